@@ -1,0 +1,8 @@
+//! alnlab: an experiment pipeline asking how well, and how fast, adaptive
+//! logic networks predict the motion of articulated rigid bodies.
+//!
+//! This crate is the orchestration: manifests, the stage graph, the artifact
+//! cache and run records. The stages themselves live in their own crates and
+//! meet only through files.
+
+pub mod manifest;

@@ -1,0 +1,600 @@
+//! Experiment manifests: TOML files with an `[experiment]` table, one table
+//! per stage and `[[variant]]` entries that override stage parameters by
+//! dotted key. Parsing keeps every value's position, so any error — a
+//! misspelt key, a wrong type, an out-of-range value, a broken relation
+//! between fields, also inside a variant — names the file, line and column,
+//! the key, and what is allowed.
+
+use std::fmt;
+use std::path::{Path, PathBuf};
+
+use alnlab_common::hash::sha256_hex;
+use serde::{Deserialize, Serialize};
+use serde_spanned::Spanned;
+use toml::de::{DeTable, DeValue};
+
+/// A parsed, validated manifest with every variant resolved.
+#[derive(Debug)]
+pub struct Manifest {
+    /// Where the manifest was read from.
+    pub path: PathBuf,
+    /// SHA-256 of the manifest file's bytes.
+    pub sha256: String,
+    /// The `[experiment]` table.
+    pub experiment: Experiment,
+    /// The variants in manifest order; a manifest without `[[variant]]` has
+    /// one, named `base`.
+    pub variants: Vec<Variant>,
+}
+
+/// The `[experiment]` table.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Experiment {
+    /// Name of the experiment: letters, digits, `-`, `_` (used in paths).
+    pub name: String,
+    /// The seed every random choice of every stage derives from.
+    pub seed: u64,
+    /// What the experiment is for.
+    #[serde(default)]
+    pub description: String,
+}
+
+/// One variant: the stage parameters with its overrides applied.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Variant {
+    /// The variant's name (`base` when the manifest has none).
+    pub name: String,
+    /// What the variant changes, in words.
+    pub description: String,
+    /// The resolved parameters of every stage.
+    pub stages: Stages,
+}
+
+/// The parameters of every stage, one table each.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Stages {
+    /// `[simulate]`
+    #[serde(default)]
+    pub simulate: alnlab_simulate::Params,
+    /// `[stride]`
+    #[serde(default)]
+    pub stride: alnlab_stride::Params,
+}
+
+/// The whole document as deserialized (variants handled separately).
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct Document {
+    experiment: Experiment,
+    #[serde(default)]
+    simulate: alnlab_simulate::Params,
+    #[serde(default)]
+    stride: alnlab_stride::Params,
+}
+
+/// An error in a manifest, located in the file.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ManifestError {
+    /// The manifest file.
+    pub file: PathBuf,
+    /// 1-based line and column, when the error has a position.
+    pub position: Option<(usize, usize)>,
+    /// The dotted key the error is about (empty for syntax errors).
+    pub key: String,
+    /// The variant being resolved, if the error is in one.
+    pub variant: Option<String>,
+    /// What is wrong and what is allowed.
+    pub message: String,
+}
+
+impl fmt::Display for ManifestError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{}", self.file.display())?;
+        if let Some((line, column)) = self.position {
+            write!(f, ":{line}:{column}")?;
+        }
+        f.write_str(": ")?;
+        if let Some(variant) = &self.variant {
+            write!(f, "in variant `{variant}`: ")?;
+        }
+        if !self.key.is_empty() {
+            write!(f, "`{}`: ", self.key)?;
+        }
+        f.write_str(&self.message)
+    }
+}
+
+impl std::error::Error for ManifestError {}
+
+impl From<ManifestError> for alnlab_common::Error {
+    fn from(e: ManifestError) -> Self {
+        alnlab_common::Error::Invalid(e.to_string())
+    }
+}
+
+impl Manifest {
+    /// Reads and validates the manifest at `path`.
+    pub fn load(path: &Path) -> Result<Manifest, alnlab_common::Error> {
+        let bytes = std::fs::read(path).map_err(|e| alnlab_common::Error::io(path, e))?;
+        let text = String::from_utf8(bytes.clone())
+            .map_err(|_| alnlab_common::Error::bad_file(path, "expected a UTF-8 TOML file"))?;
+        let mut manifest = Manifest::parse(&text, path)?;
+        manifest.sha256 = sha256_hex(&bytes);
+        Ok(manifest)
+    }
+
+    /// Parses and validates manifest text; `path` is used in error messages.
+    pub fn parse(text: &str, path: &Path) -> Result<Manifest, ManifestError> {
+        let locate = Locator { text, file: path };
+        let root = DeTable::parse(text).map_err(|e| locate.toml_error(&e, None, None))?;
+        let root_span = root.span();
+        let mut base = root.into_inner();
+        let variant_entries = take_variants(&mut base, &locate)?;
+
+        let document = deserialize(&base, root_span.clone(), &locate, None)?;
+        check_experiment(&document.experiment, &base, &locate)?;
+        let mut variants = Vec::new();
+        if variant_entries.is_empty() {
+            let stages = stages_of(document.simulate, document.stride);
+            validate(&stages, &base, &locate, None)?;
+            variants.push(Variant {
+                name: "base".into(),
+                description: String::new(),
+                stages,
+            });
+        }
+        for entry in variant_entries {
+            let (name, description, overrides) = variant_parts(entry, &locate, &variants)?;
+            let mut merged = base.clone();
+            merge(&mut merged, overrides);
+            let doc = deserialize(&merged, root_span.clone(), &locate, Some(&name))?;
+            let stages = stages_of(doc.simulate, doc.stride);
+            validate(&stages, &merged, &locate, Some(&name))?;
+            variants.push(Variant {
+                name,
+                description,
+                stages,
+            });
+        }
+        Ok(Manifest {
+            path: path.to_path_buf(),
+            sha256: sha256_hex(text.as_bytes()),
+            experiment: document.experiment,
+            variants,
+        })
+    }
+
+    /// The variant called `name`, or an error listing the variants there are.
+    pub fn variant(&self, name: &str) -> Result<&Variant, alnlab_common::Error> {
+        self.variants
+            .iter()
+            .find(|v| v.name == name)
+            .ok_or_else(|| {
+                alnlab_common::Error::Invalid(format!(
+                    "{}: no variant `{name}`; the manifest has: {}",
+                    self.path.display(),
+                    self.variant_names().join(", ")
+                ))
+            })
+    }
+
+    /// The names of all variants.
+    pub fn variant_names(&self) -> Vec<&str> {
+        self.variants.iter().map(|v| v.name.as_str()).collect()
+    }
+
+    /// The fully resolved manifest of one variant, as TOML.
+    pub fn resolved_toml(&self, variant: &Variant) -> String {
+        #[derive(Serialize)]
+        struct Resolved<'a> {
+            experiment: &'a Experiment,
+            #[serde(flatten)]
+            stages: &'a Stages,
+        }
+        toml::to_string(&Resolved {
+            experiment: &self.experiment,
+            stages: &variant.stages,
+        })
+        .expect("resolved parameters serialize to TOML")
+    }
+}
+
+fn stages_of(simulate: alnlab_simulate::Params, stride: alnlab_stride::Params) -> Stages {
+    Stages { simulate, stride }
+}
+
+/// Maps byte spans to lines and columns and builds located errors.
+struct Locator<'a> {
+    text: &'a str,
+    file: &'a Path,
+}
+
+impl Locator<'_> {
+    fn position(&self, offset: usize) -> (usize, usize) {
+        let before = &self.text[..offset.min(self.text.len())];
+        let line = before.matches('\n').count() + 1;
+        let column = before.rsplit('\n').next().map_or(0, |l| l.chars().count()) + 1;
+        (line, column)
+    }
+
+    fn error(
+        &self,
+        span: Option<std::ops::Range<usize>>,
+        key: String,
+        variant: Option<&str>,
+        message: String,
+    ) -> ManifestError {
+        ManifestError {
+            file: self.file.to_path_buf(),
+            position: span.map(|s| self.position(s.start)),
+            key,
+            variant: variant.map(str::to_string),
+            message,
+        }
+    }
+
+    /// A toml error, with the key found from its position in `table`.
+    fn toml_error(
+        &self,
+        e: &toml::de::Error,
+        table: Option<&DeTable>,
+        variant: Option<&str>,
+    ) -> ManifestError {
+        let key = match (table, e.span()) {
+            (Some(t), Some(span)) => key_at(t, span.start).join("."),
+            _ => String::new(),
+        };
+        self.error(e.span(), key, variant, e.message().trim().to_string())
+    }
+}
+
+/// The dotted path of the innermost key whose key or value span contains
+/// `offset`. Header tables (`[stride]`) span only their header, so the whole
+/// tree is searched rather than pruned by the parents' spans.
+fn key_at(table: &DeTable, offset: usize) -> Vec<String> {
+    let mut best: Option<(usize, Vec<String>)> = None;
+    search_table(table, offset, &mut Vec::new(), &mut best);
+    best.map(|(_, path)| path).unwrap_or_default()
+}
+
+type Found = Option<(usize, Vec<String>)>;
+
+fn search_table(table: &DeTable, offset: usize, path: &mut Vec<String>, best: &mut Found) {
+    for (key, value) in table.iter() {
+        path.push(key.get_ref().to_string());
+        for span in [key.span(), value.span()] {
+            let hit = span.contains(&offset) || (span.end == offset && !span.is_empty());
+            if hit && best.as_ref().is_none_or(|(len, _)| span.len() < *len) {
+                *best = Some((span.len(), path.clone()));
+            }
+        }
+        search_value(value.get_ref(), offset, path, best);
+        path.pop();
+    }
+}
+
+fn search_value(value: &DeValue, offset: usize, path: &mut Vec<String>, best: &mut Found) {
+    match value {
+        DeValue::Table(t) => search_table(t, offset, path, best),
+        DeValue::Array(items) => {
+            for (i, item) in items.iter().enumerate() {
+                path.push(i.to_string());
+                search_value(item.get_ref(), offset, path, best);
+                path.pop();
+            }
+        }
+        _ => {}
+    }
+}
+
+/// The span of the value at a dotted `path`, or of its nearest present
+/// ancestor (a defaulted field has no span of its own).
+fn span_of(table: &DeTable, path: &[&str]) -> Option<std::ops::Range<usize>> {
+    let (first, rest) = path.split_first()?;
+    let (key, value) = table.iter().find(|(k, _)| k.get_ref() == first)?;
+    let inner = match value.get_ref() {
+        DeValue::Table(t) => span_of(t, rest),
+        DeValue::Array(items) => rest.split_first().and_then(|(i, rest)| {
+            let item = items.get(i.parse::<usize>().ok()?)?;
+            match item.get_ref() {
+                DeValue::Table(t) => span_of(t, rest).or(Some(item.span())),
+                _ => Some(item.span()),
+            }
+        }),
+        _ => None,
+    };
+    inner.or(Some(if rest.is_empty() {
+        value.span()
+    } else {
+        key.span()
+    }))
+}
+
+/// Removes `[[variant]]` from the base document and returns its entries.
+fn take_variants<'i>(
+    base: &mut DeTable<'i>,
+    locate: &Locator,
+) -> Result<Vec<Spanned<DeValue<'i>>>, ManifestError> {
+    let Some(key) = base.keys().find(|k| k.get_ref() == "variant").cloned() else {
+        return Ok(Vec::new());
+    };
+    let value = base.remove(&key).expect("key just found");
+    let span = value.span();
+    match value.into_inner() {
+        DeValue::Array(items) => Ok(items.into_iter().collect()),
+        other => Err(locate.error(
+            Some(span),
+            "variant".into(),
+            None,
+            format!(
+                "expected an array of tables ([[variant]]), found {}",
+                other.type_str()
+            ),
+        )),
+    }
+}
+
+/// Splits one `[[variant]]` entry into name, description and overrides.
+fn variant_parts<'i>(
+    entry: Spanned<DeValue<'i>>,
+    locate: &Locator,
+    earlier: &[Variant],
+) -> Result<(String, String, DeTable<'i>), ManifestError> {
+    let span = entry.span();
+    let DeValue::Table(mut table) = entry.into_inner() else {
+        return Err(locate.error(
+            Some(span),
+            "variant".into(),
+            None,
+            "expected a table ([[variant]])".into(),
+        ));
+    };
+    let mut take_string =
+        |field: &str| -> Result<Option<(String, std::ops::Range<usize>)>, ManifestError> {
+            let Some(key) = table.keys().find(|k| k.get_ref() == field).cloned() else {
+                return Ok(None);
+            };
+            let value = table.remove(&key).expect("key just found");
+            let value_span = value.span();
+            match value.get_ref().as_str() {
+                Some(s) => Ok(Some((s.to_string(), value_span))),
+                None => Err(locate.error(
+                    Some(value_span),
+                    format!("variant.{field}"),
+                    None,
+                    format!("expected a string, found {}", value.get_ref().type_str()),
+                )),
+            }
+        };
+    let (name, name_span) = take_string("name")?.ok_or_else(|| {
+        locate.error(
+            Some(span.clone()),
+            "variant.name".into(),
+            None,
+            "every [[variant]] needs a `name`".into(),
+        )
+    })?;
+    let description = take_string("description")?.map(|d| d.0).unwrap_or_default();
+    if !is_identifier(&name) {
+        return Err(locate.error(
+            Some(name_span),
+            "variant.name".into(),
+            None,
+            format!("expected a name of letters, digits, `-` or `_`, found {name:?}"),
+        ));
+    }
+    if earlier.iter().any(|v| v.name == name) {
+        return Err(locate.error(
+            Some(name_span),
+            "variant.name".into(),
+            None,
+            format!("variant name `{name}` is used twice"),
+        ));
+    }
+    Ok((name, description, table))
+}
+
+/// Overlays `overrides` on `base`: tables merge key by key, anything else
+/// (numbers, strings, arrays) replaces the base value.
+fn merge<'i>(base: &mut DeTable<'i>, overrides: DeTable<'i>) {
+    for (key, value) in overrides {
+        let existing = base.iter_mut().find(|(k, _)| k.get_ref() == key.get_ref());
+        match (existing, value.get_ref()) {
+            (Some((_, slot)), DeValue::Table(_)) if slot.get_ref().is_table() => {
+                let DeValue::Table(inner) = value.into_inner() else {
+                    unreachable!("matched as a table")
+                };
+                if let DeValue::Table(target) = slot.get_mut() {
+                    merge(target, inner);
+                }
+            }
+            _ => {
+                base.insert(key, value);
+            }
+        }
+    }
+}
+
+fn deserialize(
+    table: &DeTable,
+    span: std::ops::Range<usize>,
+    locate: &Locator,
+    variant: Option<&str>,
+) -> Result<Document, ManifestError> {
+    let deserializer = toml::de::Deserializer::from(Spanned::new(span, table.clone()));
+    Document::deserialize(deserializer).map_err(|e| locate.toml_error(&e, Some(table), variant))
+}
+
+fn check_experiment(
+    experiment: &Experiment,
+    table: &DeTable,
+    locate: &Locator,
+) -> Result<(), ManifestError> {
+    if is_identifier(&experiment.name) {
+        return Ok(());
+    }
+    Err(locate.error(
+        span_of(table, &["experiment", "name"]),
+        "experiment.name".into(),
+        None,
+        format!(
+            "expected a name of letters, digits, `-` or `_`, found {:?}",
+            experiment.name
+        ),
+    ))
+}
+
+/// The checks between fields that each stage makes, located in the file.
+fn validate(
+    stages: &Stages,
+    table: &DeTable,
+    locate: &Locator,
+    variant: Option<&str>,
+) -> Result<(), ManifestError> {
+    let failure = stages
+        .simulate
+        .validate()
+        .map_err(|e| ("simulate", e.key, e.message))
+        .and_then(|()| {
+            stages
+                .stride
+                .validate()
+                .map_err(|(key, message)| ("stride", key, message))
+        });
+    match failure {
+        Ok(()) => Ok(()),
+        Err((stage, key, message)) => {
+            let path: Vec<&str> = std::iter::once(stage).chain(key.split('.')).collect();
+            Err(locate.error(span_of(table, &path), path.join("."), variant, message))
+        }
+    }
+}
+
+/// Whether `s` is a non-empty name of ASCII letters, digits, `-` and `_`.
+pub fn is_identifier(s: &str) -> bool {
+    !s.is_empty()
+        && s.chars()
+            .all(|c| c.is_ascii_alphanumeric() || c == '-' || c == '_')
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const GOOD: &str = r#"
+[experiment]
+name = "demo"
+seed = 5
+
+[[simulate.scene]]
+name = "box"
+duration = 2.0
+
+[stride]
+n = 4
+
+[[variant]]
+name = "n3"
+stride.n = 3
+
+[[variant]]
+name = "rk4"
+description = "fourth order"
+simulate.scene = [{ name = "box", duration = 2.0, integrator = "rk4" }]
+"#;
+
+    fn parse(text: &str) -> Result<Manifest, ManifestError> {
+        Manifest::parse(text, Path::new("m.toml"))
+    }
+
+    #[test]
+    fn variants_override_by_dotted_key() {
+        let m = parse(GOOD).unwrap();
+        assert_eq!(m.variant_names(), ["n3", "rk4"]);
+        assert_eq!(m.variants[0].stages.stride.n.0, 3);
+        assert_eq!(m.variants[1].stages.stride.n.0, 4);
+        assert_eq!(
+            m.variants[1].stages.simulate.scene[0].integrator,
+            alnlab_simulate::Integrator::Rk4
+        );
+        assert_eq!(m.variants[1].description, "fourth order");
+        // Unset fields take their documented defaults.
+        assert_eq!(m.variants[0].stages.simulate.scene[0].dt.get(), 1e-3);
+        let toml = m.resolved_toml(&m.variants[0]);
+        assert!(toml.contains("n = 3"), "{toml}");
+    }
+
+    #[test]
+    fn no_variant_means_one_called_base() {
+        let m = parse("[experiment]\nname = \"x\"\nseed = 1\n").unwrap();
+        assert_eq!(m.variant_names(), ["base"]);
+        assert_eq!(m.variants[0].stages, Stages::default());
+    }
+
+    #[test]
+    fn misspelt_key_is_located() {
+        let text = GOOD.replace("n = 4", "m = 4");
+        let e = parse(&text).unwrap_err();
+        assert_eq!(e.position, Some((11, 1)));
+        assert_eq!(e.key, "stride.m");
+        assert!(e.message.contains("unknown field `m`"), "{}", e.message);
+        assert!(e.message.contains("expected one of"), "{}", e.message);
+    }
+
+    #[test]
+    fn wrong_type_is_located() {
+        let text = GOOD.replace("duration = 2.0\n", "duration = \"long\"\n");
+        let e = parse(&text).unwrap_err();
+        assert_eq!(e.position, Some((8, 12)));
+        assert_eq!(e.key, "simulate.scene.0.duration");
+        assert!(e.message.contains("expected a number > 0"), "{}", e.message);
+    }
+
+    #[test]
+    fn negative_count_is_located_even_in_a_variant() {
+        let text = GOOD.replace("stride.n = 3", "stride.n = -3");
+        let e = parse(&text).unwrap_err();
+        assert_eq!(e.position, Some((15, 12)));
+        assert_eq!(e.key, "stride.n");
+        assert_eq!(e.variant.as_deref(), Some("n3"));
+        assert!(
+            e.message.contains("whole number ≥ 1, found -3"),
+            "{}",
+            e.message
+        );
+        let shown = e.to_string();
+        assert!(
+            shown.starts_with("m.toml:15:12: in variant `n3`: `stride.n`: expected"),
+            "{shown}"
+        );
+    }
+
+    #[test]
+    fn relation_errors_point_at_the_field() {
+        // Valid in the base (n = 4), invalid in variant n3.
+        let text = GOOD.replace("n = 4", "n = 4\noffset = 3");
+        let e = parse(&text).unwrap_err();
+        assert_eq!(e.key, "stride.offset");
+        assert_eq!(e.variant.as_deref(), Some("n3"));
+        assert_eq!(e.position, Some((12, 10)));
+        assert!(e.message.contains("below n = 3, found 3"), "{}", e.message);
+    }
+
+    #[test]
+    fn bad_variant_entries() {
+        let e = parse(&GOOD.replace("name = \"n3\"\n", "")).unwrap_err();
+        assert!(e.message.contains("needs a `name`"), "{e}");
+        let e = parse(&GOOD.replace("\"n3\"", "\"rk4\"")).unwrap_err();
+        assert!(e.message.contains("used twice"), "{e}");
+        let e = parse(&GOOD.replace("\"n3\"", "\"a/b\"")).unwrap_err();
+        assert!(e.message.contains("letters, digits"), "{e}");
+    }
+
+    #[test]
+    fn syntax_error_is_located() {
+        let e = parse("[experiment\nname = 1").unwrap_err();
+        assert_eq!(e.position.map(|p| p.0), Some(1));
+    }
+}

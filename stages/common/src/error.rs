@@ -1,0 +1,56 @@
+//! The error type of every stage: each variant names the file (or manifest
+//! field) it is about, and says whether the user can fix it (exit code 2) or
+//! it is an internal failure (exit code 1).
+
+use std::path::{Path, PathBuf};
+
+/// Errors raised by stages and the helpers in this crate.
+#[derive(Debug, thiserror::Error)]
+pub enum Error {
+    /// Reading or writing a file failed at the operating-system level.
+    #[error("{}: {source}", path.display())]
+    Io {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    /// A file exists but is not what it should be (truncated, corrupt, wrong schema).
+    #[error("{}: {what}", path.display())]
+    BadFile { path: PathBuf, what: String },
+    /// A parameter or an input value the user can correct.
+    #[error("{0}")]
+    Invalid(String),
+    /// A simulation or computation left its valid domain (e.g. blew up).
+    #[error("{0}")]
+    Diverged(String),
+}
+
+impl Error {
+    /// An I/O error on `path`.
+    pub fn io(path: &Path, source: std::io::Error) -> Self {
+        Error::Io {
+            path: path.to_path_buf(),
+            source,
+        }
+    }
+
+    /// A malformed file at `path`.
+    pub fn bad_file(path: &Path, what: impl std::fmt::Display) -> Self {
+        Error::BadFile {
+            path: path.to_path_buf(),
+            what: what.to_string(),
+        }
+    }
+
+    /// The process exit code for this error: 2 for what the user can fix
+    /// (bad input files, bad parameters, an unstable scene), 1 otherwise.
+    pub fn exit_code(&self) -> i32 {
+        match self {
+            Error::Io { .. } => 1,
+            Error::BadFile { .. } | Error::Invalid(_) | Error::Diverged(_) => 2,
+        }
+    }
+}
+
+/// Result with the stage error type.
+pub type Result<T, E = Error> = std::result::Result<T, E>;

@@ -1,0 +1,432 @@
+//! The trajectory log (`trajectory.mcap`): its `/state` channel, one message
+//! per logged frame, encoded as ROS 2 CDR with a `ros2msg` schema stored in the
+//! file, so the Python `mcap` reader (with its ROS 2 decoder) and Foxglove can
+//! decode it without alnlab.
+//!
+//! Each scene gets its own channel on the `/state` topic (scenes differ in
+//! their variable sets); the channel metadata names the scene and lists the
+//! generalized-state components and the variables in message order. Every
+//! field is a named `float64` except `run` and `frame` (`uint32`), so the CDR
+//! layout is fixed: a 4-byte encapsulation header, then the fields in order,
+//! each naturally aligned — which for this schema means no padding at all.
+
+use std::collections::BTreeMap;
+use std::fs::File;
+use std::io::BufWriter;
+use std::path::{Path, PathBuf};
+
+use crate::{Error, Provenance, Result, atomic};
+
+/// The topic of the full-rate state messages.
+pub const STATE_TOPIC: &str = "/state";
+/// Schema encoding of the state channels.
+pub const SCHEMA_ENCODING: &str = "ros2msg";
+/// Message encoding of the state channels.
+pub const MESSAGE_ENCODING: &str = "cdr";
+/// Name of the metadata record holding the provenance.
+pub const PROVENANCE_RECORD: &str = "alnlab.provenance";
+
+/// CDR encapsulation header: plain CDR, little endian.
+const CDR_LE: [u8; 4] = [0x00, 0x01, 0x00, 0x00];
+/// Bytes before the first f64 of the state: time (8), run (4), frame (4).
+const FIXED_BYTES: usize = 16;
+
+/// What one scene's `/state` messages hold, in order: time, run, frame, the
+/// generalized state, then the learned variables.
+#[derive(Clone, Debug, PartialEq)]
+pub struct StateLayout {
+    /// The scene's name (from the manifest).
+    pub scene: String,
+    /// Names of the generalized-state components (e.g. `root.q.w`).
+    pub state: Vec<String>,
+    /// Names of the variables (e.g. `omega.1.x`), the stable identifiers of
+    /// DESIGN.md §3.
+    pub variables: Vec<String>,
+}
+
+/// One logged frame of one run.
+#[derive(Clone, Debug, PartialEq)]
+pub struct StateFrame {
+    /// Simulated time since the start of the run, in seconds.
+    pub time: f64,
+    /// The run's index within its scene.
+    pub run: u32,
+    /// The frame's index within its run.
+    pub frame: u32,
+    /// The generalized state, in layout order.
+    pub state: Vec<f64>,
+    /// The variables, in layout order.
+    pub variables: Vec<f64>,
+}
+
+impl StateLayout {
+    /// The `ros2msg` schema text of this layout. Field names are the dotted
+    /// names with `.` replaced by `_` (ROS 2 field names allow no dots).
+    pub fn ros2msg(&self) -> String {
+        let mut s = String::from(
+            "# alnlab frame: simulated time (s), run index, frame index,\n\
+             # then the generalized state, then the variables (see channel metadata)\n\
+             float64 time\nuint32 run\nuint32 frame\n",
+        );
+        for name in self.state.iter().chain(&self.variables) {
+            s.push_str("float64 ");
+            s.push_str(&field_name(name));
+            s.push('\n');
+        }
+        s
+    }
+
+    /// The schema name for the scene with index `scene_index` in the log.
+    pub fn schema_name(scene_index: usize) -> String {
+        format!("alnlab_msgs/msg/Scene{scene_index}State")
+    }
+
+    /// Channel metadata describing this layout.
+    pub fn channel_metadata(&self) -> BTreeMap<String, String> {
+        BTreeMap::from([
+            ("scene".to_string(), self.scene.clone()),
+            ("state".to_string(), self.state.join(",")),
+            ("variables".to_string(), self.variables.join(",")),
+        ])
+    }
+
+    /// Rebuilds a layout from channel metadata.
+    pub fn from_channel_metadata(meta: &BTreeMap<String, String>) -> Option<StateLayout> {
+        let list = |key: &str| -> Option<Vec<String>> {
+            let s = meta.get(key)?;
+            Some(if s.is_empty() {
+                Vec::new()
+            } else {
+                s.split(',').map(str::to_string).collect()
+            })
+        };
+        Some(StateLayout {
+            scene: meta.get("scene")?.clone(),
+            state: list("state")?,
+            variables: list("variables")?,
+        })
+    }
+
+    /// Size of one encoded message.
+    pub fn message_len(&self) -> usize {
+        CDR_LE.len() + FIXED_BYTES + 8 * (self.state.len() + self.variables.len())
+    }
+
+    /// Encodes `frame` into `buf` (cleared first).
+    pub fn encode(&self, frame: &StateFrame, buf: &mut Vec<u8>) {
+        debug_assert_eq!(frame.state.len(), self.state.len());
+        debug_assert_eq!(frame.variables.len(), self.variables.len());
+        buf.clear();
+        buf.extend_from_slice(&CDR_LE);
+        buf.extend_from_slice(&frame.time.to_le_bytes());
+        buf.extend_from_slice(&frame.run.to_le_bytes());
+        buf.extend_from_slice(&frame.frame.to_le_bytes());
+        for v in frame.state.iter().chain(&frame.variables) {
+            buf.extend_from_slice(&v.to_le_bytes());
+        }
+    }
+
+    /// Decodes one message; `None` if its length or header does not fit.
+    pub fn decode(&self, data: &[u8]) -> Option<StateFrame> {
+        if data.len() != self.message_len() || data[..4] != CDR_LE {
+            return None;
+        }
+        let body = &data[4..];
+        let f64_at = |i: usize| f64::from_le_bytes(body[i..i + 8].try_into().expect("8 bytes"));
+        let u32_at = |i: usize| u32::from_le_bytes(body[i..i + 4].try_into().expect("4 bytes"));
+        let values = |from: usize, n: usize| -> Vec<f64> {
+            (0..n)
+                .map(|k| f64_at(FIXED_BYTES + 8 * (from + k)))
+                .collect()
+        };
+        Some(StateFrame {
+            time: f64_at(0),
+            run: u32_at(8),
+            frame: u32_at(12),
+            state: values(0, self.state.len()),
+            variables: values(self.state.len(), self.variables.len()),
+        })
+    }
+}
+
+/// The ROS 2 field name of a dotted alnlab name.
+pub fn field_name(name: &str) -> String {
+    name.replace('.', "_")
+}
+
+/// Writes a trajectory log under a temporary name; [`StateLogWriter::finish`]
+/// renames it into place. Dropped unfinished, it removes the temporary file.
+pub struct StateLogWriter {
+    writer: Option<mcap::Writer<BufWriter<File>>>,
+    channels: Vec<(u16, StateLayout)>,
+    sequence: u32,
+    buf: Vec<u8>,
+    tmp: PathBuf,
+    path: PathBuf,
+}
+
+impl StateLogWriter {
+    /// Starts a log at `path` with one `/state` channel per layout.
+    pub fn create(path: &Path, layouts: &[StateLayout]) -> Result<StateLogWriter> {
+        let tmp = atomic::temporary_name(path);
+        if let Some(parent) = path.parent().filter(|p| !p.as_os_str().is_empty()) {
+            std::fs::create_dir_all(parent).map_err(|e| Error::io(parent, e))?;
+        }
+        let file = File::create(&tmp).map_err(|e| Error::io(&tmp, e))?;
+        let mut log = StateLogWriter {
+            writer: None,
+            channels: Vec::new(),
+            sequence: 0,
+            buf: Vec::new(),
+            tmp: tmp.clone(),
+            path: path.to_path_buf(),
+        };
+        let mut writer = mcap::WriteOptions::new()
+            .compression(Some(mcap::Compression::Zstd))
+            .profile("ros2")
+            .library(format!("alnlab {}", crate::ALNLAB_VERSION))
+            .create(BufWriter::new(file))
+            .map_err(|e| Error::bad_file(&tmp, e))?;
+        for (i, layout) in layouts.iter().enumerate() {
+            let schema = writer
+                .add_schema(
+                    &StateLayout::schema_name(i),
+                    SCHEMA_ENCODING,
+                    layout.ros2msg().as_bytes(),
+                )
+                .map_err(|e| Error::bad_file(&tmp, e))?;
+            let channel = writer
+                .add_channel(
+                    schema,
+                    STATE_TOPIC,
+                    MESSAGE_ENCODING,
+                    &layout.channel_metadata(),
+                )
+                .map_err(|e| Error::bad_file(&tmp, e))?;
+            log.channels.push((channel, layout.clone()));
+        }
+        log.writer = Some(writer);
+        Ok(log)
+    }
+
+    /// Appends one frame of scene `scene_index`, logged at `log_time_ns`
+    /// (strictly increasing over the whole log, so readers that order by time
+    /// keep runs apart).
+    pub fn write(
+        &mut self,
+        scene_index: usize,
+        log_time_ns: u64,
+        frame: &StateFrame,
+    ) -> Result<()> {
+        let (channel_id, layout) = &self.channels[scene_index];
+        layout.encode(frame, &mut self.buf);
+        let header = mcap::records::MessageHeader {
+            channel_id: *channel_id,
+            sequence: self.sequence,
+            log_time: log_time_ns,
+            publish_time: log_time_ns,
+        };
+        self.sequence = self.sequence.wrapping_add(1);
+        self.writer
+            .as_mut()
+            .expect("writer present until finish")
+            .write_to_known_channel(&header, &self.buf)
+            .map_err(|e| Error::bad_file(&self.tmp, e))
+    }
+
+    /// Adds a metadata record (e.g. the scene model as JSON).
+    pub fn metadata(&mut self, name: &str, entries: BTreeMap<String, String>) -> Result<()> {
+        let record = mcap::records::Metadata {
+            name: name.to_string(),
+            metadata: entries,
+        };
+        self.writer_mut()
+            .write_metadata(&record)
+            .map_err(|e| Error::bad_file(&self.tmp, e))
+    }
+
+    /// Writes the provenance record, finishes the file, syncs it and renames
+    /// it to its final path.
+    pub fn finish(mut self, provenance: &Provenance) -> Result<()> {
+        self.metadata(
+            PROVENANCE_RECORD,
+            provenance.key_values().into_iter().collect(),
+        )?;
+        let mut writer = self.writer.take().expect("writer present until finish");
+        writer.finish().map_err(|e| Error::bad_file(&self.tmp, e))?;
+        let file = writer
+            .into_inner()
+            .into_inner()
+            .map_err(|e| Error::io(&self.tmp, e.into_error()))?;
+        file.sync_all().map_err(|e| Error::io(&self.tmp, e))?;
+        std::fs::rename(&self.tmp, &self.path).map_err(|e| Error::io(&self.path, e))
+    }
+
+    fn writer_mut(&mut self) -> &mut mcap::Writer<BufWriter<File>> {
+        self.writer.as_mut().expect("writer present until finish")
+    }
+}
+
+impl Drop for StateLogWriter {
+    fn drop(&mut self) {
+        if self.writer.is_some() {
+            let _ = std::fs::remove_file(&self.tmp);
+        }
+    }
+}
+
+/// The frames of one scene, in log order.
+#[derive(Debug)]
+pub struct SceneFrames {
+    /// The scene's layout.
+    pub layout: StateLayout,
+    /// Its frames, runs one after another, frames in order within a run.
+    pub frames: Vec<StateFrame>,
+}
+
+/// A whole trajectory log read into memory.
+#[derive(Debug)]
+pub struct StateLog {
+    /// One entry per scene, in channel order.
+    pub scenes: Vec<SceneFrames>,
+    /// Metadata records by name.
+    pub metadata: BTreeMap<String, BTreeMap<String, String>>,
+}
+
+impl StateLog {
+    /// Reads and decodes the log at `path`. A truncated or corrupt file, or a
+    /// `/state` message that does not fit its schema, is an error naming the
+    /// file.
+    pub fn read(path: &Path) -> Result<StateLog> {
+        let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+        let bad = |what: String| Error::bad_file(path, what);
+        let summary = mcap::Summary::read(&bytes)
+            .map_err(|e| bad(format!("not a readable MCAP file ({e})")))?
+            .ok_or_else(|| bad("MCAP file has no summary section (unfinished?)".into()))?;
+        let mut metadata = BTreeMap::new();
+        for index in &summary.metadata_indexes {
+            let record = mcap::read::metadata(&bytes, index)
+                .map_err(|e| bad(format!("corrupt metadata record ({e})")))?;
+            metadata.insert(record.name, record.metadata);
+        }
+        let mut channel_ids: Vec<u16> = summary
+            .channels
+            .values()
+            .filter(|c| c.topic == STATE_TOPIC)
+            .map(|c| c.id)
+            .collect();
+        channel_ids.sort_unstable();
+        let mut scenes = Vec::new();
+        let mut scene_of_channel = BTreeMap::new();
+        for id in channel_ids {
+            let channel = &summary.channels[&id];
+            let layout =
+                StateLayout::from_channel_metadata(&channel.metadata).ok_or_else(|| {
+                    bad(format!(
+                        "channel {id} on {STATE_TOPIC} lacks its layout metadata"
+                    ))
+                })?;
+            scene_of_channel.insert(id, scenes.len());
+            scenes.push(SceneFrames {
+                layout,
+                frames: Vec::new(),
+            });
+        }
+        let stream = mcap::MessageStream::new(&bytes)
+            .map_err(|e| bad(format!("not a readable MCAP file ({e})")))?;
+        for message in stream {
+            let message = message.map_err(|e| bad(format!("corrupt MCAP data ({e})")))?;
+            let Some(&scene) = scene_of_channel.get(&message.channel.id) else {
+                continue;
+            };
+            let entry = &mut scenes[scene];
+            let frame = entry.layout.decode(&message.data).ok_or_else(|| {
+                bad(format!(
+                    "message {} of scene `{}` does not fit its schema ({} bytes, expected {})",
+                    message.sequence,
+                    entry.layout.scene,
+                    message.data.len(),
+                    entry.layout.message_len()
+                ))
+            })?;
+            entry.frames.push(frame);
+        }
+        Ok(StateLog { scenes, metadata })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn layout() -> StateLayout {
+        StateLayout {
+            scene: "s".into(),
+            state: vec!["root.q.w".into()],
+            variables: vec!["omega.1.x".into(), "omega.1.y".into()],
+        }
+    }
+
+    fn frame(i: u32) -> StateFrame {
+        StateFrame {
+            time: f64::from(i) * 0.01,
+            run: 1,
+            frame: i,
+            state: vec![1.0],
+            variables: vec![f64::from(i), -0.5],
+        }
+    }
+
+    #[test]
+    fn schema_names_every_field() {
+        let text = layout().ros2msg();
+        assert!(text.contains("float64 time\nuint32 run\nuint32 frame\nfloat64 root_q_w\n"));
+        assert!(text.ends_with("float64 omega_1_x\nfloat64 omega_1_y\n"));
+    }
+
+    #[test]
+    fn codec_round_trip_and_rejects_wrong_length() {
+        let mut buf = Vec::new();
+        layout().encode(&frame(3), &mut buf);
+        assert_eq!(buf.len(), layout().message_len());
+        assert_eq!(layout().decode(&buf), Some(frame(3)));
+        assert_eq!(layout().decode(&buf[..buf.len() - 1]), None);
+    }
+
+    #[test]
+    fn log_round_trip_and_truncation_errors() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("trajectory.mcap");
+        let mut writer = StateLogWriter::create(&path, &[layout()]).unwrap();
+        for i in 0..100 {
+            writer
+                .write(0, u64::from(i) * 10_000_000, &frame(i))
+                .unwrap();
+        }
+        writer.finish(&Provenance::default()).unwrap();
+        let log = StateLog::read(&path).unwrap();
+        assert_eq!(log.scenes.len(), 1);
+        assert_eq!(log.scenes[0].layout, layout());
+        assert_eq!(log.scenes[0].frames.len(), 100);
+        assert_eq!(log.scenes[0].frames[42], frame(42));
+        assert_eq!(log.metadata[PROVENANCE_RECORD]["alnlab.stage"], "");
+
+        let bytes = std::fs::read(&path).unwrap();
+        for cut in [0, 8, bytes.len() / 2, bytes.len() - 3] {
+            std::fs::write(&path, &bytes[..cut]).unwrap();
+            let err = StateLog::read(&path).unwrap_err();
+            assert!(err.to_string().contains("trajectory.mcap"), "{err}");
+        }
+    }
+
+    #[test]
+    fn unfinished_writer_leaves_no_file() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("t.mcap");
+        {
+            let mut writer = StateLogWriter::create(&path, &[layout()]).unwrap();
+            writer.write(0, 0, &frame(0)).unwrap();
+        }
+        assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 0);
+    }
+}
