@@ -1,1 +1,409 @@
+//! End-to-end tests of the `alnlab` binary: real stages, real files.
 
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output, Stdio};
+use std::time::{Duration, Instant};
+
+use alnlab::run::RunRecord;
+
+const MANIFEST: &str = r#"
+[experiment]
+name = "e2e"
+seed = 11
+
+[[simulate.scene]]
+name = "box"
+runs = 2
+duration = 3.0
+dt = 0.001
+frame_dt = 0.01
+
+[stride]
+n = 5
+test_fraction = 0.4
+"#;
+
+fn alnlab(dir: &Path, args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_alnlab"))
+        .current_dir(dir)
+        .args(args)
+        .output()
+        .expect("alnlab runs")
+}
+
+fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+fn write_manifest(dir: &Path, name: &str, text: &str) -> PathBuf {
+    let path = dir.join(name);
+    std::fs::write(&path, text).unwrap();
+    path
+}
+
+fn run_ok(dir: &Path, args: &[&str]) -> RunRecord {
+    let mut full = vec!["-q", "run"];
+    full.extend_from_slice(args);
+    let out = alnlab(dir, &full);
+    assert!(
+        out.status.success(),
+        "alnlab {full:?} failed: {}",
+        stderr(&out)
+    );
+    let out_dir = args
+        .iter()
+        .position(|a| *a == "--out")
+        .map_or("runs", |i| args[i + 1]);
+    let json = std::fs::read(dir.join(out_dir).join("e2e/run.json")).unwrap();
+    serde_json::from_slice(&json).unwrap()
+}
+
+/// (stage, cached) for every stage of the first variant.
+fn stages(record: &RunRecord) -> Vec<(String, bool)> {
+    record.variants[0]
+        .stages
+        .iter()
+        .map(|s| (s.stage.clone(), s.cached))
+        .collect()
+}
+
+/// Bytes of every artifact file of the first variant, by role.
+fn artifact_bytes(dir: &Path, record: &RunRecord) -> Vec<(String, Vec<u8>)> {
+    record.variants[0]
+        .artifacts
+        .iter()
+        .map(|(role, a)| (role.clone(), std::fs::read(dir.join(&a.path)).unwrap()))
+        .collect()
+}
+
+#[test]
+fn check_reports_three_kinds_of_error_with_line_and_column() {
+    let dir = tempfile::tempdir().unwrap();
+    let cases = [
+        // A typo in a key.
+        (
+            "n = 5",
+            "nn = 5",
+            "typo.toml:14:1: `stride.nn`: unknown field `nn`",
+        ),
+        // A string where a number belongs.
+        (
+            "duration = 3.0",
+            "duration = \"3 s\"",
+            "wrong-type.toml:9:12: `simulate.scene.0.duration`: invalid type: string \"3 s\", expected a number > 0",
+        ),
+        // A negative count.
+        (
+            "runs = 2",
+            "runs = -2",
+            "negative.toml:8:8: `simulate.scene.0.runs`: expected a whole number ≥ 1, found -2",
+        ),
+    ];
+    let mut messages = Vec::new();
+    for (name, (from, to, expected)) in ["typo.toml", "wrong-type.toml", "negative.toml"]
+        .iter()
+        .zip(cases)
+    {
+        assert!(MANIFEST.contains(from));
+        write_manifest(dir.path(), name, &MANIFEST.replace(from, to));
+        let out = alnlab(dir.path(), &["check", name]);
+        assert_eq!(out.status.code(), Some(2), "{name}: {}", stderr(&out));
+        let err = stderr(&out);
+        assert!(
+            err.contains(expected),
+            "{name}: expected `{expected}` in\n{err}"
+        );
+        messages.push(err);
+    }
+    messages.dedup();
+    assert_eq!(messages.len(), 3);
+
+    // The valid manifest passes and is printed resolved, defaults included.
+    write_manifest(dir.path(), "good.toml", MANIFEST);
+    let out = alnlab(dir.path(), &["check", "good.toml"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let text = String::from_utf8(out.stdout).unwrap();
+    assert!(
+        text.contains("# variant `base`") && text.contains("integrator = \"semi-implicit-euler\""),
+        "{text}"
+    );
+}
+
+#[test]
+fn bad_invocations_exit_with_2_and_say_why() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = alnlab(dir.path(), &["run", "missing.toml"]);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(stderr(&out).contains("missing.toml"), "{}", stderr(&out));
+
+    write_manifest(dir.path(), "m.toml", MANIFEST);
+    let out = alnlab(dir.path(), &["run", "m.toml", "--variant", "nope"]);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(
+        stderr(&out).contains("no variant `nope`; the manifest has: base"),
+        "{}",
+        stderr(&out)
+    );
+
+    std::fs::write(dir.path().join("broken.mcap"), b"not an mcap file").unwrap();
+    let out = alnlab(
+        dir.path(),
+        &[
+            "stride",
+            "--manifest",
+            "m.toml",
+            "--trajectory",
+            "broken.mcap",
+            "--out",
+            "o",
+        ],
+    );
+    assert_eq!(out.status.code(), Some(2));
+    assert!(
+        stderr(&out).contains("broken.mcap: not a readable MCAP file"),
+        "{}",
+        stderr(&out)
+    );
+}
+
+#[test]
+fn cache_reuses_and_reruns_only_what_changed() {
+    let dir = tempfile::tempdir().unwrap();
+    write_manifest(dir.path(), "m.toml", MANIFEST);
+    let first = run_ok(dir.path(), &["m.toml"]);
+    assert_eq!(
+        stages(&first),
+        [("simulate".into(), false), ("stride".into(), false)]
+    );
+    assert!(
+        first.variants[0]
+            .artifacts
+            .keys()
+            .eq(["pairs", "stats", "trajectory"])
+    );
+
+    let second = run_ok(dir.path(), &["m.toml"]);
+    assert_eq!(
+        stages(&second),
+        [("simulate".into(), true), ("stride".into(), true)]
+    );
+    assert_eq!(
+        first.variants[0].artifacts["pairs"].sha256,
+        second.variants[0].artifacts["pairs"].sha256
+    );
+
+    // A stride parameter: simulate stays cached, stride re-runs.
+    write_manifest(dir.path(), "m.toml", &MANIFEST.replace("n = 5", "n = 4"));
+    let third = run_ok(dir.path(), &["m.toml"]);
+    assert_eq!(
+        stages(&third),
+        [("simulate".into(), true), ("stride".into(), false)]
+    );
+
+    // A simulate parameter: everything downstream re-runs too.
+    write_manifest(
+        dir.path(),
+        "m.toml",
+        &MANIFEST.replace("runs = 2", "runs = 3"),
+    );
+    let fourth = run_ok(dir.path(), &["m.toml"]);
+    assert_eq!(
+        stages(&fourth),
+        [("simulate".into(), false), ("stride".into(), false)]
+    );
+
+    // Going back to the first manifest finds its artifacts again.
+    write_manifest(dir.path(), "m.toml", MANIFEST);
+    let fifth = run_ok(dir.path(), &["m.toml"]);
+    assert_eq!(
+        stages(&fifth),
+        [("simulate".into(), true), ("stride".into(), true)]
+    );
+
+    // --force re-runs all.
+    let forced = run_ok(dir.path(), &["m.toml", "--force"]);
+    assert_eq!(
+        stages(&forced),
+        [("simulate".into(), false), ("stride".into(), false)]
+    );
+}
+
+#[test]
+fn variants_share_upstream_artifacts() {
+    let dir = tempfile::tempdir().unwrap();
+    let text = format!(
+        "{MANIFEST}\n[[variant]]\nname = \"n5\"\n\n[[variant]]\nname = \"n3\"\nstride.n = 3\n"
+    );
+    write_manifest(dir.path(), "m.toml", &text);
+    let record = run_ok(dir.path(), &["m.toml"]);
+    let [n5, n3] = &record.variants[..] else {
+        panic!("two variants")
+    };
+    assert_eq!(
+        n5.artifacts["trajectory"].cache_key,
+        n3.artifacts["trajectory"].cache_key
+    );
+    assert_ne!(
+        n5.artifacts["pairs"].cache_key,
+        n3.artifacts["pairs"].cache_key
+    );
+    assert!(n3.stages[0].cached, "n3 reuses the trajectory n5 made");
+    let only = run_ok(dir.path(), &["m.toml", "--variant", "n3"]);
+    assert_eq!(only.variants.len(), 1);
+    assert!(only.variants[0].stages.iter().all(|s| s.cached));
+}
+
+#[test]
+fn forced_reruns_give_byte_identical_artifacts() {
+    let dir = tempfile::tempdir().unwrap();
+    write_manifest(dir.path(), "m.toml", MANIFEST);
+    let first = run_ok(dir.path(), &["m.toml"]);
+    let before = artifact_bytes(dir.path(), &first);
+    let second = run_ok(dir.path(), &["m.toml", "--force"]);
+    assert!(second.variants[0].stages.iter().all(|s| !s.cached));
+    assert_eq!(before, artifact_bytes(dir.path(), &second));
+    // A separate output folder, from scratch: the same bytes again.
+    let third = run_ok(dir.path(), &["m.toml", "--out", "elsewhere"]);
+    assert_eq!(before, artifact_bytes(dir.path(), &third));
+    assert!(before.iter().any(|(role, _)| role == "trajectory"));
+}
+
+#[test]
+fn killed_run_leaves_nothing_finished_and_the_next_run_completes() {
+    // Long enough to be caught in the middle of simulate.
+    let long = MANIFEST
+        .replace("duration = 3.0", "duration = 400.0")
+        .replace("runs = 2", "runs = 4");
+    let dir = tempfile::tempdir().unwrap();
+    write_manifest(dir.path(), "m.toml", &long);
+    let mut child = Command::new(env!("CARGO_BIN_EXE_alnlab"))
+        .current_dir(dir.path())
+        .args(["-q", "run", "m.toml", "--out", "killed"])
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    let simulate_dir = dir.path().join("killed/cache/simulate");
+    let clock = Instant::now();
+    let in_progress = || {
+        std::fs::read_dir(&simulate_dir).is_ok_and(|entries| {
+            entries
+                .flatten()
+                .any(|e| e.file_name().to_string_lossy().contains(".tmp-"))
+        })
+    };
+    while !in_progress() {
+        assert!(
+            clock.elapsed() < Duration::from_secs(60),
+            "simulate never started"
+        );
+        assert!(
+            child.try_wait().unwrap().is_none(),
+            "run ended before it could be killed"
+        );
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    std::thread::sleep(Duration::from_millis(150));
+    child.kill().unwrap(); // SIGKILL
+    child.wait().unwrap();
+
+    // Nothing under a final name: only the temporary folder is there.
+    let entries: Vec<String> = std::fs::read_dir(&simulate_dir)
+        .unwrap()
+        .flatten()
+        .map(|e| e.file_name().to_string_lossy().into_owned())
+        .collect();
+    assert!(
+        entries
+            .iter()
+            .all(|e| e.starts_with('.') && e.contains(".tmp-")),
+        "{entries:?}"
+    );
+    assert!(!dir.path().join("killed/e2e/run.json").exists());
+
+    // The next run sweeps the leftovers and produces what an uninterrupted run does.
+    let resumed = run_ok(dir.path(), &["m.toml", "--out", "killed"]);
+    assert!(resumed.variants[0].stages.iter().all(|s| !s.cached));
+    let leftovers = std::fs::read_dir(&simulate_dir)
+        .unwrap()
+        .flatten()
+        .filter(|e| e.file_name().to_string_lossy().contains(".tmp-"))
+        .count();
+    assert_eq!(leftovers, 0);
+    let clean = run_ok(dir.path(), &["m.toml", "--out", "clean"]);
+    assert_eq!(
+        artifact_bytes(dir.path(), &resumed),
+        artifact_bytes(dir.path(), &clean)
+    );
+}
+
+#[test]
+fn concurrent_runs_on_one_output_folder_wait_for_each_other() {
+    let dir = tempfile::tempdir().unwrap();
+    let slow = MANIFEST.replace("duration = 3.0", "duration = 60.0");
+    write_manifest(dir.path(), "m.toml", &slow);
+    let spawn = || {
+        Command::new(env!("CARGO_BIN_EXE_alnlab"))
+            .current_dir(dir.path())
+            .args(["-q", "run", "m.toml"])
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap()
+    };
+    let (a, b) = (spawn(), spawn());
+    let (a, b) = (a.wait_with_output().unwrap(), b.wait_with_output().unwrap());
+    assert!(
+        a.status.success() && b.status.success(),
+        "{}{}",
+        stderr(&a),
+        stderr(&b)
+    );
+    let waited = [&a, &b]
+        .iter()
+        .filter(|o| stderr(o).contains("waiting: another alnlab run (pid"))
+        .count();
+    assert_eq!(waited, 1, "exactly one run waits for the other");
+    // The one that waited found everything made by the other.
+    let record = run_ok(dir.path(), &["m.toml"]);
+    assert!(record.variants[0].stages.iter().all(|s| s.cached));
+}
+
+#[test]
+fn stages_run_alone_on_explicit_files_match_the_pipeline() {
+    let dir = tempfile::tempdir().unwrap();
+    write_manifest(dir.path(), "m.toml", MANIFEST);
+    let out = alnlab(
+        dir.path(),
+        &["-q", "simulate", "--manifest", "m.toml", "--out", "alone"],
+    );
+    assert!(out.status.success(), "{}", stderr(&out));
+    let out = alnlab(
+        dir.path(),
+        &[
+            "-q",
+            "stride",
+            "--manifest",
+            "m.toml",
+            "--trajectory",
+            "alone/trajectory.mcap",
+            "--out",
+            "alone",
+        ],
+    );
+    assert!(out.status.success(), "{}", stderr(&out));
+    let record = run_ok(dir.path(), &["m.toml"]);
+    for (role, file) in [
+        ("trajectory", "trajectory.mcap"),
+        ("stats", "stats.parquet"),
+        ("pairs", "pairs.parquet"),
+    ] {
+        let alone = std::fs::read(dir.path().join("alone").join(file)).unwrap();
+        let piped =
+            std::fs::read(dir.path().join(&record.variants[0].artifacts[role].path)).unwrap();
+        assert!(
+            alone == piped,
+            "{role} differs between the stage alone and the pipeline"
+        );
+    }
+}

@@ -5,4 +5,8 @@
 //! cache and run records. The stages themselves live in their own crates and
 //! meet only through files.
 
+pub mod cache;
+pub mod cli;
 pub mod manifest;
+pub mod progress;
+pub mod run;

@@ -43,10 +43,15 @@ impl Error {
     }
 
     /// The process exit code for this error: 2 for what the user can fix
-    /// (bad input files, bad parameters, an unstable scene), 1 otherwise.
+    /// (a missing or unreadable input, bad files, bad parameters, an unstable
+    /// scene), 1 otherwise (e.g. a full disk).
     pub fn exit_code(&self) -> i32 {
+        use std::io::ErrorKind::{IsADirectory, NotADirectory, NotFound, PermissionDenied};
         match self {
-            Error::Io { .. } => 1,
+            Error::Io { source, .. } => match source.kind() {
+                NotFound | PermissionDenied | IsADirectory | NotADirectory => 2,
+                _ => 1,
+            },
             Error::BadFile { .. } | Error::Invalid(_) | Error::Diverged(_) => 2,
         }
     }

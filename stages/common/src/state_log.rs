@@ -168,6 +168,21 @@ pub struct StateLogWriter {
 impl StateLogWriter {
     /// Starts a log at `path` with one `/state` channel per layout.
     pub fn create(path: &Path, layouts: &[StateLayout]) -> Result<StateLogWriter> {
+        for layout in layouts {
+            let mut fields = std::collections::BTreeSet::new();
+            if let Some(dup) = layout
+                .state
+                .iter()
+                .chain(&layout.variables)
+                .find(|n| !fields.insert(field_name(n)))
+            {
+                return Err(Error::Invalid(format!(
+                    "scene `{}`: field `{}` appears twice in the /state layout",
+                    layout.scene,
+                    field_name(dup)
+                )));
+            }
+        }
         let tmp = atomic::temporary_name(path);
         if let Some(parent) = path.parent().filter(|p| !p.as_os_str().is_empty()) {
             std::fs::create_dir_all(parent).map_err(|e| Error::io(parent, e))?;
@@ -417,6 +432,21 @@ mod tests {
             let err = StateLog::read(&path).unwrap_err();
             assert!(err.to_string().contains("trajectory.mcap"), "{err}");
         }
+    }
+
+    #[test]
+    fn duplicate_fields_are_refused() {
+        let dir = tempfile::tempdir().unwrap();
+        let mut bad = layout();
+        bad.state.push("omega.1.x".into());
+        let err = StateLogWriter::create(&dir.path().join("t.mcap"), &[bad])
+            .err()
+            .unwrap();
+        assert!(
+            err.to_string().contains("`omega_1_x` appears twice"),
+            "{err}"
+        );
+        assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 0);
     }
 
     #[test]

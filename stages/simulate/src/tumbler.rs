@@ -78,9 +78,9 @@ pub const STATE_NAMES: [&str; 13] = [
     "root.v.x",
     "root.v.y",
     "root.v.z",
-    "omega.1.x",
-    "omega.1.y",
-    "omega.1.z",
+    "root.omega.x",
+    "root.omega.y",
+    "root.omega.z",
 ];
 
 /// Names of the learned variables, in the order of [`variables`].
@@ -128,10 +128,21 @@ pub fn variables(body: &Body, s: &State, out: &mut [f64; 12]) {
 pub fn step(body: &Body, s: &mut State, dt: f64, integrator: Integrator) {
     match integrator {
         Integrator::SemiImplicitEuler => {
+            // Momenta first, then the pose with the new velocities. The
+            // angular momentum lives in the inertial frame, where only a
+            // torque changes it (here none: it is conserved exactly), and ω
+            // follows from it and the orientation, so |ω| stays bounded.
+            // The rotation uses ω at the half-step orientation: with the
+            // start-of-step ω the energy of a body spinning near its
+            // intermediate axis wanders by a factor of two within a minute.
             s.v += body.gravity * dt;
-            s.omega += body.omega_dot(&s.omega) * dt;
+            let momentum = s.q * body.inertia.component_mul(&s.omega);
             s.p += s.v * dt;
-            s.q *= UnitQuaternion::from_scaled_axis(s.omega * dt);
+            let half = s.q * UnitQuaternion::from_scaled_axis(s.omega * (dt / 2.0));
+            let omega_half = (half.inverse() * momentum).component_div(&body.inertia);
+            s.q *= UnitQuaternion::from_scaled_axis(omega_half * dt);
+            s.q.renormalize();
+            s.omega = (s.q.inverse() * momentum).component_div(&body.inertia);
         }
         Integrator::Rk4 => rk4(body, s, dt),
     }
@@ -224,6 +235,25 @@ mod tests {
         };
         let (coarse, fine) = (drift(4e-3), drift(2e-3));
         assert!(coarse / fine > 10.0, "coarse {coarse:e}, fine {fine:e}");
+    }
+
+    #[test]
+    fn semi_implicit_euler_conserves_momentum_and_bounds_energy() {
+        let b = body();
+        let mut s = spinning([0.3, 20.0, 0.5]);
+        let rotational = |s: &State| s.omega.dot(&b.inertia.component_mul(&s.omega));
+        let e0 = rotational(&s);
+        let l0 = s.q * b.inertia.component_mul(&s.omega);
+        let mut worst: f64 = 0.0;
+        for _ in 0..100 {
+            run(&mut s, 1e-3, 1000, Integrator::SemiImplicitEuler);
+            worst = worst.max(((rotational(&s) - e0) / e0).abs());
+        }
+        let l1 = s.q * b.inertia.component_mul(&s.omega);
+        let drift = (l1 - l0).norm() / l0.norm();
+        // Conserved up to round-off: 1e5 steps of about 1e-16 each.
+        assert!(drift < 1e-10, "angular momentum drift {drift:e}");
+        assert!(worst < 2e-3, "energy wandered by {worst:e} over 100 s");
     }
 
     #[test]

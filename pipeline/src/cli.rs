@@ -1,0 +1,311 @@
+//! The `alnlab` command line: clap definitions and what each command does.
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use alnlab_common::hash::sha256_file;
+use alnlab_common::{Error, Provenance, Result};
+use clap::{Parser, Subcommand};
+
+use crate::manifest::Manifest;
+use crate::progress::Bar;
+use crate::run::{RunOptions, run, stage_params};
+
+/// alnlab — how well, and how fast, can adaptive logic networks predict the
+/// motion of articulated rigid bodies?
+///
+/// An experiment is a TOML manifest; `alnlab run` executes its stages
+/// (simulate → stride → …) through a content-addressed artifact cache and
+/// writes a run record. Every stage can also run alone on explicit files.
+#[derive(Debug, Parser)]
+#[command(
+    name = "alnlab",
+    version,
+    after_help = "Examples:
+  alnlab run                                  # experiments/quickstart.toml into runs/
+  alnlab check experiments/quickstart.toml    # validate, print the resolved variants
+  alnlab simulate --manifest experiments/quickstart.toml --out /tmp/sim"
+)]
+pub struct Cli {
+    /// No progress bars.
+    #[arg(long, short, global = true)]
+    pub quiet: bool,
+    #[command(subcommand)]
+    pub command: Command,
+}
+
+/// The subcommands.
+#[derive(Debug, Subcommand)]
+pub enum Command {
+    /// Run an experiment: every stage of every variant, reusing cached artifacts.
+    ///
+    /// Artifacts go to <OUT>/cache/<stage>/<key>/, keyed by the stage's
+    /// parameters and inputs; only stages whose key changed run again. The run
+    /// record is written to <OUT>/<experiment>/run.json. A second run on the
+    /// same <OUT> waits until the first is done.
+    #[command(after_help = "Examples:
+  alnlab run
+  alnlab run experiments/quickstart.toml --out runs --variant base
+  alnlab run experiments/quickstart.toml --force")]
+    Run {
+        /// The experiment manifest.
+        #[arg(default_value = "experiments/quickstart.toml")]
+        manifest: PathBuf,
+        /// Output folder for the cache and run records.
+        #[arg(long, default_value = "runs")]
+        out: PathBuf,
+        /// Re-run every stage, cached or not.
+        #[arg(long)]
+        force: bool,
+        /// Run only this variant.
+        #[arg(long)]
+        variant: Option<String>,
+    },
+    /// Validate a manifest and print it fully resolved, once per variant.
+    ///
+    /// Errors name the file, line and column, the key, and what is allowed;
+    /// the exit code is then 2.
+    #[command(after_help = "Example:
+  alnlab check experiments/quickstart.toml")]
+    Check {
+        /// The experiment manifest.
+        manifest: PathBuf,
+    },
+    /// Run the simulate stage alone: write trajectory.mcap and stats.parquet.
+    #[command(after_help = "Example:
+  alnlab simulate --manifest experiments/quickstart.toml --out /tmp/sim")]
+    Simulate {
+        #[command(flatten)]
+        from: ManifestArgs,
+        /// Folder to write trajectory.mcap and stats.parquet into.
+        #[arg(long)]
+        out: PathBuf,
+    },
+    /// Run the stride stage alone: pair every n-th frame with its successor.
+    #[command(after_help = "Example:
+  alnlab stride --manifest experiments/quickstart.toml \\
+      --trajectory /tmp/sim/trajectory.mcap --out /tmp/stride")]
+    Stride {
+        #[command(flatten)]
+        from: ManifestArgs,
+        /// The trajectory log written by simulate.
+        #[arg(long)]
+        trajectory: PathBuf,
+        /// Folder to write pairs.parquet into.
+        #[arg(long)]
+        out: PathBuf,
+    },
+    /// Benchmarks; each prints its figures, or one JSON object with --json.
+    #[command(subcommand)]
+    Bench(Bench),
+}
+
+/// Where a stage run alone takes its parameters from.
+#[derive(Debug, clap::Args)]
+pub struct ManifestArgs {
+    /// The experiment manifest holding the stage's parameters.
+    #[arg(long)]
+    manifest: PathBuf,
+    /// The variant whose parameters to use (default: the first).
+    #[arg(long)]
+    variant: Option<String>,
+}
+
+/// The benchmarks.
+#[derive(Debug, Subcommand)]
+pub enum Bench {
+    /// Time a fully cached `run` of a manifest (the no-op re-run).
+    ///
+    /// Runs the manifest once to fill the cache, then times REPEAT re-runs
+    /// that find everything cached, and reports the median.
+    #[command(after_help = "Example:
+  alnlab bench cache experiments/quickstart.toml --json")]
+    Cache {
+        /// The experiment manifest.
+        #[arg(default_value = "experiments/quickstart.toml")]
+        manifest: PathBuf,
+        /// Output folder for the cache.
+        #[arg(long, default_value = "runs")]
+        out: PathBuf,
+        /// How many cached re-runs to time.
+        #[arg(long, default_value_t = 10)]
+        repeat: usize,
+        /// Print one JSON object.
+        #[arg(long)]
+        json: bool,
+    },
+}
+
+/// Executes the parsed command line.
+pub fn execute(cli: Cli) -> Result<()> {
+    let quiet = cli.quiet;
+    match cli.command {
+        Command::Run {
+            manifest,
+            out,
+            force,
+            variant,
+        } => {
+            let manifest = Manifest::load(&manifest)?;
+            let options = RunOptions {
+                out,
+                force,
+                variant,
+                quiet,
+            };
+            let record = run(&manifest, &options)?;
+            for variant in &record.variants {
+                for stage in &variant.stages {
+                    let what = if stage.cached { "cached" } else { "ran" };
+                    println!(
+                        "{}/{} {:<9} {what:<6} {:>8.3} s",
+                        record.experiment, variant.name, stage.stage, stage.wall_seconds
+                    );
+                }
+            }
+            let path = options.out.join(&record.experiment).join("run.json");
+            println!(
+                "run record: {}  ({:.3} s)",
+                path.display(),
+                record.wall_seconds
+            );
+            Ok(())
+        }
+        Command::Check { manifest } => {
+            let manifest = Manifest::load(&manifest)?;
+            for variant in &manifest.variants {
+                println!("# variant `{}`", variant.name);
+                if !variant.description.is_empty() {
+                    println!("# {}", variant.description);
+                }
+                println!("{}", manifest.resolved_toml(variant));
+            }
+            Ok(())
+        }
+        Command::Simulate { from, out } => {
+            let (manifest, variant) = from.load()?;
+            let params = &manifest.variant(&variant)?.stages.simulate;
+            let seed = manifest.experiment.seed;
+            let provenance = standalone_provenance(&manifest, "simulate", seed, params, &[])?;
+            alnlab_simulate::run(
+                params,
+                seed,
+                &provenance,
+                &out,
+                &Bar::new("simulate", quiet),
+            )?;
+            println!(
+                "wrote {}",
+                out.join(alnlab_simulate::TRAJECTORY_FILE).display()
+            );
+            println!("wrote {}", out.join(alnlab_simulate::STATS_FILE).display());
+            Ok(())
+        }
+        Command::Stride {
+            from,
+            trajectory,
+            out,
+        } => {
+            let (manifest, variant) = from.load()?;
+            let params = &manifest.variant(&variant)?.stages.stride;
+            let seed = manifest.experiment.seed;
+            let inputs = [("trajectory", trajectory.as_path())];
+            let provenance = standalone_provenance(&manifest, "stride", seed, params, &inputs)?;
+            let bar = Bar::new("stride", quiet);
+            alnlab_stride::run(params, seed, &trajectory, &provenance, &out, &bar)?;
+            println!("wrote {}", out.join(alnlab_stride::PAIRS_FILE).display());
+            Ok(())
+        }
+        Command::Bench(Bench::Cache {
+            manifest,
+            out,
+            repeat,
+            json,
+        }) => bench_cache(&manifest, out, repeat.max(1), json, quiet),
+    }
+}
+
+impl ManifestArgs {
+    fn load(&self) -> Result<(Manifest, String)> {
+        let manifest = Manifest::load(&self.manifest)?;
+        let variant = match &self.variant {
+            Some(v) => v.clone(),
+            None => manifest.variants[0].name.clone(),
+        };
+        Ok((manifest, variant))
+    }
+}
+
+fn standalone_provenance(
+    manifest: &Manifest,
+    stage: &str,
+    seed: u64,
+    params: &impl serde::Serialize,
+    inputs: &[(&str, &Path)],
+) -> Result<Provenance> {
+    Ok(Provenance {
+        stage: stage.into(),
+        manifest_sha256: manifest.sha256.clone(),
+        params: stage_params(seed, params),
+        inputs: inputs
+            .iter()
+            .map(|(role, path)| Ok((role.to_string(), sha256_file(path)?)))
+            .collect::<Result<_>>()?,
+    })
+}
+
+fn bench_cache(
+    manifest: &Path,
+    out: PathBuf,
+    repeat: usize,
+    json: bool,
+    quiet: bool,
+) -> Result<()> {
+    let options = RunOptions {
+        out,
+        force: false,
+        variant: None,
+        quiet,
+    };
+    let warm = Manifest::load(manifest)?;
+    run(&warm, &options)?;
+    let mut seconds = Vec::with_capacity(repeat);
+    for _ in 0..repeat {
+        let clock = Instant::now();
+        // Everything a cached `alnlab run` does after process start.
+        let manifest = Manifest::load(manifest)?;
+        let record = run(&manifest, &options)?;
+        seconds.push(clock.elapsed().as_secs_f64());
+        if record
+            .variants
+            .iter()
+            .flat_map(|v| &v.stages)
+            .any(|s| !s.cached)
+        {
+            return Err(Error::Invalid(
+                "a stage re-ran although nothing changed".into(),
+            ));
+        }
+    }
+    seconds.sort_by(f64::total_cmp);
+    let median = seconds[seconds.len() / 2];
+    if json {
+        println!(
+            "{}",
+            serde_json::json!({
+                "manifest": manifest.display().to_string(),
+                "repeat": repeat,
+                "cached_run_median_s": median,
+                "cached_run_max_s": seconds[seconds.len() - 1],
+            })
+        );
+    } else {
+        println!(
+            "cached re-run of {}: median {:.1} ms, max {:.1} ms over {repeat} runs",
+            manifest.display(),
+            median * 1e3,
+            seconds[seconds.len() - 1] * 1e3
+        );
+    }
+    Ok(())
+}

@@ -1,0 +1,299 @@
+//! `alnlab run`: the stage graph of one manifest, executed in-process through
+//! the artifact cache, with a run record at the end.
+//!
+//! The graph today is simulate → stride; each later stage joins it when it
+//! is built. For every variant, each stage's cache key is computed from its
+//! parameters and its inputs' hashes; a stage runs only when no finished
+//! artifact has that key (or with `--force`).
+
+use std::collections::{BTreeMap, BTreeSet};
+use std::fs::{self, File};
+use std::io::{Read, Seek, Write};
+use std::path::{Path, PathBuf};
+use std::time::{Instant, SystemTime};
+
+use alnlab_common::{ALNLAB_VERSION, Error, Provenance, Result};
+use serde::{Deserialize, Serialize};
+
+use crate::cache::{Artifact, Cache, StageKey};
+use crate::manifest::{Manifest, Variant};
+use crate::progress::Bar;
+
+/// How to run.
+#[derive(Clone, Debug)]
+pub struct RunOptions {
+    /// The output folder (cache, run records).
+    pub out: PathBuf,
+    /// Re-run every stage even if its artifact is cached.
+    pub force: bool,
+    /// Run only this variant.
+    pub variant: Option<String>,
+    /// No progress bars.
+    pub quiet: bool,
+}
+
+/// `<out>/<experiment>/run.json`: what a run did and what it produced.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct RunRecord {
+    pub experiment: String,
+    pub manifest_path: String,
+    pub manifest_sha256: String,
+    pub seed: u64,
+    pub alnlab_version: String,
+    pub git_commit: Option<String>,
+    pub started: String,
+    pub finished: String,
+    pub wall_seconds: f64,
+    pub variants: Vec<VariantRecord>,
+}
+
+/// What one variant's stages did.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct VariantRecord {
+    pub name: String,
+    pub description: String,
+    /// Every artifact file by role (`trajectory`, `stats`, `pairs`, …).
+    pub artifacts: BTreeMap<String, ArtifactRef>,
+    /// The stages in execution order.
+    pub stages: Vec<StageRecord>,
+}
+
+/// One artifact file.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct ArtifactRef {
+    pub path: String,
+    pub sha256: String,
+    pub cache_key: String,
+}
+
+/// One stage of one variant.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct StageRecord {
+    pub stage: String,
+    pub cache_key: String,
+    /// Whether the artifact was reused rather than made.
+    pub cached: bool,
+    /// Time this run spent on the stage (s).
+    pub wall_seconds: f64,
+    /// Time the stage took when it made the artifact (s).
+    pub compute_seconds: f64,
+}
+
+/// Holds the output folder's lock for the duration of a run; a second run on
+/// the same folder waits (saying so) until the first is done.
+pub struct OutLock {
+    _file: File,
+}
+
+impl OutLock {
+    /// Takes the lock on `out`, waiting for another holder if there is one.
+    pub fn acquire(out: &Path) -> Result<OutLock> {
+        fs::create_dir_all(out).map_err(|e| Error::io(out, e))?;
+        let path = out.join(".lock");
+        let mut file = File::options()
+            .read(true)
+            .write(true)
+            .create(true)
+            .truncate(false)
+            .open(&path)
+            .map_err(|e| Error::io(&path, e))?;
+        if file.try_lock().is_err() {
+            let mut holder = String::new();
+            let _ = file.read_to_string(&mut holder);
+            eprintln!(
+                "waiting: another alnlab run (pid {}) is using {}",
+                holder.trim(),
+                out.display()
+            );
+            file.lock().map_err(|e| Error::io(&path, e))?;
+        }
+        file.set_len(0).map_err(|e| Error::io(&path, e))?;
+        file.rewind().map_err(|e| Error::io(&path, e))?;
+        write!(file, "{}", std::process::id()).map_err(|e| Error::io(&path, e))?;
+        Ok(OutLock { _file: file })
+    }
+}
+
+/// Runs the manifest's variants (or the one chosen) and writes the run record.
+pub fn run(manifest: &Manifest, options: &RunOptions) -> Result<RunRecord> {
+    let started = SystemTime::now();
+    let clock = Instant::now();
+    let variants: Vec<&Variant> = match &options.variant {
+        Some(name) => vec![manifest.variant(name)?],
+        None => manifest.variants.iter().collect(),
+    };
+    let _lock = OutLock::acquire(&options.out)?;
+    let cache = Cache::new(&options.out);
+    cache.sweep_unfinished()?;
+    let mut made_now = BTreeSet::new();
+    let mut records = Vec::new();
+    for variant in variants {
+        let mut graph = Graph {
+            manifest,
+            options,
+            cache: &cache,
+            made_now: &mut made_now,
+            record: VariantRecord {
+                name: variant.name.clone(),
+                description: variant.description.clone(),
+                artifacts: BTreeMap::new(),
+                stages: Vec::new(),
+            },
+        };
+        graph.run_variant(variant)?;
+        records.push(graph.record);
+    }
+    let record = RunRecord {
+        experiment: manifest.experiment.name.clone(),
+        manifest_path: manifest.path.display().to_string(),
+        manifest_sha256: manifest.sha256.clone(),
+        seed: manifest.experiment.seed,
+        alnlab_version: ALNLAB_VERSION.into(),
+        git_commit: git_commit(&manifest.path),
+        started: humantime::format_rfc3339_seconds(started).to_string(),
+        finished: humantime::format_rfc3339_seconds(SystemTime::now()).to_string(),
+        wall_seconds: clock.elapsed().as_secs_f64(),
+        variants: records,
+    };
+    let path = options.out.join(&manifest.experiment.name).join("run.json");
+    let json = serde_json::to_vec_pretty(&record).expect("records serialize");
+    alnlab_common::atomic::write_bytes(&path, &json)?;
+    Ok(record)
+}
+
+/// One variant's walk through the stages.
+struct Graph<'a> {
+    manifest: &'a Manifest,
+    options: &'a RunOptions,
+    cache: &'a Cache,
+    /// Keys made by this run, so `--force` makes shared artifacts only once.
+    made_now: &'a mut BTreeSet<String>,
+    record: VariantRecord,
+}
+
+impl Graph<'_> {
+    fn run_variant(&mut self, variant: &Variant) -> Result<()> {
+        let seed = self.manifest.experiment.seed;
+        let stages = &variant.stages;
+
+        let params = stage_params(seed, &stages.simulate);
+        let simulate = self.stage(
+            "simulate",
+            alnlab_simulate::FORMAT_VERSION,
+            &params,
+            &[],
+            &[
+                ("trajectory", alnlab_simulate::TRAJECTORY_FILE),
+                ("stats", alnlab_simulate::STATS_FILE),
+            ],
+            |provenance, dir, bar| {
+                alnlab_simulate::run(&stages.simulate, seed, provenance, dir, bar)
+            },
+        )?;
+
+        let params = stage_params(seed, &stages.stride);
+        let trajectory = simulate.path("trajectory");
+        self.stage(
+            "stride",
+            alnlab_stride::FORMAT_VERSION,
+            &params,
+            &[("trajectory", &simulate)],
+            &[("pairs", alnlab_stride::PAIRS_FILE)],
+            |provenance, dir, bar| {
+                alnlab_stride::run(&stages.stride, seed, &trajectory, provenance, dir, bar)
+            },
+        )?;
+        Ok(())
+    }
+
+    /// Finds or makes one stage's artifact and records it.
+    #[allow(clippy::too_many_arguments)]
+    fn stage(
+        &mut self,
+        name: &str,
+        format_version: u32,
+        params: &serde_json::Value,
+        inputs: &[(&str, &Artifact)],
+        outputs: &[(&str, &str)],
+        execute: impl FnOnce(&Provenance, &Path, &Bar) -> Result<()>,
+    ) -> Result<Artifact> {
+        let clock = Instant::now();
+        let input_hashes: BTreeMap<String, String> = inputs
+            .iter()
+            .map(|(role, artifact)| (role.to_string(), artifact.sha256(role).to_string()))
+            .collect();
+        let key = StageKey {
+            stage: name,
+            format_version,
+            params,
+            inputs: input_hashes.clone(),
+        }
+        .hash();
+        let reuse = !self.options.force || self.made_now.contains(&key);
+        let found = if reuse {
+            self.cache.lookup(name, &key)
+        } else {
+            None
+        };
+        let cached = found.is_some();
+        let artifact = match found {
+            Some(artifact) => artifact,
+            None => {
+                let provenance = Provenance {
+                    stage: name.into(),
+                    manifest_sha256: self.manifest.sha256.clone(),
+                    params: params.clone(),
+                    inputs: input_hashes,
+                };
+                let label = format!("{}/{}", self.manifest.experiment.name, self.record.name);
+                let bar = Bar::new(&label, self.options.quiet);
+                let artifact = self
+                    .cache
+                    .make(name, &key, outputs, |dir| execute(&provenance, dir, &bar))?;
+                self.made_now.insert(key.clone());
+                artifact
+            }
+        };
+        for (role, _) in outputs {
+            self.record.artifacts.insert(
+                role.to_string(),
+                ArtifactRef {
+                    path: artifact.path(role).display().to_string(),
+                    sha256: artifact.sha256(role).to_string(),
+                    cache_key: key.clone(),
+                },
+            );
+        }
+        self.record.stages.push(StageRecord {
+            stage: name.into(),
+            cache_key: key,
+            cached,
+            wall_seconds: clock.elapsed().as_secs_f64(),
+            compute_seconds: artifact.record.compute_seconds,
+        });
+        Ok(artifact)
+    }
+}
+
+/// The parameters a stage's cache key and provenance are made of: the
+/// experiment seed and the stage's resolved table.
+pub fn stage_params(seed: u64, params: &impl Serialize) -> serde_json::Value {
+    serde_json::json!({ "seed": seed, "params": params })
+}
+
+/// The commit of the git checkout holding `path`, if there is one.
+fn git_commit(path: &Path) -> Option<String> {
+    let dir = path
+        .parent()
+        .filter(|p| !p.as_os_str().is_empty())
+        .unwrap_or(Path::new("."));
+    let output = std::process::Command::new("git")
+        .arg("-C")
+        .arg(dir)
+        .args(["rev-parse", "HEAD"])
+        .stderr(std::process::Stdio::null())
+        .output()
+        .ok()?;
+    let commit = String::from_utf8(output.stdout).ok()?.trim().to_string();
+    (output.status.success() && !commit.is_empty()).then_some(commit)
+}
