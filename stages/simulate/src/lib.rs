@@ -5,6 +5,12 @@
 //!
 //! Scenes so far: `tumbler`, one free rigid box under gravity.
 
+pub mod dynamics;
+pub mod integrate;
+pub mod model;
+#[cfg(test)]
+mod reference;
+pub mod spatial;
 mod stats;
 pub mod tumbler;
 

@@ -1,0 +1,225 @@
+//! Fixed-step integration of the link tree: semi-implicit Euler (velocities
+//! first, then positions with the new velocities) and classical RK4. Both
+//! keep the quaternions unit. All scratch space lives in the [`Stepper`], so
+//! a step allocates nothing.
+
+use nalgebra::{Quaternion, UnitQuaternion, Vector3, Vector6};
+
+use crate::Integrator;
+use crate::dynamics::{Derivative, Kinematics, State, Workspace};
+use crate::model::Model;
+
+/// The forces acting at one instant: fills the hinge torques and the external
+/// spatial forces (link frame, at the hinge; gravity excluded) for a state
+/// whose kinematics are given.
+pub trait Forces {
+    fn apply(
+        &mut self,
+        model: &Model,
+        state: &State,
+        kin: &Kinematics,
+        tau: &mut [Vector3<f64>],
+        f_ext: &mut [Vector6<f64>],
+    );
+}
+
+/// No torques, no external forces.
+pub struct NoForces;
+
+impl Forces for NoForces {
+    fn apply(
+        &mut self,
+        _: &Model,
+        _: &State,
+        _: &Kinematics,
+        tau: &mut [Vector3<f64>],
+        f_ext: &mut [Vector6<f64>],
+    ) {
+        tau.fill(Vector3::zeros());
+        f_ext.fill(Vector6::zeros());
+    }
+}
+
+/// Everything one evaluation of the dynamics computes, kept for inspection:
+/// kinematics, forces, accelerations and the state's derivative.
+pub struct Evaluation {
+    /// Kinematics of the state last evaluated.
+    pub kin: Kinematics,
+    /// The dynamics scratch space (its `accel` holds the last accelerations).
+    pub ws: Workspace,
+    /// Hinge torques of the last evaluation.
+    pub tau: Vec<Vector3<f64>>,
+    /// External forces of the last evaluation.
+    pub f_ext: Vec<Vector6<f64>>,
+    /// The derivative of the last evaluation.
+    pub deriv: Derivative,
+    /// Sum of the external forces and gravity, inertial frame (the rate of
+    /// change of the linear momentum).
+    pub external_force: Vector3<f64>,
+}
+
+impl Evaluation {
+    /// Buffers for `model`.
+    pub fn new(model: &Model) -> Evaluation {
+        Evaluation {
+            kin: Kinematics::new(model),
+            ws: Workspace::new(model),
+            tau: vec![Vector3::zeros(); model.len()],
+            f_ext: vec![Vector6::zeros(); model.len()],
+            deriv: Derivative::zeros(model),
+            external_force: Vector3::zeros(),
+        }
+    }
+
+    /// Evaluates kinematics, forces and accelerations of `state`.
+    pub fn run(&mut self, model: &Model, state: &State, forces: &mut impl Forces) {
+        self.kin.update(model, state);
+        forces.apply(model, state, &self.kin, &mut self.tau, &mut self.f_ext);
+        self.ws.forward(
+            model,
+            state,
+            &self.kin,
+            &self.tau,
+            &self.f_ext,
+            &mut self.deriv,
+        );
+        self.external_force = model.gravity * model.total_mass();
+        for (rot, f) in self.kin.rot.iter().zip(&self.f_ext) {
+            self.external_force += rot * f.fixed_rows::<3>(3);
+        }
+    }
+}
+
+/// Steps a model forward; owns every buffer a step needs.
+///
+/// With a free root, each step ends with a momentum projection: the system's
+/// linear momentum is integrated on its own (its rate is the total external
+/// force, so without one it is constant) and the root's linear velocity is
+/// shifted so that the state carries exactly that momentum. Integrating the
+/// generalized coordinates alone lets it drift by the truncation error.
+pub struct Stepper {
+    /// The last evaluation of the dynamics (at the start of the last step for
+    /// semi-implicit Euler, at its last RK4 stage otherwise).
+    pub eval: Evaluation,
+    k: [Derivative; 3],
+    stage: State,
+    /// The tracked linear momentum (free root), set from the first state.
+    momentum: Option<Vector3<f64>>,
+}
+
+impl Stepper {
+    /// Buffers for `model`.
+    pub fn new(model: &Model) -> Stepper {
+        Stepper {
+            eval: Evaluation::new(model),
+            k: std::array::from_fn(|_| Derivative::zeros(model)),
+            stage: State::rest(model, Vector3::zeros()),
+            momentum: None,
+        }
+    }
+
+    /// Advances `state` by `dt`.
+    pub fn step(
+        &mut self,
+        model: &Model,
+        state: &mut State,
+        dt: f64,
+        integrator: Integrator,
+        forces: &mut impl Forces,
+    ) {
+        let momentum_rate = match integrator {
+            Integrator::SemiImplicitEuler => {
+                self.eval.run(model, state, forces);
+                self.start_momentum(model);
+                let d = &self.eval.deriv;
+                state.root_v += d.root_v * dt;
+                for (w, wd) in state.rates.iter_mut().zip(&d.rates) {
+                    *w += wd * dt;
+                }
+                if model.root == crate::model::Root::Free {
+                    state.root_p += self.eval.kin.rot[0] * state.root_v * dt;
+                }
+                for (q, w) in state.orient.iter_mut().zip(&state.rates) {
+                    *q *= UnitQuaternion::from_scaled_axis(w * dt);
+                    q.renormalize();
+                }
+                self.eval.external_force
+            }
+            Integrator::Rk4 => self.rk4(model, state, dt, forces),
+        };
+        if let Some(momentum) = &mut self.momentum {
+            *momentum += momentum_rate * dt;
+            let kin = &mut self.eval.kin;
+            kin.update(model, state);
+            let error = *momentum - crate::dynamics::linear_momentum(model, kin);
+            state.root_v += kin.rot[0].transpose() * error / model.total_mass();
+        }
+    }
+
+    /// Sets the tracked momentum from the state just evaluated, on the first
+    /// step of a free-root model.
+    fn start_momentum(&mut self, model: &Model) {
+        if self.momentum.is_none() && model.root == crate::model::Root::Free {
+            self.momentum = Some(crate::dynamics::linear_momentum(model, &self.eval.kin));
+        }
+    }
+
+    /// One RK4 step; returns the RK4-weighted mean external force.
+    fn rk4(
+        &mut self,
+        model: &Model,
+        state: &mut State,
+        dt: f64,
+        forces: &mut impl Forces,
+    ) -> Vector3<f64> {
+        // k1..k3 are kept; k4 is the last evaluation's derivative.
+        let mut force = Vector3::zeros();
+        for stage in 0..4 {
+            if stage == 0 {
+                self.stage.clone_from(state);
+            } else {
+                let h = if stage == 3 { dt } else { dt / 2.0 };
+                offset(&mut self.stage, state, &self.k[stage - 1], h);
+            }
+            self.eval.run(model, &self.stage, forces);
+            if stage == 0 {
+                self.start_momentum(model);
+            }
+            force += self.eval.external_force * [1.0, 2.0, 2.0, 1.0][stage] / 6.0;
+            if stage < 3 {
+                clone_derivative(&mut self.k[stage], &self.eval.deriv);
+            }
+        }
+        let [k1, k2, k3] = &self.k;
+        let k4 = &self.eval.deriv;
+        let h = dt / 6.0;
+        state.root_p += (k1.root_p + k2.root_p * 2.0 + k3.root_p * 2.0 + k4.root_p) * h;
+        state.root_v += (k1.root_v + k2.root_v * 2.0 + k3.root_v * 2.0 + k4.root_v) * h;
+        for i in 0..state.rates.len() {
+            state.rates[i] +=
+                (k1.rates[i] + k2.rates[i] * 2.0 + k3.rates[i] * 2.0 + k4.rates[i]) * h;
+            let dq: Quaternion<f64> =
+                (k1.orient[i] + k2.orient[i] * 2.0 + k3.orient[i] * 2.0 + k4.orient[i]) * h;
+            state.orient[i] = UnitQuaternion::new_normalize(state.orient[i].into_inner() + dq);
+        }
+        force
+    }
+}
+
+/// `out = base + h · d`, quaternions renormalised.
+fn offset(out: &mut State, base: &State, d: &Derivative, h: f64) {
+    out.root_p = base.root_p + d.root_p * h;
+    out.root_v = base.root_v + d.root_v * h;
+    for i in 0..base.rates.len() {
+        out.rates[i] = base.rates[i] + d.rates[i] * h;
+        out.orient[i] =
+            UnitQuaternion::new_normalize(base.orient[i].into_inner() + d.orient[i] * h);
+    }
+}
+
+fn clone_derivative(out: &mut Derivative, from: &Derivative) {
+    out.root_p = from.root_p;
+    out.root_v = from.root_v;
+    out.orient.copy_from_slice(&from.orient);
+    out.rates.copy_from_slice(&from.rates);
+}

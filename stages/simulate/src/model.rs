@@ -1,0 +1,145 @@
+//! The articulated body: a tree of rigid links. The root link is either free
+//! (6 DOF) or pinned to the world by a ball hinge (3 DOF); every other link
+//! hangs from its parent by a 3-DOF ball hinge (paper §2).
+
+use nalgebra::{Matrix3, Matrix6, Vector3};
+
+use crate::spatial::rigid_inertia;
+
+/// How the root link is held.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Root {
+    /// Free to move and turn (6 DOF).
+    Free,
+    /// Turning about a ball hinge fixed in the world (3 DOF).
+    Pinned,
+}
+
+/// One rigid link. Its frame has its origin at the proximal hinge.
+#[derive(Clone, Debug)]
+pub struct Link {
+    /// Index of the parent link; `None` for the root.
+    pub parent: Option<usize>,
+    /// Mass (kg).
+    pub mass: f64,
+    /// From the proximal hinge to the centre of mass, link frame (m).
+    pub c: Vector3<f64>,
+    /// Rotational inertia about the centre of mass, link frame (kg m²).
+    pub inertia_com: Matrix3<f64>,
+    /// From the parent's hinge to this link's hinge, parent frame (m). For a
+    /// pinned root, the pivot in the inertial frame.
+    pub l: Vector3<f64>,
+    /// The distal end point, link frame, if it is a contact point (the free
+    /// end of a chain).
+    pub tip: Option<Vector3<f64>>,
+}
+
+impl Link {
+    /// The spatial inertia about the hinge, link frame.
+    pub fn spatial_inertia(&self) -> Matrix6<f64> {
+        rigid_inertia(self.mass, &self.c, &self.inertia_com)
+    }
+
+    /// Rotational inertia about the hinge, link frame (the paper's J).
+    pub fn inertia_hinge(&self) -> Matrix3<f64> {
+        self.inertia_com
+            + (Matrix3::identity() * self.c.norm_squared() - self.c * self.c.transpose())
+                * self.mass
+    }
+}
+
+/// Shapes whose inertia a link can take.
+#[derive(Clone, Copy, Debug)]
+pub enum Shape {
+    /// A solid box with edges (x, y, z); the hinge at the centre of the −x face.
+    Box([f64; 3]),
+    /// A rod along x spanning x ∈ [0, `length`] with `radius`; the hinge at
+    /// x = 0. Its inertia is that of a solid cylinder of the same size.
+    Capsule { length: f64, radius: f64 },
+}
+
+impl Shape {
+    /// Extent along x (hinge to distal end).
+    pub fn length(&self) -> f64 {
+        match *self {
+            Shape::Box([x, _, _]) => x,
+            Shape::Capsule { length, .. } => length,
+        }
+    }
+
+    /// Rotational inertia about the centre of mass for `mass`, principal axes
+    /// along the link frame.
+    pub fn inertia_com(&self, mass: f64) -> Matrix3<f64> {
+        match *self {
+            Shape::Box([x, y, z]) => {
+                Matrix3::from_diagonal(&Vector3::new(y * y + z * z, x * x + z * z, x * x + y * y))
+                    * (mass / 12.0)
+            }
+            Shape::Capsule { length, radius } => {
+                // Solid cylinder: axial ½ m r², transverse m (3 r² + L²) / 12.
+                let axial = 0.5 * mass * radius * radius;
+                let transverse = mass * (3.0 * radius * radius + length * length) / 12.0;
+                Matrix3::from_diagonal(&Vector3::new(axial, transverse, transverse))
+            }
+        }
+    }
+}
+
+/// A tree of links with gravity.
+#[derive(Clone, Debug)]
+pub struct Model {
+    /// How the root is held.
+    pub root: Root,
+    /// The links; every parent comes before its children.
+    pub links: Vec<Link>,
+    /// Gravity, inertial frame (m/s²).
+    pub gravity: Vector3<f64>,
+}
+
+impl Model {
+    /// A chain of `shapes` hinged end to end along each link's x axis, with
+    /// the given masses. The last link's distal end is a contact point.
+    pub fn chain(root: Root, shapes: &[(Shape, f64)], gravity: Vector3<f64>) -> Model {
+        let mut links: Vec<Link> = Vec::with_capacity(shapes.len());
+        for (i, (shape, mass)) in shapes.iter().enumerate() {
+            let length = shape.length();
+            let l = match i {
+                0 => Vector3::zeros(),
+                _ => Vector3::new(shapes[i - 1].0.length(), 0.0, 0.0),
+            };
+            links.push(Link {
+                parent: i.checked_sub(1),
+                mass: *mass,
+                c: Vector3::new(length / 2.0, 0.0, 0.0),
+                inertia_com: shape.inertia_com(*mass),
+                l,
+                tip: (i + 1 == shapes.len()).then(|| Vector3::new(length, 0.0, 0.0)),
+            });
+        }
+        Model {
+            root,
+            links,
+            gravity,
+        }
+    }
+
+    /// Number of links.
+    pub fn len(&self) -> usize {
+        self.links.len()
+    }
+
+    /// Whether the model has no links (never, for a valid scene).
+    pub fn is_empty(&self) -> bool {
+        self.links.is_empty()
+    }
+
+    /// Total mass (kg).
+    pub fn total_mass(&self) -> f64 {
+        self.links.iter().map(|l| l.mass).sum()
+    }
+
+    /// Number of degrees of freedom.
+    pub fn dof(&self) -> usize {
+        3 * self.links.len() + if self.root == Root::Free { 3 } else { 0 }
+    }
+}
