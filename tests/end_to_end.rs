@@ -340,7 +340,7 @@ fn killed_run_leaves_nothing_finished_and_the_next_run_completes() {
 #[test]
 fn concurrent_runs_on_one_output_folder_wait_for_each_other() {
     let dir = tempfile::tempdir().unwrap();
-    let slow = MANIFEST.replace("duration = 3.0", "duration = 60.0");
+    let slow = MANIFEST.replace("duration = 3.0", "duration = 20.0");
     write_manifest(dir.path(), "m.toml", &slow);
     let spawn = || {
         Command::new(env!("CARGO_BIN_EXE_alnlab"))

@@ -201,8 +201,12 @@ impl Manifest {
     }
 }
 
+/// The stages' parameters with every default filled in.
 fn stages_of(simulate: alnlab_simulate::Params, stride: alnlab_stride::Params) -> Stages {
-    Stages { simulate, stride }
+    Stages {
+        simulate: simulate.resolve(),
+        stride,
+    }
 }
 
 /// Maps byte spans to lines and columns and builds located errors.

@@ -249,6 +249,39 @@ impl StateLogWriter {
             .map_err(|e| Error::bad_file(&self.tmp, e))
     }
 
+    /// Adds a channel of JSON messages with a JSON-schema (e.g. one of
+    /// Foxglove's well-known schemas); returns its id for [`Self::write_json`].
+    pub fn add_json_channel(
+        &mut self,
+        topic: &str,
+        schema_name: &str,
+        schema: &str,
+    ) -> Result<u16> {
+        let writer = self.writer.as_mut().expect("writer present until finish");
+        let schema_id = writer
+            .add_schema(schema_name, "jsonschema", schema.as_bytes())
+            .map_err(|e| Error::bad_file(&self.tmp, e))?;
+        writer
+            .add_channel(schema_id, topic, "json", &BTreeMap::new())
+            .map_err(|e| Error::bad_file(&self.tmp, e))
+    }
+
+    /// Writes one JSON message to a channel made by [`Self::add_json_channel`].
+    pub fn write_json(&mut self, channel_id: u16, log_time_ns: u64, json: &[u8]) -> Result<()> {
+        let header = mcap::records::MessageHeader {
+            channel_id,
+            sequence: self.sequence,
+            log_time: log_time_ns,
+            publish_time: log_time_ns,
+        };
+        self.sequence = self.sequence.wrapping_add(1);
+        self.writer
+            .as_mut()
+            .expect("writer present until finish")
+            .write_to_known_channel(&header, json)
+            .map_err(|e| Error::bad_file(&self.tmp, e))
+    }
+
     /// Adds a metadata record (e.g. the scene model as JSON).
     pub fn metadata(&mut self, name: &str, entries: BTreeMap<String, String>) -> Result<()> {
         let record = mcap::records::Metadata {
@@ -304,11 +337,22 @@ pub struct SceneFrames {
 pub struct StateLog {
     /// One entry per scene, in channel order.
     pub scenes: Vec<SceneFrames>,
-    /// Metadata records by name.
-    pub metadata: BTreeMap<String, BTreeMap<String, String>>,
+    /// Metadata records (name, entries), in file order; names may repeat.
+    pub metadata: Vec<(String, BTreeMap<String, String>)>,
 }
 
 impl StateLog {
+    /// The entries of every metadata record called `name`.
+    pub fn records<'a>(
+        &'a self,
+        name: &'a str,
+    ) -> impl Iterator<Item = &'a BTreeMap<String, String>> {
+        self.metadata
+            .iter()
+            .filter(move |(n, _)| n == name)
+            .map(|(_, m)| m)
+    }
+
     /// Reads and decodes the log at `path`. A truncated or corrupt file, or a
     /// `/state` message that does not fit its schema, is an error naming the
     /// file.
@@ -318,11 +362,11 @@ impl StateLog {
         let summary = mcap::Summary::read(&bytes)
             .map_err(|e| bad(format!("not a readable MCAP file ({e})")))?
             .ok_or_else(|| bad("MCAP file has no summary section (unfinished?)".into()))?;
-        let mut metadata = BTreeMap::new();
+        let mut metadata = Vec::new();
         for index in &summary.metadata_indexes {
             let record = mcap::read::metadata(&bytes, index)
                 .map_err(|e| bad(format!("corrupt metadata record ({e})")))?;
-            metadata.insert(record.name, record.metadata);
+            metadata.push((record.name, record.metadata));
         }
         let mut channel_ids: Vec<u16> = summary
             .channels
@@ -424,7 +468,13 @@ mod tests {
         assert_eq!(log.scenes[0].layout, layout());
         assert_eq!(log.scenes[0].frames.len(), 100);
         assert_eq!(log.scenes[0].frames[42], frame(42));
-        assert_eq!(log.metadata[PROVENANCE_RECORD]["alnlab.stage"], "");
+        assert_eq!(
+            log.metadata,
+            [(
+                PROVENANCE_RECORD.to_string(),
+                Provenance::default().key_values().into_iter().collect()
+            )]
+        );
 
         let bytes = std::fs::read(&path).unwrap();
         for cut in [0, 8, bytes.len() / 2, bytes.len() - 3] {

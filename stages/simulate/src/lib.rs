@@ -1,60 +1,87 @@
-//! The simulate stage: runs the scenes of a manifest and writes
-//! `trajectory.mcap` (one `/state` message per logged frame, see
-//! [`alnlab_common::state_log`]) and `stats.parquet` (min, max, mean, std and
-//! n per variable over all runs of all scenes, paper §4.2).
+//! The simulate stage (paper §2, §4.1–4.2; DESIGN.md §3): runs the scenes of
+//! a manifest and writes
+//! - `trajectory.mcap`: one `/state` message per logged frame (see
+//!   [`alnlab_common::state_log`]) holding the generalized state and the
+//!   paper's variables; `/tf` and `/scene` in Foxglove's schemas at the
+//!   viewing rate; an `alnlab.model` metadata record per scene;
+//! - `stats.parquet`: min, max, mean, std and n per variable over all runs of
+//!   all scenes (paper §4.2).
 //!
-//! Scenes so far: `tumbler`, one free rigid box under gravity.
+//! Dynamics: [`dynamics`] (articulated-body algorithm), [`integrate`]
+//! (semi-implicit Euler, RK4), [`contact`] (floor and arena wall),
+//! [`controller`] (hinge torques), [`scene`] (what a manifest describes).
 
+pub mod bench;
+pub mod contact;
+pub mod controller;
 pub mod dynamics;
+mod foxglove;
 pub mod integrate;
 pub mod model;
 #[cfg(test)]
 mod reference;
+pub mod scene;
 pub mod spatial;
 mod stats;
-pub mod tumbler;
+#[cfg(test)]
+mod tests;
+pub mod variables;
 
 use std::path::Path;
 
-use alnlab_common::params::{Count, Positive};
+use alnlab_common::params::Positive;
 use alnlab_common::state_log::{StateFrame, StateLayout, StateLogWriter};
 use alnlab_common::{Error, Progress, Provenance, Result};
-use nalgebra::{UnitQuaternion, Vector3};
-use rand::{RngExt, SeedableRng};
-use rand_chacha::ChaCha8Rng;
+use nalgebra::{Vector3, Vector6};
 use serde::{Deserialize, Serialize};
+
+use crate::contact::{ContactPoint, Surfaces, contact_points};
+use crate::controller::{Controller, ControllerKind};
+use crate::dynamics::{Kinematics, State};
+use crate::integrate::{Evaluation, Forces, Stepper};
+use crate::model::{Model, Root};
+use crate::variables::VariableSet;
+
+pub use crate::scene::{Scene, SceneKind};
 
 /// Version of what this stage writes; part of every cache key, bumped when the
 /// same parameters would produce different bytes.
-pub const FORMAT_VERSION: u32 = 1;
+pub const FORMAT_VERSION: u32 = 2;
 
 /// File name of the trajectory log.
 pub const TRAJECTORY_FILE: &str = "trajectory.mcap";
 /// File name of the statistics table.
 pub const STATS_FILE: &str = "stats.parquet";
+/// Name of the metadata records holding each scene's model.
+pub const MODEL_RECORD: &str = "alnlab.model";
 
 /// The `[simulate]` table of a manifest.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Params {
-    /// The scenes, each run `runs` times (`[[simulate.scene]]`).
+    /// The scenes (`[[simulate.scene]]`).
+    #[serde(default = "default_scenes")]
     pub scene: Vec<Scene>,
+    /// Rate of the `/tf` viewing channel (Hz); rounded to whole frames.
+    #[serde(default = "default_view_rate")]
+    pub view_rate: Positive,
+}
+
+fn default_scenes() -> Vec<Scene> {
+    vec![Scene::default().resolve()]
+}
+
+fn default_view_rate() -> Positive {
+    Positive(50.0)
 }
 
 impl Default for Params {
     fn default() -> Self {
         Params {
-            scene: vec![Scene::default()],
+            scene: default_scenes(),
+            view_rate: default_view_rate(),
         }
     }
-}
-
-/// What kind of body a scene simulates.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum SceneKind {
-    /// One free asymmetric box tumbling under gravity.
-    Tumbler,
 }
 
 /// The numerical integrator.
@@ -68,57 +95,6 @@ pub enum Integrator {
     Rk4,
 }
 
-/// One `[[simulate.scene]]` entry.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct Scene {
-    /// The scene's name, unique in the manifest (used in tables and logs).
-    pub name: String,
-    /// What is simulated.
-    pub kind: SceneKind,
-    /// How many runs, each with its own seeded initial conditions.
-    pub runs: Count,
-    /// Simulated seconds per run.
-    pub duration: Positive,
-    /// Integration step (s).
-    pub dt: Positive,
-    /// Logged time slice (s); a whole multiple of `dt`.
-    pub frame_dt: Positive,
-    /// The integrator.
-    pub integrator: Integrator,
-    /// Gravity in the inertial frame (m/s²).
-    pub gravity: [f64; 3],
-    /// Edge lengths of the box (m).
-    pub size: [Positive; 3],
-    /// Mass (kg).
-    pub mass: Positive,
-    /// Initial angular velocity, link frame (rad/s).
-    pub spin: [f64; 3],
-    /// Each run adds a seeded uniform perturbation in ±`spin_jitter` to each
-    /// component of `spin`, and starts from a seeded random orientation.
-    pub spin_jitter: f64,
-}
-
-impl Default for Scene {
-    fn default() -> Self {
-        Scene {
-            name: "tumbler".into(),
-            kind: SceneKind::Tumbler,
-            runs: Count(2),
-            duration: Positive(10.0),
-            dt: Positive(1e-3),
-            frame_dt: Positive(1e-2),
-            integrator: Integrator::default(),
-            gravity: [0.0, 0.0, -9.81],
-            size: [Positive(0.4), Positive(0.2), Positive(0.1)],
-            mass: Positive(1.0),
-            // Close to the intermediate axis: the body flips (Dzhanibekov).
-            spin: [0.2, 8.0, 0.1],
-            spin_jitter: 0.5,
-        }
-    }
-}
-
 /// A parameter error: the dotted key path within `[simulate]` and the message.
 #[derive(Debug, PartialEq)]
 pub struct ParamError {
@@ -127,19 +103,31 @@ pub struct ParamError {
 }
 
 impl Params {
+    /// Fills every scene's kind defaults (so the resolved manifest shows them).
+    pub fn resolve(mut self) -> Params {
+        self.scene = self.scene.into_iter().map(Scene::resolve).collect();
+        self
+    }
+
     /// Checks what deserialization cannot: relations between fields.
     pub fn validate(&self) -> std::result::Result<(), ParamError> {
+        if self.scene.is_empty() {
+            return Err(ParamError {
+                key: "scene".into(),
+                message: "expected at least one [[simulate.scene]]".into(),
+            });
+        }
         let mut names = std::collections::BTreeSet::new();
         for (i, scene) in self.scene.iter().enumerate() {
-            let key = |field: &str| format!("scene.{i}.{field}");
-            if scene.name.is_empty()
-                || !scene
+            let at = |field: &str| format!("scene.{i}.{field}");
+            let valid_name = !scene.name.is_empty()
+                && scene
                     .name
                     .chars()
-                    .all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-')
-            {
+                    .all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-');
+            if !valid_name {
                 return Err(ParamError {
-                    key: key("name"),
+                    key: at("name"),
                     message: format!(
                         "expected a name of letters, digits, `-` or `_`, found {:?}",
                         scene.name
@@ -148,70 +136,132 @@ impl Params {
             }
             if !names.insert(scene.name.as_str()) {
                 return Err(ParamError {
-                    key: key("name"),
+                    key: at("name"),
                     message: format!("scene name {:?} is used twice", scene.name),
                 });
             }
-            let ratio = scene.frame_dt.get() / scene.dt.get();
-            if ratio.round() < 1.0 || (ratio - ratio.round()).abs() > 1e-9 * ratio {
-                return Err(ParamError {
-                    key: key("frame_dt"),
-                    message: format!(
-                        "expected a whole multiple of dt = {}, found {} ({ratio} steps)",
-                        scene.dt.get(),
-                        scene.frame_dt.get()
-                    ),
-                });
-            }
-            if scene.frame_dt.get() > scene.duration.get() {
-                return Err(ParamError {
-                    key: key("duration"),
-                    message: "expected a duration of at least one frame_dt".into(),
-                });
-            }
-            if !(scene.spin_jitter >= 0.0 && scene.spin_jitter.is_finite()) {
-                return Err(ParamError {
-                    key: key("spin_jitter"),
-                    message: format!("expected a number ≥ 0, found {}", scene.spin_jitter),
-                });
-            }
-            if scene
-                .gravity
-                .iter()
-                .chain(&scene.spin)
-                .any(|x| !x.is_finite())
-            {
-                return Err(ParamError {
-                    key: key("gravity"),
-                    message: "expected finite numbers".into(),
-                });
-            }
+            scene
+                .clone()
+                .resolve()
+                .validate()
+                .map_err(|(field, message)| ParamError {
+                    key: at(&field),
+                    message,
+                })?;
         }
         Ok(())
     }
 }
 
-impl Scene {
-    /// Integration steps per logged frame.
-    pub fn steps_per_frame(&self) -> u64 {
-        (self.frame_dt.get() / self.dt.get()).round() as u64
-    }
+/// Everything needed to simulate one scene, built once.
+pub struct Prepared {
+    pub scene: Scene,
+    pub model: Model,
+    pub surfaces: Surfaces,
+    pub points: Vec<ContactPoint>,
+    pub variables: VariableSet,
+    pub layout: StateLayout,
+}
 
-    /// Logged frames per run (the initial state included).
-    pub fn frames_per_run(&self) -> u64 {
-        (self.duration.get() / self.frame_dt.get() + 1e-9).floor() as u64 + 1
-    }
-
-    /// The scene's `/state` layout.
-    pub fn layout(&self) -> StateLayout {
-        let names = |n: &[&str]| n.iter().map(|s| s.to_string()).collect();
-        StateLayout {
-            scene: self.name.clone(),
-            state: names(&tumbler::STATE_NAMES),
-            variables: names(&tumbler::VARIABLE_NAMES),
+impl Prepared {
+    /// Builds the model and variable set of a (resolved) scene.
+    pub fn new(scene: &Scene) -> Prepared {
+        let scene = scene.clone().resolve();
+        let model = scene.model();
+        let surfaces = scene.surfaces();
+        let points = if surfaces.any() {
+            contact_points(&model)
+        } else {
+            Vec::new()
+        };
+        let controlled = scene.controller().kind != ControllerKind::None;
+        let variables = VariableSet::of(&model, surfaces.any().then_some(&points[..]), controlled);
+        let layout = StateLayout {
+            scene: scene.name.clone(),
+            state: state_names(&model),
+            variables: variables.names(),
+        };
+        Prepared {
+            scene,
+            model,
+            surfaces,
+            points,
+            variables,
+            layout,
         }
     }
 }
+
+/// Names of the generalized-state components in the log, in the order of
+/// [`generalized_state`]: root hinge position (inertial) and, for a free root,
+/// velocity (root frame); then per link its orientation quaternion `q.<i>`
+/// (x, y, z, w; the root's to the inertial frame, others to the parent) and
+/// its angular rate `w.<i>` (the root's ω, or the hinge's relative rate).
+pub fn state_names(model: &Model) -> Vec<String> {
+    let mut names: Vec<String> = ["x", "y", "z"]
+        .iter()
+        .map(|a| format!("root.p.{a}"))
+        .collect();
+    if model.root == Root::Free {
+        names.extend(["x", "y", "z"].iter().map(|a| format!("root.v.{a}")));
+    }
+    for i in 1..=model.len() {
+        names.extend(["x", "y", "z", "w"].iter().map(|a| format!("q.{i}.{a}")));
+        names.extend(["x", "y", "z"].iter().map(|a| format!("w.{i}.{a}")));
+    }
+    names
+}
+
+/// The generalized state as logged (see [`state_names`]).
+pub fn generalized_state(model: &Model, state: &State, out: &mut Vec<f64>) {
+    out.clear();
+    out.extend(state.root_p.iter());
+    if model.root == Root::Free {
+        out.extend(state.root_v.iter());
+    }
+    for (q, w) in state.orient.iter().zip(&state.rates) {
+        out.extend([q.i, q.j, q.k, q.w]);
+        out.extend(w.iter());
+    }
+}
+
+/// The forces of a scene at one instant: control torques (held over a step)
+/// and contacts.
+pub struct SceneForces<'a> {
+    /// The surfaces to touch.
+    pub surfaces: &'a Surfaces,
+    /// The contact points.
+    pub points: &'a [ContactPoint],
+    /// Control torque g of each link on its parent (index 0 unused).
+    pub g: Vec<Vector3<f64>>,
+    /// Viscous damping at every hinge (N m s/rad).
+    pub hinge_damping: f64,
+}
+
+impl Forces for SceneForces<'_> {
+    fn apply(
+        &mut self,
+        model: &Model,
+        state: &State,
+        kin: &Kinematics,
+        tau: &mut [Vector3<f64>],
+        f_ext: &mut [Vector6<f64>],
+    ) {
+        for ((t, g), w) in tau.iter_mut().zip(&self.g).zip(&state.rates) {
+            *t = -g - w * self.hinge_damping;
+        }
+        if model.root == Root::Pinned {
+            tau[0] = Vector3::zeros();
+        }
+        f_ext.fill(Vector6::zeros());
+        if !self.points.is_empty() {
+            self.surfaces.apply(model, self.points, kin, f_ext);
+        }
+    }
+}
+
+/// Values beyond this magnitude count as a blow-up even while finite.
+const DIVERGED: f64 = 1e9;
 
 /// Runs every scene of `params` and writes `trajectory.mcap` and
 /// `stats.parquet` into `out_dir`. The result depends only on `params` and
@@ -226,30 +276,52 @@ pub fn run(
     params
         .validate()
         .map_err(|e| Error::Invalid(format!("simulate.{}: {}", e.key, e.message)))?;
-    let layouts: Vec<StateLayout> = params.scene.iter().map(Scene::layout).collect();
-    let total_steps: u64 = params
-        .scene
+    let prepared: Vec<Prepared> = params.scene.iter().map(Prepared::new).collect();
+    let layouts: Vec<StateLayout> = prepared.iter().map(|p| p.layout.clone()).collect();
+    let total_steps: u64 = prepared
         .iter()
-        .map(|s| s.runs.0 * (s.frames_per_run() - 1) * s.steps_per_frame())
+        .map(|p| p.scene.runs.0 * (p.scene.frames_per_run() - 1) * p.scene.steps_per_frame())
         .sum();
     progress.start("simulate", total_steps, "steps");
 
     let mut log = StateLogWriter::create(&out_dir.join(TRAJECTORY_FILE), &layouts)?;
+    let tf = log.add_json_channel(
+        foxglove::TF_TOPIC,
+        foxglove::TF_SCHEMA,
+        &foxglove::tf_schema(),
+    )?;
+    let scene_channel = log.add_json_channel(
+        foxglove::SCENE_TOPIC,
+        foxglove::SCENE_SCHEMA,
+        &foxglove::scene_schema(),
+    )?;
     let mut stats = stats::VariableStats::default();
     let mut log_time_ns = 0u64;
-    for (scene_index, scene) in params.scene.iter().enumerate() {
-        log.metadata(
-            &format!("alnlab.model.{}", scene.name),
-            [("json".to_string(), model_json(scene).to_string())].into(),
-        )?;
-        let frame_ns = (scene.frame_dt.get() * 1e9).round() as u64;
-        for run in 0..scene.runs.0 as u32 {
-            simulate_run(scene, seed, scene_index, run, |frame| {
-                stats.add(&layouts[scene_index].variables, &frame.variables);
+    for (scene_index, p) in prepared.iter().enumerate() {
+        log.metadata(MODEL_RECORD, model_record(p))?;
+        let frame_ns = (p.scene.frame_dt.get() * 1e9).round() as u64;
+        let view_every = ((1.0 / params.view_rate.get()) / p.scene.frame_dt.get())
+            .round()
+            .max(1.0) as u32;
+        for run in 0..p.scene.runs.0 as u32 {
+            log.write_json(
+                scene_channel,
+                log_time_ns,
+                &foxglove::scene_update(&p.scene, &p.model, run, log_time_ns),
+            )?;
+            simulate_run(p, seed, scene_index, run, |frame, kin| {
+                stats.add(&p.layout.variables, &frame.variables);
                 log.write(scene_index, log_time_ns, frame)?;
+                if frame.frame % view_every == 0 {
+                    log.write_json(
+                        tf,
+                        log_time_ns,
+                        &foxglove::transforms(&p.scene.name, run, kin, log_time_ns),
+                    )?;
+                }
                 log_time_ns += frame_ns;
                 if frame.frame > 0 {
-                    progress.advance(scene.steps_per_frame());
+                    progress.advance(p.scene.steps_per_frame());
                 }
                 Ok(())
             })?;
@@ -260,198 +332,162 @@ pub fn run(
     log.finish(provenance)
 }
 
-/// Simulates one run of `scene`, handing every logged frame to `on_frame`.
-/// A non-finite value stops the run with an error naming scene, run, step
-/// and variable; nothing non-finite reaches `on_frame`.
+/// Simulates one run, handing every logged frame (and the kinematics of its
+/// state) to `on_frame`. A blow-up (a non-finite or absurdly large value)
+/// stops the run with an error naming scene, run, step and variable; no such
+/// value ever reaches `on_frame`.
 pub fn simulate_run(
-    scene: &Scene,
+    p: &Prepared,
     seed: u64,
     scene_index: usize,
     run: u32,
-    mut on_frame: impl FnMut(&StateFrame) -> Result<()>,
+    mut on_frame: impl FnMut(&StateFrame, &Kinematics) -> Result<()>,
 ) -> Result<()> {
-    let body = tumbler::Body::solid_box(
-        scene.mass.get(),
-        scene.size.map(Positive::get),
-        scene.gravity,
+    let scene = &p.scene;
+    let model = &p.model;
+    let mut rng = scene::run_rng(seed, scene_index, run);
+    let mut state = scene.initial_state(model, &mut rng);
+    let hinges = model.len() - 1;
+    let mut controller = Controller::new(
+        scene.controller(),
+        hinges,
+        scene::run_seed(seed ^ 0xC0DE, scene_index, run),
     );
-    let mut rng = ChaCha8Rng::seed_from_u64(run_seed(seed, scene_index, run));
-    let jitter = scene.spin_jitter;
-    let spin = Vector3::from(
-        scene
-            .spin
-            .map(|w| w + jitter * rng.random_range(-1.0..=1.0)),
-    );
-    let axis = Vector3::new(
-        rng.random_range(-1.0..=1.0),
-        rng.random_range(-1.0..=1.0),
-        rng.random_range(-1.0..=1.0),
-    );
-    let mut state = tumbler::State {
-        p: Vector3::zeros(),
-        q: UnitQuaternion::from_scaled_axis(axis * std::f64::consts::PI),
-        v: Vector3::zeros(),
-        omega: spin,
+    let mut forces = SceneForces {
+        surfaces: &p.surfaces,
+        points: &p.points,
+        g: vec![Vector3::zeros(); model.len()],
+        hinge_damping: scene.hinge_damping.expect("resolved"),
     };
+    let mut hinge_torques = vec![Vector3::zeros(); hinges];
+    let mut stepper = Stepper::new(model);
+    let mut eval = Evaluation::new(model);
     let dt = scene.dt.get();
     let steps_per_frame = scene.steps_per_frame();
-    let mut generalized = [0.0; 13];
-    let mut variables = [0.0; 12];
     let mut frame = StateFrame {
         time: 0.0,
         run,
         frame: 0,
-        state: vec![0.0; 13],
-        variables: vec![0.0; 12],
+        state: Vec::with_capacity(p.layout.state.len()),
+        variables: Vec::with_capacity(p.layout.variables.len()),
     };
+    let mut step = 0u64;
     for index in 0..scene.frames_per_run() {
         if index > 0 {
             for _ in 0..steps_per_frame {
-                tumbler::step(&body, &mut state, dt, scene.integrator);
+                controller.torques(step as f64 * dt, &mut hinge_torques);
+                forces.g[1..].copy_from_slice(&hinge_torques);
+                stepper.step(model, &mut state, dt, scene.integrator, &mut forces);
+                step += 1;
+                if !state.is_finite() {
+                    return Err(blow_up(p, run, step, &p.layout.state, &{
+                        let mut v = Vec::new();
+                        generalized_state(model, &state, &mut v);
+                        v
+                    }));
+                }
             }
         }
-        tumbler::generalized_state(&body, &state, &mut generalized);
-        tumbler::variables(&body, &state, &mut variables);
-        let names = tumbler::STATE_NAMES.iter().zip(&generalized);
-        let values = names.chain(tumbler::VARIABLE_NAMES.iter().zip(&variables));
-        if let Some((name, value)) = values.into_iter().find(|(_, v)| !v.is_finite()) {
-            return Err(Error::Diverged(format!(
-                "scene `{}`, run {run}, step {}: {name} became {value}; \
-                 the integration is unstable (try a smaller dt)",
-                scene.name,
-                index * steps_per_frame
-            )));
+        controller.torques(step as f64 * dt, &mut hinge_torques);
+        forces.g[1..].copy_from_slice(&hinge_torques);
+        eval.run(model, &state, &mut forces);
+        generalized_state(model, &state, &mut frame.state);
+        p.variables.values(
+            &state,
+            &eval.kin,
+            &eval.ws.accel,
+            &forces.g,
+            &eval.f_ext,
+            &mut frame.variables,
+        );
+        if let Some(err) = check(p, run, step, &frame) {
+            return Err(err);
         }
         frame.time = index as f64 * scene.frame_dt.get();
         frame.frame = index as u32;
-        frame.state.copy_from_slice(&generalized);
-        frame.variables.copy_from_slice(&variables);
-        on_frame(&frame)?;
+        on_frame(&frame, &eval.kin)?;
     }
     Ok(())
 }
 
-/// The seed of one run, mixed from the experiment seed, scene and run so runs
-/// are independent and reproducible.
-fn run_seed(seed: u64, scene_index: usize, run: u32) -> u64 {
-    let mut x =
-        seed ^ ((scene_index as u64) << 32 | u64::from(run)).wrapping_mul(0x9E37_79B9_7F4A_7C15);
-    // splitmix64 finalizer
-    x = (x ^ (x >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-    x = (x ^ (x >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-    x ^ (x >> 31)
+fn check(p: &Prepared, run: u32, step: u64, frame: &StateFrame) -> Option<Error> {
+    let bad = |x: &f64| !x.is_finite() || x.abs() > DIVERGED;
+    if frame.state.iter().any(bad) {
+        return Some(blow_up(p, run, step, &p.layout.state, &frame.state));
+    }
+    if frame.variables.iter().any(bad) {
+        return Some(blow_up(p, run, step, &p.layout.variables, &frame.variables));
+    }
+    None
 }
 
-/// The scene's model as JSON (metadata record `alnlab.model.<scene>`).
-fn model_json(scene: &Scene) -> serde_json::Value {
-    let body = tumbler::Body::solid_box(
-        scene.mass.get(),
-        scene.size.map(Positive::get),
-        scene.gravity,
-    );
-    let inertia_about_hinge = body.inertia_matrix()
-        + (nalgebra::Matrix3::identity() * body.c.norm_squared() - body.c * body.c.transpose())
-            * body.mass;
-    serde_json::json!({
+fn blow_up(p: &Prepared, run: u32, step: u64, names: &[String], values: &[f64]) -> Error {
+    let (name, value) = names
+        .iter()
+        .zip(values)
+        .find(|(_, v)| !v.is_finite() || v.abs() > DIVERGED)
+        .map_or(("?", f64::NAN), |(n, v)| (n.as_str(), *v));
+    Error::Diverged(format!(
+        "scene `{}`, run {run}, step {step}: {name} became {value:e}; the simulation is \
+         unstable (try a smaller dt, or softer contacts)",
+        p.scene.name
+    ))
+}
+
+/// The `alnlab.model` metadata record of a scene: the model as JSON.
+fn model_record(p: &Prepared) -> std::collections::BTreeMap<String, String> {
+    let scene = &p.scene;
+    let links: Vec<serde_json::Value> = p
+        .model
+        .links
+        .iter()
+        .map(|link| {
+            serde_json::json!({
+                "parent": link.parent.map_or(-1, |p| p as i64),
+                "joint": match (link.parent, p.model.root) {
+                    (None, Root::Free) => "free",
+                    _ => "ball",
+                },
+                "mass": link.mass,
+                "c": link.c.as_slice(),
+                "J": link.inertia_hinge().transpose().as_slice(),
+                "l": link.l.as_slice(),
+            })
+        })
+        .collect();
+    let json = serde_json::json!({
         "scene": scene.name,
         "kind": scene.kind,
-        "gravity": scene.gravity,
+        "gravity": p.model.gravity.as_slice(),
         "dt": scene.dt,
         "frame_dt": scene.frame_dt,
         "integrator": scene.integrator,
-        "links": [{
-            "parent": -1,
-            "joint": "free",
-            "mass": body.mass,
-            "c": body.c.as_slice(),
-            "J": inertia_about_hinge.as_slice(),
-            "l": [0.0, 0.0, 0.0],
-        }],
+        "floor": p.surfaces.floor,
+        "arena_radius": p.surfaces.arena_radius,
+        "contact": scene.contact,
+        "contact_model": "penalty spring-damper N = max(0, k d + c d'), regularised Coulomb \
+                          friction F_t = -mu N v_t / max(|v_t|, slip_speed)",
+        "links": links,
         "conventions": {
             "units": "SI",
             "quaternion_order": ["x", "y", "z", "w"],
+            "J": "inertia about the proximal hinge, link frame, row-major",
+            "l": "hinge offset from the parent's hinge, parent frame (pinned root: the pivot, inertial frame)",
             "frames": {
-                "root.p": "inertial", "root.q": "link to inertial", "root.v": "inertial",
+                "root.p": "inertial", "root.v": "root link", "q.1": "root link to inertial",
+                "q.i": "link i to its parent", "w.1": "root angular velocity, root link",
+                "w.i": "hinge i relative angular velocity, link i",
                 "v": "link", "a": "link", "omega": "link", "omega_dot": "link",
+                "g": "link", "f_E": "link", "g_E": "link",
             },
-            "J": "about the proximal hinge, link frame, column-major",
+            "g": "control torque the link exerts on its parent (paper §2); the link feels -g",
+            "roll_pitch": "x and y angles of R = Rz(yaw) Ry(pitch) Rx(roll) of the hinge \
+                           rotation; at pitch = ±90° roll is defined as 0",
         },
-    })
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn frames_and_steps() {
-        let scene = Scene::default();
-        assert_eq!(scene.steps_per_frame(), 10);
-        assert_eq!(scene.frames_per_run(), 1001);
-    }
-
-    #[test]
-    fn frame_dt_must_be_a_multiple_of_dt() {
-        let params = Params {
-            scene: vec![Scene {
-                frame_dt: Positive(0.0105),
-                ..Scene::default()
-            }],
-        };
-        let err = params.validate().unwrap_err();
-        assert_eq!(err.key, "scene.0.frame_dt");
-        assert!(err.message.contains("whole multiple of dt"));
-    }
-
-    #[test]
-    fn blow_up_names_scene_run_step_and_variable() {
-        let scene = Scene {
-            spin: [1e300, 1e300, 1e300],
-            spin_jitter: 0.0,
-            ..Scene::default()
-        };
-        let mut frames = 0;
-        let err = simulate_run(&scene, 1, 0, 0, |_| {
-            frames += 1;
-            Ok(())
-        })
-        .unwrap_err();
-        let msg = err.to_string();
-        assert!(msg.contains("scene `tumbler`, run 0, step"), "{msg}");
-        assert_eq!(err.exit_code(), 2);
-        assert!(frames <= 1);
-    }
-
-    #[test]
-    fn writes_log_and_stats_that_read_back() {
-        let dir = tempfile::tempdir().unwrap();
-        let params = Params::default();
-        run(
-            &params,
-            7,
-            &Provenance::default(),
-            dir.path(),
-            &alnlab_common::Silent,
-        )
-        .unwrap();
-        let log =
-            alnlab_common::state_log::StateLog::read(&dir.path().join(TRAJECTORY_FILE)).unwrap();
-        let frames = &log.scenes[0].frames;
-        assert_eq!(frames.len(), 2 * 1001);
-        assert_eq!((frames[1001].run, frames[1001].frame), (1, 0));
-        assert!(log.metadata["alnlab.model.tumbler"]["json"].contains("\"parent\":-1"));
-        let stats = alnlab_common::table::Table::read(&dir.path().join(STATS_FILE)).unwrap();
-        assert_eq!(stats.num_rows(), 12);
-        // Independent check of one statistic: the mean of omega.1.y.
-        let k = tumbler::VARIABLE_NAMES
-            .iter()
-            .position(|n| *n == "omega.1.y")
-            .unwrap();
-        let mean = frames.iter().map(|f| f.variables[k]).sum::<f64>() / frames.len() as f64;
-        let got = stats.f64_column("mean").unwrap().value(k);
-        assert!(
-            (got - mean).abs() < 1e-12 * mean.abs().max(1.0),
-            "{got} vs {mean}"
-        );
-    }
+    });
+    [
+        ("scene".to_string(), scene.name.clone()),
+        ("json".to_string(), json.to_string()),
+    ]
+    .into()
 }

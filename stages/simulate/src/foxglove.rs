@@ -1,0 +1,176 @@
+//! The viewing channels of the trajectory log, in Foxglove's well-known
+//! schemas (JSON encoding): `/tf` carries a `foxglove.FrameTransforms` with
+//! every link's frame at the viewing rate, and `/scene` a
+//! `foxglove.SceneUpdate` at the start of each run drawing the floor, the
+//! arena wall and the links in their frames, so the motion can be watched in
+//! Foxglove.
+
+use nalgebra::{UnitQuaternion, Vector3};
+use serde_json::{Value, json};
+
+use crate::dynamics::Kinematics;
+use crate::model::Model;
+use crate::scene::{Scene, SceneKind};
+
+/// Topic of the frame transforms.
+pub const TF_TOPIC: &str = "/tf";
+/// Topic of the scene entities.
+pub const SCENE_TOPIC: &str = "/scene";
+/// Foxglove schema name of `/tf`.
+pub const TF_SCHEMA: &str = "foxglove.FrameTransforms";
+/// Foxglove schema name of `/scene`.
+pub const SCENE_SCHEMA: &str = "foxglove.SceneUpdate";
+
+fn time(ns: u64) -> Value {
+    json!({ "sec": ns / 1_000_000_000, "nsec": ns % 1_000_000_000 })
+}
+
+fn vector(v: &Vector3<f64>) -> Value {
+    json!({ "x": v.x, "y": v.y, "z": v.z })
+}
+
+fn quaternion(q: &UnitQuaternion<f64>) -> Value {
+    json!({ "x": q.i, "y": q.j, "z": q.k, "w": q.w })
+}
+
+/// The frame id of link `i` (0-based) of a run.
+pub fn link_frame(scene: &str, run: u32, i: usize) -> String {
+    format!("{scene}/run{run}/link{}", i + 1)
+}
+
+/// One `/tf` message: every link's pose in the `world` frame.
+pub fn transforms(scene: &str, run: u32, kin: &Kinematics, log_time_ns: u64) -> Vec<u8> {
+    let transforms: Vec<Value> = (0..kin.rot.len())
+        .map(|i| {
+            let rotation = UnitQuaternion::from_matrix(&kin.rot[i]);
+            json!({
+                "timestamp": time(log_time_ns),
+                "parent_frame_id": "world",
+                "child_frame_id": link_frame(scene, run, i),
+                "translation": vector(&kin.pos[i]),
+                "rotation": quaternion(&rotation),
+            })
+        })
+        .collect();
+    serde_json::to_vec(&json!({ "transforms": transforms })).expect("JSON serializes")
+}
+
+/// One `/scene` message for the start of a run.
+pub fn scene_update(scene: &Scene, model: &Model, run: u32, log_time_ns: u64) -> Vec<u8> {
+    let pose = |p: Vector3<f64>, q: UnitQuaternion<f64>| json!({ "position": vector(&p), "orientation": quaternion(&q) });
+    let colour = json!({ "r": 0.85, "g": 0.45, "b": 0.2, "a": 1.0 });
+    let mut entities = Vec::new();
+    let surfaces = scene.surfaces();
+    if surfaces.floor {
+        entities.push(json!({
+            "timestamp": time(log_time_ns), "frame_id": "world", "id": "floor",
+            "frame_locked": false,
+            "cubes": [{
+                "pose": pose(Vector3::new(0.0, 0.0, -0.005), UnitQuaternion::identity()),
+                "size": { "x": 10.0, "y": 10.0, "z": 0.01 },
+                "color": { "r": 0.6, "g": 0.6, "b": 0.6, "a": 1.0 },
+            }],
+        }));
+    }
+    if let Some(r) = surfaces.arena_radius {
+        entities.push(json!({
+            "timestamp": time(log_time_ns), "frame_id": "world", "id": "arena",
+            "frame_locked": false,
+            "cylinders": [{
+                "pose": pose(Vector3::new(0.0, 0.0, 0.5), UnitQuaternion::identity()),
+                "size": { "x": 2.0 * r, "y": 2.0 * r, "z": 1.0 },
+                "bottom_scale": 1.0, "top_scale": 1.0,
+                "color": { "r": 0.3, "g": 0.5, "b": 0.8, "a": 0.2 },
+            }],
+        }));
+    }
+    let along_x = UnitQuaternion::from_euler_angles(0.0, std::f64::consts::FRAC_PI_2, 0.0);
+    for (i, link) in model.links.iter().enumerate() {
+        let length = 2.0 * link.c.x;
+        // A cylinder's axis is its z axis: turn it onto the link's x axis.
+        let radius = scene.link_radius.expect("resolved").get();
+        let shape = if scene.kind == SceneKind::Tumbler {
+            json!({ "cubes": [{
+                "pose": pose(link.c, UnitQuaternion::identity()),
+                "size": { "x": length, "y": 2.0 * radius, "z": radius },
+                "color": colour,
+            }]})
+        } else {
+            json!({ "cylinders": [{
+                "pose": pose(link.c, along_x),
+                "size": { "x": 2.0 * radius, "y": 2.0 * radius, "z": length },
+                "bottom_scale": 1.0, "top_scale": 1.0,
+                "color": colour,
+            }]})
+        };
+        let mut entity = json!({
+            "timestamp": time(log_time_ns),
+            "frame_id": link_frame(&scene.name, run, i),
+            "id": format!("{}/run{run}/link{}", scene.name, i + 1),
+            "frame_locked": true,
+        });
+        entity
+            .as_object_mut()
+            .expect("object")
+            .extend(shape.as_object().expect("object").clone());
+        entities.push(entity);
+    }
+    serde_json::to_vec(&json!({ "deletions": [], "entities": entities })).expect("JSON serializes")
+}
+
+/// JSON schema of `foxglove.FrameTransforms` (the fields alnlab writes).
+pub fn tf_schema() -> String {
+    let vec3 = json!({ "type": "object", "properties": {
+        "x": { "type": "number" }, "y": { "type": "number" }, "z": { "type": "number" } } });
+    let quat = json!({ "type": "object", "properties": {
+        "x": { "type": "number" }, "y": { "type": "number" },
+        "z": { "type": "number" }, "w": { "type": "number" } } });
+    json!({
+        "title": TF_SCHEMA,
+        "description": "An array of FrameTransform messages",
+        "type": "object",
+        "properties": { "transforms": { "type": "array", "items": {
+            "title": "foxglove.FrameTransform",
+            "type": "object",
+            "properties": {
+                "timestamp": time_schema(),
+                "parent_frame_id": { "type": "string" },
+                "child_frame_id": { "type": "string" },
+                "translation": vec3,
+                "rotation": quat,
+            },
+        }}},
+    })
+    .to_string()
+}
+
+/// JSON schema of `foxglove.SceneUpdate` (the fields alnlab writes).
+pub fn scene_schema() -> String {
+    json!({
+        "title": SCENE_SCHEMA,
+        "description": "An update to the entities displayed in a 3D scene",
+        "type": "object",
+        "properties": {
+            "deletions": { "type": "array", "items": { "type": "object" } },
+            "entities": { "type": "array", "items": {
+                "title": "foxglove.SceneEntity",
+                "type": "object",
+                "properties": {
+                    "timestamp": time_schema(),
+                    "frame_id": { "type": "string" },
+                    "id": { "type": "string" },
+                    "frame_locked": { "type": "boolean" },
+                    "cubes": { "type": "array", "items": { "title": "foxglove.CubePrimitive", "type": "object" } },
+                    "cylinders": { "type": "array", "items": { "title": "foxglove.CylinderPrimitive", "type": "object" } },
+                },
+            }},
+        },
+    })
+    .to_string()
+}
+
+fn time_schema() -> Value {
+    json!({ "type": "object", "title": "time", "properties": {
+        "sec": { "type": "integer", "minimum": 0 },
+        "nsec": { "type": "integer", "minimum": 0, "maximum": 999_999_999 } } })
+}

@@ -1,0 +1,383 @@
+//! Scenes: what a manifest's `[[simulate.scene]]` entry describes, and how it
+//! becomes a model, surfaces, a controller and seeded initial states.
+//!
+//! Kinds and their defaults (any default can be overridden):
+//!
+//! | kind | links | root | floor | arena wall | gravity | hinge damping | controller |
+//! |---|---|---|---|---|---|---|---|
+//! | `worm` | 3 capsules | free | yes | r = 2 m | −9.81 z | 0.3 | random |
+//! | `chain` | 4 capsules | free | no | no | 0 | 0 | none |
+//! | `pendulum` | 3 capsules | pinned | no | no | −9.81 z | 0 | none |
+//! | `tumbler` | 1 box | free | no | no | 0 | 0 | none |
+
+use alnlab_common::params::{Count, Positive};
+use nalgebra::{UnitQuaternion, Vector3};
+use rand::{RngExt, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use serde::{Deserialize, Serialize};
+
+use crate::Integrator;
+use crate::contact::{ContactParams, Surfaces};
+use crate::controller::{ControllerKind, ControllerParams};
+use crate::dynamics::State;
+use crate::model::{Model, Root, Shape};
+
+/// What a scene simulates.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum SceneKind {
+    /// The paper's worm: a free chain rolling, jumping and falling in its arena.
+    #[default]
+    Worm,
+    /// A free chain of links, tumbling.
+    Chain,
+    /// A chain hanging from a hinge fixed in the world.
+    Pendulum,
+    /// One free asymmetric box.
+    Tumbler,
+}
+
+/// One `[[simulate.scene]]` entry. Fields left out take the kind's defaults
+/// (filled in by [`Scene::resolve`], so `alnlab check` shows them).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Scene {
+    /// Unique name: letters, digits, `-`, `_`.
+    pub name: String,
+    /// What is simulated.
+    #[serde(default)]
+    pub kind: SceneKind,
+    /// Runs, each with its own seeded initial state (and controller).
+    #[serde(default = "two")]
+    pub runs: Count,
+    /// Simulated seconds per run.
+    #[serde(default = "ten")]
+    pub duration: Positive,
+    /// Integration step (s).
+    #[serde(default = "millisecond")]
+    pub dt: Positive,
+    /// Logged time slice (s), a whole multiple of `dt`.
+    #[serde(default = "ten_milliseconds")]
+    pub frame_dt: Positive,
+    /// Integrator.
+    #[serde(default)]
+    pub integrator: Integrator,
+    /// Number of links (1..=64).
+    pub links: Option<Count>,
+    /// Length of each link (m); for a tumbler, the box's x edge.
+    pub link_length: Option<Positive>,
+    /// Radius of each capsule link (m); for a tumbler, half the y edge.
+    pub link_radius: Option<Positive>,
+    /// Mass of each link (kg).
+    pub link_mass: Option<Positive>,
+    /// Gravity, inertial frame (m/s²).
+    pub gravity: Option<[f64; 3]>,
+    /// Whether the floor z = 0 is there.
+    pub floor: Option<bool>,
+    /// Radius of the arena wall (m); 0 for no wall.
+    pub arena_radius: Option<f64>,
+    /// Contact law.
+    #[serde(default)]
+    pub contact: ContactParams,
+    /// Viscous damping at every hinge (N m s/rad): a torque −b·w against the
+    /// hinge's relative rate, like a muscle's viscosity.
+    pub hinge_damping: Option<f64>,
+    /// Hinge controller.
+    pub controller: Option<ControllerParams>,
+    /// Initial height of the root hinge (m).
+    pub initial_height: Option<f64>,
+    /// Each run starts with a random linear velocity of up to this speed (m/s).
+    pub initial_speed: Option<f64>,
+    /// Each run starts with random angular rates of up to this (rad/s) per
+    /// component, at the root and at every hinge.
+    pub initial_spin: Option<f64>,
+}
+
+fn two() -> Count {
+    Count(2)
+}
+fn ten() -> Positive {
+    Positive(10.0)
+}
+fn millisecond() -> Positive {
+    Positive(1e-3)
+}
+fn ten_milliseconds() -> Positive {
+    Positive(1e-2)
+}
+
+impl Default for Scene {
+    /// A worm scene with every kind-dependent field left to [`Scene::resolve`].
+    fn default() -> Self {
+        Scene {
+            name: "worm".into(),
+            kind: SceneKind::Worm,
+            runs: two(),
+            duration: ten(),
+            dt: millisecond(),
+            frame_dt: ten_milliseconds(),
+            integrator: Integrator::default(),
+            links: None,
+            link_length: None,
+            link_radius: None,
+            link_mass: None,
+            gravity: None,
+            floor: None,
+            arena_radius: None,
+            contact: ContactParams::default(),
+            hinge_damping: None,
+            controller: None,
+            initial_height: None,
+            initial_speed: None,
+            initial_spin: None,
+        }
+    }
+}
+
+/// A scene error: the field (within the scene) and what is wrong.
+pub type SceneError = (String, String);
+
+impl Scene {
+    /// Fills every field left out with the kind's default.
+    pub fn resolve(mut self) -> Scene {
+        use SceneKind::*;
+        let k = self.kind;
+        let default_links = match k {
+            Worm | Pendulum => 3,
+            Chain => 4,
+            Tumbler => 1,
+        };
+        self.links.get_or_insert(Count(default_links));
+        self.link_length
+            .get_or_insert(Positive(if k == Tumbler { 0.4 } else { 0.5 }));
+        self.link_radius
+            .get_or_insert(Positive(if k == Tumbler { 0.1 } else { 0.06 }));
+        self.link_mass.get_or_insert(Positive(1.0));
+        let g = if matches!(k, Worm | Pendulum) {
+            -9.81
+        } else {
+            0.0
+        };
+        self.gravity.get_or_insert([0.0, 0.0, g]);
+        self.floor.get_or_insert(k == Worm);
+        self.arena_radius
+            .get_or_insert(if k == Worm { 2.0 } else { 0.0 });
+        self.hinge_damping
+            .get_or_insert(if k == Worm { 0.3 } else { 0.0 });
+        self.controller.get_or_insert_with(|| ControllerParams {
+            kind: if k == Worm {
+                ControllerKind::Random
+            } else {
+                ControllerKind::None
+            },
+            ..ControllerParams::default()
+        });
+        self.initial_height
+            .get_or_insert(if k == Worm { 0.5 } else { 0.0 });
+        self.initial_speed
+            .get_or_insert(if k == Worm { 2.0 } else { 0.0 });
+        self.initial_spin.get_or_insert(match k {
+            Worm => 2.0,
+            Chain => 3.0,
+            Pendulum => 1.5,
+            Tumbler => 6.0,
+        });
+        self
+    }
+
+    fn links_n(&self) -> usize {
+        self.links.expect("resolved").get()
+    }
+
+    /// Checks the scene (after [`Scene::resolve`]); on error, the field and
+    /// what is allowed.
+    pub fn validate(&self) -> Result<(), SceneError> {
+        let err = |field: &str, message: String| Err((field.to_string(), message));
+        let n = self.links_n();
+        if n > 64 {
+            return err("links", format!("expected 1 to 64 links, found {n}"));
+        }
+        if self.kind == SceneKind::Tumbler && n != 1 {
+            return err("links", format!("a tumbler is one body, found links = {n}"));
+        }
+        if self.kind == SceneKind::Worm && n < 2 {
+            return err("links", "a worm needs at least 2 links".into());
+        }
+        let ratio = self.frame_dt.get() / self.dt.get();
+        if ratio.round() < 1.0 || (ratio - ratio.round()).abs() > 1e-9 * ratio {
+            return err(
+                "frame_dt",
+                format!(
+                    "expected a whole multiple of dt = {}, found {} ({ratio} steps)",
+                    self.dt.get(),
+                    self.frame_dt.get()
+                ),
+            );
+        }
+        if self.frame_dt.get() > self.duration.get() {
+            return err(
+                "duration",
+                "expected a duration of at least one frame_dt".into(),
+            );
+        }
+        let arena = self.arena_radius.expect("resolved");
+        if !(arena >= 0.0 && arena.is_finite()) {
+            return err(
+                "arena_radius",
+                format!("expected a radius ≥ 0 (0: no wall), found {arena}"),
+            );
+        }
+        for (field, value) in [
+            ("initial_height", self.initial_height),
+            ("initial_speed", self.initial_speed),
+            ("initial_spin", self.initial_spin),
+            ("hinge_damping", self.hinge_damping),
+            ("contact.damping", Some(self.contact.damping)),
+            ("contact.friction", Some(self.contact.friction)),
+        ] {
+            let v = value.expect("resolved");
+            let ok = v.is_finite() && (field == "initial_height" || v >= 0.0);
+            if !ok {
+                return err(field, format!("expected a finite number ≥ 0, found {v}"));
+            }
+        }
+        if self
+            .gravity
+            .expect("resolved")
+            .iter()
+            .any(|g| !g.is_finite())
+        {
+            return err("gravity", "expected three finite numbers".into());
+        }
+        let hinges = n - 1;
+        self.controller
+            .as_ref()
+            .expect("resolved")
+            .validate(hinges)
+            .map_err(|(field, message)| (format!("controller.{field}"), message))
+    }
+
+    /// Integration steps per logged frame.
+    pub fn steps_per_frame(&self) -> u64 {
+        (self.frame_dt.get() / self.dt.get()).round() as u64
+    }
+
+    /// Logged frames per run (the initial state included).
+    pub fn frames_per_run(&self) -> u64 {
+        (self.duration.get() / self.frame_dt.get() + 1e-9).floor() as u64 + 1
+    }
+
+    /// The link tree.
+    pub fn model(&self) -> Model {
+        let n = self.links_n();
+        let (length, radius) = (
+            self.link_length.expect("resolved").get(),
+            self.link_radius.expect("resolved").get(),
+        );
+        let shape = match self.kind {
+            SceneKind::Tumbler => Shape::Box([length, 2.0 * radius, radius]),
+            _ => Shape::Capsule { length, radius },
+        };
+        let root = if self.kind == SceneKind::Pendulum {
+            Root::Pinned
+        } else {
+            Root::Free
+        };
+        let mass = self.link_mass.expect("resolved").get();
+        Model::chain(
+            root,
+            &vec![(shape, mass); n],
+            Vector3::from(self.gravity.expect("resolved")),
+        )
+    }
+
+    /// The floor and wall, if any.
+    pub fn surfaces(&self) -> Surfaces {
+        let arena = self.arena_radius.expect("resolved");
+        Surfaces {
+            floor: self.floor.expect("resolved"),
+            arena_radius: (arena > 0.0).then_some(arena),
+            params: self.contact.clone(),
+            dt: self.dt.get(),
+            point_radius: match self.kind {
+                SceneKind::Tumbler => 0.0,
+                _ => self.link_radius.expect("resolved").get(),
+            },
+        }
+    }
+
+    /// The controller parameters.
+    pub fn controller(&self) -> &ControllerParams {
+        self.controller.as_ref().expect("resolved")
+    }
+
+    /// The seeded initial state of one run: the root at the initial height
+    /// (for a worm: anywhere in the inner half of the arena, turned about the
+    /// vertical), every hinge slightly bent, random velocities within the
+    /// initial speed and spin.
+    pub fn initial_state(&self, model: &Model, rng: &mut ChaCha8Rng) -> State {
+        let mut uniform = |scale: f64| {
+            Vector3::new(
+                rng.random_range(-1.0..=1.0),
+                rng.random_range(-1.0..=1.0),
+                rng.random_range(-1.0..=1.0),
+            ) * scale
+        };
+        let mut state = State::rest(model, Vector3::zeros());
+        let height = self.initial_height.expect("resolved");
+        let spin = self.initial_spin.expect("resolved");
+        match self.kind {
+            SceneKind::Worm => {
+                let r = self.arena_radius.expect("resolved") / 2.0;
+                let place = uniform(r);
+                state.root_p = Vector3::new(place.x, place.y, height);
+                let yaw = uniform(std::f64::consts::PI).z;
+                state.orient[0] = UnitQuaternion::from_euler_angles(0.0, 0.0, yaw);
+                for q in state.orient.iter_mut().skip(1) {
+                    *q = UnitQuaternion::from_scaled_axis(uniform(0.3));
+                }
+            }
+            SceneKind::Chain | SceneKind::Tumbler => {
+                state.root_p = Vector3::new(0.0, 0.0, height);
+                for q in state.orient.iter_mut() {
+                    *q = UnitQuaternion::from_scaled_axis(uniform(std::f64::consts::PI));
+                }
+            }
+            SceneKind::Pendulum => {
+                state.root_p = Vector3::new(0.0, 0.0, height);
+                // Hanging down (link x along −z), swung out a little.
+                let down = UnitQuaternion::from_euler_angles(0.0, std::f64::consts::FRAC_PI_2, 0.0);
+                state.orient[0] = down * UnitQuaternion::from_scaled_axis(uniform(0.6));
+                for q in state.orient.iter_mut().skip(1) {
+                    *q = UnitQuaternion::from_scaled_axis(uniform(0.4));
+                }
+            }
+        }
+        for w in state.rates.iter_mut() {
+            *w = uniform(spin);
+        }
+        if model.root == Root::Free {
+            let mut v = uniform(self.initial_speed.expect("resolved"));
+            if self.kind == SceneKind::Worm {
+                v.z = v.z.abs();
+            }
+            state.root_v = state.orient[0].inverse() * v;
+        }
+        state
+    }
+}
+
+/// The seed of one run, mixed from the experiment seed, scene and run so that
+/// runs are independent and reproducible.
+pub fn run_seed(seed: u64, scene_index: usize, run: u32) -> u64 {
+    let mut x =
+        seed ^ (((scene_index as u64) << 32) | u64::from(run)).wrapping_mul(0x9E37_79B9_7F4A_7C15);
+    x = (x ^ (x >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+    x = (x ^ (x >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+    x ^ (x >> 31)
+}
+
+/// A generator seeded for one run.
+pub fn run_rng(seed: u64, scene_index: usize, run: u32) -> ChaCha8Rng {
+    ChaCha8Rng::seed_from_u64(run_seed(seed, scene_index, run))
+}
