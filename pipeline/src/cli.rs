@@ -96,7 +96,12 @@ pub enum Command {
         out: PathBuf,
     },
     /// Benchmarks; each prints its figures, or one JSON object with --json.
-    #[command(subcommand)]
+    #[command(
+        subcommand,
+        after_help = "Examples:
+  alnlab bench sim --json
+  alnlab bench cache experiments/quickstart.toml"
+    )]
     Bench(Bench),
 }
 
@@ -114,6 +119,19 @@ pub struct ManifestArgs {
 /// The benchmarks.
 #[derive(Debug, Subcommand)]
 pub enum Bench {
+    /// Time the simulator: ns per step for the worm with and without
+    /// contacts and for free chains of 1 to 64 links, and the simulate
+    /// stage's throughput with MCAP writing. Medians of REPEAT runs, one core.
+    #[command(after_help = "Example:
+  alnlab bench sim --json")]
+    Sim {
+        /// How many timed runs per figure.
+        #[arg(long, default_value_t = 5)]
+        repeat: usize,
+        /// Print one JSON object.
+        #[arg(long)]
+        json: bool,
+    },
     /// Time a fully cached `run` of a manifest (the no-op re-run).
     ///
     /// Runs the manifest once to fill the cache, then times REPEAT re-runs
@@ -222,6 +240,32 @@ pub fn execute(cli: Cli) -> Result<()> {
             repeat,
             json,
         }) => bench_cache(&manifest, out, repeat.max(1), json, quiet),
+        Command::Bench(Bench::Sim { repeat, json }) => {
+            let figures = alnlab_simulate::bench::run(repeat.max(1))?;
+            if json {
+                println!(
+                    "{}",
+                    serde_json::to_string(&figures).expect("figures serialize")
+                );
+            } else {
+                println!(
+                    "worm without contacts: {:8.0} ns/step",
+                    figures.worm_no_contact_ns_per_step
+                );
+                println!(
+                    "worm with contacts:    {:8.0} ns/step",
+                    figures.worm_contact_ns_per_step
+                );
+                for (links, ns) in &figures.chain_ns_per_step {
+                    println!("free chain, {links:2} links: {ns:8.0} ns/step");
+                }
+                println!(
+                    "simulate stage:        {:8.0} steps/s",
+                    figures.stage_steps_per_s
+                );
+            }
+            Ok(())
+        }
     }
 }
 
