@@ -73,12 +73,6 @@ impl Transform {
             .copy_from(&(-self.e * skew(&self.r)));
         x
     }
-
-    /// An articulated (or rigid) inertia moved from B to A: `Xᵀ I X`.
-    pub fn inertia_to_parent(&self, inertia: &Matrix6<f64>) -> Matrix6<f64> {
-        let x = self.matrix();
-        x.transpose() * inertia * x
-    }
 }
 
 /// The spatial inertia at the hinge of a body of `mass`, centre of mass `c`
