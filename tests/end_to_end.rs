@@ -407,3 +407,37 @@ fn stages_run_alone_on_explicit_files_match_the_pipeline() {
         );
     }
 }
+
+#[test]
+fn an_unstable_scene_stops_the_run_with_exit_2_and_leaves_no_artifact() {
+    let dir = tempfile::tempdir().unwrap();
+    let unstable = MANIFEST
+        .replace(
+            "frame_dt = 0.01",
+            "frame_dt = 0.01\ndt = 0.005\ncontact = { stiffness = 1e8 }",
+        )
+        .replace("dt = 0.001\n", "");
+    write_manifest(dir.path(), "m.toml", &unstable);
+    let out = alnlab(dir.path(), &["-q", "run", "m.toml"]);
+    assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
+    let err = stderr(&out);
+    assert!(
+        err.contains("variant `base`, stage simulate: scene `box`, run 0, step "),
+        "{err}"
+    );
+    assert!(err.contains("unstable"), "{err}");
+    let simulate = dir.path().join("runs/cache/simulate");
+    assert_eq!(
+        std::fs::read_dir(&simulate).map_or(0, |d| d.count()),
+        0,
+        "no artifact folder, finished or not"
+    );
+
+    let out = alnlab(
+        dir.path(),
+        &["-q", "simulate", "--manifest", "m.toml", "--out", "alone"],
+    );
+    assert_eq!(out.status.code(), Some(2));
+    assert!(!dir.path().join("alone/trajectory.mcap").exists());
+    assert!(!dir.path().join("alone/stats.parquet").exists());
+}

@@ -5,7 +5,9 @@ Usage: python tests/interop.py RUN_JSON
 Reads every Parquet artifact named in the run record with pyarrow and every
 MCAP log with the `mcap` package, decoding each /state message with the ROS 2
 decoder from the schema stored in the file, and checks the decoded values
-against the stride stage's pairs table. Exits non-zero on any mismatch.
+against the stride stage's pairs table; checks that /tf and /scene use
+Foxglove's well-known schema names and that every scene's model is in an
+`alnlab.model` metadata record. Exits non-zero on any mismatch.
 """
 
 import json
@@ -37,10 +39,26 @@ def main(run_json: str) -> int:
         with open(artifacts["trajectory"]["path"], "rb") as f:
             reader = make_reader(f, decoder_factories=[DecoderFactory()])
             assert reader.get_header().profile == "ros2"
+            summary = reader.get_summary()
+            schemas = {c.topic: summary.schemas[c.schema_id].name for c in summary.channels.values()}
+            assert schemas["/tf"] == "foxglove.FrameTransforms", schemas
+            assert schemas["/scene"] == "foxglove.SceneUpdate", schemas
+            models = [m for m in reader.iter_metadata() if m.name == "alnlab.model"]
+            scenes = {c.metadata["scene"] for c in summary.channels.values() if c.topic == "/state"}
+            assert {m.metadata["scene"] for m in models} == scenes, (models, scenes)
+            for m in models:
+                model = json.loads(m.metadata["json"])
+                assert model["links"][0]["parent"] == -1 and model["conventions"]["units"] == "SI"
+            tf = 0
+            for _, channel, message in reader.iter_messages(topics=["/tf"]):
+                transforms = json.loads(message.data)["transforms"]
+                assert all(t["parent_frame_id"] == "world" for t in transforms)
+                tf += 1
+            assert tf > 0, "no /tf messages"
             for schema, channel, message, decoded in reader.iter_decoded_messages(topics=["/state"]):
                 assert schema.encoding == "ros2msg" and channel.message_encoding == "cdr"
                 names = channel.metadata["variables"].split(",")
-                values = {n: getattr(decoded, n.replace(".", "_")) for n in names}
+                values = {n: getattr(decoded, n.replace(".", "_").lower()) for n in names}
                 assert all(math.isfinite(v) for v in values.values())
                 frames[(channel.metadata["scene"], decoded.run, decoded.frame)] = values
         assert frames, "no /state messages"

@@ -247,9 +247,11 @@ impl Graph<'_> {
                 };
                 let label = format!("{}/{}", self.manifest.experiment.name, self.record.name);
                 let bar = Bar::new(&label, self.options.quiet);
+                let context = format!("variant `{}`, stage {name}", self.record.name);
                 let artifact = self
                     .cache
-                    .make(name, &key, outputs, |dir| execute(&provenance, dir, &bar))?;
+                    .make(name, &key, outputs, |dir| execute(&provenance, dir, &bar))
+                    .map_err(|e| e.context(&context))?;
                 self.made_now.insert(key.clone());
                 artifact
             }

@@ -42,6 +42,16 @@ impl Error {
         }
     }
 
+    /// The same error with `context` (e.g. `variant `x`, stage simulate`)
+    /// put before its message.
+    pub fn context(self, context: &str) -> Self {
+        match self {
+            Error::Invalid(m) => Error::Invalid(format!("{context}: {m}")),
+            Error::Diverged(m) => Error::Diverged(format!("{context}: {m}")),
+            other => other,
+        }
+    }
+
     /// The process exit code for this error: 2 for what the user can fix
     /// (a missing or unreadable input, bad files, bad parameters, an unstable
     /// scene), 1 otherwise (e.g. a full disk).

@@ -60,8 +60,7 @@ pub struct StateFrame {
 }
 
 impl StateLayout {
-    /// The `ros2msg` schema text of this layout. Field names are the dotted
-    /// names with `.` replaced by `_` (ROS 2 field names allow no dots).
+    /// The `ros2msg` schema text of this layout, fields named by [`field_name`].
     pub fn ros2msg(&self) -> String {
         let mut s = String::from(
             "# alnlab frame: simulated time (s), run index, frame index,\n\
@@ -149,9 +148,11 @@ impl StateLayout {
     }
 }
 
-/// The ROS 2 field name of a dotted alnlab name.
+/// The ROS 2 field name of a dotted alnlab name: dots become underscores and
+/// letters lower case (ROS 2 allows only `[a-z][a-z0-9_]*`), so `f_E.1.x` is
+/// the field `f_e_1_x`.
 pub fn field_name(name: &str) -> String {
-    name.replace('.', "_")
+    name.replace('.', "_").to_ascii_lowercase()
 }
 
 /// Writes a trajectory log under a temporary name; [`StateLogWriter::finish`]
@@ -441,6 +442,8 @@ mod tests {
         let text = layout().ros2msg();
         assert!(text.contains("float64 time\nuint32 run\nuint32 frame\nfloat64 root_q_w\n"));
         assert!(text.ends_with("float64 omega_1_x\nfloat64 omega_1_y\n"));
+        // ROS 2 field names are lower case.
+        assert_eq!(field_name("f_E.3.z"), "f_e_3_z");
     }
 
     #[test]

@@ -5,7 +5,7 @@
 //!
 //! | kind | links | root | floor | arena wall | gravity | hinge damping | controller |
 //! |---|---|---|---|---|---|---|---|
-//! | `worm` | 3 capsules | free | yes | r = 2 m | −9.81 z | 0.3 | random |
+//! | `worm` | 3 capsules | free | yes | r = 2 m | −9.81 z | 1.0 | random |
 //! | `chain` | 4 capsules | free | no | no | 0 | 0 | none |
 //! | `pendulum` | 3 capsules | pinned | no | no | −9.81 z | 0 | none |
 //! | `tumbler` | 1 box | free | no | no | 0 | 0 | none |
@@ -248,6 +248,26 @@ impl Scene {
             .any(|g| !g.is_finite())
         {
             return err("gravity", "expected three finite numbers".into());
+        }
+        // Damping is integrated explicitly: b·dt must stay below the smallest
+        // rotational inertia of a link, or the hinge's rate overshoots.
+        let damping = self.hinge_damping.expect("resolved");
+        let model = self.model();
+        let smallest = model
+            .links
+            .iter()
+            .map(|l| l.inertia_com.symmetric_eigenvalues().min())
+            .fold(f64::INFINITY, f64::min);
+        let limit = smallest / self.dt.get();
+        if damping > limit {
+            return err(
+                "hinge_damping",
+                format!(
+                    "expected at most {limit:.3} N m s/rad with dt = {} (the links' smallest \
+                     inertia is {smallest:.2e} kg m²), found {damping}; lower it or dt",
+                    self.dt.get()
+                ),
+            );
         }
         let hinges = n - 1;
         self.controller

@@ -355,6 +355,21 @@ fn long_horizon_worm_stays_finite_and_unit() {
     assert!(worst_norm <= 1e-12, "quaternion norm off by {worst_norm:e}");
 }
 
+#[test]
+fn too_much_hinge_damping_for_dt_is_refused() {
+    let scene = Scene {
+        hinge_damping: Some(2.0),
+        ..Scene::default()
+    }
+    .resolve();
+    let (field, message) = scene.validate().unwrap_err();
+    assert_eq!(field, "hinge_damping");
+    assert!(
+        message.contains("expected at most 1.800 N m s/rad with dt = 0.001"),
+        "{message}"
+    );
+}
+
 /// Hard case 7: an unstable scene stops with a clear error and leaves no log.
 #[test]
 fn blow_up_names_scene_run_step_and_variable_and_leaves_nothing() {
