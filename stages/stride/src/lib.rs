@@ -1,23 +1,24 @@
 //! The stride stage (paper §4.3): from `trajectory.mcap`, take every n-th
 //! logged frame of each run and its successor, and write them side by side to
 //! `pairs.parquet`, never pairing across runs. A `split` column assigns each
-//! row to `train` or `test`.
+//! row to training and testing.
 //!
 //! Columns: `scene` (string), `run` (u32), `step` (u32, the frame index of the
-//! `x.` values), `split` (string), then `x.<variable>` and `y.<variable>` (f64)
-//! for the union of the scenes' variables (null where a scene lacks one).
+//! `x.` values), `split` (string: `train`, `test`, or `both` — only the
+//! `paper` split puts a row in both), then `x.<variable>` and `y.<variable>`
+//! (f64) for the union of the scenes' variables (null where a scene lacks one).
 
 use std::path::Path;
 use std::sync::Arc;
 
 use alnlab_common::params::{Count, Fraction};
-use alnlab_common::state_log::StateLog;
+use alnlab_common::state_log::{StateFrame, StateLog};
 use alnlab_common::{Error, Progress, Provenance, Result, table};
 use arrow_array::{Array, Float64Array, StringArray, UInt32Array};
 use serde::{Deserialize, Serialize};
 
 /// Version of what this stage writes (part of every cache key).
-pub const FORMAT_VERSION: u32 = 1;
+pub const FORMAT_VERSION: u32 = 2;
 /// File name of the pairs table.
 pub const PAIRS_FILE: &str = "pairs.parquet";
 
@@ -26,9 +27,15 @@ pub const PAIRS_FILE: &str = "pairs.parquet";
 #[serde(rename_all = "kebab-case")]
 pub enum Split {
     /// Each row goes to test with probability `test_fraction`, decided by a
-    /// seeded hash of (scene, run, step), so train and test never share a row.
+    /// seeded hash of (scene, run, step), so train and test never share a
+    /// row; `train_rows` / `test_rows`, if given, keep that many of each
+    /// (chosen by another seeded hash, so from all over the log).
     #[default]
     Disjoint,
+    /// As the paper (§4.3): train on the first `train_rows` rows and test on
+    /// the first `test_rows` rows, so with 1000 and 9000 one test row in nine
+    /// was also seen in training.
+    Paper,
 }
 
 /// The `[stride]` table of a manifest.
@@ -43,6 +50,10 @@ pub struct Params {
     pub split: Split,
     /// Share of rows that go to test (with `split = "disjoint"`).
     pub test_fraction: Fraction,
+    /// Number of training rows (required by `paper`, a cap for `disjoint`).
+    pub train_rows: Option<Count>,
+    /// Number of test rows (required by `paper`, a cap for `disjoint`).
+    pub test_rows: Option<Count>,
 }
 
 impl Default for Params {
@@ -52,6 +63,8 @@ impl Default for Params {
             offset: 0,
             split: Split::Disjoint,
             test_fraction: Fraction(0.5),
+            train_rows: None,
+            test_rows: None,
         }
     }
 }
@@ -68,7 +81,45 @@ impl Params {
                 ),
             ));
         }
+        if self.split == Split::Paper {
+            for (key, value) in [
+                ("train_rows", self.train_rows),
+                ("test_rows", self.test_rows),
+            ] {
+                if value.is_none() {
+                    return Err((
+                        key.into(),
+                        "the `paper` split needs train_rows and test_rows".into(),
+                    ));
+                }
+            }
+        }
         Ok(())
+    }
+}
+
+/// One pair: the scene and the two frames.
+struct Pair<'a> {
+    scene: usize,
+    x: &'a StateFrame,
+    y: &'a StateFrame,
+}
+
+/// Which split a row is in.
+#[derive(Clone, Copy, PartialEq, Debug)]
+enum Role {
+    Train,
+    Test,
+    Both,
+}
+
+impl Role {
+    fn name(self) -> &'static str {
+        match self {
+            Role::Train => "train",
+            Role::Test => "test",
+            Role::Both => "both",
+        }
     }
 }
 
@@ -96,36 +147,22 @@ pub fn run(
     let total: usize = log.scenes.iter().map(|s| s.frames.len()).sum();
     progress.start("stride", total as u64, "frames");
 
-    let (mut scene_col, mut run_col, mut step_col, mut split_col) =
-        (Vec::new(), Vec::new(), Vec::new(), Vec::new());
-    let mut x_cols: Vec<Vec<Option<f64>>> = vec![Vec::new(); variables.len()];
-    let mut y_cols: Vec<Vec<Option<f64>>> = vec![Vec::new(); variables.len()];
-    for scene in &log.scenes {
-        // Where each of the table's variables sits in this scene's frames.
-        let index: Vec<Option<usize>> = variables
-            .iter()
-            .map(|v| scene.layout.variables.iter().position(|s| s == v))
-            .collect();
-        for pair in scene.frames.windows(2) {
-            let (x, y) = (&pair[0], &pair[1]);
+    let mut pairs = Vec::new();
+    for (scene_index, scene) in log.scenes.iter().enumerate() {
+        for window in scene.frames.windows(2) {
+            let (x, y) = (&window[0], &window[1]);
             let taken = u64::from(x.frame) % params.n.0 == params.offset;
-            if !taken || y.run != x.run || y.frame != x.frame + 1 {
-                continue;
-            }
-            scene_col.push(scene.layout.scene.clone());
-            run_col.push(x.run);
-            step_col.push(x.frame);
-            let test =
-                unit_hash(seed, &scene.layout.scene, x.run, x.frame) < params.test_fraction.get();
-            split_col.push(if test { "test" } else { "train" });
-            for (k, i) in index.iter().enumerate() {
-                x_cols[k].push(i.map(|i| x.variables[i]));
-                y_cols[k].push(i.map(|i| y.variables[i]));
+            if taken && y.run == x.run && y.frame == x.frame + 1 {
+                pairs.push(Pair {
+                    scene: scene_index,
+                    x,
+                    y,
+                });
             }
         }
         progress.advance(scene.frames.len() as u64);
     }
-    if scene_col.is_empty() {
+    if pairs.is_empty() {
         return Err(Error::bad_file(
             trajectory,
             format!(
@@ -134,23 +171,156 @@ pub fn run(
             ),
         ));
     }
+    let scene_name = |p: &Pair| log.scenes[p.scene].layout.scene.as_str();
+    let roles = assign(params, seed, &pairs, |p| {
+        (scene_name(p), p.x.run, p.x.frame)
+    })
+    .map_err(|e| Error::bad_file(trajectory, e))?;
+    let chosen: Vec<(&Pair, Role)> = pairs
+        .iter()
+        .zip(roles)
+        .filter_map(|(p, r)| r.map(|r| (p, r)))
+        .collect();
 
+    // Where each of the table's variables sits in each scene's frames.
+    let index: Vec<Vec<Option<usize>>> = log
+        .scenes
+        .iter()
+        .map(|s| {
+            variables
+                .iter()
+                .map(|v| s.layout.variables.iter().position(|n| n == v))
+                .collect()
+        })
+        .collect();
+    // `after` picks the successor frame (`y.` columns) instead of the frame.
+    let column = |k: usize, after: bool| -> Arc<dyn Array> {
+        let values: Float64Array = chosen
+            .iter()
+            .map(|(p, _)| {
+                let frame = if after { p.y } else { p.x };
+                index[p.scene][k].map(|i| frame.variables[i])
+            })
+            .collect();
+        Arc::new(values)
+    };
     let x_names: Vec<String> = variables.iter().map(|v| format!("x.{v}")).collect();
     let y_names: Vec<String> = variables.iter().map(|v| format!("y.{v}")).collect();
     let mut columns: Vec<(&str, Arc<dyn Array>)> = vec![
-        ("scene", Arc::new(StringArray::from(scene_col))),
-        ("run", Arc::new(UInt32Array::from(run_col))),
-        ("step", Arc::new(UInt32Array::from(step_col))),
-        ("split", Arc::new(StringArray::from(split_col))),
+        (
+            "scene",
+            Arc::new(
+                chosen
+                    .iter()
+                    .map(|(p, _)| Some(scene_name(p)))
+                    .collect::<StringArray>(),
+            ),
+        ),
+        (
+            "run",
+            Arc::new(chosen.iter().map(|(p, _)| p.x.run).collect::<UInt32Array>()),
+        ),
+        (
+            "step",
+            Arc::new(
+                chosen
+                    .iter()
+                    .map(|(p, _)| p.x.frame)
+                    .collect::<UInt32Array>(),
+            ),
+        ),
+        (
+            "split",
+            Arc::new(
+                chosen
+                    .iter()
+                    .map(|(_, r)| Some(r.name()))
+                    .collect::<StringArray>(),
+            ),
+        ),
     ];
-    for (name, values) in x_names.iter().zip(x_cols).chain(y_names.iter().zip(y_cols)) {
-        columns.push((name, Arc::new(Float64Array::from(values))));
+    for (k, name) in x_names.iter().enumerate() {
+        columns.push((name, column(k, false)));
+    }
+    for (k, name) in y_names.iter().enumerate() {
+        columns.push((name, column(k, true)));
     }
     table::write_parquet(
         &out_dir.join(PAIRS_FILE),
         &table::batch(columns),
         provenance,
     )
+}
+
+/// The split of every pair (`None`: left out), from its identity.
+fn assign<T>(
+    params: &Params,
+    seed: u64,
+    pairs: &[T],
+    identity: impl Fn(&T) -> (&str, u32, u32),
+) -> std::result::Result<Vec<Option<Role>>, String> {
+    match params.split {
+        Split::Paper => {
+            let (train, test) = (
+                params.train_rows.expect("validated").get(),
+                params.test_rows.expect("validated").get(),
+            );
+            if pairs.len() < train.max(test) {
+                return Err(format!(
+                    "has {} frame pairs; the paper split asks for {train} training and {test} test rows",
+                    pairs.len()
+                ));
+            }
+            Ok((0..pairs.len())
+                .map(|i| match (i < train, i < test) {
+                    (true, true) => Some(Role::Both),
+                    (true, false) => Some(Role::Train),
+                    (false, true) => Some(Role::Test),
+                    (false, false) => None,
+                })
+                .collect())
+        }
+        Split::Disjoint => {
+            let mut roles: Vec<Option<Role>> = pairs
+                .iter()
+                .map(|p| {
+                    let (scene, run, step) = identity(p);
+                    let test = unit_hash(seed, scene, run, step) < params.test_fraction.get();
+                    Some(if test { Role::Test } else { Role::Train })
+                })
+                .collect();
+            for (role, cap) in [
+                (Role::Train, params.train_rows),
+                (Role::Test, params.test_rows),
+            ] {
+                let Some(cap) = cap else { continue };
+                // Keep the `cap` rows of this split with the smallest second hash.
+                let mut members: Vec<(f64, usize)> = roles
+                    .iter()
+                    .enumerate()
+                    .filter(|(_, r)| **r == Some(role))
+                    .map(|(i, _)| {
+                        let (scene, run, step) = identity(&pairs[i]);
+                        (unit_hash(!seed, scene, run, step), i)
+                    })
+                    .collect();
+                if members.len() < cap.get() {
+                    return Err(format!(
+                        "has {} {} rows with test_fraction = {}, fewer than the {} asked for",
+                        members.len(),
+                        role.name(),
+                        params.test_fraction.get(),
+                        cap.get()
+                    ));
+                }
+                members.sort_by(|a, b| a.0.total_cmp(&b.0));
+                for &(_, i) in &members[cap.get()..] {
+                    roles[i] = None;
+                }
+            }
+            Ok(roles)
+        }
+    }
 }
 
 /// A seeded hash of a row's identity, uniform in [0, 1).
@@ -222,6 +392,67 @@ mod tests {
             .filter(|&i| split.value(i) == "test")
             .count();
         assert!((70..=152).contains(&tests), "{tests} test rows of 222");
+        assert!((0..split.len()).all(|i| matches!(split.value(i), "train" | "test")));
+    }
+
+    fn roles(params: &Params, n: u32) -> std::result::Result<Vec<Option<Role>>, String> {
+        let ids: Vec<u32> = (0..n).collect();
+        assign(params, 5, &ids, |&i| ("s", i / 100, i % 100))
+    }
+
+    #[test]
+    fn paper_split_tests_on_a_superset_of_training() {
+        let params = Params {
+            split: Split::Paper,
+            train_rows: Some(Count(100)),
+            test_rows: Some(Count(900)),
+            ..Params::default()
+        };
+        let r = roles(&params, 1200).unwrap();
+        let count = |role| r.iter().filter(|x| **x == Some(role)).count();
+        assert_eq!(
+            (count(Role::Both), count(Role::Test), count(Role::Train)),
+            (100, 800, 0)
+        );
+        assert_eq!(r.iter().filter(|x| x.is_none()).count(), 300);
+        // One test row in nine was also seen in training, as in §4.3.
+        assert_eq!(count(Role::Both) * 9, count(Role::Both) + count(Role::Test));
+        let err = roles(&params, 500).unwrap_err();
+        assert!(
+            err.contains("asks for 100 training and 900 test rows"),
+            "{err}"
+        );
+        let missing = Params {
+            split: Split::Paper,
+            ..Params::default()
+        };
+        assert_eq!(missing.validate().unwrap_err().0, "train_rows");
+    }
+
+    #[test]
+    fn disjoint_split_caps_sizes_from_all_over() {
+        let params = Params {
+            train_rows: Some(Count(50)),
+            test_rows: Some(Count(40)),
+            ..Params::default()
+        };
+        let r = roles(&params, 1000).unwrap();
+        let train: Vec<usize> = (0..1000).filter(|&i| r[i] == Some(Role::Train)).collect();
+        assert_eq!(train.len(), 50);
+        assert_eq!(r.iter().filter(|x| **x == Some(Role::Test)).count(), 40);
+        assert!(
+            train[0] < 200 && train[49] > 800,
+            "spread over the log: {train:?}"
+        );
+        let too_many = Params {
+            test_rows: Some(Count(900)),
+            ..Params::default()
+        };
+        assert!(
+            roles(&too_many, 1000)
+                .unwrap_err()
+                .contains("fewer than the 900 asked for")
+        );
     }
 
     #[test]
