@@ -173,19 +173,28 @@ fn cache_reuses_and_reruns_only_what_changed() {
     let first = run_ok(dir.path(), &["m.toml"]);
     assert_eq!(
         stages(&first),
-        [("simulate".into(), false), ("stride".into(), false)]
+        [
+            ("simulate".into(), false),
+            ("stride".into(), false),
+            ("quantize".into(), false)
+        ]
     );
-    assert!(
-        first.variants[0]
-            .artifacts
-            .keys()
-            .eq(["pairs", "stats", "trajectory"])
-    );
+    assert!(first.variants[0].artifacts.keys().eq([
+        "codebook",
+        "levels",
+        "pairs",
+        "stats",
+        "trajectory"
+    ]));
 
     let second = run_ok(dir.path(), &["m.toml"]);
     assert_eq!(
         stages(&second),
-        [("simulate".into(), true), ("stride".into(), true)]
+        [
+            ("simulate".into(), true),
+            ("stride".into(), true),
+            ("quantize".into(), true)
+        ]
     );
     assert_eq!(
         first.variants[0].artifacts["pairs"].sha256,
@@ -197,7 +206,11 @@ fn cache_reuses_and_reruns_only_what_changed() {
     let third = run_ok(dir.path(), &["m.toml"]);
     assert_eq!(
         stages(&third),
-        [("simulate".into(), true), ("stride".into(), false)]
+        [
+            ("simulate".into(), true),
+            ("stride".into(), false),
+            ("quantize".into(), false)
+        ]
     );
 
     // A simulate parameter: everything downstream re-runs too.
@@ -209,7 +222,11 @@ fn cache_reuses_and_reruns_only_what_changed() {
     let fourth = run_ok(dir.path(), &["m.toml"]);
     assert_eq!(
         stages(&fourth),
-        [("simulate".into(), false), ("stride".into(), false)]
+        [
+            ("simulate".into(), false),
+            ("stride".into(), false),
+            ("quantize".into(), false)
+        ]
     );
 
     // Going back to the first manifest finds its artifacts again.
@@ -217,14 +234,22 @@ fn cache_reuses_and_reruns_only_what_changed() {
     let fifth = run_ok(dir.path(), &["m.toml"]);
     assert_eq!(
         stages(&fifth),
-        [("simulate".into(), true), ("stride".into(), true)]
+        [
+            ("simulate".into(), true),
+            ("stride".into(), true),
+            ("quantize".into(), true)
+        ]
     );
 
     // --force re-runs all.
     let forced = run_ok(dir.path(), &["m.toml", "--force"]);
     assert_eq!(
         stages(&forced),
-        [("simulate".into(), false), ("stride".into(), false)]
+        [
+            ("simulate".into(), false),
+            ("stride".into(), false),
+            ("quantize".into(), false)
+        ]
     );
 }
 
@@ -440,4 +465,57 @@ fn an_unstable_scene_stops_the_run_with_exit_2_and_leaves_no_artifact() {
     assert_eq!(out.status.code(), Some(2));
     assert!(!dir.path().join("alone/trajectory.mcap").exists());
     assert!(!dir.path().join("alone/stats.parquet").exists());
+}
+
+#[test]
+fn quantize_parameters_are_checked_with_their_place() {
+    let dir = tempfile::tempdir().unwrap();
+    let cases = [
+        (
+            "[quantize]\nrange = { a = [5, -5] }\n",
+            "`quantize.range.a`: expected [min, max] with min < max, found [5, -5]",
+        ),
+        (
+            "[quantize]\nlevels = 1\n",
+            "`quantize.levels`: expected at least 2 levels, found 1",
+        ),
+        (
+            "[quantize]\nlevels = 1000\n\nwidth = 8\n",
+            "`quantize.width`: 1000 levels need a walk code of 10 to 64 bits, found 8",
+        ),
+    ];
+    for (i, (table, expected)) in cases.iter().enumerate() {
+        let name = format!("q{i}.toml");
+        let text = format!("{MANIFEST}\n{table}");
+        // The offending key's line: the last line of the table.
+        let line = text.lines().count();
+        write_manifest(dir.path(), &name, &text);
+        let out = alnlab(dir.path(), &["check", &name]);
+        assert_eq!(out.status.code(), Some(2), "{name}: {}", stderr(&out));
+        assert!(
+            stderr(&out).contains(expected),
+            "{name}: expected `{expected}` in\n{}",
+            stderr(&out)
+        );
+        let place = format!("{name}:{line}:");
+        assert!(
+            stderr(&out).contains(&place),
+            "{name}: expected {place}\n{}",
+            stderr(&out)
+        );
+    }
+    // Well formed, but the data has no such variable: refused when run.
+    write_manifest(
+        dir.path(),
+        "q.toml",
+        &format!("{MANIFEST}\n[quantize]\nrange = {{ \"a.7.x\" = [0, 1] }}\n"),
+    );
+    let out = alnlab(dir.path(), &["-q", "run", "q.toml"]);
+    assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
+    assert!(
+        stderr(&out)
+            .contains("stage quantize: quantize.range.a.7.x: the data has no such variable"),
+        "{}",
+        stderr(&out)
+    );
 }

@@ -95,6 +95,23 @@ pub enum Command {
         #[arg(long)]
         out: PathBuf,
     },
+    /// Run the quantize stage alone: ranges, levels and codes per variable.
+    #[command(after_help = "Example:
+  alnlab quantize --manifest experiments/quickstart.toml \\
+      --pairs /tmp/stride/pairs.parquet --stats /tmp/sim/stats.parquet --out /tmp/quantize")]
+    Quantize {
+        #[command(flatten)]
+        from: ManifestArgs,
+        /// The pairs table written by stride.
+        #[arg(long)]
+        pairs: PathBuf,
+        /// The statistics table written by simulate.
+        #[arg(long)]
+        stats: PathBuf,
+        /// Folder to write codebook.parquet and levels.parquet into.
+        #[arg(long)]
+        out: PathBuf,
+    },
     /// Benchmarks; each prints its figures, or one JSON object with --json.
     #[command(
         subcommand,
@@ -125,6 +142,19 @@ pub enum Bench {
     #[command(after_help = "Example:
   alnlab bench sim --json")]
     Sim {
+        /// How many timed runs per figure.
+        #[arg(long, default_value_t = 5)]
+        repeat: usize,
+        /// Print one JSON object.
+        #[arg(long)]
+        json: bool,
+    },
+    /// Time quantization and coding: values quantized and walk-encoded into
+    /// a bit matrix per second, and walk nearest-code decodes per second
+    /// (W = 23, L = 214). Medians of REPEAT runs, one core.
+    #[command(after_help = "Example:
+  alnlab bench quantize --json")]
+    Quantize {
         /// How many timed runs per figure.
         #[arg(long, default_value_t = 5)]
         repeat: usize,
@@ -240,6 +270,45 @@ pub fn execute(cli: Cli) -> Result<()> {
             repeat,
             json,
         }) => bench_cache(&manifest, out, repeat.max(1), json, quiet),
+        Command::Quantize {
+            from,
+            pairs,
+            stats,
+            out,
+        } => {
+            let (manifest, variant) = from.load()?;
+            let params = &manifest.variant(&variant)?.stages.quantize;
+            let seed = manifest.experiment.seed;
+            let inputs = [("pairs", pairs.as_path()), ("stats", stats.as_path())];
+            let provenance = standalone_provenance(&manifest, "quantize", seed, params, &inputs)?;
+            let bar = Bar::new("quantize", quiet);
+            alnlab_quantize::run(params, seed, &pairs, &stats, &provenance, &out, &bar)?;
+            println!(
+                "wrote {}",
+                out.join(alnlab_quantize::CODEBOOK_FILE).display()
+            );
+            println!("wrote {}", out.join(alnlab_quantize::LEVELS_FILE).display());
+            Ok(())
+        }
+        Command::Bench(Bench::Quantize { repeat, json }) => {
+            let figures = alnlab_quantize::bench::run(repeat.max(1));
+            if json {
+                println!(
+                    "{}",
+                    serde_json::to_string(&figures).expect("figures serialize")
+                );
+            } else {
+                println!(
+                    "quantize + encode: {:12.0} values/s",
+                    figures.quantize_encode_values_per_s
+                );
+                println!(
+                    "walk decode:       {:12.0} decodes/s",
+                    figures.walk_decodes_per_s
+                );
+            }
+            Ok(())
+        }
         Command::Bench(Bench::Sim { repeat, json }) => {
             let figures = alnlab_simulate::bench::run(repeat.max(1))?;
             if json {

@@ -61,6 +61,9 @@ pub struct Stages {
     /// `[stride]`
     #[serde(default)]
     pub stride: alnlab_stride::Params,
+    /// `[quantize]`
+    #[serde(default)]
+    pub quantize: alnlab_quantize::Params,
 }
 
 /// The whole document as deserialized (variants handled separately).
@@ -72,6 +75,8 @@ struct Document {
     simulate: alnlab_simulate::Params,
     #[serde(default)]
     stride: alnlab_stride::Params,
+    #[serde(default)]
+    quantize: alnlab_quantize::Params,
 }
 
 /// An error in a manifest, located in the file.
@@ -137,7 +142,7 @@ impl Manifest {
         check_experiment(&document.experiment, &base, &locate)?;
         let mut variants = Vec::new();
         if variant_entries.is_empty() {
-            let stages = stages_of(document.simulate, document.stride);
+            let stages = stages_of(document.simulate, document.stride, document.quantize);
             validate(&stages, &base, &locate, None)?;
             variants.push(Variant {
                 name: "base".into(),
@@ -150,7 +155,7 @@ impl Manifest {
             let mut merged = base.clone();
             merge(&mut merged, overrides);
             let doc = deserialize(&merged, root_span.clone(), &locate, Some(&name))?;
-            let stages = stages_of(doc.simulate, doc.stride);
+            let stages = stages_of(doc.simulate, doc.stride, doc.quantize);
             validate(&stages, &merged, &locate, Some(&name))?;
             variants.push(Variant {
                 name,
@@ -202,10 +207,15 @@ impl Manifest {
 }
 
 /// The stages' parameters with every default filled in.
-fn stages_of(simulate: alnlab_simulate::Params, stride: alnlab_stride::Params) -> Stages {
+fn stages_of(
+    simulate: alnlab_simulate::Params,
+    stride: alnlab_stride::Params,
+    quantize: alnlab_quantize::Params,
+) -> Stages {
     Stages {
         simulate: simulate.resolve(),
         stride,
+        quantize,
     }
 }
 
@@ -466,6 +476,12 @@ fn validate(
                 .stride
                 .validate()
                 .map_err(|(key, message)| ("stride", key, message))
+        })
+        .and_then(|()| {
+            stages
+                .quantize
+                .validate()
+                .map_err(|(key, message)| ("quantize", key, message))
         });
     match failure {
         Ok(()) => Ok(()),

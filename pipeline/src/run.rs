@@ -1,8 +1,8 @@
 //! `alnlab run`: the stage graph of one manifest, executed in-process through
 //! the artifact cache, with a run record at the end.
 //!
-//! The graph today is simulate → stride; each later stage joins it when it
-//! is built. For every variant, each stage's cache key is computed from its
+//! The graph today is simulate → stride → quantize; each later stage joins
+//! it when it is built. For every variant, each stage's cache key is computed from its
 //! parameters and its inputs' hashes; a stage runs only when no finished
 //! artifact has that key (or with `--force`).
 
@@ -193,7 +193,7 @@ impl Graph<'_> {
 
         let params = stage_params(seed, &stages.stride);
         let trajectory = simulate.path("trajectory");
-        self.stage(
+        let stride = self.stage(
             "stride",
             alnlab_stride::FORMAT_VERSION,
             &params,
@@ -201,6 +201,22 @@ impl Graph<'_> {
             &[("pairs", alnlab_stride::PAIRS_FILE)],
             |provenance, dir, bar| {
                 alnlab_stride::run(&stages.stride, seed, &trajectory, provenance, dir, bar)
+            },
+        )?;
+
+        let params = stage_params(seed, &stages.quantize);
+        let (pairs, stats) = (stride.path("pairs"), simulate.path("stats"));
+        self.stage(
+            "quantize",
+            alnlab_quantize::FORMAT_VERSION,
+            &params,
+            &[("pairs", &stride), ("stats", &simulate)],
+            &[
+                ("codebook", alnlab_quantize::CODEBOOK_FILE),
+                ("levels", alnlab_quantize::LEVELS_FILE),
+            ],
+            |provenance, dir, bar| {
+                alnlab_quantize::run(&stages.quantize, seed, &pairs, &stats, provenance, dir, bar)
             },
         )?;
         Ok(())

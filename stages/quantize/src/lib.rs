@@ -1,9 +1,754 @@
-//! The quantize stage (paper §4.2, §4.4, §6; DESIGN.md §4) — its contract,
-//! pending its own issue: reads `pairs.parquet` and `stats.parquet`, clamps
-//! each variable to its range, quantizes it to L levels and writes the
-//! codebook and `levels.parquet`. Not yet part of the stage graph.
+//! The quantize stage (paper §4.2, §4.4, §6; DESIGN.md §4): reads
+//! `pairs.parquet` and `stats.parquet`, clamps each variable to its range,
+//! quantizes it to L levels and writes
+//! - `codebook.parquet`: per variable its range, L, code, width, walk seed,
+//!   whether it is learned (a variable constant in the data is not) and how
+//!   many values were clamped;
+//! - `levels.parquet`: `scene`, `run`, `step`, `split`, then the level (u16)
+//!   of every learned `x.` and `y.` value.
+//!
+//! The codes themselves live in [`codes`]; [`bits::encode`] turns level
+//! columns into the bit matrices the train and test stages work on.
 
+pub mod bench;
+pub mod bits;
+pub mod codes;
+pub mod walk;
+
+use std::collections::BTreeMap;
+use std::path::Path;
+use std::sync::Arc;
+
+use alnlab_common::params::Count;
+use alnlab_common::table::{self, Table};
+use alnlab_common::{Error, Progress, Provenance, Result};
+use arrow_array::{
+    Array, BooleanArray, Float64Array, StringArray, UInt16Array, UInt32Array, UInt64Array,
+};
+use serde::{Deserialize, Serialize};
+
+use crate::codes::{Code, Codec, binary_width};
+use crate::walk::WalkSpec;
+
+/// Version of what this stage writes (part of every cache key).
+pub const FORMAT_VERSION: u32 = 1;
 /// File name of the codebook.
 pub const CODEBOOK_FILE: &str = "codebook.parquet";
 /// File name of the levels table.
 pub const LEVELS_FILE: &str = "levels.parquet";
+
+/// Where variable ranges come from.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum RangeSource {
+    /// The min and max seen in the data (`stats.parquet`).
+    #[default]
+    Observed,
+    /// The paper's table of §4.2, by group.
+    Paper,
+}
+
+/// The paper's ranges (§4.2: "All available configuration files for
+/// DynaTree were then run"), by variable group.
+pub const PAPER_RANGES: [(&str, f64, f64); 8] = [
+    ("a", -500.0, 500.0),
+    ("f_E", -3000.0, 4000.0),
+    ("g_E", -3000.0, 3000.0),
+    ("g", -150.0, 150.0),
+    ("R", -1.57, 1.57),
+    ("omega", -35.0, 35.0),
+    ("omega_dot", -1500.0, 2000.0),
+    ("v", -18.0, 11.0),
+];
+
+/// The variable groups of DESIGN.md §6 (roll and pitch form the group `R`).
+pub const GROUPS: [&str; 8] = ["a", "f_E", "g_E", "g", "R", "omega", "omega_dot", "v"];
+
+/// The group of a variable name (`omega_dot.3.x` → `omega_dot`, `roll.2` → `R`).
+pub fn group_of(variable: &str) -> &str {
+    match variable.split('.').next().unwrap_or("") {
+        "roll" | "pitch" => "R",
+        g => g,
+    }
+}
+
+/// The `[quantize]` table of a manifest.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct Params {
+    /// Levels per variable, L ≥ 2 (paper: 214).
+    pub levels: Count,
+    /// The code of a level.
+    pub code: Code,
+    /// Width of the walk code in bits (paper: 23).
+    pub width: Count,
+    /// Bits flipped per level on the walk.
+    pub walk_step: Count,
+    /// Levels over which walk distance grows linearly (see [`walk`]).
+    pub walk_span: Count,
+    /// Where ranges come from.
+    pub ranges: RangeSource,
+    /// Ranges given by hand, by group (`a`, `R`, …) or variable (`a.1.z`);
+    /// a variable's own entry wins over its group's.
+    pub range: BTreeMap<String, [f64; 2]>,
+}
+
+impl Default for Params {
+    fn default() -> Self {
+        Params {
+            levels: Count(214),
+            code: Code::Walk,
+            width: Count(23),
+            walk_step: Count(1),
+            walk_span: Count(7),
+            ranges: RangeSource::Observed,
+            range: BTreeMap::new(),
+        }
+    }
+}
+
+impl Params {
+    /// Checks the parameters; on error, the key and what is allowed.
+    pub fn validate(&self) -> std::result::Result<(), (String, String)> {
+        let levels = self.levels.get();
+        if levels < 2 {
+            return Err((
+                "levels".into(),
+                format!("expected at least 2 levels, found {levels}"),
+            ));
+        }
+        if levels > 65536 {
+            return Err((
+                "levels".into(),
+                format!("expected at most 65536 levels, found {levels}"),
+            ));
+        }
+        if self.code == Code::Walk {
+            let (w, s, h) = (self.width.0, self.walk_step.0, self.walk_span.0);
+            let min = u64::from(binary_width(levels));
+            if w < min || w > 64 {
+                return Err((
+                    "width".into(),
+                    format!("{levels} levels need a walk code of {min} to 64 bits, found {w}"),
+                ));
+            }
+            if s * (h + 1) > w {
+                return Err((
+                    "walk_span".into(),
+                    format!(
+                        "a walk of step {s} over span {h} needs width ≥ {}, found {w}",
+                        s * (h + 1)
+                    ),
+                ));
+            }
+        }
+        for (name, [lo, hi]) in &self.range {
+            let known_group =
+                GROUPS.contains(&name.as_str()) || ["roll", "pitch"].contains(&name.as_str());
+            let looks_like_variable = name.contains('.') && GROUPS.contains(&group_of(name));
+            if !known_group && !looks_like_variable {
+                return Err((
+                    format!("range.{name}"),
+                    format!(
+                        "unknown group or variable `{name}`; groups are {}",
+                        GROUPS.join(", ")
+                    ),
+                ));
+            }
+            if !(lo.is_finite() && hi.is_finite() && lo < hi) {
+                return Err((
+                    format!("range.{name}"),
+                    format!("expected [min, max] with min < max, found [{lo}, {hi}]"),
+                ));
+            }
+        }
+        Ok(())
+    }
+
+    /// The walk of a variable (its seed derived from the experiment seed and
+    /// the variable's name), if the code is `walk`.
+    fn walk(&self, seed: u64, variable: &str) -> Option<WalkSpec> {
+        (self.code == Code::Walk).then(|| WalkSpec {
+            levels: self.levels.get(),
+            width: self.width.0 as u32,
+            step: self.walk_step.0 as u32,
+            span: self.walk_span.0 as u32,
+            seed: variable_seed(seed, variable),
+        })
+    }
+}
+
+/// A seed per variable: FNV-1a of the name mixed into the experiment seed.
+pub fn variable_seed(seed: u64, variable: &str) -> u64 {
+    variable
+        .bytes()
+        .fold(0xcbf2_9ce4_8422_2325u64 ^ seed, |h, b| {
+            (h ^ u64::from(b)).wrapping_mul(0x100_0000_01b3)
+        })
+}
+
+/// Uniform quantization of one variable.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Quantizer {
+    pub min: f64,
+    pub max: f64,
+    pub levels: usize,
+}
+
+impl Quantizer {
+    /// The level of `x` (nearest of L evenly spaced values from min to max)
+    /// and whether it was clamped into the range.
+    #[inline]
+    pub fn level(&self, x: f64) -> (u16, bool) {
+        let top = (self.levels - 1) as f64;
+        let t = (x - self.min) / (self.max - self.min) * top;
+        let clamped = !(0.0..=top).contains(&t);
+        (t.round().clamp(0.0, top) as u16, clamped)
+    }
+
+    /// The value a level stands for.
+    pub fn value(&self, level: usize) -> f64 {
+        self.min + (self.max - self.min) * level as f64 / (self.levels - 1) as f64
+    }
+}
+
+/// One variable's line of the codebook.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Entry {
+    pub variable: String,
+    pub learned: bool,
+    /// Why a variable is not learned (empty if it is).
+    pub note: String,
+    pub quantizer: Quantizer,
+    pub code: Code,
+    pub width: u32,
+    pub walk_step: u32,
+    pub walk_span: u32,
+    pub seed: u64,
+    /// How many of its `x.` and `y.` values were clamped into the range.
+    pub clamped: u64,
+}
+
+/// The codebook: every variable's range, levels and code.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Codebook {
+    pub entries: Vec<Entry>,
+}
+
+impl Codebook {
+    /// The learned entries, in table order.
+    pub fn learned(&self) -> impl Iterator<Item = &Entry> {
+        self.entries.iter().filter(|e| e.learned)
+    }
+
+    /// Reads `codebook.parquet`.
+    pub fn read(path: &Path) -> Result<Codebook> {
+        let t = Table::read(path)?;
+        let s = |c| t.column::<StringArray>(c);
+        let f = |c| t.f64_column(c);
+        let u = |c| t.column::<UInt64Array>(c);
+        let (variable, note, code) = (s("variable")?, s("note")?, s("code")?);
+        let (min, max) = (f("min")?, f("max")?);
+        let (levels, width, step, span, seed, clamped) = (
+            u("levels")?,
+            u("width")?,
+            u("walk_step")?,
+            u("walk_span")?,
+            u("seed")?,
+            u("clamped")?,
+        );
+        let learned = t.column::<BooleanArray>("learned")?;
+        let entries = (0..t.num_rows())
+            .map(|r| {
+                let code = match code.value(r) {
+                    "binary" => Code::Binary,
+                    "gray" => Code::Gray,
+                    "walk" => Code::Walk,
+                    "thermometer" => Code::Thermometer,
+                    other => {
+                        return Err(Error::bad_file(
+                            path,
+                            format!("row {r}: unknown code `{other}`"),
+                        ));
+                    }
+                };
+                Ok(Entry {
+                    variable: variable.value(r).to_string(),
+                    learned: learned.value(r),
+                    note: note.value(r).to_string(),
+                    quantizer: Quantizer {
+                        min: min.value(r),
+                        max: max.value(r),
+                        levels: levels.value(r) as usize,
+                    },
+                    code,
+                    width: width.value(r) as u32,
+                    walk_step: step.value(r) as u32,
+                    walk_span: span.value(r) as u32,
+                    seed: seed.value(r),
+                    clamped: clamped.value(r),
+                })
+            })
+            .collect::<Result<_>>()?;
+        Ok(Codebook { entries })
+    }
+
+    fn write(&self, path: &Path, provenance: &Provenance) -> Result<()> {
+        let e = &self.entries;
+        let strings = |f: fn(&Entry) -> &str| -> Arc<dyn Array> {
+            Arc::new(e.iter().map(|x| Some(f(x))).collect::<StringArray>())
+        };
+        let floats = |f: fn(&Entry) -> f64| -> Arc<dyn Array> {
+            Arc::new(
+                e.iter()
+                    .map(f)
+                    .collect::<Vec<_>>()
+                    .into_iter()
+                    .collect::<Float64Array>(),
+            )
+        };
+        let counts = |f: fn(&Entry) -> u64| -> Arc<dyn Array> {
+            Arc::new(
+                e.iter()
+                    .map(f)
+                    .collect::<Vec<_>>()
+                    .into_iter()
+                    .collect::<UInt64Array>(),
+            )
+        };
+        let batch = table::batch(vec![
+            ("variable", strings(|x| &x.variable)),
+            ("group", strings(|x| group_of(&x.variable))),
+            (
+                "learned",
+                Arc::new(e.iter().map(|x| Some(x.learned)).collect::<BooleanArray>()),
+            ),
+            ("note", strings(|x| &x.note)),
+            ("min", floats(|x| x.quantizer.min)),
+            ("max", floats(|x| x.quantizer.max)),
+            ("levels", counts(|x| x.quantizer.levels as u64)),
+            ("code", strings(|x| x.code.name())),
+            ("width", counts(|x| u64::from(x.width))),
+            ("walk_step", counts(|x| u64::from(x.walk_step))),
+            ("walk_span", counts(|x| u64::from(x.walk_span))),
+            ("seed", counts(|x| x.seed)),
+            ("clamped", counts(|x| x.clamped)),
+        ]);
+        table::write_parquet(path, &batch, provenance)
+    }
+}
+
+impl Entry {
+    /// The entry's codec (a walk is redrawn from its seed).
+    pub fn codec(&self) -> std::result::Result<Codec, String> {
+        let walk = (self.code == Code::Walk).then_some(WalkSpec {
+            levels: self.quantizer.levels,
+            width: self.width,
+            step: self.walk_step,
+            span: self.walk_span,
+            seed: self.seed,
+        });
+        Codec::new(self.code, self.quantizer.levels, walk)
+    }
+}
+
+/// Reads `pairs` and `stats`, writes the codebook and the levels table into
+/// `out_dir`.
+pub fn run(
+    params: &Params,
+    seed: u64,
+    pairs_path: &Path,
+    stats_path: &Path,
+    provenance: &Provenance,
+    out_dir: &Path,
+    progress: &dyn Progress,
+) -> Result<()> {
+    params
+        .validate()
+        .map_err(|(key, message)| Error::Invalid(format!("quantize.{key}: {message}")))?;
+    let pairs = Table::read(pairs_path)?;
+    let stats = Table::read(stats_path)?;
+    let variables: Vec<String> = pairs
+        .batch
+        .schema()
+        .fields()
+        .iter()
+        .filter_map(|f| f.name().strip_prefix("x.").map(str::to_string))
+        .collect();
+    for name in params.range.keys() {
+        let known = variables.iter().any(|v| {
+            v == name || group_of(v) == name || v.split('.').next() == Some(name.as_str())
+        });
+        if !known {
+            return Err(Error::Invalid(format!(
+                "quantize.range.{name}: the data has no such variable or group; its variables are {}",
+                variables.join(", ")
+            )));
+        }
+    }
+    let observed = observed_ranges(&stats)?;
+    progress.start("quantize", variables.len() as u64, "variables");
+
+    let mut entries = Vec::new();
+    let mut columns: Vec<(String, Arc<dyn Array>)> = Vec::new();
+    for v in &variables {
+        let x = pairs.f64_column(&format!("x.{v}"))?;
+        let y = pairs.f64_column(&format!("y.{v}"))?;
+        check_finite(&pairs, &format!("x.{v}"), x)?;
+        check_finite(&pairs, &format!("y.{v}"), y)?;
+        let (lo, hi) = observed
+            .get(v.as_str())
+            .copied()
+            .ok_or_else(|| Error::bad_file(stats_path, format!("has no statistics for `{v}`")))?;
+        let (min, max) = params
+            .range
+            .get(v)
+            .or_else(|| params.range.get(group_of(v)))
+            .or_else(|| params.range.get(v.split('.').next().unwrap_or("")))
+            .map(|[a, b]| (*a, *b))
+            .or_else(|| match params.ranges {
+                RangeSource::Observed => (lo < hi).then_some((lo, hi)),
+                RangeSource::Paper => PAPER_RANGES
+                    .iter()
+                    .find(|g| g.0 == group_of(v))
+                    .map(|g| (g.1, g.2)),
+            })
+            .unwrap_or((lo, hi));
+        let walk = params.walk(seed, v);
+        let mut entry = Entry {
+            variable: v.clone(),
+            learned: true,
+            note: String::new(),
+            quantizer: Quantizer {
+                min,
+                max,
+                levels: params.levels.get(),
+            },
+            code: params.code,
+            // The walk's width; the other codes' width follows from L below.
+            width: walk.map_or(0, |w| w.width),
+            walk_step: walk.map_or(0, |w| w.step),
+            walk_span: walk.map_or(0, |w| w.span),
+            seed: walk.map_or(0, |w| w.seed),
+            clamped: 0,
+        };
+        if x.null_count() > 0 {
+            entry.learned = false;
+            entry.note = "missing in some scene".into();
+        } else if lo == hi {
+            entry.learned = false;
+            entry.note = format!("constant ({lo}) in the data");
+        }
+        let codec = entry
+            .codec()
+            .map_err(|e| Error::Invalid(format!("quantize: {v}: {e}")))?;
+        entry.width = codec.width();
+        if entry.learned {
+            for (prefix, values) in [("x", x), ("y", y)] {
+                let mut clamped = 0u64;
+                let levels: UInt16Array = values
+                    .values()
+                    .iter()
+                    .map(|&value| {
+                        let (level, was_clamped) = entry.quantizer.level(value);
+                        clamped += u64::from(was_clamped);
+                        level
+                    })
+                    .collect::<Vec<_>>()
+                    .into();
+                entry.clamped += clamped;
+                columns.push((format!("{prefix}.{v}"), Arc::new(levels)));
+            }
+        }
+        entries.push(entry);
+        progress.advance(1);
+    }
+    // x. columns first, then y., in variable order.
+    columns.sort_by_key(|(name, _)| !name.starts_with("x."));
+    let mut batch_columns: Vec<(&str, Arc<dyn Array>)> = vec![
+        (
+            "scene",
+            Arc::new(pairs.column::<StringArray>("scene")?.clone()),
+        ),
+        ("run", Arc::new(pairs.column::<UInt32Array>("run")?.clone())),
+        (
+            "step",
+            Arc::new(pairs.column::<UInt32Array>("step")?.clone()),
+        ),
+        (
+            "split",
+            Arc::new(pairs.column::<StringArray>("split")?.clone()),
+        ),
+    ];
+    batch_columns.extend(columns.iter().map(|(n, a)| (n.as_str(), a.clone())));
+    let codebook = Codebook { entries };
+    codebook.write(&out_dir.join(CODEBOOK_FILE), provenance)?;
+    table::write_parquet(
+        &out_dir.join(LEVELS_FILE),
+        &table::batch(batch_columns),
+        provenance,
+    )
+}
+
+/// (min, max) per variable from `stats.parquet`.
+fn observed_ranges(stats: &Table) -> Result<BTreeMap<&str, (f64, f64)>> {
+    let names = stats.column::<StringArray>("variable")?;
+    let (min, max) = (stats.f64_column("min")?, stats.f64_column("max")?);
+    Ok((0..stats.num_rows())
+        .map(|r| (names.value(r), (min.value(r), max.value(r))))
+        .collect())
+}
+
+/// A NaN or infinite value is an error naming its row and column.
+fn check_finite(table: &Table, column: &str, values: &Float64Array) -> Result<()> {
+    match (0..values.len()).find(|&r| values.is_valid(r) && !values.value(r).is_finite()) {
+        Some(row) => Err(Error::bad_file(
+            table.path(),
+            format!(
+                "row {row}, column `{column}`: {} is not a finite number",
+                values.value(row)
+            ),
+        )),
+        None => Ok(()),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use alnlab_common::Silent;
+    use alnlab_common::params::Positive;
+
+    /// Simulates a short worm run and strides it; returns the folder.
+    fn data() -> tempfile::TempDir {
+        let dir = tempfile::tempdir().unwrap();
+        let scene = alnlab_simulate::Scene {
+            duration: Positive(3.0),
+            ..Default::default()
+        };
+        let sim = alnlab_simulate::Params {
+            scene: vec![scene],
+            ..Default::default()
+        };
+        alnlab_simulate::run(&sim, 5, &Provenance::default(), dir.path(), &Silent).unwrap();
+        let stride = alnlab_stride::Params::default();
+        let trajectory = dir.path().join(alnlab_simulate::TRAJECTORY_FILE);
+        alnlab_stride::run(
+            &stride,
+            5,
+            &trajectory,
+            &Provenance::default(),
+            dir.path(),
+            &Silent,
+        )
+        .unwrap();
+        dir
+    }
+
+    fn quantize(params: &Params, dir: &Path) -> Result<()> {
+        run(
+            params,
+            5,
+            &dir.join(alnlab_stride::PAIRS_FILE),
+            &dir.join(alnlab_simulate::STATS_FILE),
+            &Provenance::default(),
+            dir,
+            &Silent,
+        )
+    }
+
+    #[test]
+    fn levels_are_the_quantized_pairs_and_the_codebook_reads_back() {
+        let dir = data();
+        let params = Params {
+            levels: Count(50),
+            ..Params::default()
+        };
+        quantize(&params, dir.path()).unwrap();
+        let codebook = Codebook::read(&dir.path().join(CODEBOOK_FILE)).unwrap();
+        let levels = Table::read(&dir.path().join(LEVELS_FILE)).unwrap();
+        let pairs = Table::read(&dir.path().join(alnlab_stride::PAIRS_FILE)).unwrap();
+        assert_eq!(levels.num_rows(), pairs.num_rows());
+        assert!(codebook.learned().count() > 40);
+        for entry in codebook.learned() {
+            assert_eq!(
+                (entry.quantizer.levels, entry.width, entry.clamped),
+                (50, 23, 0)
+            );
+            for side in ["x", "y"] {
+                let name = format!("{side}.{}", entry.variable);
+                let got = levels.column::<UInt16Array>(&name).unwrap();
+                let values = pairs.f64_column(&name).unwrap();
+                for r in 0..values.len() {
+                    // Independently: nearest of 50 evenly spaced values.
+                    let q = entry.quantizer;
+                    let step = (q.max - q.min) / 49.0;
+                    let expected = ((values.value(r) - q.min) / step).round() as u16;
+                    assert_eq!(got.value(r), expected, "{name} row {r}");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn paper_ranges_clamp_and_count() {
+        let dir = data();
+        let params = Params {
+            ranges: RangeSource::Paper,
+            range: [("omega".to_string(), [-1.0, 1.0])].into(),
+            ..Params::default()
+        };
+        quantize(&params, dir.path()).unwrap();
+        let codebook = Codebook::read(&dir.path().join(CODEBOOK_FILE)).unwrap();
+        let find = |v: &str| codebook.entries.iter().find(|e| e.variable == v).unwrap();
+        assert_eq!(
+            (find("a.1.x").quantizer.min, find("a.1.x").quantizer.max),
+            (-500.0, 500.0)
+        );
+        assert_eq!(find("roll.2").quantizer.max, 1.57);
+        let omega = find("omega.1.y");
+        assert_eq!(
+            (omega.quantizer.min, omega.quantizer.max),
+            (-1.0, 1.0),
+            "a manual group range wins"
+        );
+        let pairs = Table::read(&dir.path().join(alnlab_stride::PAIRS_FILE)).unwrap();
+        let outside = ["x", "y"]
+            .iter()
+            .flat_map(|s| {
+                let c = pairs.f64_column(&format!("{s}.omega.1.y")).unwrap();
+                (0..c.len()).map(move |r| c.value(r)).collect::<Vec<_>>()
+            })
+            .filter(|x| x.abs() > 1.0)
+            .count() as u64;
+        assert!(outside > 0);
+        assert_eq!(omega.clamped, outside);
+    }
+
+    #[test]
+    fn constant_variables_are_not_learned() {
+        // Without a controller the hinge torques are absent; make the floor
+        // absent too and hold the worm still in zero gravity: nothing moves.
+        let dir = tempfile::tempdir().unwrap();
+        let scene = alnlab_simulate::Scene {
+            kind: alnlab_simulate::SceneKind::Tumbler,
+            initial_spin: Some(0.0),
+            duration: Positive(1.0),
+            ..Default::default()
+        };
+        let sim = alnlab_simulate::Params {
+            scene: vec![scene],
+            ..Default::default()
+        };
+        alnlab_simulate::run(&sim, 1, &Provenance::default(), dir.path(), &Silent).unwrap();
+        let trajectory = dir.path().join(alnlab_simulate::TRAJECTORY_FILE);
+        alnlab_stride::run(
+            &alnlab_stride::Params::default(),
+            1,
+            &trajectory,
+            &Provenance::default(),
+            dir.path(),
+            &Silent,
+        )
+        .unwrap();
+        quantize(&Params::default(), dir.path()).unwrap();
+        let codebook = Codebook::read(&dir.path().join(CODEBOOK_FILE)).unwrap();
+        assert_eq!(codebook.learned().count(), 0);
+        assert!(
+            codebook
+                .entries
+                .iter()
+                .all(|e| e.note.starts_with("constant (")),
+            "{:?}",
+            codebook.entries[0].note
+        );
+        let levels = Table::read(&dir.path().join(LEVELS_FILE)).unwrap();
+        assert_eq!(
+            levels.batch.num_columns(),
+            4,
+            "only scene, run, step, split"
+        );
+    }
+
+    #[test]
+    fn bad_parameters_and_names_are_refused() {
+        let err = |p: Params| p.validate().unwrap_err();
+        let e = err(Params {
+            range: [("a".into(), [5.0, 5.0])].into(),
+            ..Params::default()
+        });
+        assert_eq!(e.0, "range.a");
+        assert!(e.1.contains("min < max"));
+        assert!(
+            err(Params {
+                levels: Count(1),
+                ..Params::default()
+            })
+            .1
+            .contains("at least 2 levels")
+        );
+        let e = err(Params {
+            levels: Count(1000),
+            width: Count(8),
+            ..Params::default()
+        });
+        assert_eq!(e.0, "width");
+        assert!(e.1.contains("1000 levels need a walk code of 10 to 64 bits, found 8"));
+        let e = err(Params {
+            range: [("speed".into(), [0.0, 1.0])].into(),
+            ..Params::default()
+        });
+        assert!(e.1.contains("unknown group or variable `speed`"));
+        // Well formed but absent from the data: refused when the data is seen.
+        let dir = data();
+        let p = Params {
+            range: [("a.9.x".into(), [0.0, 1.0])].into(),
+            ..Params::default()
+        };
+        let e = quantize(&p, dir.path()).unwrap_err();
+        assert!(
+            e.to_string()
+                .contains("quantize.range.a.9.x: the data has no such variable"),
+            "{e}"
+        );
+        assert_eq!(e.exit_code(), 2);
+    }
+
+    #[test]
+    fn non_finite_values_name_row_and_column() {
+        let dir = data();
+        let pairs_path = dir.path().join(alnlab_stride::PAIRS_FILE);
+        let pairs = Table::read(&pairs_path).unwrap();
+        let mut columns: Vec<(String, Arc<dyn Array>)> = Vec::new();
+        for (field, column) in pairs
+            .batch
+            .schema()
+            .fields()
+            .iter()
+            .zip(pairs.batch.columns())
+        {
+            let mut column = column.clone();
+            if field.name() == "y.v.2.z" {
+                let mut values: Vec<Option<f64>> =
+                    pairs.f64_column("y.v.2.z").unwrap().iter().collect();
+                values[7] = Some(f64::NAN);
+                column = Arc::new(Float64Array::from(values));
+            }
+            columns.push((field.name().clone(), column));
+        }
+        let batch = table::batch(
+            columns
+                .iter()
+                .map(|(n, c)| (n.as_str(), c.clone()))
+                .collect(),
+        );
+        table::write_parquet(&pairs_path, &batch, &Provenance::default()).unwrap();
+        let e = quantize(&Params::default(), dir.path()).unwrap_err();
+        assert!(
+            e.to_string()
+                .contains("pairs.parquet: row 7, column `y.v.2.z`: NaN is not a finite number"),
+            "{e}"
+        );
+        assert_eq!(e.exit_code(), 2);
+    }
+}

@@ -1,0 +1,317 @@
+//! The four codes of a quantization level (DESIGN.md §4), each with its
+//! encoder and its decoder, which is defined for every bit pattern, codeword
+//! or not:
+//!
+//! | code | width | decode(bits) |
+//! |---|---|---|
+//! | `binary` | ⌈log₂ L⌉ | the number the bits spell, clamped to L − 1 |
+//! | `gray` | ⌈log₂ L⌉ | the reflected-Gray inverse, clamped to L − 1 |
+//! | `walk` | W | the level of the nearest code (Hamming), ties to the lower level |
+//! | `thermometer` | L − 1 | the number of ones (level k is k ones) |
+//!
+//! Codes are stored per level as little-endian u64 words; bit i of a code is
+//! bit i % 64 of word i / 64.
+
+use serde::{Deserialize, Serialize};
+
+use crate::walk::WalkSpec;
+
+/// Which code.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Code {
+    Binary,
+    Gray,
+    #[default]
+    Walk,
+    Thermometer,
+}
+
+impl Code {
+    /// The code's name as in manifests.
+    pub fn name(self) -> &'static str {
+        match self {
+            Code::Binary => "binary",
+            Code::Gray => "gray",
+            Code::Walk => "walk",
+            Code::Thermometer => "thermometer",
+        }
+    }
+}
+
+/// Bits needed for L levels in binary: ⌈log₂ L⌉ (at least 1).
+pub fn binary_width(levels: usize) -> u32 {
+    (usize::BITS - (levels - 1).leading_zeros()).max(1)
+}
+
+/// A code for L levels with its table of codewords.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Codec {
+    code: Code,
+    levels: usize,
+    width: u32,
+    words: usize,
+    /// `levels × words` codewords.
+    table: Vec<u64>,
+}
+
+impl Codec {
+    /// The codec of `code` for `levels` levels; `walk` uses `walk` (its width
+    /// and span), the others ignore it. Says why, if the parameters cannot
+    /// make a code.
+    pub fn new(code: Code, levels: usize, walk: Option<WalkSpec>) -> Result<Codec, String> {
+        if levels < 2 {
+            return Err(format!("expected at least 2 levels, found {levels}"));
+        }
+        if levels > usize::from(u16::MAX) + 1 {
+            return Err(format!("expected at most 65536 levels, found {levels}"));
+        }
+        let width = match code {
+            Code::Binary | Code::Gray => binary_width(levels),
+            Code::Thermometer => (levels - 1) as u32,
+            Code::Walk => walk.ok_or("the walk code needs its width and span")?.width,
+        };
+        let words = width.div_ceil(64) as usize;
+        let mut table = vec![0u64; levels * words];
+        match code {
+            Code::Binary => (0..levels).for_each(|k| table[k] = k as u64),
+            Code::Gray => (0..levels).for_each(|k| table[k] = (k ^ (k >> 1)) as u64),
+            Code::Thermometer => {
+                for k in 0..levels {
+                    for bit in 0..k {
+                        table[k * words + bit / 64] |= 1 << (bit % 64);
+                    }
+                }
+            }
+            Code::Walk => {
+                let spec = WalkSpec {
+                    levels,
+                    ..walk.expect("checked above")
+                };
+                let min = binary_width(levels);
+                if spec.width < min {
+                    return Err(format!(
+                        "{levels} levels need a code of at least {min} bits, found width = {}",
+                        spec.width
+                    ));
+                }
+                table = spec.codes()?;
+            }
+        }
+        Ok(Codec {
+            code,
+            levels,
+            width,
+            words,
+            table,
+        })
+    }
+
+    /// The code.
+    pub fn code(&self) -> Code {
+        self.code
+    }
+
+    /// Number of levels L.
+    pub fn levels(&self) -> usize {
+        self.levels
+    }
+
+    /// Bits per code.
+    pub fn width(&self) -> u32 {
+        self.width
+    }
+
+    /// The codeword of `level`, as words.
+    pub fn codeword(&self, level: usize) -> &[u64] {
+        &self.table[level * self.words..(level + 1) * self.words]
+    }
+
+    /// The level a bit pattern (as words, bits beyond the width zero) stands
+    /// for; defined for every pattern (see the module table).
+    pub fn decode(&self, bits: &[u64]) -> usize {
+        let last = self.levels - 1;
+        match self.code {
+            Code::Binary => (bits[0] as usize).min(last),
+            Code::Gray => {
+                let mut x = bits[0];
+                let mut shift = 1;
+                while shift < 64 {
+                    x ^= x >> shift;
+                    shift <<= 1;
+                }
+                (x as usize).min(last)
+            }
+            Code::Thermometer => {
+                (bits.iter().map(|w| w.count_ones() as usize).sum::<usize>()).min(last)
+            }
+            Code::Walk => self.nearest(bits[0], 0, last),
+        }
+    }
+
+    /// Like [`Codec::decode`], but only levels within `window` of `previous`
+    /// are candidates (paper §4.7: a variable moves little per step, so only
+    /// part of the path need be checked).
+    pub fn decode_near(&self, bits: &[u64], previous: usize, window: usize) -> usize {
+        let lo = previous.saturating_sub(window);
+        let hi = (previous + window).min(self.levels - 1);
+        match self.code {
+            Code::Walk => self.nearest(bits[0], lo, hi),
+            _ => self.decode(bits).clamp(lo, hi),
+        }
+    }
+
+    /// The level in `lo..=hi` whose (single-word) walk code is nearest to
+    /// `bits`, the lowest on ties.
+    fn nearest(&self, bits: u64, lo: usize, hi: usize) -> usize {
+        let mut best = (u32::MAX, lo);
+        for (k, code) in self.table[lo..=hi].iter().enumerate() {
+            let d = (code ^ bits).count_ones();
+            if d < best.0 {
+                best = (d, lo + k);
+            }
+        }
+        best.1
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn walk(width: u32, span: u32) -> Option<WalkSpec> {
+        Some(WalkSpec {
+            levels: 0,
+            width,
+            step: 1,
+            span,
+            seed: 3,
+        })
+    }
+
+    fn codecs(levels: usize) -> Vec<Codec> {
+        let w = match levels {
+            0..=16 => 8,
+            17..=214 => 23,
+            _ => 32,
+        };
+        let span = if levels > 16 { 7 } else { 2 };
+        [Code::Binary, Code::Gray, Code::Walk, Code::Thermometer]
+            .into_iter()
+            .map(|c| Codec::new(c, levels, walk(w, span)).unwrap())
+            .collect()
+    }
+
+    #[test]
+    fn every_level_round_trips() {
+        for levels in [2, 3, 214, 1000] {
+            for codec in codecs(levels) {
+                for k in 0..levels {
+                    assert_eq!(
+                        codec.decode(codec.codeword(k)),
+                        k,
+                        "{:?} L={levels} k={k}",
+                        codec.code()
+                    );
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn widths() {
+        assert_eq!(binary_width(2), 1);
+        assert_eq!(binary_width(3), 2);
+        assert_eq!(binary_width(214), 8);
+        assert_eq!(binary_width(1000), 10);
+        let c = codecs(214);
+        assert_eq!(
+            c.iter().map(Codec::width).collect::<Vec<_>>(),
+            [8, 8, 23, 213]
+        );
+    }
+
+    #[test]
+    fn gray_neighbours_differ_in_one_bit() {
+        let gray = Codec::new(Code::Gray, 1000, None).unwrap();
+        for k in 1..1000 {
+            assert_eq!(
+                (gray.codeword(k)[0] ^ gray.codeword(k - 1)[0]).count_ones(),
+                1
+            );
+        }
+    }
+
+    #[test]
+    fn non_codewords_decode_as_defined() {
+        let binary = Codec::new(Code::Binary, 214, None).unwrap();
+        assert_eq!(binary.decode(&[250]), 213, "beyond L − 1: clamped");
+        let gray = Codec::new(Code::Gray, 214, None).unwrap();
+        // 255 in Gray is the inverse of 170 (10101010) → clamped.
+        assert_eq!(gray.decode(&[255]), 170);
+        assert_eq!(gray.decode(&[0b1000_0000]), 213, "Gray 128 → 255 → clamped");
+        let thermo = Codec::new(Code::Thermometer, 214, None).unwrap();
+        // Ones anywhere count: 0b1011 has three.
+        assert_eq!(thermo.decode(&[0b1011, 0, 0, 0]), 3);
+        let walk = Codec::new(Code::Walk, 214, walk(23, 7)).unwrap();
+        // One bit off a codeword decodes to it (distance 1 < any other's).
+        for k in [0, 50, 213] {
+            let flipped = walk.codeword(k)[0] ^ (1 << 5);
+            let d = walk.decode(&[flipped]);
+            let dist = |l: usize| (walk.codeword(l)[0] ^ flipped).count_ones();
+            assert!(
+                dist(d) <= 1 && (0..d).all(|l| dist(l) > dist(d)),
+                "k={k} → {d}"
+            );
+        }
+        // Ties go to the lower level: with two bits per step, flipping one of
+        // them leaves a pattern one bit from each neighbour.
+        let exact_tie = Codec::new(
+            Code::Walk,
+            214,
+            Some(WalkSpec {
+                levels: 0,
+                width: 23,
+                step: 2,
+                span: 3,
+                seed: 9,
+            }),
+        )
+        .unwrap();
+        let (a, b) = (exact_tie.codeword(20)[0], exact_tie.codeword(21)[0]);
+        let diff = a ^ b; // two bits
+        let one = diff & diff.wrapping_neg(); // lowest of them
+        assert_eq!(
+            exact_tie.decode(&[a ^ one]),
+            20,
+            "one bit from each: the lower level"
+        );
+    }
+
+    #[test]
+    fn window_limits_the_candidates() {
+        let walk = Codec::new(Code::Walk, 214, walk(23, 7)).unwrap();
+        let far = walk.codeword(200)[0];
+        assert_eq!(
+            walk.decode_near(&[far], 20, 10),
+            walk.decode_near(&[far], 20, 10).clamp(10, 30)
+        );
+        assert_eq!(walk.decode_near(walk.codeword(25), 20, 10), 25);
+        let binary = Codec::new(Code::Binary, 214, None).unwrap();
+        assert_eq!(binary.decode_near(&[200], 20, 10), 30);
+    }
+
+    #[test]
+    fn bad_parameters_say_why() {
+        assert!(
+            Codec::new(Code::Binary, 1, None)
+                .unwrap_err()
+                .contains("at least 2 levels")
+        );
+        let narrow = Codec::new(Code::Walk, 1000, walk(8, 2)).unwrap_err();
+        assert!(
+            narrow.contains("1000 levels need a code of at least 10 bits"),
+            "{narrow}"
+        );
+    }
+}
