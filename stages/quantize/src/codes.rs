@@ -53,6 +53,8 @@ pub struct Codec {
     words: usize,
     /// `levels × words` codewords.
     table: Vec<u64>,
+    /// Bits flipped per level (walk only; 0 otherwise).
+    walk_step: u32,
 }
 
 impl Codec {
@@ -73,6 +75,11 @@ impl Codec {
         };
         let words = width.div_ceil(64) as usize;
         let mut table = vec![0u64; levels * words];
+        let walk_step = if code == Code::Walk {
+            walk.map_or(0, |w| w.step)
+        } else {
+            0
+        };
         match code {
             Code::Binary => (0..levels).for_each(|k| table[k] = k as u64),
             Code::Gray => (0..levels).for_each(|k| table[k] = (k ^ (k >> 1)) as u64),
@@ -104,6 +111,7 @@ impl Codec {
             width,
             words,
             table,
+            walk_step,
         })
     }
 
@@ -163,15 +171,25 @@ impl Codec {
 
     /// The level in `lo..=hi` whose (single-word) walk code is nearest to
     /// `bits`, the lowest on ties.
+    ///
+    /// Exact, but skips levels that cannot win: consecutive walk codes differ
+    /// in `step` bits, so j levels past a code at distance d lie at distance
+    /// ≥ d − step·j, and none of them beats the best b found so far while
+    /// j ≤ (d − b) / step.
     fn nearest(&self, bits: u64, lo: usize, hi: usize) -> usize {
-        let mut best = (u32::MAX, lo);
-        for (k, code) in self.table[lo..=hi].iter().enumerate() {
-            let d = (code ^ bits).count_ones();
-            if d < best.0 {
-                best = (d, lo + k);
+        let step = self.walk_step.max(1);
+        let (mut best, mut best_level) = (u32::MAX, lo);
+        let mut k = lo;
+        while k <= hi {
+            let d = (self.table[k] ^ bits).count_ones();
+            if d < best {
+                (best, best_level) = (d, k);
             }
+            // (Division is slow; the common one-bit walk needs none.)
+            let skip = if step == 1 { d - best } else { (d - best) / step };
+            k += skip as usize + 1;
         }
-        best.1
+        best_level
     }
 }
 
@@ -286,6 +304,34 @@ mod tests {
             20,
             "one bit from each: the lower level"
         );
+    }
+
+    #[test]
+    fn skipping_search_equals_brute_force() {
+        use rand::{RngExt, SeedableRng};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(4);
+        for (step, span) in [(1, 7), (2, 3), (3, 2)] {
+            let spec = WalkSpec {
+                levels: 0,
+                width: 23,
+                step,
+                span,
+                seed: 5,
+            };
+            let walk = Codec::new(Code::Walk, 214, Some(spec)).unwrap();
+            for _ in 0..20_000 {
+                let bits = rng.random::<u64>() & ((1 << 23) - 1);
+                let (lo, hi) = (rng.random_range(0..100), rng.random_range(100..214));
+                let brute = (lo..=hi)
+                    .min_by_key(|&k| ((walk.codeword(k)[0] ^ bits).count_ones(), k))
+                    .unwrap();
+                assert_eq!(
+                    walk.nearest(bits, lo, hi),
+                    brute,
+                    "step {step}, bits {bits:#x}"
+                );
+            }
+        }
     }
 
     #[test]
