@@ -186,7 +186,11 @@ impl Codec {
                 (best, best_level) = (d, k);
             }
             // (Division is slow; the common one-bit walk needs none.)
-            let skip = if step == 1 { d - best } else { (d - best) / step };
+            let skip = if step == 1 {
+                d - best
+            } else {
+                (d - best) / step
+            };
             k += skip as usize + 1;
         }
         best_level
