@@ -1,7 +1,9 @@
-//! The train stage (paper §3, §4.3; DESIGN.md §5) — its contract, pending its
-//! own issue: reads `levels.parquet` and the codebook, trains the ALN forest
-//! and writes the model file and `training.parquet`. Not yet part of the
-//! stage graph.
+//! The train stage (paper §3, §4.3; DESIGN.md §5): ALN trees and forests.
+//! Work in progress: the tree (training, parsimonious and bit-sliced
+//! evaluation, pruning) is here; the forest, the model file and the stage
+//! itself are not yet, so train is not yet part of the stage graph.
+
+pub mod tree;
 
 /// File name of the model.
 pub const MODEL_FILE: &str = "model.aln";
