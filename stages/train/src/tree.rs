@@ -562,7 +562,7 @@ mod tests {
                 .collect();
             let targets: Vec<bool> = inputs
                 .iter()
-                .map(|x| (x.count_ones() + case as u32) % 3 == 0)
+                .map(|x| (x.count_ones() + case as u32).is_multiple_of(3))
                 .collect();
             let (columns, target_words, words) = slice(&inputs, bits, &targets);
             let samples = Samples {
