@@ -303,6 +303,8 @@ impl Tree {
         }
         let mut log = Vec::new();
         let (mut stack, mut flipped) = (Vec::new(), Vec::new());
+        // Ancestors already queued for recomputation in this sample.
+        let mut stale = vec![false; internal];
         for _ in 0..max_epochs {
             let mut epoch = EpochLog {
                 errors: 0,
@@ -343,17 +345,27 @@ impl Tree {
                         stack.push(right);
                     }
                 }
-                // Children have larger indices than parents: recomputing the
-                // changed nodes and their ancestors from the highest index
-                // down visits every node after its children.
-                while !flipped.is_empty() {
-                    flipped.sort_unstable_by(|a, b| b.cmp(a));
-                    flipped.dedup();
-                    let i = flipped.remove(0);
-                    self.recompute(i, words, &mut values);
-                    if i > 0 {
-                        flipped.push((i - 1) / 2);
+                // The changed nodes and all their ancestors, each once.
+                // Children have larger indices than parents, so recomputing
+                // from the highest index down visits every node after its
+                // children.
+                let changed = flipped.len();
+                for k in 0..changed {
+                    let mut i = flipped[k];
+                    while i > 0 {
+                        i = (i - 1) / 2;
+                        if stale[i] {
+                            break;
+                        }
+                        stale[i] = true;
+                        flipped.push(i);
                     }
+                }
+                flipped.sort_unstable_by(|a, b| b.cmp(a));
+                flipped.dedup();
+                for &i in &flipped {
+                    self.recompute(i, words, &mut values);
+                    stale[i] = false;
                 }
             }
             let done = epoch.errors == 0;
