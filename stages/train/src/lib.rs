@@ -3,6 +3,7 @@
 //! evaluation, pruning) is here; the forest, the model file and the stage
 //! itself are not yet, so train is not yet part of the stage graph.
 
+pub mod forest;
 pub mod tree;
 
 /// File name of the model.

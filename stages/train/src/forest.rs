@@ -1,0 +1,299 @@
+//! Forests of ALN trees: one tree per output bit of every learned variable,
+//! `vote` independently seeded trees per bit whose majority is the bit
+//! (paper §4.3, §4.7). Trees train in parallel (rayon); each tree's seed
+//! derives from the experiment seed and the tree's identity alone, so the
+//! result does not depend on the number of threads.
+
+use std::time::Instant;
+
+use alnlab_quantize::bits::BitMatrix;
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use rayon::prelude::*;
+
+use crate::tree::{EpochLog, Pruned, Samples, Tree, TreeSpec};
+
+/// Bit-sliced columns: bit `b` of sample `s` is bit `s % 64` of
+/// `data[b * words + s / 64]`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Columns {
+    /// Number of samples.
+    pub count: usize,
+    /// Number of bits (columns).
+    pub bits: usize,
+    /// Words per column.
+    pub words: usize,
+    /// `bits × words` words.
+    pub data: Vec<u64>,
+}
+
+impl Columns {
+    /// The columns of the rows `rows` of a bit matrix.
+    pub fn from_rows(matrix: &BitMatrix, rows: &[usize]) -> Columns {
+        let (count, bits) = (rows.len(), matrix.bits());
+        let words = count.div_ceil(64).max(1);
+        let mut data = vec![0u64; bits * words];
+        for (s, &r) in rows.iter().enumerate() {
+            let row = matrix.row(r);
+            for b in 0..bits {
+                data[b * words + s / 64] |= (row[b / 64] >> (b % 64) & 1) << (s % 64);
+            }
+        }
+        Columns {
+            count,
+            bits,
+            words,
+            data,
+        }
+    }
+
+    /// Column `b`.
+    pub fn column(&self, b: usize) -> &[u64] {
+        &self.data[b * self.words..(b + 1) * self.words]
+    }
+}
+
+/// Which tree: the output variable (index among the learned ones), the bit of
+/// its code, and the voter.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
+pub struct TreeId {
+    pub variable: u32,
+    pub bit: u32,
+    pub vote: u32,
+}
+
+impl TreeId {
+    /// The tree's seed: the experiment seed mixed with its identity.
+    pub fn seed(&self, seed: u64) -> u64 {
+        let mut x = seed
+            ^ (u64::from(self.variable) << 40 | u64::from(self.bit) << 20 | u64::from(self.vote))
+                .wrapping_mul(0x9E37_79B9_7F4A_7C15);
+        x = (x ^ (x >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        x = (x ^ (x >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        x ^ (x >> 31)
+    }
+}
+
+/// A trained tree with its training log.
+#[derive(Clone, Debug)]
+pub struct Trained {
+    pub id: TreeId,
+    pub tree: Tree,
+    pub epochs: Vec<EpochLog>,
+    /// Wall time of each epoch (s) — a measurement, not part of the model.
+    pub seconds: Vec<f64>,
+}
+
+/// Trains one tree per (variable, bit, voter): `targets[v]` holds variable
+/// v's target bits as columns over the same samples as `inputs`.
+pub fn train(
+    spec: &TreeSpec,
+    epochs: usize,
+    vote: u32,
+    seed: u64,
+    inputs: &Columns,
+    targets: &[Columns],
+    on_tree_done: &(dyn Fn() + Sync),
+) -> Vec<Trained> {
+    let ids: Vec<TreeId> = targets
+        .iter()
+        .enumerate()
+        .flat_map(|(v, t)| {
+            (0..t.bits as u32).flat_map(move |bit| {
+                (0..vote).map(move |voter| TreeId {
+                    variable: v as u32,
+                    bit,
+                    vote: voter,
+                })
+            })
+        })
+        .collect();
+    ids.par_iter()
+        .map(|&id| {
+            let mut rng = ChaCha8Rng::seed_from_u64(id.seed(seed));
+            let mut tree = Tree::new(spec, &mut rng);
+            let samples = Samples {
+                count: inputs.count,
+                words: inputs.words,
+                columns: &inputs.data,
+                targets: targets[id.variable as usize].column(id.bit as usize),
+            };
+            let clock = Instant::now();
+            let epochs_log = tree.train_epochs(&samples, epochs);
+            let per_epoch = clock.elapsed().as_secs_f64() / epochs_log.len().max(1) as f64;
+            on_tree_done();
+            Trained {
+                id,
+                tree,
+                seconds: vec![per_epoch; epochs_log.len()],
+                epochs: epochs_log,
+            }
+        })
+        .collect()
+}
+
+/// The pruned trees of a forest, for prediction.
+pub struct Predictor {
+    /// (id, pruned tree), in training order.
+    pub trees: Vec<(TreeId, Pruned)>,
+    /// Voters per bit.
+    pub vote: u32,
+}
+
+impl Predictor {
+    /// The predicted bits of every output variable for 64 samples at a time:
+    /// `out[v]` gets variable v's bits as columns (`widths[v]` bits).
+    pub fn predict(&self, inputs: &Columns, widths: &[usize]) -> Vec<Columns> {
+        let mut out: Vec<Columns> = widths
+            .iter()
+            .map(|&bits| Columns {
+                count: inputs.count,
+                bits,
+                words: inputs.words,
+                data: vec![0; bits * inputs.words],
+            })
+            .collect();
+        let mut values = Vec::new();
+        let mut votes = vec![0u64; self.vote as usize];
+        for chunk in self.trees.chunks(self.vote as usize) {
+            let id = chunk[0].0;
+            for w in 0..inputs.words {
+                for (k, (_, tree)) in chunk.iter().enumerate() {
+                    votes[k] =
+                        tree.evaluate_word(|b| inputs.data[b * inputs.words + w], &mut values);
+                }
+                let target = &mut out[id.variable as usize];
+                target.data[id.bit as usize * inputs.words + w] = majority(&votes);
+            }
+        }
+        out
+    }
+}
+
+/// Bitwise majority of an odd number of words.
+pub fn majority(words: &[u64]) -> u64 {
+    match words {
+        [a] => *a,
+        [a, b, c] => a & b | a & c | b & c,
+        _ => (0..64).fold(0, |acc, bit| {
+            let ones = words.iter().filter(|w| *w >> bit & 1 == 1).count();
+            acc | u64::from(2 * ones > words.len()) << bit
+        }),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use alnlab_quantize::bits::encode;
+    use alnlab_quantize::codes::{Code, Codec};
+    use alnlab_quantize::walk::WalkSpec;
+    use rand::RngExt;
+
+    fn spec(leaves: usize, inputs: usize) -> TreeSpec {
+        TreeSpec {
+            leaves,
+            inputs,
+            counter_bound: 3,
+            initial_spread: 1,
+        }
+    }
+
+    /// y = x + 1 on one variable (walk code, L = 64): train on some levels'
+    /// samples, test on unseen ones; returns the mean test error in levels.
+    fn successor_error(vote: u32, noise: f64, seed: u64) -> f64 {
+        let codec = Codec::new(
+            Code::Walk,
+            64,
+            Some(WalkSpec {
+                levels: 64,
+                width: 23,
+                step: 1,
+                span: 7,
+                seed: 3,
+            }),
+        )
+        .unwrap();
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        let x: Vec<u16> = (0..1200).map(|_| rng.random_range(0..63)).collect();
+        let y: Vec<u16> = x
+            .iter()
+            .map(|&v| {
+                if rng.random_bool(noise) {
+                    rng.random_range(0..64)
+                } else {
+                    v + 1
+                }
+            })
+            .collect();
+        let x_bits = encode(&[&codec], &[&x]);
+        let y_bits = encode(&[&codec], &[&y]);
+        let (train_rows, test_rows): (Vec<usize>, Vec<usize>) = (0..1200).partition(|&r| r < 800);
+        let inputs = Columns::from_rows(&x_bits, &train_rows);
+        let targets = [Columns::from_rows(&y_bits, &train_rows)];
+        let trained = train(&spec(512, 23), 10, vote, seed, &inputs, &targets, &|| {});
+        let predictor = Predictor {
+            trees: trained.iter().map(|t| (t.id, t.tree.prune())).collect(),
+            vote,
+        };
+        let test_inputs = Columns::from_rows(&x_bits, &test_rows);
+        let predicted = &predictor.predict(&test_inputs, &[23])[0];
+        let mut total = 0.0;
+        for (s, &r) in test_rows.iter().enumerate() {
+            let bits: u64 = (0..23).fold(0, |acc, b| {
+                acc | (predicted.column(b)[s / 64] >> (s % 64) & 1) << b
+            });
+            let level = codec.decode(&[bits]) as f64;
+            total += (level - f64::from(x[r] + 1)).abs();
+        }
+        total / test_rows.len() as f64
+    }
+
+    #[test]
+    fn a_forest_learns_the_successor() {
+        let error = successor_error(1, 0.0, 1);
+        eprintln!("y = x + 1, walk L = 64: mean test error {error:.3} levels");
+        assert!(error <= 1.0, "mean test error {error} levels");
+    }
+
+    #[test]
+    fn majority_vote_beats_a_single_tree_on_a_noisy_target() {
+        let (one, three) = (successor_error(1, 0.2, 2), successor_error(3, 0.2, 2));
+        eprintln!("20% noise: vote 1 {one:.3}, vote 3 {three:.3} levels");
+        assert!(three < one, "vote 3: {three}, vote 1: {one}");
+    }
+
+    #[test]
+    fn training_is_the_same_on_any_number_of_threads() {
+        let mut rng = ChaCha8Rng::seed_from_u64(5);
+        let inputs = Columns {
+            count: 200,
+            bits: 30,
+            words: 4,
+            data: (0..120).map(|_| rng.random()).collect(),
+        };
+        let targets = [Columns {
+            count: 200,
+            bits: 5,
+            words: 4,
+            data: (0..20).map(|_| rng.random()).collect(),
+        }];
+        let run = |threads| {
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap();
+            pool.install(|| train(&spec(64, 30), 3, 3, 9, &inputs, &targets, &|| {}))
+                .into_iter()
+                .map(|t| (t.id, t.tree, t.epochs))
+                .collect::<Vec<_>>()
+        };
+        assert_eq!(run(1), run(2));
+    }
+
+    #[test]
+    fn majority_of_words() {
+        assert_eq!(majority(&[0b1100, 0b1010, 0b1001]), 0b1000);
+        assert_eq!(majority(&[0b11000, 0b10100, 0b10010, 0b10001, 0]), 0b10000);
+    }
+}
