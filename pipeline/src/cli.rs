@@ -112,6 +112,23 @@ pub enum Command {
         #[arg(long)]
         out: PathBuf,
     },
+    /// Run the train stage alone: an ALN forest over the training rows.
+    #[command(after_help = "Example:
+  alnlab train --manifest experiments/quickstart.toml \\
+      --codebook /tmp/quantize/codebook.parquet --levels /tmp/quantize/levels.parquet --out /tmp/train")]
+    Train {
+        #[command(flatten)]
+        from: ManifestArgs,
+        /// The codebook written by quantize.
+        #[arg(long)]
+        codebook: PathBuf,
+        /// The levels table written by quantize.
+        #[arg(long)]
+        levels: PathBuf,
+        /// Folder to write model.aln and training.parquet into.
+        #[arg(long)]
+        out: PathBuf,
+    },
     /// Benchmarks; each prints its figures, or one JSON object with --json.
     #[command(
         subcommand,
@@ -288,6 +305,26 @@ pub fn execute(cli: Cli) -> Result<()> {
                 out.join(alnlab_quantize::CODEBOOK_FILE).display()
             );
             println!("wrote {}", out.join(alnlab_quantize::LEVELS_FILE).display());
+            Ok(())
+        }
+        Command::Train {
+            from,
+            codebook,
+            levels,
+            out,
+        } => {
+            let (manifest, variant) = from.load()?;
+            let params = &manifest.variant(&variant)?.stages.train;
+            let seed = manifest.experiment.seed;
+            let inputs = [
+                ("codebook", codebook.as_path()),
+                ("levels", levels.as_path()),
+            ];
+            let provenance = standalone_provenance(&manifest, "train", seed, params, &inputs)?;
+            let bar = Bar::new("train", quiet);
+            alnlab_train::run(params, seed, &codebook, &levels, &provenance, &out, &bar)?;
+            println!("wrote {}", out.join(alnlab_train::MODEL_FILE).display());
+            println!("wrote {}", out.join(alnlab_train::TRAINING_FILE).display());
             Ok(())
         }
         Command::Bench(Bench::Quantize { repeat, json }) => {

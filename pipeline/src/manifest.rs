@@ -64,6 +64,9 @@ pub struct Stages {
     /// `[quantize]`
     #[serde(default)]
     pub quantize: alnlab_quantize::Params,
+    /// `[train]`
+    #[serde(default)]
+    pub train: alnlab_train::Params,
 }
 
 /// The whole document as deserialized (variants handled separately).
@@ -77,6 +80,8 @@ struct Document {
     stride: alnlab_stride::Params,
     #[serde(default)]
     quantize: alnlab_quantize::Params,
+    #[serde(default)]
+    train: alnlab_train::Params,
 }
 
 /// An error in a manifest, located in the file.
@@ -138,11 +143,12 @@ impl Manifest {
         let mut base = root.into_inner();
         let variant_entries = take_variants(&mut base, &locate)?;
 
-        let document = deserialize(&base, root_span.clone(), &locate, None)?;
-        check_experiment(&document.experiment, &base, &locate)?;
+        let (experiment, base_stages) =
+            split(deserialize(&base, root_span.clone(), &locate, None)?);
+        check_experiment(&experiment, &base, &locate)?;
         let mut variants = Vec::new();
         if variant_entries.is_empty() {
-            let stages = stages_of(document.simulate, document.stride, document.quantize);
+            let stages = base_stages;
             validate(&stages, &base, &locate, None)?;
             variants.push(Variant {
                 name: "base".into(),
@@ -155,7 +161,7 @@ impl Manifest {
             let mut merged = base.clone();
             merge(&mut merged, overrides);
             let doc = deserialize(&merged, root_span.clone(), &locate, Some(&name))?;
-            let stages = stages_of(doc.simulate, doc.stride, doc.quantize);
+            let (_, stages) = split(doc);
             validate(&stages, &merged, &locate, Some(&name))?;
             variants.push(Variant {
                 name,
@@ -166,7 +172,7 @@ impl Manifest {
         Ok(Manifest {
             path: path.to_path_buf(),
             sha256: sha256_hex(text.as_bytes()),
-            experiment: document.experiment,
+            experiment,
             variants,
         })
     }
@@ -206,17 +212,15 @@ impl Manifest {
     }
 }
 
-/// The stages' parameters with every default filled in.
-fn stages_of(
-    simulate: alnlab_simulate::Params,
-    stride: alnlab_stride::Params,
-    quantize: alnlab_quantize::Params,
-) -> Stages {
-    Stages {
-        simulate: simulate.resolve(),
-        stride,
-        quantize,
-    }
+/// The experiment table and the stages' parameters, every default filled in.
+fn split(document: Document) -> (Experiment, Stages) {
+    let stages = Stages {
+        simulate: document.simulate.resolve(),
+        stride: document.stride,
+        quantize: document.quantize,
+        train: document.train,
+    };
+    (document.experiment, stages)
 }
 
 /// Maps byte spans to lines and columns and builds located errors.
@@ -482,6 +486,12 @@ fn validate(
                 .quantize
                 .validate()
                 .map_err(|(key, message)| ("quantize", key, message))
+        })
+        .and_then(|()| {
+            stages
+                .train
+                .validate()
+                .map_err(|(key, message)| ("train", key, message))
         });
     match failure {
         Ok(()) => Ok(()),

@@ -1,8 +1,8 @@
 //! `alnlab run`: the stage graph of one manifest, executed in-process through
 //! the artifact cache, with a run record at the end.
 //!
-//! The graph today is simulate → stride → quantize; each later stage joins
-//! it when it is built. For every variant, each stage's cache key is computed from its
+//! The graph today is simulate → stride → quantize → train; each later
+//! stage joins it when it is built. For every variant, each stage's cache key is computed from its
 //! parameters and its inputs' hashes; a stage runs only when no finished
 //! artifact has that key (or with `--force`).
 
@@ -206,7 +206,7 @@ impl Graph<'_> {
 
         let params = stage_params(seed, &stages.quantize);
         let (pairs, stats) = (stride.path("pairs"), simulate.path("stats"));
-        self.stage(
+        let quantize = self.stage(
             "quantize",
             alnlab_quantize::FORMAT_VERSION,
             &params,
@@ -217,6 +217,30 @@ impl Graph<'_> {
             ],
             |provenance, dir, bar| {
                 alnlab_quantize::run(&stages.quantize, seed, &pairs, &stats, provenance, dir, bar)
+            },
+        )?;
+
+        let params = stage_params(seed, &stages.train);
+        let (codebook, levels) = (quantize.path("codebook"), quantize.path("levels"));
+        self.stage(
+            "train",
+            alnlab_train::FORMAT_VERSION,
+            &params,
+            &[("codebook", &quantize), ("levels", &quantize)],
+            &[
+                ("model", alnlab_train::MODEL_FILE),
+                ("training", alnlab_train::TRAINING_FILE),
+            ],
+            |provenance, dir, bar| {
+                alnlab_train::run(
+                    &stages.train,
+                    seed,
+                    &codebook,
+                    &levels,
+                    provenance,
+                    dir,
+                    bar,
+                )
             },
         )?;
         Ok(())

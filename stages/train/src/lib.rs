@@ -1,12 +1,241 @@
-//! The train stage (paper §3, §4.3; DESIGN.md §5): ALN trees and forests.
-//! Work in progress: the tree (training, parsimonious and bit-sliced
-//! evaluation, pruning) is here; the forest, the model file and the stage
-//! itself are not yet, so train is not yet part of the stage graph.
+//! The train stage (paper §3, §4.3, §4.7; DESIGN.md §5): reads the codebook
+//! and `levels.parquet`, trains one ALN tree per output bit of every learned
+//! variable (`vote` trees per bit) on the training rows, and writes the model
+//! file and `training.parquet` (per tree per epoch: errors, counter updates,
+//! seconds).
+//!
+//! [`tree`] is one ALN, [`forest`] trains and evaluates many, [`model`] is
+//! the file format.
 
 pub mod forest;
+pub mod model;
 pub mod tree;
 
+use std::path::Path;
+use std::sync::Arc;
+
+use alnlab_common::hash::sha256_file;
+use alnlab_common::params::Count;
+use alnlab_common::table::{self, Table};
+use alnlab_common::{Error, Progress, Provenance, Result};
+use alnlab_quantize::Codebook;
+use alnlab_quantize::bits::encode;
+use alnlab_quantize::codes::Codec;
+use arrow_array::{Array, Float64Array, StringArray, UInt16Array, UInt32Array, UInt64Array};
+use serde::{Deserialize, Serialize};
+
+use crate::forest::Columns;
+use crate::model::{Header, Model};
+use crate::tree::TreeSpec;
+
+/// Version of what this stage writes (part of every cache key).
+pub const FORMAT_VERSION: u32 = 1;
 /// File name of the model.
 pub const MODEL_FILE: &str = "model.aln";
 /// File name of the training log table.
 pub const TRAINING_FILE: &str = "training.parquet";
+
+/// The `[train]` table of a manifest.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct Params {
+    /// Leaves per tree, a power of two (paper: 8192).
+    pub leaves: Count,
+    /// Most epochs (presentations of the training set; paper: 10).
+    pub epochs: Count,
+    /// Trees per output bit, whose majority is the bit: 1, 3 or 5 (§4.7).
+    pub vote: Count,
+    /// Node counters stay within ±counter_bound.
+    pub counter_bound: Count,
+    /// Initial counters are uniform in −spread..spread − 1.
+    pub initial_spread: Count,
+}
+
+impl Default for Params {
+    fn default() -> Self {
+        Params {
+            leaves: Count(8192),
+            epochs: Count(10),
+            vote: Count(1),
+            counter_bound: Count(3),
+            initial_spread: Count(1),
+        }
+    }
+}
+
+impl Params {
+    /// Checks the parameters; on error, the key and what is allowed.
+    pub fn validate(&self) -> std::result::Result<(), (String, String)> {
+        let leaves = self.leaves.0;
+        if !(2..=1 << 24).contains(&leaves) || !leaves.is_power_of_two() {
+            return Err((
+                "leaves".into(),
+                format!("expected a power of two from 2 to 2^24, found {leaves}"),
+            ));
+        }
+        if ![1, 3, 5].contains(&self.vote.0) {
+            return Err((
+                "vote".into(),
+                format!("expected 1, 3 or 5, found {}", self.vote.0),
+            ));
+        }
+        if self.counter_bound.0 > 127 {
+            return Err((
+                "counter_bound".into(),
+                format!("expected at most 127, found {}", self.counter_bound.0),
+            ));
+        }
+        if self.initial_spread.0 > self.counter_bound.0 {
+            return Err((
+                "initial_spread".into(),
+                format!(
+                    "expected at most counter_bound = {}, found {}",
+                    self.counter_bound.0, self.initial_spread.0
+                ),
+            ));
+        }
+        Ok(())
+    }
+
+    fn tree_spec(&self, inputs: usize) -> TreeSpec {
+        TreeSpec {
+            leaves: self.leaves.get(),
+            inputs,
+            counter_bound: self.counter_bound.0 as i8,
+            initial_spread: self.initial_spread.0 as i8,
+        }
+    }
+}
+
+/// Reads the codebook and levels, trains, writes the model and the log.
+pub fn run(
+    params: &Params,
+    seed: u64,
+    codebook_path: &Path,
+    levels_path: &Path,
+    provenance: &Provenance,
+    out_dir: &Path,
+    progress: &dyn Progress,
+) -> Result<()> {
+    params
+        .validate()
+        .map_err(|(key, message)| Error::Invalid(format!("train.{key}: {message}")))?;
+    let codebook = Codebook::read(codebook_path)?;
+    let levels = Table::read(levels_path)?;
+    let learned: Vec<_> = codebook.learned().collect();
+    if learned.is_empty() {
+        return Err(Error::bad_file(
+            codebook_path,
+            "has no learned variable: nothing to train",
+        ));
+    }
+    let codecs: Vec<Codec> = learned
+        .iter()
+        .map(|e| {
+            e.codec()
+                .map_err(|m| Error::bad_file(codebook_path, format!("{}: {m}", e.variable)))
+        })
+        .collect::<Result<_>>()?;
+    let split = levels.column::<StringArray>("split")?;
+    let rows: Vec<usize> = (0..levels.num_rows())
+        .filter(|&r| matches!(split.value(r), "train" | "both"))
+        .collect();
+    if rows.is_empty() {
+        return Err(Error::bad_file(levels_path, "has no training rows"));
+    }
+    let column = |side: &str, variable: &str| -> Result<&[u16]> {
+        Ok(levels
+            .column::<UInt16Array>(&format!("{side}.{variable}"))?
+            .values())
+    };
+    let x_columns: Vec<&[u16]> = learned
+        .iter()
+        .map(|e| column("x", &e.variable))
+        .collect::<Result<_>>()?;
+    let codec_refs: Vec<&Codec> = codecs.iter().collect();
+    let inputs = Columns::from_rows(&encode(&codec_refs, &x_columns), &rows);
+    let targets: Vec<Columns> = learned
+        .iter()
+        .zip(&codecs)
+        .map(|(e, c)| {
+            Ok(Columns::from_rows(
+                &encode(&[c], &[column("y", &e.variable)?]),
+                &rows,
+            ))
+        })
+        .collect::<Result<_>>()?;
+
+    let vote = params.vote.0 as u32;
+    let total_trees: usize = targets.iter().map(|t| t.bits).sum::<usize>() * vote as usize;
+    progress.start("train", total_trees as u64, "trees");
+    let tick = || progress.advance(1);
+    let spec = params.tree_spec(inputs.bits);
+    let trained = forest::train(
+        &spec,
+        params.epochs.get(),
+        vote,
+        seed,
+        &inputs,
+        &targets,
+        &tick,
+    );
+
+    let model = Model {
+        header: Header {
+            codebook_sha256: sha256_file(codebook_path)?,
+            params: serde_json::to_value(params).expect("parameters serialize"),
+            inputs: inputs.bits,
+            outputs: learned
+                .iter()
+                .zip(&codecs)
+                .map(|(e, c)| (e.variable.clone(), c.width() as usize))
+                .collect(),
+            vote,
+            counter_bound: spec.counter_bound,
+        },
+        trees: trained.iter().map(|t| (t.id, t.tree.clone())).collect(),
+    };
+    model.write(&out_dir.join(MODEL_FILE))?;
+    write_log(&out_dir.join(TRAINING_FILE), &trained, &learned, provenance)
+}
+
+/// `training.parquet`: one row per tree per epoch.
+fn write_log(
+    path: &Path,
+    trained: &[forest::Trained],
+    learned: &[&alnlab_quantize::Entry],
+    provenance: &Provenance,
+) -> Result<()> {
+    let rows = trained.iter().flat_map(|t| {
+        t.epochs
+            .iter()
+            .zip(&t.seconds)
+            .enumerate()
+            .map(move |(k, e)| (t, k, e))
+    });
+    let (mut variable, mut bit, mut vote, mut epoch) =
+        (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+    let (mut errors, mut updates, mut seconds) = (Vec::new(), Vec::new(), Vec::new());
+    for (t, k, (e, s)) in rows {
+        variable.push(learned[t.id.variable as usize].variable.as_str());
+        bit.push(t.id.bit);
+        vote.push(t.id.vote);
+        epoch.push(k as u32 + 1);
+        errors.push(e.errors as u64);
+        updates.push(e.updates as u64);
+        seconds.push(*s);
+    }
+    let batch = table::batch(vec![
+        (
+            "variable",
+            Arc::new(StringArray::from(variable)) as Arc<dyn Array>,
+        ),
+        ("bit", Arc::new(UInt32Array::from(bit))),
+        ("vote", Arc::new(UInt32Array::from(vote))),
+        ("epoch", Arc::new(UInt32Array::from(epoch))),
+        ("errors", Arc::new(UInt64Array::from(errors))),
+        ("updates", Arc::new(UInt64Array::from(updates))),
+        ("seconds", Arc::new(Float64Array::from(seconds))),
+    ]);
+    table::write_parquet(path, &batch, provenance)
+}

@@ -140,6 +140,37 @@ impl Tree {
         &self.leaves
     }
 
+    /// A tree with the given node functions (heap order) and leaf literals;
+    /// each node's counters are set to the smallest values inducing its
+    /// function (−1 or 0).
+    pub fn from_functions(functions: &[Function], leaves: Vec<Literal>, bound: i8) -> Tree {
+        assert_eq!(
+            functions.len() + 1,
+            leaves.len(),
+            "one more leaf than internal nodes"
+        );
+        let sign = |negative: bool| if negative { -1 } else { 0 };
+        let c01 = functions
+            .iter()
+            .map(|f| sign(matches!(f, Function::And | Function::Left)))
+            .collect();
+        let c10 = functions
+            .iter()
+            .map(|f| sign(matches!(f, Function::And | Function::Right)))
+            .collect();
+        Tree {
+            c01,
+            c10,
+            leaves,
+            bound,
+        }
+    }
+
+    /// Every internal node's function, heap order.
+    pub fn functions(&self) -> Vec<Function> {
+        (0..self.c01.len()).map(|i| self.function(i)).collect()
+    }
+
     /// Evaluates every node bottom-up into `values` (heap order).
     fn evaluate_all(&self, input: &[u64], values: &mut Vec<bool>) {
         let internal = self.leaves.len() - 1;
