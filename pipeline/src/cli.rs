@@ -179,6 +179,25 @@ pub enum Bench {
         #[arg(long)]
         json: bool,
     },
+    /// Time ALN training at the paper's scale: 1472 trees of 8192 leaves,
+    /// 1472 input bits, 1000 samples, 10 epochs, on all cores.
+    #[command(after_help = "Example:
+  alnlab bench train --json")]
+    Train {
+        /// Print one JSON object.
+        #[arg(long)]
+        json: bool,
+    },
+    /// Time full-state prediction at the paper's scale: all 1472 trees and
+    /// the decoding, bit-sliced in batches and one sample at a time
+    /// (parsimonious), with the fraction of nodes evaluated.
+    #[command(after_help = "Example:
+  alnlab bench predict --json")]
+    Predict {
+        /// Print one JSON object.
+        #[arg(long)]
+        json: bool,
+    },
     /// Time a fully cached `run` of a manifest (the no-op re-run).
     ///
     /// Runs the manifest once to fill the cache, then times REPEAT re-runs
@@ -325,6 +344,44 @@ pub fn execute(cli: Cli) -> Result<()> {
             alnlab_train::run(params, seed, &codebook, &levels, &provenance, &out, &bar)?;
             println!("wrote {}", out.join(alnlab_train::MODEL_FILE).display());
             println!("wrote {}", out.join(alnlab_train::TRAINING_FILE).display());
+            Ok(())
+        }
+        Command::Bench(Bench::Train { json }) => {
+            let figures = alnlab_train::bench::train();
+            if json {
+                println!(
+                    "{}",
+                    serde_json::to_string(&figures).expect("figures serialize")
+                );
+            } else {
+                println!(
+                    "paper-scale training: {:.1} s for {} trees on {} threads ({:.3e} node updates/s)",
+                    figures.seconds, figures.trees, figures.threads, figures.node_updates_per_s
+                );
+            }
+            Ok(())
+        }
+        Command::Bench(Bench::Predict { json }) => {
+            let figures = alnlab_train::bench::predict();
+            if json {
+                println!(
+                    "{}",
+                    serde_json::to_string(&figures).expect("figures serialize")
+                );
+            } else {
+                println!(
+                    "batched (bit-sliced):     {:10.0} ns per state",
+                    figures.batched_ns_per_state
+                );
+                println!(
+                    "single (parsimonious):    {:10.0} ns per state",
+                    figures.single_ns_per_state
+                );
+                println!(
+                    "nodes evaluated:          {:.4} of all (estimate ½·(3/4)^13 = {:.4})",
+                    figures.nodes_evaluated_fraction, figures.estimated_fraction
+                );
+            }
             Ok(())
         }
         Command::Bench(Bench::Quantize { repeat, json }) => {

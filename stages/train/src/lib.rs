@@ -7,6 +7,7 @@
 //! [`tree`] is one ALN, [`forest`] trains and evaluates many, [`model`] is
 //! the file format.
 
+pub mod bench;
 pub mod forest;
 pub mod model;
 pub mod tree;
