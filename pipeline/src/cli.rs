@@ -7,7 +7,7 @@ use alnlab_common::hash::sha256_file;
 use alnlab_common::{Error, Provenance, Result};
 use clap::{Parser, Subcommand};
 
-use crate::manifest::Manifest;
+use crate::manifest::{Manifest, Stages};
 use crate::progress::Bar;
 use crate::run::{RunOptions, run, stage_params};
 
@@ -266,40 +266,37 @@ pub fn execute(cli: Cli) -> Result<()> {
             }
             Ok(())
         }
-        Command::Simulate { from, out } => {
-            let (manifest, variant) = from.load()?;
-            let params = &manifest.variant(&variant)?.stages.simulate;
-            let seed = manifest.experiment.seed;
-            let provenance = standalone_provenance(&manifest, "simulate", seed, params, &[])?;
-            alnlab_simulate::run(
-                params,
-                seed,
-                &provenance,
-                &out,
-                &Bar::new("simulate", quiet),
-            )?;
-            println!(
-                "wrote {}",
-                out.join(alnlab_simulate::TRAJECTORY_FILE).display()
-            );
-            println!("wrote {}", out.join(alnlab_simulate::STATS_FILE).display());
-            Ok(())
-        }
+        Command::Simulate { from, out } => run_alone(
+            &from,
+            "simulate",
+            |s| &s.simulate,
+            &[],
+            &out,
+            &[
+                alnlab_simulate::TRAJECTORY_FILE,
+                alnlab_simulate::STATS_FILE,
+            ],
+            quiet,
+            |params, seed, provenance, bar| {
+                alnlab_simulate::run(params, seed, provenance, &out, bar)
+            },
+        ),
         Command::Stride {
             from,
             trajectory,
             out,
-        } => {
-            let (manifest, variant) = from.load()?;
-            let params = &manifest.variant(&variant)?.stages.stride;
-            let seed = manifest.experiment.seed;
-            let inputs = [("trajectory", trajectory.as_path())];
-            let provenance = standalone_provenance(&manifest, "stride", seed, params, &inputs)?;
-            let bar = Bar::new("stride", quiet);
-            alnlab_stride::run(params, seed, &trajectory, &provenance, &out, &bar)?;
-            println!("wrote {}", out.join(alnlab_stride::PAIRS_FILE).display());
-            Ok(())
-        }
+        } => run_alone(
+            &from,
+            "stride",
+            |s| &s.stride,
+            &[("trajectory", &trajectory)],
+            &out,
+            &[alnlab_stride::PAIRS_FILE],
+            quiet,
+            |params, seed, provenance, bar| {
+                alnlab_stride::run(params, seed, &trajectory, provenance, &out, bar)
+            },
+        ),
         Command::Bench(Bench::Cache {
             manifest,
             out,
@@ -311,41 +308,35 @@ pub fn execute(cli: Cli) -> Result<()> {
             pairs,
             stats,
             out,
-        } => {
-            let (manifest, variant) = from.load()?;
-            let params = &manifest.variant(&variant)?.stages.quantize;
-            let seed = manifest.experiment.seed;
-            let inputs = [("pairs", pairs.as_path()), ("stats", stats.as_path())];
-            let provenance = standalone_provenance(&manifest, "quantize", seed, params, &inputs)?;
-            let bar = Bar::new("quantize", quiet);
-            alnlab_quantize::run(params, seed, &pairs, &stats, &provenance, &out, &bar)?;
-            println!(
-                "wrote {}",
-                out.join(alnlab_quantize::CODEBOOK_FILE).display()
-            );
-            println!("wrote {}", out.join(alnlab_quantize::LEVELS_FILE).display());
-            Ok(())
-        }
+        } => run_alone(
+            &from,
+            "quantize",
+            |s| &s.quantize,
+            &[("pairs", &pairs), ("stats", &stats)],
+            &out,
+            &[alnlab_quantize::CODEBOOK_FILE, alnlab_quantize::LEVELS_FILE],
+            quiet,
+            |params, seed, provenance, bar| {
+                alnlab_quantize::run(params, seed, &pairs, &stats, provenance, &out, bar)
+            },
+        ),
         Command::Train {
             from,
             codebook,
             levels,
             out,
-        } => {
-            let (manifest, variant) = from.load()?;
-            let params = &manifest.variant(&variant)?.stages.train;
-            let seed = manifest.experiment.seed;
-            let inputs = [
-                ("codebook", codebook.as_path()),
-                ("levels", levels.as_path()),
-            ];
-            let provenance = standalone_provenance(&manifest, "train", seed, params, &inputs)?;
-            let bar = Bar::new("train", quiet);
-            alnlab_train::run(params, seed, &codebook, &levels, &provenance, &out, &bar)?;
-            println!("wrote {}", out.join(alnlab_train::MODEL_FILE).display());
-            println!("wrote {}", out.join(alnlab_train::TRAINING_FILE).display());
-            Ok(())
-        }
+        } => run_alone(
+            &from,
+            "train",
+            |s| &s.train,
+            &[("codebook", &codebook), ("levels", &levels)],
+            &out,
+            &[alnlab_train::MODEL_FILE, alnlab_train::TRAINING_FILE],
+            quiet,
+            |params, seed, provenance, bar| {
+                alnlab_train::run(params, seed, &codebook, &levels, provenance, &out, bar)
+            },
+        ),
         Command::Bench(Bench::Train { json }) => {
             let figures = alnlab_train::bench::train();
             if json {
@@ -443,14 +434,25 @@ impl ManifestArgs {
     }
 }
 
-fn standalone_provenance(
-    manifest: &Manifest,
+/// Runs one stage alone: its parameters from the chosen variant of the
+/// manifest, provenance from the manifest and the inputs' hashes (as
+/// `alnlab run` writes them, so the files are the same), then names the
+/// files written.
+#[allow(clippy::too_many_arguments)]
+fn run_alone<P: serde::Serialize>(
+    from: &ManifestArgs,
     stage: &str,
-    seed: u64,
-    params: &impl serde::Serialize,
-    inputs: &[(&str, &Path)],
-) -> Result<Provenance> {
-    Ok(Provenance {
+    pick: fn(&Stages) -> &P,
+    inputs: &[(&str, &PathBuf)],
+    out: &Path,
+    outputs: &[&str],
+    quiet: bool,
+    run: impl FnOnce(&P, u64, &Provenance, &Bar) -> Result<()>,
+) -> Result<()> {
+    let (manifest, variant) = from.load()?;
+    let params = pick(&manifest.variant(&variant)?.stages);
+    let seed = manifest.experiment.seed;
+    let provenance = Provenance {
         stage: stage.into(),
         manifest_sha256: manifest.sha256.clone(),
         params: stage_params(seed, params),
@@ -458,7 +460,12 @@ fn standalone_provenance(
             .iter()
             .map(|(role, path)| Ok((role.to_string(), sha256_file(path)?)))
             .collect::<Result<_>>()?,
-    })
+    };
+    run(params, seed, &provenance, &Bar::new(stage, quiet))?;
+    for file in outputs {
+        println!("wrote {}", out.join(file).display());
+    }
+    Ok(())
 }
 
 fn bench_cache(

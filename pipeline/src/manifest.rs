@@ -471,31 +471,18 @@ fn validate(
     locate: &Locator,
     variant: Option<&str>,
 ) -> Result<(), ManifestError> {
-    let failure = stages
-        .simulate
-        .validate()
-        .map_err(|e| ("simulate", e.key, e.message))
-        .and_then(|()| {
-            stages
-                .stride
-                .validate()
-                .map_err(|(key, message)| ("stride", key, message))
-        })
-        .and_then(|()| {
-            stages
-                .quantize
-                .validate()
-                .map_err(|(key, message)| ("quantize", key, message))
-        })
-        .and_then(|()| {
-            stages
-                .train
-                .validate()
-                .map_err(|(key, message)| ("train", key, message))
-        });
+    let checks = [
+        ("simulate", stages.simulate.validate()),
+        ("stride", stages.stride.validate()),
+        ("quantize", stages.quantize.validate()),
+        ("train", stages.train.validate()),
+    ];
+    let failure = checks
+        .into_iter()
+        .find_map(|(stage, check)| check.err().map(|(key, message)| (stage, key, message)));
     match failure {
-        Ok(()) => Ok(()),
-        Err((stage, key, message)) => {
+        None => Ok(()),
+        Some((stage, key, message)) => {
             let path: Vec<&str> = std::iter::once(stage).chain(key.split('.')).collect();
             Err(locate.error(span_of(table, &path), path.join("."), variant, message))
         }

@@ -7,6 +7,15 @@ use std::fmt;
 use serde::de::{self, Deserializer, Visitor};
 use serde::{Deserialize, Serialize};
 
+/// What a stage's `validate` reports: the key within the stage's table and
+/// what is wrong with it.
+pub type ParamError = (String, String);
+
+/// A failed parameter check as a user error, `stage.key: message`.
+pub fn invalid(stage: &str, (key, message): ParamError) -> crate::Error {
+    crate::Error::Invalid(format!("{stage}.{key}: {message}"))
+}
+
 /// A whole number ≥ 1 (a count of runs, steps, epochs …).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize)]
 #[serde(transparent)]

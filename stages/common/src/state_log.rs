@@ -235,9 +235,18 @@ impl StateLogWriter {
         frame: &StateFrame,
     ) -> Result<()> {
         let (channel_id, layout) = &self.channels[scene_index];
+        let channel_id = *channel_id;
         layout.encode(frame, &mut self.buf);
+        let buf = std::mem::take(&mut self.buf);
+        let written = self.write_message(channel_id, log_time_ns, &buf);
+        self.buf = buf;
+        written
+    }
+
+    /// Writes one message, numbering it in sequence.
+    fn write_message(&mut self, channel_id: u16, log_time_ns: u64, data: &[u8]) -> Result<()> {
         let header = mcap::records::MessageHeader {
-            channel_id: *channel_id,
+            channel_id,
             sequence: self.sequence,
             log_time: log_time_ns,
             publish_time: log_time_ns,
@@ -246,7 +255,7 @@ impl StateLogWriter {
         self.writer
             .as_mut()
             .expect("writer present until finish")
-            .write_to_known_channel(&header, &self.buf)
+            .write_to_known_channel(&header, data)
             .map_err(|e| Error::bad_file(&self.tmp, e))
     }
 
@@ -269,18 +278,7 @@ impl StateLogWriter {
 
     /// Writes one JSON message to a channel made by [`Self::add_json_channel`].
     pub fn write_json(&mut self, channel_id: u16, log_time_ns: u64, json: &[u8]) -> Result<()> {
-        let header = mcap::records::MessageHeader {
-            channel_id,
-            sequence: self.sequence,
-            log_time: log_time_ns,
-            publish_time: log_time_ns,
-        };
-        self.sequence = self.sequence.wrapping_add(1);
-        self.writer
-            .as_mut()
-            .expect("writer present until finish")
-            .write_to_known_channel(&header, json)
-            .map_err(|e| Error::bad_file(&self.tmp, e))
+        self.write_message(channel_id, log_time_ns, json)
     }
 
     /// Adds a metadata record (e.g. the scene model as JSON).

@@ -19,7 +19,7 @@ use std::collections::BTreeMap;
 use std::path::Path;
 use std::sync::Arc;
 
-use alnlab_common::params::Count;
+use alnlab_common::params::{self, Count, ParamError};
 use alnlab_common::table::{self, Table};
 use alnlab_common::{Error, Progress, Provenance, Result};
 use arrow_array::{
@@ -109,7 +109,7 @@ impl Default for Params {
 
 impl Params {
     /// Checks the parameters; on error, the key and what is allowed.
-    pub fn validate(&self) -> std::result::Result<(), (String, String)> {
+    pub fn validate(&self) -> std::result::Result<(), ParamError> {
         let levels = self.levels.get();
         if levels < 2 {
             return Err((
@@ -365,7 +365,7 @@ pub fn run(
 ) -> Result<()> {
     params
         .validate()
-        .map_err(|(key, message)| Error::Invalid(format!("quantize.{key}: {message}")))?;
+        .map_err(|e| params::invalid("quantize", e))?;
     let pairs = Table::read(pairs_path)?;
     let stats = Table::read(stats_path)?;
     let variables: Vec<String> = pairs

@@ -29,7 +29,7 @@ pub mod variables;
 
 use std::path::Path;
 
-use alnlab_common::params::Positive;
+use alnlab_common::params::{self, ParamError, Positive};
 use alnlab_common::state_log::{StateFrame, StateLayout, StateLogWriter};
 use alnlab_common::{Error, Progress, Provenance, Result};
 use nalgebra::{Vector3, Vector6};
@@ -95,13 +95,6 @@ pub enum Integrator {
     Rk4,
 }
 
-/// A parameter error: the dotted key path within `[simulate]` and the message.
-#[derive(Debug, PartialEq)]
-pub struct ParamError {
-    pub key: String,
-    pub message: String,
-}
-
 impl Params {
     /// Fills every scene's kind defaults (so the resolved manifest shows them).
     pub fn resolve(mut self) -> Params {
@@ -112,10 +105,10 @@ impl Params {
     /// Checks what deserialization cannot: relations between fields.
     pub fn validate(&self) -> std::result::Result<(), ParamError> {
         if self.scene.is_empty() {
-            return Err(ParamError {
-                key: "scene".into(),
-                message: "expected at least one [[simulate.scene]]".into(),
-            });
+            return Err((
+                "scene".into(),
+                "expected at least one [[simulate.scene]]".into(),
+            ));
         }
         let mut names = std::collections::BTreeSet::new();
         for (i, scene) in self.scene.iter().enumerate() {
@@ -126,28 +119,25 @@ impl Params {
                     .chars()
                     .all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-');
             if !valid_name {
-                return Err(ParamError {
-                    key: at("name"),
-                    message: format!(
+                return Err((
+                    at("name"),
+                    format!(
                         "expected a name of letters, digits, `-` or `_`, found {:?}",
                         scene.name
                     ),
-                });
+                ));
             }
             if !names.insert(scene.name.as_str()) {
-                return Err(ParamError {
-                    key: at("name"),
-                    message: format!("scene name {:?} is used twice", scene.name),
-                });
+                return Err((
+                    at("name"),
+                    format!("scene name {:?} is used twice", scene.name),
+                ));
             }
             scene
                 .clone()
                 .resolve()
                 .validate()
-                .map_err(|(field, message)| ParamError {
-                    key: at(&field),
-                    message,
-                })?;
+                .map_err(|(field, message)| (at(&field), message))?;
         }
         Ok(())
     }
@@ -275,7 +265,7 @@ pub fn run(
 ) -> Result<()> {
     params
         .validate()
-        .map_err(|e| Error::Invalid(format!("simulate.{}: {}", e.key, e.message)))?;
+        .map_err(|e| params::invalid("simulate", e))?;
     let prepared: Vec<Prepared> = params.scene.iter().map(Prepared::new).collect();
     let layouts: Vec<StateLayout> = prepared.iter().map(|p| p.layout.clone()).collect();
     let total_steps: u64 = prepared

@@ -45,8 +45,8 @@ fn frame_dt_must_be_a_multiple_of_dt() {
         ..Params::default()
     };
     let err = params.validate().unwrap_err();
-    assert_eq!(err.key, "scene.0.frame_dt");
-    assert!(err.message.contains("whole multiple of dt"));
+    assert_eq!(err.0, "scene.0.frame_dt");
+    assert!(err.1.contains("whole multiple of dt"));
 }
 
 #[test]

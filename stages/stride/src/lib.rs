@@ -11,7 +11,7 @@
 use std::path::Path;
 use std::sync::Arc;
 
-use alnlab_common::params::{Count, Fraction};
+use alnlab_common::params::{self, Count, Fraction, ParamError};
 use alnlab_common::state_log::{StateFrame, StateLog};
 use alnlab_common::{Error, Progress, Provenance, Result, table};
 use arrow_array::{Array, Float64Array, StringArray, UInt32Array};
@@ -71,7 +71,7 @@ impl Default for Params {
 
 impl Params {
     /// Checks relations between fields; on error, the key and what is allowed.
-    pub fn validate(&self) -> std::result::Result<(), (String, String)> {
+    pub fn validate(&self) -> std::result::Result<(), ParamError> {
         if self.offset >= self.n.0 {
             return Err((
                 "offset".into(),
@@ -134,7 +134,7 @@ pub fn run(
 ) -> Result<()> {
     params
         .validate()
-        .map_err(|(key, message)| Error::Invalid(format!("stride.{key}: {message}")))?;
+        .map_err(|e| params::invalid("stride", e))?;
     let log = StateLog::read(trajectory)?;
     let mut variables: Vec<&str> = Vec::new();
     for scene in &log.scenes {

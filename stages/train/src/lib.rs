@@ -16,7 +16,7 @@ use std::path::Path;
 use std::sync::Arc;
 
 use alnlab_common::hash::sha256_file;
-use alnlab_common::params::Count;
+use alnlab_common::params::{self, Count, ParamError};
 use alnlab_common::table::{self, Table};
 use alnlab_common::{Error, Progress, Provenance, Result};
 use alnlab_quantize::Codebook;
@@ -66,7 +66,7 @@ impl Default for Params {
 
 impl Params {
     /// Checks the parameters; on error, the key and what is allowed.
-    pub fn validate(&self) -> std::result::Result<(), (String, String)> {
+    pub fn validate(&self) -> std::result::Result<(), ParamError> {
         let leaves = self.leaves.0;
         if !(2..=1 << 24).contains(&leaves) || !leaves.is_power_of_two() {
             return Err((
@@ -118,9 +118,7 @@ pub fn run(
     out_dir: &Path,
     progress: &dyn Progress,
 ) -> Result<()> {
-    params
-        .validate()
-        .map_err(|(key, message)| Error::Invalid(format!("train.{key}: {message}")))?;
+    params.validate().map_err(|e| params::invalid("train", e))?;
     let codebook = Codebook::read(codebook_path)?;
     let levels = Table::read(levels_path)?;
     let learned: Vec<_> = codebook.learned().collect();
