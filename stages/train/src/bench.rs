@@ -113,10 +113,11 @@ pub fn train() -> TrainBench {
     }
 }
 
-/// Trains a paper-scale forest briefly, then times prediction of full states.
+/// Trains a paper-scale forest (10 epochs), then times prediction of full
+/// states.
 pub fn predict() -> PredictBench {
     let (codecs, inputs, targets) = data(1024);
-    let trained = forest::train(&spec(inputs.bits), 1, 1, 7, &inputs, &targets, &|| {});
+    let trained = forest::train(&spec(inputs.bits), 10, 1, 7, &inputs, &targets, &|| {});
     let predictor = Predictor {
         trees: trained.iter().map(|t| (t.id, t.tree.prune())).collect(),
         vote: 1,
