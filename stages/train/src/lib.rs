@@ -10,6 +10,7 @@
 pub mod bench;
 pub mod forest;
 pub mod model;
+pub mod threshold;
 pub mod tree;
 
 use std::path::Path;

@@ -1,0 +1,187 @@
+//! The threshold-predicate model (paper §6): instead of one tree per output
+//! bit, one tree per output variable computing the predicate
+//! p(y, x) = [y < f(x)] over thermometer-coded inputs and a thermometer-coded
+//! candidate level y. The prediction is the level at which p turns false,
+//! found by binary search over y.
+
+use alnlab_quantize::bits::{BitMatrix, encode};
+use alnlab_quantize::codes::{Code, Codec};
+use rand::{RngExt, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+
+use crate::forest::Columns;
+use crate::tree::{EpochLog, Samples, Scratch, Tree, TreeSpec};
+
+/// The first level in `0..levels` at which `below` (true for levels under
+/// the answer, false from it on) is false; `levels` if it never is. With a
+/// predicate that is not monotone, one level where it changes from true to
+/// false (or an end).
+pub fn transition(levels: usize, mut below: impl FnMut(usize) -> bool) -> usize {
+    let (mut lo, mut hi) = (0, levels);
+    while lo < hi {
+        let mid = lo + (hi - lo) / 2;
+        if below(mid) {
+            lo = mid + 1;
+        } else {
+            hi = mid;
+        }
+    }
+    lo
+}
+
+/// A threshold tree for one output variable of `levels` levels, reading
+/// `x_bits` input bits followed by the candidate level in thermometer code.
+pub struct ThresholdModel {
+    pub tree: Tree,
+    pub x_bits: usize,
+    pub thermometer: Codec,
+}
+
+impl ThresholdModel {
+    /// Trains on the rows of `x` (thermometer-coded inputs) with true levels
+    /// `y`: each row is presented with candidate levels around its true
+    /// level (±`near`) and `far` random ones, labelled [candidate < y].
+    #[allow(clippy::too_many_arguments)]
+    pub fn train(
+        spec: &TreeSpec,
+        epochs: usize,
+        seed: u64,
+        x: &BitMatrix,
+        y: &[u16],
+        levels: usize,
+        near: usize,
+        far: usize,
+    ) -> (ThresholdModel, Vec<EpochLog>) {
+        let thermometer = Codec::new(Code::Thermometer, levels, None).expect("levels ≥ 2");
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        let (mut rows, mut candidates, mut labels) = (Vec::new(), Vec::new(), Vec::new());
+        for (r, &target) in y.iter().enumerate() {
+            let target = usize::from(target);
+            let lo = target.saturating_sub(near);
+            let hi = (target + near).min(levels - 1);
+            let around = lo..=hi;
+            let random = (0..far).map(|_| rng.random_range(0..levels));
+            for candidate in around.chain(random) {
+                rows.push(r);
+                candidates.push(candidate as u16);
+                labels.push(candidate < target);
+            }
+        }
+        let x_bits = x.bits();
+        let inputs = joined_columns(x, &rows, &thermometer, &candidates);
+        let mut targets = vec![0u64; inputs.words];
+        for (s, &label) in labels.iter().enumerate() {
+            targets[s / 64] |= u64::from(label) << (s % 64);
+        }
+        let spec = TreeSpec {
+            inputs: inputs.bits,
+            ..*spec
+        };
+        let mut tree = Tree::new(&spec, &mut rng);
+        let samples = Samples {
+            count: inputs.count,
+            words: inputs.words,
+            columns: &inputs.data,
+            targets: &targets,
+        };
+        let log = tree.train_epochs(&samples, epochs);
+        (
+            ThresholdModel {
+                tree,
+                x_bits,
+                thermometer,
+            },
+            log,
+        )
+    }
+
+    /// The predicted level for one row of inputs (packed words of `x_bits`
+    /// bits, zero beyond): binary search for where the predicate turns false.
+    pub fn predict(&self, x_row: &[u64], scratch: &mut Scratch) -> usize {
+        let width = self.thermometer.width() as usize;
+        let mut input = vec![0u64; (self.x_bits + width).div_ceil(64)];
+        transition(self.thermometer.levels(), |candidate| {
+            input.fill(0);
+            input[..x_row.len()].copy_from_slice(x_row);
+            // Level k in thermometer code: its first k bits set.
+            for bit in self.x_bits..self.x_bits + candidate {
+                input[bit / 64] |= 1 << (bit % 64);
+            }
+            self.tree.evaluate(&input, scratch)
+        })
+    }
+}
+
+/// Bit-sliced columns of x rows (`rows[s]`) followed by the thermometer code
+/// of `candidates[s]`.
+fn joined_columns(
+    x: &BitMatrix,
+    rows: &[usize],
+    thermometer: &Codec,
+    candidates: &[u16],
+) -> Columns {
+    let x_columns = Columns::from_rows(x, rows);
+    let candidate_matrix = encode(&[thermometer], &[candidates]);
+    let all: Vec<usize> = (0..candidates.len()).collect();
+    let c_columns = Columns::from_rows(&candidate_matrix, &all);
+    let mut data = x_columns.data;
+    data.extend_from_slice(&c_columns.data);
+    Columns {
+        count: rows.len(),
+        bits: x_columns.bits + c_columns.bits,
+        words: x_columns.words,
+        data,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn binary_search_finds_the_transition_exactly() {
+        for levels in [2, 3, 64, 214] {
+            for answer in 0..=levels {
+                let mut calls = 0;
+                let found = transition(levels, |y| {
+                    calls += 1;
+                    y < answer
+                });
+                assert_eq!(found, answer, "L = {levels}");
+                assert!(calls <= (levels as f64).log2().ceil() as usize + 1);
+            }
+        }
+    }
+
+    #[test]
+    fn a_threshold_tree_learns_the_successor() {
+        // y = x + 1 over L = 16 levels, x thermometer-coded.
+        let levels = 16;
+        let thermometer = Codec::new(Code::Thermometer, levels, None).unwrap();
+        let mut rng = ChaCha8Rng::seed_from_u64(3);
+        let x: Vec<u16> = (0..600)
+            .map(|_| rng.random_range(0..levels as u16 - 1))
+            .collect();
+        let y: Vec<u16> = x.iter().map(|v| v + 1).collect();
+        let x_bits = encode(&[&thermometer], &[&x]);
+        let spec = TreeSpec {
+            leaves: 1024,
+            inputs: 0,
+            counter_bound: 3,
+            initial_spread: 1,
+        };
+        // Rows 0..400 train (y has 400 entries), rows 400..600 test.
+        let (model, log) = ThresholdModel::train(&spec, 20, 5, &x_bits, &y[..400], levels, 2, 2);
+        let mut scratch = Scratch::default();
+        let errors: Vec<usize> = (400..600)
+            .map(|r| {
+                model
+                    .predict(x_bits.row(r), &mut scratch)
+                    .abs_diff(usize::from(y[r]))
+            })
+            .collect();
+        let mean = errors.iter().sum::<usize>() as f64 / errors.len() as f64;
+        eprintln!("threshold tree, y = x + 1 (L = 16): mean test error {mean:.3} levels");
+        assert!(mean <= 1.0, "mean error {mean} levels; training {log:?}");
+    }
+}
