@@ -180,11 +180,7 @@ impl Params {
 
 /// A seed per variable: FNV-1a of the name mixed into the experiment seed.
 pub fn variable_seed(seed: u64, variable: &str) -> u64 {
-    variable
-        .bytes()
-        .fold(0xcbf2_9ce4_8422_2325u64 ^ seed, |h, b| {
-            (h ^ u64::from(b)).wrapping_mul(0x100_0000_01b3)
-        })
+    alnlab_common::hash::fnv1a(variable.as_bytes(), seed)
 }
 
 /// Uniform quantization of one variable.

@@ -390,11 +390,7 @@ impl Scene {
 /// The seed of one run, mixed from the experiment seed, scene and run so that
 /// runs are independent and reproducible.
 pub fn run_seed(seed: u64, scene_index: usize, run: u32) -> u64 {
-    let mut x =
-        seed ^ (((scene_index as u64) << 32) | u64::from(run)).wrapping_mul(0x9E37_79B9_7F4A_7C15);
-    x = (x ^ (x >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-    x = (x ^ (x >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-    x ^ (x >> 31)
+    alnlab_common::hash::mix_seed(seed, ((scene_index as u64) << 32) | u64::from(run))
 }
 
 /// A generator seeded for one run.

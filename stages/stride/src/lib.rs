@@ -11,6 +11,7 @@
 use std::path::Path;
 use std::sync::Arc;
 
+use alnlab_common::hash::{fnv1a, mix_seed};
 use alnlab_common::params::{self, Count, Fraction, ParamError};
 use alnlab_common::state_log::{StateFrame, StateLog};
 use alnlab_common::{Error, Progress, Provenance, Result, table};
@@ -326,14 +327,8 @@ fn assign<T>(
 /// A seeded hash of a row's identity, uniform in [0, 1).
 fn unit_hash(seed: u64, scene: &str, run: u32, step: u32) -> f64 {
     // FNV-1a over the scene name, then splitmix64 over everything.
-    let name = scene.bytes().fold(0xcbf2_9ce4_8422_2325u64, |h, b| {
-        (h ^ u64::from(b)).wrapping_mul(0x100_0000_01b3)
-    });
-    let mut x =
-        seed ^ name ^ (u64::from(run) << 32 | u64::from(step)).wrapping_mul(0x9E37_79B9_7F4A_7C15);
-    x = (x ^ (x >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-    x = (x ^ (x >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-    x ^= x >> 31;
+    let name = fnv1a(scene.as_bytes(), 0);
+    let x = mix_seed(seed ^ name, u64::from(run) << 32 | u64::from(step));
     (x >> 11) as f64 / (1u64 << 53) as f64
 }
 

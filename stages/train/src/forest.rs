@@ -65,12 +65,8 @@ pub struct TreeId {
 impl TreeId {
     /// The tree's seed: the experiment seed mixed with its identity.
     pub fn seed(&self, seed: u64) -> u64 {
-        let mut x = seed
-            ^ (u64::from(self.variable) << 40 | u64::from(self.bit) << 20 | u64::from(self.vote))
-                .wrapping_mul(0x9E37_79B9_7F4A_7C15);
-        x = (x ^ (x >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        x = (x ^ (x >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        x ^ (x >> 31)
+        let key = u64::from(self.variable) << 40 | u64::from(self.bit) << 20 | u64::from(self.vote);
+        alnlab_common::hash::mix_seed(seed, key)
     }
 }
 
