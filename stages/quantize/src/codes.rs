@@ -14,6 +14,7 @@
 
 use serde::{Deserialize, Serialize};
 
+use crate::near::ChunkIndex;
 use crate::walk::WalkSpec;
 
 /// Which code.
@@ -55,6 +56,8 @@ pub struct Codec {
     table: Vec<u64>,
     /// Bits flipped per level (walk only; 0 otherwise).
     walk_step: u32,
+    /// Walk only: finds the nearest codeword without a scan when it is near.
+    index: Option<ChunkIndex>,
 }
 
 impl Codec {
@@ -105,6 +108,7 @@ impl Codec {
                 table = spec.codes()?;
             }
         }
+        let index = (code == Code::Walk).then(|| ChunkIndex::new(&table, width));
         Ok(Codec {
             code,
             levels,
@@ -112,6 +116,7 @@ impl Codec {
             words,
             table,
             walk_step,
+            index,
         })
     }
 
@@ -153,7 +158,11 @@ impl Codec {
             Code::Thermometer => {
                 (bits.iter().map(|w| w.count_ones() as usize).sum::<usize>()).min(last)
             }
-            Code::Walk => self.nearest(bits[0], 0, last),
+            Code::Walk => {
+                let near = self.index.as_ref().expect("walk codecs have an index");
+                near.nearest_within(&self.table, bits[0])
+                    .unwrap_or_else(|| self.nearest(bits[0], 0, last))
+            }
         }
     }
 
@@ -334,6 +343,15 @@ mod tests {
                     brute,
                     "step {step}, bits {bits:#x}"
                 );
+                // decode, through the chunk index, near a codeword and not.
+                let near =
+                    walk.codeword(rng.random_range(0..214))[0] ^ (1 << rng.random_range(0..23));
+                for bits in [bits, near] {
+                    let brute = (0..214)
+                        .min_by_key(|&k| ((walk.codeword(k)[0] ^ bits).count_ones(), k))
+                        .unwrap();
+                    assert_eq!(walk.decode(&[bits]), brute, "step {step}, bits {bits:#x}");
+                }
             }
         }
     }

@@ -13,6 +13,7 @@
 pub mod bench;
 pub mod bits;
 pub mod codes;
+pub mod near;
 pub mod walk;
 
 use std::collections::BTreeMap;
