@@ -555,3 +555,39 @@ fn quantize_parameters_are_checked_with_their_place() {
         stderr(&out)
     );
 }
+
+#[test]
+fn threshold_models_train_one_tree_per_variable_the_same_on_any_thread_count() {
+    use alnlab_train::ModelKind;
+    use alnlab_train::model::Model;
+    let dir = tempfile::tempdir().unwrap();
+    let text =
+        format!("{MANIFEST}\n[[variant]]\nname = \"threshold\"\ntrain.model = \"threshold\"\n");
+    write_manifest(dir.path(), "m.toml", &text);
+    let record = run_ok(dir.path(), &["m.toml"]);
+    let model_path = dir.path().join(&record.variants[0].artifacts["model"].path);
+    let model = Model::read(&model_path).unwrap();
+    assert_eq!(model.header.model, ModelKind::Threshold);
+    assert!(!model.header.outputs.is_empty());
+    assert_eq!(
+        model.trees.len(),
+        model.header.outputs.len(),
+        "one tree per variable"
+    );
+    assert!(model.trees.iter().all(|(id, _)| id.bit == 0));
+    // On one thread, in another folder: the same model, bit for bit.
+    let out = Command::new(env!("CARGO_BIN_EXE_alnlab"))
+        .current_dir(dir.path())
+        .env("RAYON_NUM_THREADS", "1")
+        .args(["-q", "run", "m.toml", "--out", "one-thread"])
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", stderr(&out));
+    let json = std::fs::read(dir.path().join("one-thread/e2e/run.json")).unwrap();
+    let again: RunRecord = serde_json::from_slice(&json).unwrap();
+    let again_path = dir.path().join(&again.variants[0].artifacts["model"].path);
+    assert_eq!(
+        std::fs::read(model_path).unwrap(),
+        std::fs::read(again_path).unwrap()
+    );
+}

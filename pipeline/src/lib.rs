@@ -5,6 +5,7 @@
 //! cache and run records. The stages themselves live in their own crates and
 //! meet only through files.
 
+pub mod bench;
 pub mod cache;
 pub mod cli;
 pub mod manifest;

@@ -11,6 +11,7 @@ use alnlab_quantize::codes::{Code, Codec};
 use alnlab_quantize::walk::WalkSpec;
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
+use rayon::prelude::*;
 use serde::Serialize;
 
 use crate::forest::{self, Columns, Predictor};
@@ -28,14 +29,24 @@ pub struct TrainBench {
 /// The figures of `alnlab bench predict`, with stable keys for `--json`.
 #[derive(Debug, Serialize)]
 pub struct PredictBench {
-    /// ns per full predicted state (all trees and decoding), bit-sliced batches of 64.
+    /// ns per full predicted state (all trees, votes and decoding), in
+    /// bit-sliced batches of 1024 samples run on `threads` threads.
     pub batched_ns_per_state: f64,
-    /// ns per full predicted state, one sample at a time, parsimonious.
+    /// The same on one thread.
+    pub batched_one_thread_ns_per_state: f64,
+    /// ns per full predicted state, one sample at a time, parsimonious, on
+    /// one thread.
     pub single_ns_per_state: f64,
+    /// Of `batched_ns_per_state`, the decoding of the predicted codes.
+    pub decode_ns_per_state: f64,
+    /// Leaves the single-sample evaluation tests per state.
+    pub leaves_tested_per_state: f64,
     /// Fraction of nodes the parsimonious evaluation visited.
     pub nodes_evaluated_fraction: f64,
     /// The paper's estimate ½·(3/4)^d (§3.2).
     pub estimated_fraction: f64,
+    /// Threads of the batched evaluation.
+    pub threads: usize,
 }
 
 const VARIABLES: usize = 64;
@@ -114,60 +125,98 @@ pub fn train() -> TrainBench {
 }
 
 /// Trains a paper-scale forest (10 epochs), then times prediction of full
-/// states.
+/// states: every tree, the votes and the decoding of every variable.
 pub fn predict() -> PredictBench {
     let (codecs, inputs, targets) = data(1024);
     let trained = forest::train(&spec(inputs.bits), 10, 1, 7, &inputs, &targets, &|| {});
-    let predictor = Predictor {
-        trees: trained.iter().map(|t| (t.id, t.tree.prune())).collect(),
-        vote: 1,
-    };
     let widths = vec![23; VARIABLES];
+    let predictor = Predictor::new(trained.iter().map(|t| (t.id, &t.tree)), &widths, 1);
     let decode_all = |out: &[Columns]| -> usize {
-        let mut sum = 0;
-        for s in 0..inputs.count {
-            for (v, c) in out.iter().enumerate() {
-                let bits = (0..23).fold(0u64, |acc, b| {
-                    acc | (c.column(b)[s / 64] >> (s % 64) & 1) << b
-                });
-                sum += codecs[v].decode(&[bits]);
-            }
-        }
-        sum
+        codecs
+            .par_iter()
+            .zip(out)
+            .map(|(codec, columns)| {
+                let mut sum = 0;
+                let mut codes = [0u64; 64];
+                for w in 0..columns.words {
+                    columns.transpose_word(w, &mut codes);
+                    let samples = (columns.count - 64 * w).min(64);
+                    sum += codes[..samples]
+                        .iter()
+                        .map(|c| codec.decode(&[*c]))
+                        .sum::<usize>();
+                }
+                sum
+            })
+            .sum()
     };
-    let clock = Instant::now();
-    let out = predictor.predict(&inputs, &widths);
-    std::hint::black_box(decode_all(&out));
-    let batched_ns_per_state = clock.elapsed().as_nanos() as f64 / inputs.count as f64;
+    let batched = || {
+        median_ns(5, inputs.count, || {
+            std::hint::black_box(decode_all(&predictor.predict(&inputs)));
+        })
+    };
+    let batched_ns_per_state = batched();
+    let one_thread = rayon::ThreadPoolBuilder::new()
+        .num_threads(1)
+        .build()
+        .expect("a thread pool of one thread");
+    let batched_one_thread_ns_per_state = one_thread.install(batched);
+    let out = predictor.predict(&inputs);
+    let decode_ns_per_state = median_ns(5, inputs.count, || {
+        std::hint::black_box(decode_all(&out));
+    });
 
-    // One sample at a time, parsimoniously, over 64 samples.
-    let samples = 64;
-    let mut visited = 0usize;
-    let clock = Instant::now();
-    for s in 0..samples {
-        let row: Vec<u64> = {
+    // One sample at a time, parsimoniously.
+    let rows: Vec<Vec<u64>> = (0..inputs.count)
+        .map(|s| {
             let mut row = vec![0u64; inputs.bits.div_ceil(64)];
             for b in 0..inputs.bits {
                 row[b / 64] |= (inputs.column(b)[s / 64] >> (s % 64) & 1) << (b % 64);
             }
             row
-        };
-        for (v, codec) in codecs.iter().enumerate() {
-            let mut bits = 0u64;
-            for b in 0..23 {
-                let (value, n) = trained[v * 23 + b].tree.evaluate_parsimonious(&row);
-                visited += n;
-                bits |= u64::from(value) << b;
+        })
+        .collect();
+    let mut votes = Vec::new();
+    let mut codes = vec![Vec::new(); VARIABLES];
+    let mut tested = 0;
+    let single_ns_per_state = median_ns(5, rows.len(), || {
+        tested = 0;
+        for row in &rows {
+            tested += predictor.predict_one(row, &mut votes, &mut codes);
+            for (codec, code) in codecs.iter().zip(&codes) {
+                std::hint::black_box(codec.decode(code));
             }
-            std::hint::black_box(codec.decode(&[bits]));
         }
-    }
-    let single_ns_per_state = clock.elapsed().as_nanos() as f64 / samples as f64;
-    let nodes = (2 * 8192 - 1) * trained.len() * samples;
+    });
+
+    // The fraction of all nodes parsimonious evaluation of the unpruned
+    // trees visits, over 64 samples.
+    let visited: usize = rows[..64]
+        .iter()
+        .flat_map(|row| trained.iter().map(|t| t.tree.evaluate_parsimonious(row).1))
+        .sum();
+    let nodes = (2 * 8192 - 1) * trained.len() * 64;
     PredictBench {
         batched_ns_per_state,
+        batched_one_thread_ns_per_state,
         single_ns_per_state,
+        decode_ns_per_state,
+        leaves_tested_per_state: tested as f64 / rows.len() as f64,
         nodes_evaluated_fraction: visited as f64 / nodes as f64,
         estimated_fraction: 0.5 * 0.75f64.powi(13),
+        threads: rayon::current_num_threads(),
     }
+}
+
+/// The median over `runs` runs of `f`, in ns per each of `items`.
+fn median_ns(runs: usize, items: usize, mut f: impl FnMut()) -> f64 {
+    let mut times: Vec<f64> = (0..runs)
+        .map(|_| {
+            let clock = Instant::now();
+            f();
+            clock.elapsed().as_nanos() as f64 / items as f64
+        })
+        .collect();
+    times.sort_by(f64::total_cmp);
+    times[runs / 2]
 }

@@ -11,6 +11,7 @@ use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
 
+use crate::compiled::{BLOCK, Block, Chains, Programs};
 use crate::tree::{EpochLog, Pruned, Samples, Tree, TreeSpec};
 
 /// Bit-sliced columns: bit `b` of sample `s` is bit `s % 64` of
@@ -50,6 +51,20 @@ impl Columns {
     /// Column `b`.
     pub fn column(&self, b: usize) -> &[u64] {
         &self.data[b * self.words..(b + 1) * self.words]
+    }
+
+    /// The rows of the 64 samples of word `w`, for at most 64 bits:
+    /// `rows[i]` gets the bits of sample 64·w + i.
+    pub fn transpose_word(&self, w: usize, rows: &mut [u64; 64]) {
+        assert!(self.bits <= 64, "rows of at most 64 bits");
+        rows.fill(0);
+        for b in 0..self.bits {
+            let mut word = self.data[b * self.words + w];
+            while word != 0 {
+                rows[word.trailing_zeros() as usize] |= 1 << b;
+                word &= word - 1;
+            }
+        }
     }
 }
 
@@ -115,7 +130,7 @@ pub fn train(
                 targets: targets[id.variable as usize].column(id.bit as usize),
             };
             let clock = Instant::now();
-            let epochs_log = tree.train_epochs(&samples, epochs);
+            let epochs_log = tree.train_epochs(&samples, epochs, &mut rng);
             let per_epoch = clock.elapsed().as_secs_f64() / epochs_log.len().max(1) as f64;
             on_tree_done();
             Trained {
@@ -128,41 +143,131 @@ pub fn train(
         .collect()
 }
 
-/// The pruned trees of a forest, for prediction.
+/// A forest's trees, pruned and compiled for prediction: batches bit-sliced
+/// ([`Programs`]), single samples parsimoniously ([`Chains`]).
 pub struct Predictor {
-    /// (id, pruned tree), in training order.
-    pub trees: Vec<(TreeId, Pruned)>,
+    /// Output bits per variable, in tree order.
+    widths: Vec<usize>,
     /// Voters per bit.
-    pub vote: u32,
+    vote: usize,
+    programs: Programs,
+    chains: Chains,
 }
 
 impl Predictor {
-    /// The predicted bits of every output variable for 64 samples at a time:
-    /// `out[v]` gets variable v's bits as columns (`widths[v]` bits).
-    pub fn predict(&self, inputs: &Columns, widths: &[usize]) -> Vec<Columns> {
-        let mut out: Vec<Columns> = widths
-            .iter()
-            .map(|&bits| Columns {
-                count: inputs.count,
-                bits,
-                words: inputs.words,
-                data: vec![0; bits * inputs.words],
+    /// Compiles `trees`, which must be in training order — by variable, bit,
+    /// voter — for outputs of `widths` bits with `vote` voters per bit.
+    pub fn new<'a>(
+        trees: impl IntoIterator<Item = (TreeId, &'a Tree)>,
+        widths: &[usize],
+        vote: u32,
+    ) -> Predictor {
+        let mut expected = widths.iter().enumerate().flat_map(|(v, &bits)| {
+            (0..bits as u32).flat_map(move |bit| {
+                (0..vote).map(move |voter| TreeId {
+                    variable: v as u32,
+                    bit,
+                    vote: voter,
+                })
+            })
+        });
+        let pruned: Vec<Pruned> = trees
+            .into_iter()
+            .map(|(id, tree)| {
+                assert_eq!(Some(id), expected.next(), "trees in training order");
+                tree.prune()
             })
             .collect();
-        let mut values = Vec::new();
-        let mut votes = vec![0u64; self.vote as usize];
-        for chunk in self.trees.chunks(self.vote as usize) {
-            let id = chunk[0].0;
-            for w in 0..inputs.words {
-                for (k, (_, tree)) in chunk.iter().enumerate() {
-                    votes[k] =
-                        tree.evaluate_word(|b| inputs.data[b * inputs.words + w], &mut values);
+        assert_eq!(expected.next(), None, "a tree for every bit and voter");
+        Predictor {
+            widths: widths.to_vec(),
+            vote: vote as usize,
+            programs: Programs::new(&pruned),
+            chains: Chains::new(&pruned),
+        }
+    }
+
+    /// The predicted bits of every output variable over all samples of
+    /// `inputs`: `out[v]` holds variable v's bits as columns. Blocks of
+    /// samples run in parallel; the result does not depend on the threads.
+    pub fn predict(&self, inputs: &Columns) -> Vec<Columns> {
+        let blocks = inputs.words.div_ceil(BLOCK);
+        let per_block: Vec<Vec<Block>> = (0..blocks)
+            .into_par_iter()
+            .map(|k| {
+                let mut block_inputs = vec![[0u64; BLOCK]; inputs.bits];
+                let words = (k * BLOCK..inputs.words.min((k + 1) * BLOCK)).enumerate();
+                for (b, block) in block_inputs.iter_mut().enumerate() {
+                    for (j, w) in words.clone() {
+                        block[j] = inputs.data[b * inputs.words + w];
+                    }
                 }
-                let target = &mut out[id.variable as usize];
-                target.data[id.bit as usize * inputs.words + w] = majority(&votes);
+                let mut trees = vec![[0u64; BLOCK]; self.programs.trees()];
+                self.programs.evaluate_block(&block_inputs, &mut trees);
+                trees
+                    .chunks(self.vote)
+                    .map(|voters| std::array::from_fn(|j| majority_of(voters, j)))
+                    .collect()
+            })
+            .collect();
+        let padding = (inputs.words * 64 - inputs.count) as u32;
+        let last_word = u64::MAX.checked_shr(padding).unwrap_or(0);
+        let mut bit_index = 0;
+        self.widths
+            .iter()
+            .map(|&bits| {
+                let mut data = vec![0u64; bits * inputs.words];
+                for b in 0..bits {
+                    let column = &mut data[b * inputs.words..(b + 1) * inputs.words];
+                    for (w, word) in column.iter_mut().enumerate() {
+                        *word = per_block[w / BLOCK][bit_index][w % BLOCK];
+                    }
+                    if let Some(last) = column.last_mut() {
+                        *last &= last_word;
+                    }
+                    bit_index += 1;
+                }
+                Columns {
+                    count: inputs.count,
+                    bits,
+                    words: inputs.words,
+                    data,
+                }
+            })
+            .collect()
+    }
+
+    /// The predicted code words of every output variable for one sample
+    /// (`input`: its bits, 64 per word), evaluated parsimoniously: `out[v]`
+    /// gets variable v's code, ⌈width/64⌉ words. `votes` is scratch space.
+    /// Returns the number of leaves tested.
+    pub fn predict_one(&self, input: &[u64], votes: &mut Vec<bool>, out: &mut [Vec<u64>]) -> usize {
+        votes.resize(self.chains.trees(), false);
+        let tested = self.chains.evaluate(input, votes);
+        let mut voters = votes.chunks(self.vote);
+        for (code, &bits) in out.iter_mut().zip(&self.widths) {
+            code.clear();
+            code.resize(bits.div_ceil(64), 0);
+            for b in 0..bits {
+                let ones = voters
+                    .next()
+                    .expect("a bit per tree")
+                    .iter()
+                    .filter(|&&v| v)
+                    .count();
+                code[b / 64] |= u64::from(2 * ones > self.vote) << (b % 64);
             }
         }
-        out
+        tested
+    }
+}
+
+/// Bitwise majority of word `j` of an odd number of blocks.
+fn majority_of(voters: &[Block], j: usize) -> u64 {
+    match voters {
+        [a] => a[j],
+        [a, b, c] => a[j] & b[j] | a[j] & c[j] | b[j] & c[j],
+        _ => majority(&voters.iter().map(|v| v[j]).collect::<Vec<_>>()),
     }
 }
 
@@ -228,12 +333,9 @@ mod tests {
         let inputs = Columns::from_rows(&x_bits, &train_rows);
         let targets = [Columns::from_rows(&y_bits, &train_rows)];
         let trained = train(&spec(512, 23), 10, vote, seed, &inputs, &targets, &|| {});
-        let predictor = Predictor {
-            trees: trained.iter().map(|t| (t.id, t.tree.prune())).collect(),
-            vote,
-        };
+        let predictor = Predictor::new(trained.iter().map(|t| (t.id, &t.tree)), &[23], vote);
         let test_inputs = Columns::from_rows(&x_bits, &test_rows);
-        let predicted = &predictor.predict(&test_inputs, &[23])[0];
+        let predicted = &predictor.predict(&test_inputs)[0];
         let mut total = 0.0;
         for (s, &r) in test_rows.iter().enumerate() {
             let bits: u64 = (0..23).fold(0, |acc, b| {

@@ -8,6 +8,7 @@
 //! the file format.
 
 pub mod bench;
+pub mod compiled;
 pub mod forest;
 pub mod model;
 pub mod threshold;
@@ -31,16 +32,31 @@ use crate::model::{Header, Model};
 use crate::tree::TreeSpec;
 
 /// Version of what this stage writes (part of every cache key).
-pub const FORMAT_VERSION: u32 = 1;
+pub const FORMAT_VERSION: u32 = 2;
 /// File name of the model.
 pub const MODEL_FILE: &str = "model.aln";
 /// File name of the training log table.
 pub const TRAINING_FILE: &str = "training.parquet";
 
+/// Which model to train (DESIGN.md §5).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum ModelKind {
+    /// One tree per output bit of every learned variable, decoded by the
+    /// variable's code (§4.3).
+    #[default]
+    BitForest,
+    /// One tree per output variable computing [y < f(x)] over the inputs
+    /// and a thermometer-coded candidate y; y found by binary search (§6).
+    Threshold,
+}
+
 /// The `[train]` table of a manifest.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct Params {
+    /// `bit-forest` or `threshold`.
+    pub model: ModelKind,
     /// Leaves per tree, a power of two (paper: 8192).
     pub leaves: Count,
     /// Most epochs (presentations of the training set; paper: 10).
@@ -51,16 +67,24 @@ pub struct Params {
     pub counter_bound: Count,
     /// Initial counters are uniform in −spread..spread − 1.
     pub initial_spread: Count,
+    /// Threshold model: each training row is presented with the candidate
+    /// levels within `threshold_near` of its true level …
+    pub threshold_near: u32,
+    /// … and `threshold_far` random candidate levels.
+    pub threshold_far: u32,
 }
 
 impl Default for Params {
     fn default() -> Self {
         Params {
+            model: ModelKind::BitForest,
             leaves: Count(8192),
             epochs: Count(10),
             vote: Count(1),
             counter_bound: Count(3),
             initial_spread: Count(1),
+            threshold_near: 2,
+            threshold_far: 2,
         }
     }
 }
@@ -152,43 +176,90 @@ pub fn run(
         .iter()
         .map(|e| column("x", &e.variable))
         .collect::<Result<_>>()?;
-    let codec_refs: Vec<&Codec> = codecs.iter().collect();
-    let inputs = Columns::from_rows(&encode(&codec_refs, &x_columns), &rows);
-    let targets: Vec<Columns> = learned
+    let y_columns: Vec<&[u16]> = learned
         .iter()
-        .zip(&codecs)
-        .map(|(e, c)| {
-            Ok(Columns::from_rows(
-                &encode(&[c], &[column("y", &e.variable)?]),
-                &rows,
-            ))
-        })
+        .map(|e| column("y", &e.variable))
         .collect::<Result<_>>()?;
+    let codec_refs: Vec<&Codec> = codecs.iter().collect();
+    let x_bits = encode(&codec_refs, &x_columns);
+    let inputs = x_bits.bits();
 
     let vote = params.vote.0 as u32;
-    let total_trees: usize = targets.iter().map(|t| t.bits).sum::<usize>() * vote as usize;
-    progress.start("train", total_trees as u64, "trees");
     let tick = || progress.advance(1);
-    let spec = params.tree_spec(inputs.bits);
-    let trained = forest::train(
-        &spec,
-        params.epochs.get(),
-        vote,
-        seed,
-        &inputs,
-        &targets,
-        &tick,
-    );
+    let spec = params.tree_spec(inputs);
+    let (trained, output_widths) = match params.model {
+        ModelKind::BitForest => {
+            let inputs = Columns::from_rows(&x_bits, &rows);
+            let targets: Vec<Columns> = codecs
+                .iter()
+                .zip(&y_columns)
+                .map(|(c, y)| Columns::from_rows(&encode(&[c], &[y]), &rows))
+                .collect();
+            let widths: Vec<usize> = targets.iter().map(|t| t.bits).collect();
+            let total_trees = widths.iter().sum::<usize>() * vote as usize;
+            progress.start("train", total_trees as u64, "trees");
+            let trained = forest::train(
+                &spec,
+                params.epochs.get(),
+                vote,
+                seed,
+                &inputs,
+                &targets,
+                &tick,
+            );
+            (trained, widths)
+        }
+        ModelKind::Threshold => {
+            // The training rows alone, in order, with their true levels.
+            let x_train = encode(
+                &codec_refs,
+                &x_columns
+                    .iter()
+                    .map(|x| rows.iter().map(|&r| x[r]).collect())
+                    .collect::<Vec<Vec<u16>>>()
+                    .iter()
+                    .map(Vec::as_slice)
+                    .collect::<Vec<_>>(),
+            );
+            let y_train: Vec<Vec<u16>> = y_columns
+                .iter()
+                .map(|y| rows.iter().map(|&r| y[r]).collect())
+                .collect();
+            let targets: Vec<(&[u16], usize)> = y_train
+                .iter()
+                .zip(&codecs)
+                .map(|(y, c)| (y.as_slice(), c.levels()))
+                .collect();
+            progress.start("train", (targets.len() * vote as usize) as u64, "trees");
+            let candidates = threshold::Candidates {
+                near: params.threshold_near as usize,
+                far: params.threshold_far as usize,
+            };
+            let trained = threshold::train_forest(
+                &spec,
+                params.epochs.get(),
+                vote,
+                seed,
+                candidates,
+                &x_train,
+                &targets,
+                &tick,
+            );
+            // The candidate's thermometer code.
+            (trained, codecs.iter().map(|c| c.levels() - 1).collect())
+        }
+    };
 
     let model = Model {
         header: Header {
             codebook_sha256: sha256_file(codebook_path)?,
             params: serde_json::to_value(params).expect("parameters serialize"),
-            inputs: inputs.bits,
+            model: params.model,
+            inputs,
             outputs: learned
                 .iter()
-                .zip(&codecs)
-                .map(|(e, c)| (e.variable.clone(), c.width() as usize))
+                .zip(output_widths)
+                .map(|(e, width)| (e.variable.clone(), width))
                 .collect(),
             vote,
             counter_bound: spec.counter_bound,

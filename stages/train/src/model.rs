@@ -4,6 +4,11 @@
 //! the training parameters. Written atomically; reading a wrong or truncated
 //! file is a clear error.
 //!
+//! The header says which model the trees make up (`bit-forest`: one tree
+//! per output bit and voter, over the input bits; `threshold`: one tree per
+//! output variable and voter, over the input bits and the candidate level's
+//! thermometer code).
+//!
 //! Layout (little endian): magic `ALNLAB-MODEL\0\0\0\0` (16 bytes), format
 //! version (u32), header length (u32), header (JSON), then per tree:
 //! variable, bit, voter, leaves (4 × u32), the leaves' literals (leaves ×
@@ -16,13 +21,14 @@ use std::path::Path;
 use alnlab_common::{Error, Result, atomic};
 use serde::{Deserialize, Serialize};
 
+use crate::ModelKind;
 use crate::forest::TreeId;
 use crate::tree::{Function, Tree};
 
 /// The file's magic bytes.
 pub const MAGIC: &[u8; 16] = b"ALNLAB-MODEL\0\0\0\0";
 /// The model file format version.
-pub const MODEL_FORMAT: u32 = 1;
+pub const MODEL_FORMAT: u32 = 2;
 
 /// The model's header.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -31,9 +37,14 @@ pub struct Header {
     pub codebook_sha256: String,
     /// The train stage's parameters, as JSON.
     pub params: serde_json::Value,
-    /// Input bits per sample.
+    /// Which model the trees make up.
+    pub model: ModelKind,
+    /// Input bits per sample (for the threshold model, before the
+    /// candidate's bits).
     pub inputs: usize,
-    /// The learned output variables, in tree order, with their code widths.
+    /// The learned output variables, in tree order, with their code widths
+    /// (for the threshold model, the width of the candidate's thermometer
+    /// code: levels − 1).
     pub outputs: Vec<(String, usize)>,
     /// Voters per bit.
     pub vote: u32,
@@ -120,9 +131,21 @@ impl Model {
         let header: Header = serde_json::from_slice(take(header_len, "the header")?)
             .map_err(|e| bad(format!("corrupt header ({e})")))?;
         let mut trees = Vec::new();
-        let total: usize =
-            header.outputs.iter().map(|(_, w)| w).sum::<usize>() * header.vote as usize;
-        for t in 0..total {
+        // Each tree's input bits, in file order.
+        let vote = header.vote as usize;
+        let tree_inputs: Vec<usize> = match header.model {
+            ModelKind::BitForest => header
+                .outputs
+                .iter()
+                .flat_map(|&(_, width)| std::iter::repeat_n(header.inputs, width * vote))
+                .collect(),
+            ModelKind::Threshold => header
+                .outputs
+                .iter()
+                .flat_map(|&(_, width)| std::iter::repeat_n(header.inputs + width, vote))
+                .collect(),
+        };
+        for (t, &inputs) in tree_inputs.iter().enumerate() {
             let what = format!("tree {t}");
             let fields: Vec<u32> = (0..4)
                 .map(|_| take(4, &what).map(u32_of))
@@ -144,10 +167,9 @@ impl Model {
                 .chunks_exact(4)
                 .map(u32_of)
                 .collect();
-            if let Some(l) = literals.iter().find(|&&l| l as usize >= 2 * header.inputs) {
+            if let Some(l) = literals.iter().find(|&&l| l as usize >= 2 * inputs) {
                 return Err(bad(format!(
-                    "tree {t}: literal {l} beyond the {} inputs",
-                    header.inputs
+                    "tree {t}: literal {l} beyond its {inputs} inputs"
                 )));
             }
             let packed = take((leaves - 1).div_ceil(4), &what)?;
@@ -200,6 +222,7 @@ mod tests {
             header: Header {
                 codebook_sha256: "ab".into(),
                 params: serde_json::json!({"leaves": 64}),
+                model: ModelKind::BitForest,
                 inputs: 10,
                 outputs: vec![("a.1.x".into(), 3), ("a.1.y".into(), 3)],
                 vote: 1,
@@ -207,6 +230,45 @@ mod tests {
             },
             trees,
         }
+    }
+
+    #[test]
+    fn a_threshold_model_round_trips_with_its_candidate_inputs() {
+        let mut rng = ChaCha8Rng::seed_from_u64(2);
+        // Two variables of 6 levels: 10 input bits + 5 candidate bits.
+        let spec = TreeSpec {
+            leaves: 64,
+            inputs: 15,
+            counter_bound: 3,
+            initial_spread: 1,
+        };
+        let mut m = model();
+        m.header.model = ModelKind::Threshold;
+        m.header.outputs = vec![("a.1.x".into(), 5), ("a.1.y".into(), 5)];
+        m.trees = (0..2)
+            .map(|v| {
+                let id = TreeId {
+                    variable: v,
+                    bit: 0,
+                    vote: 0,
+                };
+                (id, Tree::new(&spec, &mut rng))
+            })
+            .collect();
+        assert!(
+            m.trees[0].1.literals().iter().any(|&l| l >= 20),
+            "candidate bits used"
+        );
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("model.aln");
+        m.write(&path).unwrap();
+        assert_eq!(Model::read(&path).unwrap(), m);
+        // Read as a bit-forest, the same trees have literals out of range.
+        m.header.model = ModelKind::BitForest;
+        m.header.outputs = vec![("a.1.x".into(), 1), ("a.1.y".into(), 1)];
+        m.write(&path).unwrap();
+        let error = Model::read(&path).unwrap_err().to_string();
+        assert!(error.contains("beyond its 10 inputs"), "{error}");
     }
 
     #[test]

@@ -9,7 +9,11 @@ use alnlab_quantize::codes::{Code, Codec};
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
-use crate::forest::Columns;
+use std::time::Instant;
+
+use rayon::prelude::*;
+
+use crate::forest::{Columns, Trained, TreeId};
 use crate::tree::{EpochLog, Samples, Scratch, Tree, TreeSpec};
 
 /// The first level in `0..levels` at which `below` (true for levels under
@@ -84,7 +88,7 @@ impl ThresholdModel {
             columns: &inputs.data,
             targets: &targets,
         };
-        let log = tree.train_epochs(&samples, epochs);
+        let log = tree.train_epochs(&samples, epochs, &mut rng);
         (
             ThresholdModel {
                 tree,
@@ -110,6 +114,64 @@ impl ThresholdModel {
             self.tree.evaluate(&input, scratch)
         })
     }
+}
+
+/// The candidates each training row is presented with (§6): the levels
+/// within `near` of its true level and `far` random ones.
+#[derive(Clone, Copy, Debug)]
+pub struct Candidates {
+    pub near: usize,
+    pub far: usize,
+}
+
+/// Trains `vote` threshold trees for each output variable, in parallel:
+/// `targets[v]` holds variable v's true levels for the rows of `x` and its
+/// number of levels. Tree (v, voter) is [`TreeId`] { variable: v, bit: 0,
+/// vote: voter }, seeded from `seed` and that identity alone.
+#[allow(clippy::too_many_arguments)]
+pub fn train_forest(
+    spec: &TreeSpec,
+    epochs: usize,
+    vote: u32,
+    seed: u64,
+    candidates: Candidates,
+    x: &BitMatrix,
+    targets: &[(&[u16], usize)],
+    on_tree_done: &(dyn Fn() + Sync),
+) -> Vec<Trained> {
+    let ids: Vec<TreeId> = (0..targets.len() as u32)
+        .flat_map(|variable| {
+            (0..vote).map(move |voter| TreeId {
+                variable,
+                bit: 0,
+                vote: voter,
+            })
+        })
+        .collect();
+    ids.par_iter()
+        .map(|&id| {
+            let (y, levels) = targets[id.variable as usize];
+            let clock = Instant::now();
+            let (model, epochs_log) = ThresholdModel::train(
+                spec,
+                epochs,
+                id.seed(seed),
+                x,
+                y,
+                levels,
+                candidates.near,
+                candidates.far,
+            );
+            let per_epoch = clock.elapsed().as_secs_f64() / epochs_log.len().max(1) as f64;
+            on_tree_done();
+            Trained {
+                id,
+                tree: model.tree,
+                seconds: vec![per_epoch; epochs_log.len()],
+                epochs: epochs_log,
+            }
+        })
+        .collect()
 }
 
 /// Bit-sliced columns of x rows (`rows[s]`) followed by the thermometer code
