@@ -3,8 +3,10 @@
 //! of a pattern equals it on at least one whole chunk. So the codewords that
 //! share a chunk with the pattern — a few buckets' worth — contain every
 //! codeword that near, and the nearest of them is the nearest of all when it
-//! lies within k − 1. Predicted codes are mostly that near, which makes
-//! walk decoding a handful of popcounts instead of a scan of all levels.
+//! lies within k − 1. Predicted codes are mostly that near — most of them
+//! codewords outright, which a hash table finds with one probe — so walk
+//! decoding takes a probe or a handful of popcounts instead of a scan of all
+//! levels.
 
 /// Buckets of codewords by the value of each chunk.
 #[derive(Clone, Debug, PartialEq)]
@@ -16,6 +18,10 @@ pub struct ChunkIndex {
     starts: Vec<u32>,
     /// Levels, ascending within each bucket.
     levels: Vec<u32>,
+    /// An open-addressing hash table of the codewords (level + 1 per slot,
+    /// 0 empty, linear probing): a pattern that is a codeword — most
+    /// predictions — is found with one probe.
+    exact: Vec<u32>,
 }
 
 impl ChunkIndex {
@@ -47,17 +53,46 @@ impl ChunkIndex {
                 fill[i] += 1;
             }
         }
+        let slots = (2 * codewords.len()).next_power_of_two();
+        let mut exact = vec![0u32; slots];
+        for (level, &word) in codewords.iter().enumerate() {
+            let mut slot = exact_slot(word, slots - 1);
+            while exact[slot] != 0 {
+                slot = (slot + 1) & (slots - 1);
+            }
+            exact[slot] = level as u32 + 1;
+        }
         ChunkIndex {
             chunks,
             chunk_bits,
             starts,
             levels,
+            exact,
+        }
+    }
+
+    /// The lowest level whose codeword is `bits`, if any.
+    fn exact_level(&self, codewords: &[u64], bits: u64) -> Option<usize> {
+        let mask = self.exact.len() - 1;
+        let mut slot = exact_slot(bits, mask);
+        loop {
+            let entry = self.exact[slot] as usize;
+            if entry == 0 {
+                return None;
+            }
+            if codewords[entry - 1] == bits {
+                return Some(entry - 1);
+            }
+            slot = (slot + 1) & mask;
         }
     }
 
     /// The level of the codeword nearest to `bits` (the lowest on ties) if
     /// its distance is at most k − 1; `None` when every codeword is farther.
     pub fn nearest_within(&self, codewords: &[u64], bits: u64) -> Option<usize> {
+        if let Some(level) = self.exact_level(codewords, bits) {
+            return Some(level);
+        }
         let (mut best, mut best_level) = (u32::MAX, usize::MAX);
         for c in 0..self.chunks {
             let value = (bits >> (c * self.chunk_bits) & ((1 << self.chunk_bits) - 1)) as usize;
@@ -65,11 +100,6 @@ impl ChunkIndex {
             for &level in &self.levels[self.starts[i] as usize..self.starts[i + 1] as usize] {
                 let level = level as usize;
                 let d = (codewords[level] ^ bits).count_ones();
-                if d == 0 {
-                    // A codeword itself (the lowest level of equal ones,
-                    // buckets being ascending): nothing is nearer.
-                    return Some(level);
-                }
                 if (d, level) < (best, best_level) {
                     (best, best_level) = (d, level);
                 }
@@ -77,6 +107,11 @@ impl ChunkIndex {
         }
         (best < self.chunks).then_some(best_level)
     }
+}
+
+/// Fibonacci hashing of a codeword into a table of `mask + 1` slots.
+fn exact_slot(word: u64, mask: usize) -> usize {
+    (word.wrapping_mul(0x9E37_79B9_7F4A_7C15) >> 40) as usize & mask
 }
 
 #[cfg(test)]

@@ -58,13 +58,27 @@ impl Columns {
     pub fn transpose_word(&self, w: usize, rows: &mut [u64; 64]) {
         assert!(self.bits <= 64, "rows of at most 64 bits");
         rows.fill(0);
-        for b in 0..self.bits {
-            let mut word = self.data[b * self.words + w];
-            while word != 0 {
-                rows[word.trailing_zeros() as usize] |= 1 << b;
-                word &= word - 1;
-            }
+        for (b, row) in rows.iter_mut().enumerate().take(self.bits) {
+            *row = self.data[b * self.words + w];
         }
+        transpose(rows);
+    }
+}
+
+/// Transposes a 64×64 bit matrix in place (bit c of `m[r]` ↔ bit r of
+/// `m[c]`) by swapping off-diagonal blocks of 32, 16, … 1: 6·32 masked swaps
+/// rather than a loop per bit.
+fn transpose(m: &mut [u64; 64]) {
+    let mut j = 32;
+    let mut mask: u64 = 0x0000_0000_FFFF_FFFF;
+    while j != 0 {
+        for k in (0..64).filter(|k| k & j == 0) {
+            let t = ((m[k] >> j) ^ m[k + j]) & mask;
+            m[k + j] ^= t;
+            m[k] ^= t << j;
+        }
+        j >>= 1;
+        mask ^= mask << j;
     }
 }
 
@@ -387,6 +401,33 @@ mod tests {
                 .collect::<Vec<_>>()
         };
         assert_eq!(run(1), run(2));
+    }
+
+    #[test]
+    fn transposing_a_word_gives_each_sample_its_bits() {
+        let mut rng = ChaCha8Rng::seed_from_u64(12);
+        for bits in [1, 23, 64] {
+            let columns = Columns {
+                count: 130,
+                bits,
+                words: 3,
+                data: (0..3 * bits).map(|_| rng.random()).collect(),
+            };
+            let mut rows = [0u64; 64];
+            for w in 0..3 {
+                columns.transpose_word(w, &mut rows);
+                for (i, row) in rows.iter().enumerate() {
+                    for b in 0..64 {
+                        let expected = b < bits && columns.column(b)[w] >> i & 1 == 1;
+                        assert_eq!(
+                            row >> b & 1 == 1,
+                            expected,
+                            "bits {bits}, word {w}, sample {i}, bit {b}"
+                        );
+                    }
+                }
+            }
+        }
     }
 
     #[test]
