@@ -3,6 +3,8 @@
 //! writes `summary.parquet` and `reports/<experiment>/report.md`. Not yet part
 //! of the stage graph.
 
+pub mod stats;
+
 /// File name of the summary table.
 pub const SUMMARY_FILE: &str = "summary.parquet";
 /// File name of the report.
