@@ -62,45 +62,50 @@ fn run_ok(dir: &Path, args: &[&str]) -> RunRecord {
     serde_json::from_slice(&json).unwrap()
 }
 
-/// (stage, cached) for every stage of the first variant.
-fn stages(record: &RunRecord) -> Vec<(String, bool)> {
-    record.variants[0]
-        .stages
-        .iter()
-        .map(|s| (s.stage.clone(), s.cached))
-        .collect()
+/// The stages of a variant, in order.
+const STAGES: [&str; 5] = ["simulate", "stride", "quantize", "train", "test"];
+
+/// Whether each stage of the first variant (in [`STAGES`] order) was cached.
+fn cached(record: &RunRecord) -> Vec<bool> {
+    let stages = &record.variants[0].stages;
+    assert!(stages.iter().map(|s| s.stage.as_str()).eq(STAGES));
+    stages.iter().map(|s| s.cached).collect()
 }
 
 /// Bytes of every artifact file of the first variant, by role; the training
-/// log as its columns less `seconds` (a measurement, the one value in an
-/// artifact that differs between equal runs).
+/// log as its columns less `seconds` and the timings less `ns_per_state`
+/// (measurements, the only values in artifacts that differ between equal
+/// runs).
 fn artifact_bytes(dir: &Path, record: &RunRecord) -> Vec<(String, Vec<u8>)> {
     record.variants[0]
         .artifacts
         .iter()
         .map(|(role, a)| {
             let path = dir.join(&a.path);
-            let bytes = if role == "training" {
-                training_log(&path)
-            } else {
-                std::fs::read(&path).unwrap()
+            let bytes = match role.as_str() {
+                "training" => table_without(&path, "seconds"),
+                "timings" => table_without(&path, "ns_per_state"),
+                _ => std::fs::read(&path).unwrap(),
             };
             (role.clone(), bytes)
         })
         .collect()
 }
 
-/// The training log's deterministic columns, as text.
-fn training_log(path: &Path) -> Vec<u8> {
+/// A table's columns but one, as text.
+fn table_without(path: &Path, measured: &str) -> Vec<u8> {
     let table = alnlab_common::table::Table::read(path).unwrap();
     let schema = table.batch.schema();
     let mut text = String::new();
     for (field, column) in schema.fields().iter().zip(table.batch.columns()) {
-        if field.name() != "seconds" {
+        if field.name() != measured {
             text.push_str(&format!("{}: {:?}\n", field.name(), column));
         }
     }
-    assert!(text.contains("errors"));
+    assert!(
+        schema.field_with_name(measured).is_ok(),
+        "{measured} is a column"
+    );
     text.into_bytes()
 }
 
@@ -199,35 +204,21 @@ fn cache_reuses_and_reruns_only_what_changed() {
     let dir = tempfile::tempdir().unwrap();
     write_manifest(dir.path(), "m.toml", MANIFEST);
     let first = run_ok(dir.path(), &["m.toml"]);
-    assert_eq!(
-        stages(&first),
-        [
-            ("simulate".into(), false),
-            ("stride".into(), false),
-            ("quantize".into(), false),
-            ("train".into(), false)
-        ]
-    );
+    assert_eq!(cached(&first), [false, false, false, false, false]);
     assert!(first.variants[0].artifacts.keys().eq([
         "codebook",
         "levels",
         "model",
         "pairs",
+        "predictions",
         "stats",
+        "timings",
         "training",
         "trajectory"
     ]));
 
     let second = run_ok(dir.path(), &["m.toml"]);
-    assert_eq!(
-        stages(&second),
-        [
-            ("simulate".into(), true),
-            ("stride".into(), true),
-            ("quantize".into(), true),
-            ("train".into(), true)
-        ]
-    );
+    assert_eq!(cached(&second), [true, true, true, true, true]);
     assert_eq!(
         first.variants[0].artifacts["pairs"].sha256,
         second.variants[0].artifacts["pairs"].sha256
@@ -236,15 +227,7 @@ fn cache_reuses_and_reruns_only_what_changed() {
     // A stride parameter: simulate stays cached, stride re-runs.
     write_manifest(dir.path(), "m.toml", &MANIFEST.replace("n = 5", "n = 4"));
     let third = run_ok(dir.path(), &["m.toml"]);
-    assert_eq!(
-        stages(&third),
-        [
-            ("simulate".into(), true),
-            ("stride".into(), false),
-            ("quantize".into(), false),
-            ("train".into(), false)
-        ]
-    );
+    assert_eq!(cached(&third), [true, false, false, false, false]);
 
     // A simulate parameter: everything downstream re-runs too.
     write_manifest(
@@ -253,40 +236,16 @@ fn cache_reuses_and_reruns_only_what_changed() {
         &MANIFEST.replace("runs = 2", "runs = 3"),
     );
     let fourth = run_ok(dir.path(), &["m.toml"]);
-    assert_eq!(
-        stages(&fourth),
-        [
-            ("simulate".into(), false),
-            ("stride".into(), false),
-            ("quantize".into(), false),
-            ("train".into(), false)
-        ]
-    );
+    assert_eq!(cached(&fourth), [false, false, false, false, false]);
 
     // Going back to the first manifest finds its artifacts again.
     write_manifest(dir.path(), "m.toml", MANIFEST);
     let fifth = run_ok(dir.path(), &["m.toml"]);
-    assert_eq!(
-        stages(&fifth),
-        [
-            ("simulate".into(), true),
-            ("stride".into(), true),
-            ("quantize".into(), true),
-            ("train".into(), true)
-        ]
-    );
+    assert_eq!(cached(&fifth), [true, true, true, true, true]);
 
     // --force re-runs all.
     let forced = run_ok(dir.path(), &["m.toml", "--force"]);
-    assert_eq!(
-        stages(&forced),
-        [
-            ("simulate".into(), false),
-            ("stride".into(), false),
-            ("quantize".into(), false),
-            ("train".into(), false)
-        ]
-    );
+    assert_eq!(cached(&forced), [false, false, false, false, false]);
 }
 
 #[test]
@@ -467,6 +426,35 @@ fn stages_run_alone_on_explicit_files_match_the_pipeline() {
             "{role} differs between the stage alone and the pipeline"
         );
     }
+    // The test stage alone, on the pipeline's model, codebook and levels.
+    let artifact = |role: &str| {
+        let path = dir.path().join(&record.variants[0].artifacts[role].path);
+        path.display().to_string()
+    };
+    let (model, codebook, levels) = (artifact("model"), artifact("codebook"), artifact("levels"));
+    let out = alnlab(
+        dir.path(),
+        &[
+            "-q",
+            "test",
+            "--manifest",
+            "m.toml",
+            "--model",
+            &model,
+            "--codebook",
+            &codebook,
+            "--levels",
+            &levels,
+            "--out",
+            "alone",
+        ],
+    );
+    assert!(out.status.success(), "{}", stderr(&out));
+    let alone = std::fs::read(dir.path().join("alone/predictions.parquet")).unwrap();
+    assert!(
+        alone == std::fs::read(artifact("predictions")).unwrap(),
+        "predictions differ"
+    );
 }
 
 #[test]

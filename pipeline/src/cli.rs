@@ -129,6 +129,27 @@ pub enum Command {
         #[arg(long)]
         out: PathBuf,
     },
+    /// Run the test stage alone: the model's predictions for every test row,
+    /// beside the persistence and linear baselines, and their timings.
+    #[command(after_help = "Example:
+  alnlab test --manifest experiments/quickstart.toml --model /tmp/train/model.aln \\
+      --codebook /tmp/quantize/codebook.parquet --levels /tmp/quantize/levels.parquet --out /tmp/test")]
+    Test {
+        #[command(flatten)]
+        from: ManifestArgs,
+        /// The model written by train.
+        #[arg(long)]
+        model: PathBuf,
+        /// The codebook written by quantize.
+        #[arg(long)]
+        codebook: PathBuf,
+        /// The levels table written by quantize.
+        #[arg(long)]
+        levels: PathBuf,
+        /// Folder to write predictions.parquet and timings.parquet into.
+        #[arg(long)]
+        out: PathBuf,
+    },
     /// Benchmarks; each prints its figures, or one JSON object with --json.
     #[command(
         subcommand,
@@ -338,6 +359,28 @@ pub fn execute(cli: Cli) -> Result<()> {
             quiet,
             |params, seed, provenance, bar| {
                 alnlab_train::run(params, seed, &codebook, &levels, provenance, &out, bar)
+            },
+        ),
+        Command::Test {
+            from,
+            model,
+            codebook,
+            levels,
+            out,
+        } => run_alone(
+            &from,
+            "test",
+            |s| &s.test,
+            &[
+                ("model", &model),
+                ("codebook", &codebook),
+                ("levels", &levels),
+            ],
+            &out,
+            &[alnlab_test::PREDICTIONS_FILE, alnlab_test::TIMINGS_FILE],
+            quiet,
+            |params, _seed, provenance, bar| {
+                alnlab_test::run(params, &model, &codebook, &levels, provenance, &out, bar)
             },
         ),
         Command::Bench(Bench::Train { json }) => {

@@ -67,6 +67,9 @@ pub struct Stages {
     /// `[train]`
     #[serde(default)]
     pub train: alnlab_train::Params,
+    /// `[test]`
+    #[serde(default)]
+    pub test: alnlab_test::Params,
 }
 
 /// The whole document as deserialized (variants handled separately).
@@ -82,6 +85,8 @@ struct Document {
     quantize: alnlab_quantize::Params,
     #[serde(default)]
     train: alnlab_train::Params,
+    #[serde(default)]
+    test: alnlab_test::Params,
 }
 
 /// An error in a manifest, located in the file.
@@ -219,6 +224,7 @@ fn split(document: Document) -> (Experiment, Stages) {
         stride: document.stride,
         quantize: document.quantize,
         train: document.train,
+        test: document.test,
     };
     (document.experiment, stages)
 }
@@ -476,6 +482,7 @@ fn validate(
         ("stride", stages.stride.validate()),
         ("quantize", stages.quantize.validate()),
         ("train", stages.train.validate()),
+        ("test", stages.test.validate()),
     ];
     let failure = checks
         .into_iter()

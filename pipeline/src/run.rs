@@ -222,7 +222,7 @@ impl Graph<'_> {
 
         let params = stage_params(seed, &stages.train);
         let (codebook, levels) = (quantize.path("codebook"), quantize.path("levels"));
-        self.stage(
+        let train = self.stage(
             "train",
             alnlab_train::FORMAT_VERSION,
             &params,
@@ -235,6 +235,34 @@ impl Graph<'_> {
                 alnlab_train::run(
                     &stages.train,
                     seed,
+                    &codebook,
+                    &levels,
+                    provenance,
+                    dir,
+                    bar,
+                )
+            },
+        )?;
+
+        let params = stage_params(seed, &stages.test);
+        let model = train.path("model");
+        self.stage(
+            "test",
+            alnlab_test::FORMAT_VERSION,
+            &params,
+            &[
+                ("model", &train),
+                ("codebook", &quantize),
+                ("levels", &quantize),
+            ],
+            &[
+                ("predictions", alnlab_test::PREDICTIONS_FILE),
+                ("timings", alnlab_test::TIMINGS_FILE),
+            ],
+            |provenance, dir, bar| {
+                alnlab_test::run(
+                    &stages.test,
+                    &model,
                     &codebook,
                     &levels,
                     provenance,

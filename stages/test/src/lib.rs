@@ -1,9 +1,242 @@
-//! The test stage (paper §4.5; DESIGN.md §6–7) — its contract, pending its own
-//! issue: reads the model and `levels.parquet`, predicts every test row and
-//! writes `predictions.parquet` and `timings.parquet`. Not yet part of the
-//! stage graph.
+//! The test stage (paper §4.5, §4.7; DESIGN.md §6–7): loads the model,
+//! predicts the next level of every learned variable for every test row of
+//! `levels.parquet`, and scores it beside the baselines ([`baseline`]) on
+//! the same rows. Writes
+//! - `predictions.parquet`: per model (`aln`, `persistence`, `linear`),
+//!   variable and test row: the true level, the predicted level and the
+//!   absolute error in levels;
+//! - `timings.parquet`: ns per predicted state for each model and evaluation
+//!   path, with the threads used and the machine's cores — a measurement,
+//!   the one artifact that differs between equal runs.
 
+pub mod baseline;
+pub mod predict;
+
+use std::path::Path;
+use std::sync::Arc;
+
+use alnlab_common::hash::sha256_file;
+use alnlab_common::params::{self, Fraction, ParamError};
+use alnlab_common::table::{self, Table};
+use alnlab_common::{Error, Progress, Provenance, Result};
+use alnlab_quantize::Codebook;
+use alnlab_quantize::codes::Codec;
+use alnlab_train::model::Model;
+use arrow_array::{Array, Float64Array, StringArray, UInt16Array, UInt32Array};
+use serde::{Deserialize, Serialize};
+
+use crate::predict::Timing;
+
+/// Version of what this stage writes (part of every cache key).
+pub const FORMAT_VERSION: u32 = 1;
 /// File name of the predictions table.
 pub const PREDICTIONS_FILE: &str = "predictions.parquet";
 /// File name of the timings table.
 pub const TIMINGS_FILE: &str = "timings.parquet";
+
+/// The models of `predictions.parquet`, in order.
+pub const MODELS: [&str; 3] = ["aln", "persistence", "linear"];
+
+/// The `[test]` table of a manifest.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct Params {
+    /// Rate limiting (§4.7): each decoded variable moves at most this
+    /// fraction of its levels from its current level. Off when absent.
+    pub rate_limit: Option<Fraction>,
+}
+
+impl Params {
+    /// Checks the parameters (every value the types admit is allowed).
+    pub fn validate(&self) -> std::result::Result<(), ParamError> {
+        Ok(())
+    }
+
+    /// The most levels each variable may move, if rate limited.
+    fn windows(&self, codecs: &[Codec]) -> Option<Vec<usize>> {
+        self.rate_limit.map(|f| {
+            codecs
+                .iter()
+                .map(|c| (f.get() * (c.levels() - 1) as f64).ceil() as usize)
+                .collect()
+        })
+    }
+}
+
+/// The test rows' levels: `x[v][k]` and `y[v][k]` for learned variable v and
+/// the k-th test row.
+pub struct TestRows {
+    /// Row indices in `levels.parquet`.
+    pub rows: Vec<usize>,
+    pub x: Vec<Vec<u16>>,
+    pub y: Vec<Vec<u16>>,
+}
+
+/// Reads the model, codebook and levels, predicts, writes both tables.
+#[allow(clippy::too_many_arguments)]
+pub fn run(
+    params: &Params,
+    model_path: &Path,
+    codebook_path: &Path,
+    levels_path: &Path,
+    provenance: &Provenance,
+    out_dir: &Path,
+    progress: &dyn Progress,
+) -> Result<()> {
+    params.validate().map_err(|e| params::invalid("test", e))?;
+    let model = Model::read(model_path)?;
+    if model.header.codebook_sha256 != sha256_file(codebook_path)? {
+        return Err(Error::bad_file(
+            model_path,
+            format!(
+                "was trained with another codebook than {}",
+                codebook_path.display()
+            ),
+        ));
+    }
+    let codebook = Codebook::read(codebook_path)?;
+    let learned: Vec<_> = codebook.learned().collect();
+    let names: Vec<&str> = learned.iter().map(|e| e.variable.as_str()).collect();
+    let outputs: Vec<&str> = model
+        .header
+        .outputs
+        .iter()
+        .map(|(n, _)| n.as_str())
+        .collect();
+    if names != outputs {
+        return Err(Error::bad_file(
+            model_path,
+            format!("predicts {outputs:?}, but the codebook learns {names:?}"),
+        ));
+    }
+    let codecs: Vec<Codec> = learned
+        .iter()
+        .map(|e| {
+            e.codec()
+                .map_err(|m| Error::bad_file(codebook_path, format!("{}: {m}", e.variable)))
+        })
+        .collect::<Result<_>>()?;
+    let levels = Table::read(levels_path)?;
+    let split = levels.column::<StringArray>("split")?;
+    let rows_of = |wanted: &str| -> Vec<usize> {
+        (0..levels.num_rows())
+            .filter(|&r| [wanted, "both"].contains(&split.value(r)))
+            .collect()
+    };
+    let column = |side: &str, variable: &str| -> Result<&[u16]> {
+        Ok(levels
+            .column::<UInt16Array>(&format!("{side}.{variable}"))?
+            .values())
+    };
+    let select = |side: &str, rows: &[usize]| -> Result<Vec<Vec<u16>>> {
+        names
+            .iter()
+            .map(|v| {
+                let levels = column(side, v)?;
+                Ok(rows.iter().map(|&r| levels[r]).collect())
+            })
+            .collect()
+    };
+    let test_rows = rows_of("test");
+    if test_rows.is_empty() {
+        return Err(Error::bad_file(levels_path, "has no test rows"));
+    }
+    let train_rows = rows_of("train");
+    let test = TestRows {
+        x: select("x", &test_rows)?,
+        y: select("y", &test_rows)?,
+        rows: test_rows,
+    };
+
+    progress.start("test", 3, "models");
+    let windows = params.windows(&codecs);
+    let (aln, mut timings) = predict::aln(&model, &codecs, &test.x, windows.as_deref());
+    progress.advance(1);
+    let persistence = test.x.clone();
+    progress.advance(1);
+    let levels_of: Vec<usize> = codecs.iter().map(Codec::levels).collect();
+    let linear = baseline::Linear::fit(&select("x", &train_rows)?, &select("y", &train_rows)?);
+    let (linear_levels, linear_timing) = predict::linear(&linear, &test.x, &levels_of);
+    timings.push(linear_timing);
+    progress.advance(1);
+
+    write_predictions(
+        &out_dir.join(PREDICTIONS_FILE),
+        &names,
+        &test,
+        &[&aln, &persistence, &linear_levels],
+        provenance,
+    )?;
+    write_timings(&out_dir.join(TIMINGS_FILE), &timings, provenance)
+}
+
+/// `predictions.parquet`: one row per model, variable and test row.
+fn write_predictions(
+    path: &Path,
+    names: &[&str],
+    test: &TestRows,
+    predicted: &[&Vec<Vec<u16>>; 3],
+    provenance: &Provenance,
+) -> Result<()> {
+    let (mut model, mut variable, mut row) = (Vec::new(), Vec::new(), Vec::new());
+    let (mut truth, mut guess, mut error) = (Vec::new(), Vec::new(), Vec::new());
+    for (name, levels) in MODELS.iter().zip(predicted) {
+        for (v, var) in names.iter().enumerate() {
+            for (k, &r) in test.rows.iter().enumerate() {
+                let (t, p) = (test.y[v][k], levels[v][k]);
+                model.push(*name);
+                variable.push(*var);
+                row.push(r as u32);
+                truth.push(t);
+                guess.push(p);
+                error.push(t.abs_diff(p));
+            }
+        }
+    }
+    let batch = table::batch(vec![
+        (
+            "model",
+            Arc::new(StringArray::from(model)) as Arc<dyn Array>,
+        ),
+        ("variable", Arc::new(StringArray::from(variable))),
+        ("row", Arc::new(UInt32Array::from(row))),
+        ("true_level", Arc::new(UInt16Array::from(truth))),
+        ("predicted_level", Arc::new(UInt16Array::from(guess))),
+        ("error", Arc::new(UInt16Array::from(error))),
+    ]);
+    table::write_parquet(path, &batch, provenance)
+}
+
+/// `timings.parquet`: one row per model and evaluation path.
+fn write_timings(path: &Path, timings: &[Timing], provenance: &Provenance) -> Result<()> {
+    let cores = std::thread::available_parallelism().map_or(1, |n| n.get()) as u32;
+    let column =
+        |f: fn(&Timing) -> u32| UInt32Array::from(timings.iter().map(f).collect::<Vec<_>>());
+    let batch = table::batch(vec![
+        (
+            "model",
+            Arc::new(StringArray::from_iter_values(
+                timings.iter().map(|t| t.model),
+            )) as Arc<dyn Array>,
+        ),
+        (
+            "path",
+            Arc::new(StringArray::from_iter_values(
+                timings.iter().map(|t| t.path),
+            )),
+        ),
+        (
+            "ns_per_state",
+            Arc::new(Float64Array::from_iter_values(
+                timings.iter().map(|t| t.ns_per_state),
+            )),
+        ),
+        ("states", Arc::new(column(|t| t.states as u32))),
+        ("threads", Arc::new(column(|t| t.threads as u32))),
+        (
+            "cores",
+            Arc::new(UInt32Array::from(vec![cores; timings.len()])),
+        ),
+    ]);
+    table::write_parquet(path, &batch, provenance)
+}

@@ -14,7 +14,7 @@ use std::time::Instant;
 use rayon::prelude::*;
 
 use crate::forest::{Columns, Trained, TreeId};
-use crate::tree::{EpochLog, Samples, Scratch, Tree, TreeSpec};
+use crate::tree::{EpochLog, Samples, Tree, TreeSpec};
 
 /// The first level in `0..levels` at which `below` (true for levels under
 /// the answer, false from it on) is false; `levels` if it never is. With a
@@ -101,19 +101,38 @@ impl ThresholdModel {
 
     /// The predicted level for one row of inputs (packed words of `x_bits`
     /// bits, zero beyond): binary search for where the predicate turns false.
-    pub fn predict(&self, x_row: &[u64], scratch: &mut Scratch) -> usize {
-        let width = self.thermometer.width() as usize;
-        let mut input = vec![0u64; (self.x_bits + width).div_ceil(64)];
-        transition(self.thermometer.levels(), |candidate| {
-            input.fill(0);
-            input[..x_row.len()].copy_from_slice(x_row);
-            // Level k in thermometer code: its first k bits set.
-            for bit in self.x_bits..self.x_bits + candidate {
-                input[bit / 64] |= 1 << (bit % 64);
-            }
-            self.tree.evaluate(&input, scratch)
-        })
+    pub fn predict(&self, x_row: &[u64], input: &mut Vec<u64>) -> usize {
+        predict(&[&self.tree], self.x_bits, &self.thermometer, x_row, input)
     }
+}
+
+/// The level predicted by the majority of `voters` (threshold trees over
+/// `x_bits` input bits and `thermometer`'s candidate) for one row of inputs:
+/// binary search for where the voted predicate turns false. Each tree is
+/// evaluated parsimoniously; `input` is scratch space.
+pub fn predict(
+    voters: &[&Tree],
+    x_bits: usize,
+    thermometer: &Codec,
+    x_row: &[u64],
+    input: &mut Vec<u64>,
+) -> usize {
+    let width = thermometer.width() as usize;
+    input.clear();
+    input.resize((x_bits + width).div_ceil(64), 0);
+    transition(thermometer.levels(), |candidate| {
+        input.fill(0);
+        input[..x_row.len()].copy_from_slice(x_row);
+        // Level k in thermometer code: its first k bits set.
+        for bit in x_bits..x_bits + candidate {
+            input[bit / 64] |= 1 << (bit % 64);
+        }
+        let yes = voters
+            .iter()
+            .filter(|tree| tree.evaluate_parsimonious(input).0)
+            .count();
+        2 * yes > voters.len()
+    })
 }
 
 /// The candidates each training row is presented with (§6): the levels
@@ -234,11 +253,11 @@ mod tests {
         };
         // Rows 0..400 train (y has 400 entries), rows 400..600 test.
         let (model, log) = ThresholdModel::train(&spec, 20, 5, &x_bits, &y[..400], levels, 2, 2);
-        let mut scratch = Scratch::default();
+        let mut input = Vec::new();
         let errors: Vec<usize> = (400..600)
             .map(|r| {
                 model
-                    .predict(x_bits.row(r), &mut scratch)
+                    .predict(x_bits.row(r), &mut input)
                     .abs_diff(usize::from(y[r]))
             })
             .collect();

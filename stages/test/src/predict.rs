@@ -1,0 +1,292 @@
+//! Predicting the test rows with a trained model, timed per evaluation path.
+//!
+//! A bit-forest predicts bit-sliced in batches (all rows at once, on all
+//! threads — the levels come from this path) and one row at a time
+//! (parsimonious chains), which must agree; a threshold model predicts one
+//! row at a time by binary search. Times are for encoded inputs to decoded
+//! levels: the trees, the votes and the decoding (with rate limiting, when
+//! on, as `decode_near` around the current level).
+
+use std::time::Instant;
+
+use alnlab_quantize::bits::{BitMatrix, encode};
+use alnlab_quantize::codes::{Code, Codec};
+use alnlab_train::ModelKind;
+use alnlab_train::forest::{Columns, Predictor};
+use alnlab_train::model::Model;
+use alnlab_train::threshold;
+use alnlab_train::tree::Tree;
+use rayon::prelude::*;
+
+use crate::baseline::Linear;
+
+/// One measured evaluation path.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Timing {
+    pub model: &'static str,
+    /// `batched`, `single` or `threshold-search`.
+    pub path: &'static str,
+    pub ns_per_state: f64,
+    /// States timed.
+    pub states: usize,
+    pub threads: usize,
+}
+
+/// The ALN's predicted levels `[variable][row]` for the current levels `x`
+/// (`[variable][row]`), and the timings of its evaluation paths. `windows`
+/// rate-limits each variable to within that many levels of its current one.
+pub fn aln(
+    model: &Model,
+    codecs: &[Codec],
+    x: &[Vec<u16>],
+    windows: Option<&[usize]>,
+) -> (Vec<Vec<u16>>, Vec<Timing>) {
+    let refs: Vec<&Codec> = codecs.iter().collect();
+    let columns: Vec<&[u16]> = x.iter().map(Vec::as_slice).collect();
+    let inputs = encode(&refs, &columns);
+    match model.header.model {
+        ModelKind::BitForest => bit_forest(model, codecs, x, &inputs, windows),
+        ModelKind::Threshold => {
+            let (levels, timing) = threshold_search(model, codecs, x, &inputs, windows);
+            (levels, vec![timing])
+        }
+    }
+}
+
+/// The level a code decodes to, rate limited around `current` if asked.
+fn decode(codec: &Codec, code: &[u64], current: u16, window: Option<usize>) -> u16 {
+    let level = match window {
+        Some(w) => codec.decode_near(code, usize::from(current), w),
+        None => codec.decode(code),
+    };
+    level as u16
+}
+
+// A row index reads the inputs, the current levels and the outputs at once.
+#[allow(clippy::needless_range_loop)]
+fn bit_forest(
+    model: &Model,
+    codecs: &[Codec],
+    x: &[Vec<u16>],
+    inputs: &BitMatrix,
+    windows: Option<&[usize]>,
+) -> (Vec<Vec<u16>>, Vec<Timing>) {
+    let rows = inputs.rows();
+    let widths: Vec<usize> = model.header.outputs.iter().map(|(_, w)| *w).collect();
+    let trees = model.trees.iter().map(|(id, tree)| (*id, tree));
+    let predictor = Predictor::new(trees, &widths, model.header.vote);
+    let window = |v: usize| windows.map(|w| w[v]);
+
+    let sliced = Columns::from_rows(inputs, &(0..rows).collect::<Vec<_>>());
+    let clock = Instant::now();
+    let out = predictor.predict(&sliced);
+    let levels: Vec<Vec<u16>> = out
+        .par_iter()
+        .zip(codecs)
+        .enumerate()
+        .map(|(v, (columns, codec))| {
+            let mut levels = Vec::with_capacity(rows);
+            let mut code = vec![0u64; columns.bits.div_ceil(64)];
+            let mut words = [0u64; 64];
+            for w in 0..columns.words {
+                let samples = (rows - 64 * w).min(64);
+                if columns.bits <= 64 {
+                    columns.transpose_word(w, &mut words);
+                }
+                for (i, &word) in words.iter().enumerate().take(samples) {
+                    let s = 64 * w + i;
+                    if columns.bits <= 64 {
+                        code[0] = word;
+                    } else {
+                        code.fill(0);
+                        for b in 0..columns.bits {
+                            code[b / 64] |= (columns.column(b)[w] >> i & 1) << (b % 64);
+                        }
+                    }
+                    levels.push(decode(codec, &code, x[v][s], window(v)));
+                }
+            }
+            levels
+        })
+        .collect();
+    let batched = Timing {
+        model: "aln",
+        path: "batched",
+        ns_per_state: clock.elapsed().as_nanos() as f64 / rows as f64,
+        states: rows,
+        threads: rayon::current_num_threads(),
+    };
+
+    let mut votes = Vec::new();
+    let mut codes = vec![Vec::new(); codecs.len()];
+    let mut single_levels = vec![Vec::with_capacity(rows); codecs.len()];
+    let clock = Instant::now();
+    for r in 0..rows {
+        predictor.predict_one(inputs.row(r), &mut votes, &mut codes);
+        for (v, (codec, code)) in codecs.iter().zip(&codes).enumerate() {
+            single_levels[v].push(decode(codec, code, x[v][r], window(v)));
+        }
+    }
+    let single = Timing {
+        model: "aln",
+        path: "single",
+        ns_per_state: clock.elapsed().as_nanos() as f64 / rows as f64,
+        states: rows,
+        threads: 1,
+    };
+    assert_eq!(
+        single_levels, levels,
+        "parsimonious and bit-sliced evaluation disagree"
+    );
+    (levels, vec![batched, single])
+}
+
+#[allow(clippy::needless_range_loop)]
+fn threshold_search(
+    model: &Model,
+    codecs: &[Codec],
+    x: &[Vec<u16>],
+    inputs: &BitMatrix,
+    windows: Option<&[usize]>,
+) -> (Vec<Vec<u16>>, Timing) {
+    let vote = model.header.vote as usize;
+    let voters: Vec<Vec<&Tree>> = model
+        .trees
+        .chunks(vote)
+        .map(|chunk| chunk.iter().map(|(_, tree)| tree).collect())
+        .collect();
+    let thermometers: Vec<Codec> = codecs
+        .iter()
+        .map(|c| Codec::new(Code::Thermometer, c.levels(), None).expect("levels ≥ 2"))
+        .collect();
+    let rows = inputs.rows();
+    let mut levels = vec![Vec::with_capacity(rows); codecs.len()];
+    let mut scratch = Vec::new();
+    let clock = Instant::now();
+    for r in 0..rows {
+        for (v, trees) in voters.iter().enumerate() {
+            let level = threshold::predict(
+                trees,
+                inputs.bits(),
+                &thermometers[v],
+                inputs.row(r),
+                &mut scratch,
+            );
+            let level = match windows {
+                Some(w) => {
+                    let current = usize::from(x[v][r]);
+                    level.clamp(current.saturating_sub(w[v]), current + w[v])
+                }
+                None => level,
+            };
+            levels[v].push(level.min(codecs[v].levels() - 1) as u16);
+        }
+    }
+    let timing = Timing {
+        model: "aln",
+        path: "threshold-search",
+        ns_per_state: clock.elapsed().as_nanos() as f64 / rows as f64,
+        states: rows,
+        threads: 1,
+    };
+    (levels, timing)
+}
+
+/// The linear baseline's levels `[variable][row]`, timed one row at a time.
+pub fn linear(model: &Linear, x: &[Vec<u16>], levels: &[usize]) -> (Vec<Vec<u16>>, Timing) {
+    let rows = x.first().map_or(0, Vec::len);
+    let mut out = vec![Vec::with_capacity(rows); x.len()];
+    let (mut row, mut predicted) = (vec![0u16; x.len()], vec![0u16; x.len()]);
+    let clock = Instant::now();
+    for r in 0..rows {
+        for (v, column) in x.iter().enumerate() {
+            row[v] = column[r];
+        }
+        model.predict(&row, levels, &mut predicted);
+        for (v, &p) in predicted.iter().enumerate() {
+            out[v].push(p);
+        }
+    }
+    let timing = Timing {
+        model: "linear",
+        path: "single",
+        ns_per_state: clock.elapsed().as_nanos() as f64 / rows.max(1) as f64,
+        states: rows,
+        threads: 1,
+    };
+    (out, timing)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use alnlab_quantize::walk::WalkSpec;
+    use alnlab_train::forest::{self, Columns};
+    use alnlab_train::model::Header;
+    use alnlab_train::tree::TreeSpec;
+
+    /// A forest (vote 3) trained on y = x + 1 over 64 walk-coded levels, and
+    /// its codec.
+    fn successor_model() -> (Model, Codec) {
+        let spec = WalkSpec {
+            levels: 64,
+            width: 23,
+            step: 1,
+            span: 7,
+            seed: 3,
+        };
+        let codec = Codec::new(Code::Walk, 64, Some(spec)).unwrap();
+        let x: Vec<u16> = (0..800).map(|i| (i * 37 % 63) as u16).collect();
+        let y: Vec<u16> = x.iter().map(|v| v + 1).collect();
+        let all: Vec<usize> = (0..800).collect();
+        let inputs = Columns::from_rows(&encode(&[&codec], &[&x]), &all);
+        let targets = [Columns::from_rows(&encode(&[&codec], &[&y]), &all)];
+        let tree = TreeSpec {
+            leaves: 512,
+            inputs: 23,
+            counter_bound: 3,
+            initial_spread: 1,
+        };
+        let trained = forest::train(&tree, 10, 3, 1, &inputs, &targets, &|| {});
+        let header = Header {
+            codebook_sha256: String::new(),
+            params: serde_json::Value::Null,
+            model: ModelKind::BitForest,
+            inputs: 23,
+            outputs: vec![("v".into(), 23)],
+            vote: 3,
+            counter_bound: 3,
+        };
+        let trees = trained.into_iter().map(|t| (t.id, t.tree)).collect();
+        (Model { header, trees }, codec)
+    }
+
+    #[test]
+    fn both_paths_predict_the_successor_and_rate_limits_hold() {
+        let (model, codec) = successor_model();
+        let x = vec![(0..63u16).rev().collect::<Vec<_>>()];
+        // (The two paths' levels are compared inside.)
+        let (levels, timings) = aln(&model, std::slice::from_ref(&codec), &x, None);
+        let error: usize = levels[0]
+            .iter()
+            .zip(&x[0])
+            .map(|(&p, &c)| p.abs_diff(c + 1) as usize)
+            .sum();
+        assert!(
+            error as f64 / 63.0 <= 1.0,
+            "mean error {}",
+            error as f64 / 63.0
+        );
+        let paths: Vec<&str> = timings.iter().map(|t| t.path).collect();
+        assert_eq!(paths, ["batched", "single"]);
+        assert!(
+            timings
+                .iter()
+                .all(|t| t.ns_per_state > 0.0 && t.states == 63)
+        );
+
+        // Rate limited to 0 levels: nothing moves.
+        let (still, _) = aln(&model, std::slice::from_ref(&codec), &x, Some(&[0]));
+        assert_eq!(still, x);
+    }
+}
