@@ -63,7 +63,14 @@ fn run_ok(dir: &Path, args: &[&str]) -> RunRecord {
 }
 
 /// The stages of a variant, in order.
-const STAGES: [&str; 5] = ["simulate", "stride", "quantize", "train", "test"];
+const STAGES: [&str; 6] = [
+    "simulate",
+    "stride",
+    "quantize",
+    "train",
+    "test",
+    "summarize",
+];
 
 /// Whether each stage of the first variant (in [`STAGES`] order) was cached.
 fn cached(record: &RunRecord) -> Vec<bool> {
@@ -204,7 +211,7 @@ fn cache_reuses_and_reruns_only_what_changed() {
     let dir = tempfile::tempdir().unwrap();
     write_manifest(dir.path(), "m.toml", MANIFEST);
     let first = run_ok(dir.path(), &["m.toml"]);
-    assert_eq!(cached(&first), [false, false, false, false, false]);
+    assert_eq!(cached(&first), [false, false, false, false, false, false]);
     assert!(first.variants[0].artifacts.keys().eq([
         "codebook",
         "levels",
@@ -212,13 +219,14 @@ fn cache_reuses_and_reruns_only_what_changed() {
         "pairs",
         "predictions",
         "stats",
+        "summary",
         "timings",
         "training",
         "trajectory"
     ]));
 
     let second = run_ok(dir.path(), &["m.toml"]);
-    assert_eq!(cached(&second), [true, true, true, true, true]);
+    assert_eq!(cached(&second), [true, true, true, true, true, true]);
     assert_eq!(
         first.variants[0].artifacts["pairs"].sha256,
         second.variants[0].artifacts["pairs"].sha256
@@ -227,7 +235,7 @@ fn cache_reuses_and_reruns_only_what_changed() {
     // A stride parameter: simulate stays cached, stride re-runs.
     write_manifest(dir.path(), "m.toml", &MANIFEST.replace("n = 5", "n = 4"));
     let third = run_ok(dir.path(), &["m.toml"]);
-    assert_eq!(cached(&third), [true, false, false, false, false]);
+    assert_eq!(cached(&third), [true, false, false, false, false, false]);
 
     // A simulate parameter: everything downstream re-runs too.
     write_manifest(
@@ -236,16 +244,16 @@ fn cache_reuses_and_reruns_only_what_changed() {
         &MANIFEST.replace("runs = 2", "runs = 3"),
     );
     let fourth = run_ok(dir.path(), &["m.toml"]);
-    assert_eq!(cached(&fourth), [false, false, false, false, false]);
+    assert_eq!(cached(&fourth), [false, false, false, false, false, false]);
 
     // Going back to the first manifest finds its artifacts again.
     write_manifest(dir.path(), "m.toml", MANIFEST);
     let fifth = run_ok(dir.path(), &["m.toml"]);
-    assert_eq!(cached(&fifth), [true, true, true, true, true]);
+    assert_eq!(cached(&fifth), [true, true, true, true, true, true]);
 
     // --force re-runs all.
     let forced = run_ok(dir.path(), &["m.toml", "--force"]);
-    assert_eq!(cached(&forced), [false, false, false, false, false]);
+    assert_eq!(cached(&forced), [false, false, false, false, false, false]);
 }
 
 #[test]
@@ -577,5 +585,56 @@ fn threshold_models_train_one_tree_per_variable_the_same_on_any_thread_count() {
     assert_eq!(
         std::fs::read(model_path).unwrap(),
         std::fs::read(again_path).unwrap()
+    );
+}
+
+#[test]
+fn the_report_renders_with_its_charts_and_renders_again_the_same() {
+    let dir = tempfile::tempdir().unwrap();
+    write_manifest(dir.path(), "m.toml", MANIFEST);
+    let record = run_ok(dir.path(), &["m.toml"]);
+    let summary = alnlab_summarize::read(
+        &dir.path()
+            .join(&record.variants[0].artifacts["summary"].path),
+    )
+    .unwrap();
+    let models: std::collections::BTreeSet<&str> =
+        summary.iter().map(|r| r.model.as_str()).collect();
+    assert!(models.into_iter().eq(["aln", "linear", "persistence"]));
+    let report_path = dir.path().join("reports/e2e/report.md");
+    let report = std::fs::read_to_string(&report_path).unwrap();
+    for heading in [
+        "## Reproducibility",
+        "Error by group (paper §4.6)",
+        "## Speed against error",
+    ] {
+        assert!(report.contains(heading), "{heading} missing:\n{report}");
+    }
+    // Every chart the report shows exists and is an SVG document.
+    let charts: Vec<&str> = report
+        .split("](")
+        .skip(1)
+        .map(|rest| &rest[..rest.find(')').unwrap()])
+        .collect();
+    assert!(charts.len() >= 3, "{charts:?}");
+    for chart in charts {
+        let svg = std::fs::read_to_string(dir.path().join("reports/e2e").join(chart)).unwrap();
+        assert!(
+            svg.starts_with("<svg") && svg.trim_end().ends_with("</svg>"),
+            "{chart}"
+        );
+    }
+    // `alnlab report` renders it again from the artifacts: the same text.
+    let out = alnlab(dir.path(), &["report", "runs/e2e", "--reports", "again"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let again = std::fs::read_to_string(dir.path().join("again/e2e/report.md")).unwrap();
+    assert_eq!(again, report);
+    // A folder without a run record is a user error.
+    let out = alnlab(dir.path(), &["report", "nowhere"]);
+    assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
+    assert!(
+        stderr(&out).contains("nowhere/run.json"),
+        "{}",
+        stderr(&out)
     );
 }

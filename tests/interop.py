@@ -1,25 +1,77 @@
 """Standard readers must read what alnlab writes (DESIGN.md §2).
 
-Usage: python tests/interop.py RUN_JSON
+Usage: python tests/interop.py RUN_JSON REPORT_DIR
 
 Reads every Parquet artifact named in the run record with pyarrow and every
 MCAP log with the `mcap` package, decoding each /state message with the ROS 2
 decoder from the schema stored in the file, and checks the decoded values
 against the stride stage's pairs table; checks that /tf and /scene use
 Foxglove's well-known schema names and that every scene's model is in an
-`alnlab.model` metadata record. Exits non-zero on any mismatch.
+`alnlab.model` metadata record; recomputes every statistic of
+summary.parquet from predictions.parquet in plain Python; parses every SVG
+the report shows as XML. Exits non-zero on any mismatch.
 """
 
 import json
 import math
+import re
 import sys
+import xml.etree.ElementTree as ET
+from collections import defaultdict
+from pathlib import Path
 
 import pyarrow.parquet as pq
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 
 
-def main(run_json: str) -> int:
+def quantile(xs, q):
+    """numpy's default (linear) percentile of sorted xs."""
+    pos = q * (len(xs) - 1)
+    lo = math.floor(pos)
+    hi = min(lo + 1, len(xs) - 1)
+    return xs[lo] + (xs[hi] - xs[lo]) * (pos - lo)
+
+
+def check_summary(predictions_path, summary_path):
+    """Every statistic of summary.parquet, recomputed from the predictions."""
+    errors = defaultdict(list)
+    for row in pq.read_table(predictions_path, columns=["model", "variable", "error"]).to_pylist():
+        errors[(row["model"], row["variable"])].append(row["error"])
+    summary = pq.read_table(summary_path).to_pylist()
+    assert len(summary) == len(errors), (len(summary), len(errors))
+    for row in summary:
+        xs = sorted(errors[(row["model"], row["variable"])])
+        n = len(xs)
+        mean = sum(xs) / n
+        std = math.sqrt(sum((x - mean) ** 2 for x in xs) / (n - 1)) if n > 1 else float("nan")
+        cut = n * 5 // 100
+        trimmed = sum(xs[cut:n - cut]) / (n - 2 * cut)
+        expected = {
+            "n": n, "mean": mean, "std_dev": std, "std_err": std / math.sqrt(n),
+            "trimmed_mean": trimmed, "median": quantile(xs, 0.5),
+            "iqr": quantile(xs, 0.75) - quantile(xs, 0.25), "p95": quantile(xs, 0.95), "max": xs[-1],
+        }
+        for key, value in expected.items():
+            assert math.isclose(row[key], value, rel_tol=1e-9, abs_tol=1e-12), (row["variable"], key, row[key], value)
+        bins = [xs.count(k) for k in range(10)] + [sum(1 for x in xs if x >= 10)]
+        assert bins == [row[f"hist_{k}"] for k in range(10)] + [row["hist_10_plus"]], row["variable"]
+    return len(summary)
+
+
+def check_report(report_dir):
+    """The report exists and every chart it shows parses as an SVG document."""
+    report = Path(report_dir) / "report.md"
+    text = report.read_text()
+    charts = re.findall(r"!\[[^\]]*\]\(([^)]+)\)", text)
+    assert charts, "the report shows no chart"
+    for chart in charts:
+        root = ET.parse(Path(report_dir) / chart).getroot()
+        assert root.tag == "{http://www.w3.org/2000/svg}svg", (chart, root.tag)
+    return len(charts)
+
+
+def main(run_json: str, report_dir: str) -> int:
     record = json.load(open(run_json))
     checked = 0
     for variant in record["variants"]:
@@ -71,10 +123,13 @@ def main(run_json: str) -> int:
             for name in x:
                 assert row["x." + name] == x[name], (row["step"], name)
                 assert row["y." + name] == y[name], (row["step"], name)
+        summaries = check_summary(artifacts["predictions"]["path"], artifacts["summary"]["path"])
         print(f"{variant['name']}: {len(frames)} /state messages decoded, "
-              f"{len(pairs)} pair rows match, {checked} Parquet files read")
+              f"{len(pairs)} pair rows match, {checked} Parquet files read, "
+              f"{summaries} summary rows recomputed")
+    print(f"report: {check_report(report_dir)} SVG charts parse")
     return 0
 
 
 if __name__ == "__main__":
-    sys.exit(main(sys.argv[1]))
+    sys.exit(main(sys.argv[1], sys.argv[2]))

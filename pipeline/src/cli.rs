@@ -60,6 +60,20 @@ pub enum Command {
         /// Run only this variant.
         #[arg(long)]
         variant: Option<String>,
+        /// Folder for reports: the run's goes to `<reports>/<experiment>/`.
+        #[arg(long, default_value = "reports")]
+        reports: PathBuf,
+    },
+    /// Render a run's report again from its record and artifacts, without
+    /// recomputing anything.
+    #[command(after_help = "Example:
+  alnlab report runs/quickstart")]
+    Report {
+        /// The run's folder: `<out>/<experiment>`, holding run.json.
+        run_dir: PathBuf,
+        /// Folder for reports: the report goes to `<reports>/<experiment>/`.
+        #[arg(long, default_value = "reports")]
+        reports: PathBuf,
     },
     /// Validate a manifest and print it fully resolved, once per variant.
     ///
@@ -212,6 +226,16 @@ pub enum Bench {
         #[arg(long)]
         json: bool,
     },
+    /// Time the summarize stage on 10⁷ errors (3 models × 64 variables ×
+    /// 52 084 rows): reading predictions.parquet, the statistics, writing
+    /// summary.parquet.
+    #[command(after_help = "Example:
+  alnlab bench summarize --json")]
+    Summarize {
+        /// Print one JSON object.
+        #[arg(long)]
+        json: bool,
+    },
     /// Time full-state prediction at the paper's scale: all 1472 trees and
     /// the decoding, bit-sliced in batches and one sample at a time
     /// (parsimonious), with the fraction of nodes evaluated.
@@ -253,6 +277,7 @@ pub fn execute(cli: Cli) -> Result<()> {
             out,
             force,
             variant,
+            reports,
         } => {
             let manifest = Manifest::load(&manifest)?;
             let options = RunOptions {
@@ -277,6 +302,14 @@ pub fn execute(cli: Cli) -> Result<()> {
                 path.display(),
                 record.wall_seconds
             );
+            let report = crate::report::render(&record, &reports)?;
+            println!("report:     {}", report.display());
+            Ok(())
+        }
+        Command::Report { run_dir, reports } => {
+            let record = crate::report::read_record(&run_dir)?;
+            let report = crate::report::render(&record, &reports)?;
+            println!("report: {}", report.display());
             Ok(())
         }
         Command::Check { manifest } => {
@@ -383,6 +416,16 @@ pub fn execute(cli: Cli) -> Result<()> {
                 alnlab_test::run(params, &model, &codebook, &levels, provenance, &out, bar)
             },
         ),
+        Command::Bench(Bench::Summarize { json }) => {
+            let figures = alnlab_summarize::bench::run()?;
+            print_figures(&figures, json, |figures| {
+                println!(
+                    "summarize: {:.3} s for {} errors ({:.3e} errors/s)",
+                    figures.seconds, figures.errors, figures.errors_per_s
+                );
+            });
+            Ok(())
+        }
         Command::Bench(Bench::Train { json }) => {
             let figures = alnlab_train::bench::train();
             let worm = crate::bench::worm_training()?;
@@ -404,12 +447,7 @@ pub fn execute(cli: Cli) -> Result<()> {
         }
         Command::Bench(Bench::Predict { json }) => {
             let figures = alnlab_train::bench::predict();
-            if json {
-                println!(
-                    "{}",
-                    serde_json::to_string(&figures).expect("figures serialize")
-                );
-            } else {
+            print_figures(&figures, json, |figures| {
                 println!(
                     "batched (bit-sliced):     {:10.0} ns per state on {} threads, of which decoding {:.0} ns",
                     figures.batched_ns_per_state, figures.threads, figures.decode_ns_per_state
@@ -426,17 +464,12 @@ pub fn execute(cli: Cli) -> Result<()> {
                     "nodes evaluated:          {:.4} of all (estimate ½·(3/4)^13 = {:.4})",
                     figures.nodes_evaluated_fraction, figures.estimated_fraction
                 );
-            }
+            });
             Ok(())
         }
         Command::Bench(Bench::Quantize { repeat, json }) => {
             let figures = alnlab_quantize::bench::run(repeat.max(1));
-            if json {
-                println!(
-                    "{}",
-                    serde_json::to_string(&figures).expect("figures serialize")
-                );
-            } else {
+            print_figures(&figures, json, |figures| {
                 println!(
                     "quantize + encode: {:12.0} values/s",
                     figures.quantize_encode_values_per_s
@@ -445,17 +478,12 @@ pub fn execute(cli: Cli) -> Result<()> {
                     "walk decode:       {:12.0} decodes/s",
                     figures.walk_decodes_per_s
                 );
-            }
+            });
             Ok(())
         }
         Command::Bench(Bench::Sim { repeat, json }) => {
             let figures = alnlab_simulate::bench::run(repeat.max(1))?;
-            if json {
-                println!(
-                    "{}",
-                    serde_json::to_string(&figures).expect("figures serialize")
-                );
-            } else {
+            print_figures(&figures, json, |figures| {
                 println!(
                     "worm without contacts: {:8.0} ns/step",
                     figures.worm_no_contact_ns_per_step
@@ -471,9 +499,22 @@ pub fn execute(cli: Cli) -> Result<()> {
                     "simulate stage:        {:8.0} steps/s",
                     figures.stage_steps_per_s
                 );
-            }
+            });
             Ok(())
         }
+    }
+}
+
+/// Prints a benchmark's figures: one JSON object with `--json`, else as
+/// `text` words them.
+fn print_figures<T: serde::Serialize>(figures: &T, json: bool, text: impl FnOnce(&T)) {
+    if json {
+        println!(
+            "{}",
+            serde_json::to_string(figures).expect("figures serialize")
+        );
+    } else {
+        text(figures);
     }
 }
 

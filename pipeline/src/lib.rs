@@ -10,4 +10,5 @@ pub mod cache;
 pub mod cli;
 pub mod manifest;
 pub mod progress;
+pub mod report;
 pub mod run;

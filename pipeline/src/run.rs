@@ -246,7 +246,7 @@ impl Graph<'_> {
 
         let params = stage_params(seed, &stages.test);
         let model = train.path("model");
-        self.stage(
+        let test = self.stage(
             "test",
             alnlab_test::FORMAT_VERSION,
             &params,
@@ -270,6 +270,18 @@ impl Graph<'_> {
                     bar,
                 )
             },
+        )?;
+
+        // Summarizing has no parameters of its own.
+        let params = stage_params(seed, &());
+        let predictions = test.path("predictions");
+        self.stage(
+            "summarize",
+            alnlab_summarize::FORMAT_VERSION,
+            &params,
+            &[("predictions", &test)],
+            &[("summary", alnlab_summarize::SUMMARY_FILE)],
+            |provenance, dir, bar| alnlab_summarize::run(&predictions, provenance, dir, bar),
         )?;
         Ok(())
     }

@@ -8,8 +8,9 @@ use std::fs::File;
 use std::path::Path;
 use std::sync::Arc;
 
-use arrow_array::{Array, Float64Array, RecordBatch};
+use arrow_array::{Array, Float64Array, RecordBatch, StringArray};
 use parquet::arrow::ArrowWriter;
+use parquet::arrow::ProjectionMask;
 use parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder;
 use parquet::basic::{Compression, ZstdLevel};
 use parquet::file::metadata::KeyValue;
@@ -54,9 +55,23 @@ impl Table {
     /// Reads the table at `path`. A missing, truncated or corrupt file is an
     /// error naming the file.
     pub fn read(path: &Path) -> Result<Table> {
+        Table::read_projected(path, None)
+    }
+
+    /// Reads only the named columns of the table at `path` (the others are
+    /// not decoded); a name the file lacks shows up as a missing column.
+    pub fn read_columns(path: &Path, columns: &[&str]) -> Result<Table> {
+        Table::read_projected(path, Some(columns))
+    }
+
+    fn read_projected(path: &Path, columns: Option<&[&str]>) -> Result<Table> {
         let file = File::open(path).map_err(|e| Error::io(path, e))?;
-        let builder = ParquetRecordBatchReaderBuilder::try_new(file)
+        let mut builder = ParquetRecordBatchReaderBuilder::try_new(file)
             .map_err(|e| Error::bad_file(path, format!("not a readable Parquet file ({e})")))?;
+        if let Some(columns) = columns {
+            let mask = ProjectionMask::columns(builder.parquet_schema(), columns.iter().copied());
+            builder = builder.with_projection(mask);
+        }
         let metadata = builder
             .metadata()
             .file_metadata()
@@ -119,6 +134,15 @@ impl Table {
         })
     }
 
+    /// The string column `name`, as owned strings (nulls as empty).
+    pub fn strings(&self, name: &str) -> Result<Vec<String>> {
+        Ok(self
+            .column::<StringArray>(name)?
+            .iter()
+            .map(|v| v.unwrap_or_default().to_string())
+            .collect())
+    }
+
     /// The f64 column `name`.
     pub fn f64_column(&self, name: &str) -> Result<&Float64Array> {
         self.column::<Float64Array>(name)
@@ -144,7 +168,7 @@ pub fn batch(columns: Vec<(&str, Arc<dyn Array>)>) -> RecordBatch {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use arrow_array::{StringArray, UInt32Array};
+    use arrow_array::UInt32Array;
 
     fn sample() -> RecordBatch {
         batch(vec![

@@ -22,13 +22,14 @@ use alnlab_common::{Error, Progress, Provenance, Result};
 use alnlab_quantize::Codebook;
 use alnlab_quantize::codes::Codec;
 use alnlab_train::model::Model;
-use arrow_array::{Array, Float64Array, StringArray, UInt16Array, UInt32Array};
+use arrow_array::{Array, DictionaryArray, Float64Array, StringArray, UInt16Array, UInt32Array};
 use serde::{Deserialize, Serialize};
 
 use crate::predict::Timing;
 
 /// Version of what this stage writes (part of every cache key).
 pub const FORMAT_VERSION: u32 = 1;
+
 /// File name of the predictions table.
 pub const PREDICTIONS_FILE: &str = "predictions.parquet";
 /// File name of the timings table.
@@ -170,7 +171,8 @@ pub fn run(
     write_timings(&out_dir.join(TIMINGS_FILE), &timings, provenance)
 }
 
-/// `predictions.parquet`: one row per model, variable and test row.
+/// `predictions.parquet`: one row per model, variable and test row; model
+/// and variable dictionary-encoded (small keys, quick to group by).
 fn write_predictions(
     path: &Path,
     names: &[&str],
@@ -180,12 +182,12 @@ fn write_predictions(
 ) -> Result<()> {
     let (mut model, mut variable, mut row) = (Vec::new(), Vec::new(), Vec::new());
     let (mut truth, mut guess, mut error) = (Vec::new(), Vec::new(), Vec::new());
-    for (name, levels) in MODELS.iter().zip(predicted) {
-        for (v, var) in names.iter().enumerate() {
+    for (m, levels) in predicted.iter().enumerate() {
+        for v in 0..names.len() {
             for (k, &r) in test.rows.iter().enumerate() {
                 let (t, p) = (test.y[v][k], levels[v][k]);
-                model.push(*name);
-                variable.push(*var);
+                model.push(m as u16);
+                variable.push(v as u16);
                 row.push(r as u32);
                 truth.push(t);
                 guess.push(p);
@@ -193,12 +195,18 @@ fn write_predictions(
             }
         }
     }
+    let dictionary = |keys: Vec<u16>, values: &[&str]| {
+        DictionaryArray::new(
+            UInt16Array::from(keys),
+            Arc::new(StringArray::from(values.to_vec())),
+        )
+    };
     let batch = table::batch(vec![
         (
             "model",
-            Arc::new(StringArray::from(model)) as Arc<dyn Array>,
+            Arc::new(dictionary(model, &MODELS)) as Arc<dyn Array>,
         ),
-        ("variable", Arc::new(StringArray::from(variable))),
+        ("variable", Arc::new(dictionary(variable, names))),
         ("row", Arc::new(UInt32Array::from(row))),
         ("true_level", Arc::new(UInt16Array::from(truth))),
         ("predicted_level", Arc::new(UInt16Array::from(guess))),

@@ -1,0 +1,69 @@
+//! Rendering a run's report from its record: the record names every
+//! artifact, the summarize crate draws the tables and charts.
+
+use std::path::{Path, PathBuf};
+
+use alnlab_common::{Error, Result};
+use alnlab_summarize::report::{self, RunInfo, StageTime, VariantInfo};
+
+use crate::run::RunRecord;
+
+/// Renders the report of `record` into `<reports>/<experiment>/`; returns
+/// the path of `report.md`.
+pub fn render(record: &RunRecord, reports: &Path) -> Result<PathBuf> {
+    let variants = record
+        .variants
+        .iter()
+        .map(|v| {
+            let artifact = |role: &str| -> Result<PathBuf> {
+                v.artifacts
+                    .get(role)
+                    .map(|a| PathBuf::from(&a.path))
+                    .ok_or_else(|| {
+                        Error::Invalid(format!(
+                            "variant `{}` of the run record has no `{role}` artifact",
+                            v.name
+                        ))
+                    })
+            };
+            Ok(VariantInfo {
+                name: v.name.clone(),
+                description: v.description.clone(),
+                stages: v
+                    .stages
+                    .iter()
+                    .map(|s| StageTime {
+                        stage: s.stage.clone(),
+                        cached: s.cached,
+                        wall_seconds: s.wall_seconds,
+                        compute_seconds: s.compute_seconds,
+                    })
+                    .collect(),
+                summary: artifact("summary")?,
+                timings: artifact("timings")?,
+                training: artifact("training")?,
+                model: artifact("model")?,
+            })
+        })
+        .collect::<Result<_>>()?;
+    let run = RunInfo {
+        experiment: record.experiment.clone(),
+        manifest_path: record.manifest_path.clone(),
+        manifest_sha256: record.manifest_sha256.clone(),
+        seed: record.seed,
+        alnlab_version: record.alnlab_version.clone(),
+        git_commit: record.git_commit.clone(),
+        started: record.started.clone(),
+        wall_seconds: record.wall_seconds,
+        variants,
+    };
+    report::render(&run, &reports.join(&record.experiment))
+}
+
+/// Reads `<run_dir>/run.json`.
+pub fn read_record(run_dir: &Path) -> Result<RunRecord> {
+    let path = run_dir.join("run.json");
+    let bytes = std::fs::read(&path).map_err(|e| Error::io(&path, e))?;
+    serde_json::from_slice(&bytes)
+        .map_err(|e| Error::bad_file(&path, format!("not a run record ({e})")))
+}

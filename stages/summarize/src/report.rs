@@ -1,0 +1,474 @@
+//! The report of a run: `report.md` and its SVG charts, rendered from the
+//! artifacts alone (summaries, timings, training logs, models) and the run's
+//! record — so it can be rendered again at any time without recomputing.
+//!
+//! Per variant: the paper's §4.6 table (best and worst variable of each
+//! group) beside the baselines' errors for the same variables; the variables
+//! the ALN predicts worse than persistence, flagged; the §4.5 histogram of
+//! the worst variable; training errors per epoch; the §5 hardware estimate.
+//! Across variants: one side-by-side table and the speed-against-error
+//! chart. A reproducibility block heads it all.
+
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+
+use alnlab_common::table::Table;
+use alnlab_common::{Result, atomic};
+use alnlab_train::ModelKind;
+use alnlab_train::model::Model;
+use arrow_array::{Float64Array, UInt32Array, UInt64Array};
+
+use crate::charts::{self, SpeedPoint};
+use crate::{REPORT_FILE, SummaryRow};
+
+/// What the report needs of a run.
+pub struct RunInfo {
+    pub experiment: String,
+    pub manifest_path: String,
+    pub manifest_sha256: String,
+    pub seed: u64,
+    pub alnlab_version: String,
+    pub git_commit: Option<String>,
+    pub started: String,
+    pub wall_seconds: f64,
+    pub variants: Vec<VariantInfo>,
+}
+
+/// What the report needs of one variant: its stage times and artifacts.
+pub struct VariantInfo {
+    pub name: String,
+    pub description: String,
+    pub stages: Vec<StageTime>,
+    pub summary: PathBuf,
+    pub timings: PathBuf,
+    pub training: PathBuf,
+    pub model: PathBuf,
+}
+
+/// One stage of a variant in the run.
+pub struct StageTime {
+    pub stage: String,
+    pub cached: bool,
+    pub wall_seconds: f64,
+    pub compute_seconds: f64,
+}
+
+/// One row of `timings.parquet`.
+struct Timing {
+    model: String,
+    path: String,
+    ns_per_state: f64,
+    threads: u32,
+    cores: u32,
+}
+
+/// A variant's artifacts, read.
+struct Loaded<'a> {
+    info: &'a VariantInfo,
+    summary: Vec<SummaryRow>,
+    timings: Vec<Timing>,
+    /// Mean training errors per tree, per epoch (1-based).
+    training: Vec<(f64, f64)>,
+    hardware: Hardware,
+}
+
+/// The §5 estimate from the pruned trees.
+struct Hardware {
+    kind: ModelKind,
+    max_depth: u32,
+    mean_depth: f64,
+    max_width: usize,
+    levels_steps: u32,
+}
+
+impl Hardware {
+    /// Gate delays for one predicted state: the deepest tree, then decoding
+    /// (§5: twice the code width) — or, for the threshold model, one tree
+    /// per binary-search step.
+    fn delays(&self) -> u64 {
+        match self.kind {
+            ModelKind::BitForest => u64::from(self.max_depth) + 2 * self.max_width as u64,
+            ModelKind::Threshold => u64::from(self.max_depth) * u64::from(self.levels_steps),
+        }
+    }
+}
+
+/// Renders the report into `dir` (created if need be); returns the path of
+/// `report.md`.
+pub fn render(run: &RunInfo, dir: &Path) -> Result<PathBuf> {
+    let variants: Vec<Loaded> = run.variants.iter().map(load).collect::<Result<_>>()?;
+    let mut md = String::new();
+    let _ = writeln!(md, "# {} — report\n", run.experiment);
+    reproducibility(&mut md, run, &variants);
+    side_by_side(&mut md, &variants);
+
+    let mut points = Vec::new();
+    for v in &variants {
+        for t in &v.timings {
+            if let Some((mean, p95)) = overall(&v.summary, &t.model) {
+                points.push(SpeedPoint {
+                    label: format!("{} {} {} ({} thr)", v.info.name, t.model, t.path, t.threads),
+                    ns_per_state: t.ns_per_state,
+                    mean,
+                    p95,
+                });
+            }
+        }
+    }
+    atomic::write_bytes(&dir.join("speed.svg"), charts::speed(&points).as_bytes())?;
+    let _ = writeln!(md, "## Speed against error\n");
+    let _ = writeln!(
+        md,
+        "![ns per predicted state against error](speed.svg)\n\nEach point is one model and evaluation \
+         path of one variant: its ns per predicted state on this machine against its error averaged \
+         over the variables (mean filled, 95th percentile hollow). The re-simulation baseline \
+         (the simulator itself at coarser steps) is not measured yet.\n"
+    );
+
+    for v in &variants {
+        variant_section(&mut md, v, dir)?;
+    }
+    let path = dir.join(REPORT_FILE);
+    atomic::write_bytes(&path, md.as_bytes())?;
+    Ok(path)
+}
+
+fn load(info: &VariantInfo) -> Result<Loaded<'_>> {
+    let summary = crate::read(&info.summary)?;
+    let table = Table::read(&info.timings)?;
+    let text = |name: &str| table.strings(name);
+    let (models, paths) = (text("model")?, text("path")?);
+    let ns = table.column::<Float64Array>("ns_per_state")?.values();
+    let threads = table.column::<UInt32Array>("threads")?.values();
+    let cores = table.column::<UInt32Array>("cores")?.values();
+    let timings = (0..table.num_rows())
+        .map(|i| Timing {
+            model: models[i].clone(),
+            path: paths[i].clone(),
+            ns_per_state: ns[i],
+            threads: threads[i],
+            cores: cores[i],
+        })
+        .collect();
+
+    let log = Table::read(&info.training)?;
+    let epochs = log.column::<UInt32Array>("epoch")?.values();
+    let errors = log.column::<UInt64Array>("errors")?.values();
+    let mut per_epoch: Vec<(u64, u64)> = Vec::new();
+    for (&epoch, &e) in epochs.iter().zip(errors.iter()) {
+        let k = epoch as usize;
+        if per_epoch.len() < k {
+            per_epoch.resize(k, (0, 0));
+        }
+        per_epoch[k - 1].0 += e;
+        per_epoch[k - 1].1 += 1;
+    }
+    let training = per_epoch
+        .iter()
+        .enumerate()
+        .filter(|(_, (_, trees))| *trees > 0)
+        .map(|(k, (sum, trees))| ((k + 1) as f64, *sum as f64 / *trees as f64))
+        .collect();
+
+    let model = Model::read(&info.model)?;
+    let depths: Vec<u32> = model.trees.iter().map(|(_, t)| t.prune().depth()).collect();
+    let max_width = model
+        .header
+        .outputs
+        .iter()
+        .map(|(_, w)| *w)
+        .max()
+        .unwrap_or(0);
+    let hardware = Hardware {
+        kind: model.header.model,
+        max_depth: depths.iter().copied().max().unwrap_or(0),
+        mean_depth: depths.iter().map(|&d| f64::from(d)).sum::<f64>() / depths.len().max(1) as f64,
+        max_width,
+        // A thermometer of w bits has w + 1 levels: ⌈log₂(w + 1)⌉ steps.
+        levels_steps: (max_width + 1).next_power_of_two().trailing_zeros(),
+    };
+    Ok(Loaded {
+        info,
+        summary,
+        timings,
+        training,
+        hardware,
+    })
+}
+
+/// (mean, 95th percentile) of a model's errors, averaged over the variables.
+fn overall(summary: &[SummaryRow], model: &str) -> Option<(f64, f64)> {
+    let rows: Vec<&SummaryRow> = summary.iter().filter(|r| r.model == model).collect();
+    let n = rows.len() as f64;
+    (!rows.is_empty()).then(|| {
+        (
+            rows.iter().map(|r| r.stats.mean).sum::<f64>() / n,
+            rows.iter().map(|r| r.stats.p95).sum::<f64>() / n,
+        )
+    })
+}
+
+/// The mean error of `model` for `variable`.
+fn mean_of(summary: &[SummaryRow], model: &str, variable: &str) -> Option<f64> {
+    summary
+        .iter()
+        .find(|r| r.model == model && r.variable == variable)
+        .map(|r| r.stats.mean)
+}
+
+/// The variables the ALN predicts worse (higher mean error) than
+/// persistence: (variable, ALN mean, persistence mean).
+fn worse_than_persistence(summary: &[SummaryRow]) -> Vec<(&str, f64, f64)> {
+    summary
+        .iter()
+        .filter(|r| r.model == "aln")
+        .filter_map(|r| {
+            let persistence = mean_of(summary, "persistence", &r.variable)?;
+            (r.stats.mean > persistence).then_some((r.variable.as_str(), r.stats.mean, persistence))
+        })
+        .collect()
+}
+
+fn reproducibility(md: &mut String, run: &RunInfo, variants: &[Loaded]) {
+    let cores = variants
+        .iter()
+        .flat_map(|v| v.timings.first())
+        .map(|t| t.cores)
+        .next()
+        .unwrap_or(0);
+    let _ = writeln!(md, "## Reproducibility\n");
+    let _ = writeln!(md, "| | |\n|---|---|");
+    let _ = writeln!(md, "| manifest | `{}` |", run.manifest_path);
+    let _ = writeln!(md, "| manifest sha256 | `{}` |", run.manifest_sha256);
+    let _ = writeln!(md, "| seed | {} |", run.seed);
+    let _ = writeln!(md, "| alnlab | {} |", run.alnlab_version);
+    let commit = run
+        .git_commit
+        .as_deref()
+        .unwrap_or("(not in a git checkout)");
+    let _ = writeln!(md, "| git commit | `{commit}` |");
+    let _ = writeln!(md, "| machine | {cores} cores |");
+    let _ = writeln!(md, "| started | {} |", run.started);
+    let _ = writeln!(md, "| wall time | {:.2} s |\n", run.wall_seconds);
+    let _ = writeln!(
+        md,
+        "| variant | stage | cached | wall (s) | compute when made (s) |"
+    );
+    let _ = writeln!(md, "|---|---|---|---:|---:|");
+    for v in variants {
+        for s in &v.info.stages {
+            let _ = writeln!(
+                md,
+                "| {} | {} | {} | {:.3} | {:.3} |",
+                v.info.name,
+                s.stage,
+                if s.cached { "yes" } else { "no" },
+                s.wall_seconds,
+                s.compute_seconds
+            );
+        }
+    }
+    md.push('\n');
+}
+
+fn side_by_side(md: &mut String, variants: &[Loaded]) {
+    let _ = writeln!(md, "## Variants side by side\n");
+    let _ = writeln!(
+        md,
+        "Errors in quantization levels, averaged over the variables.\n\n\
+         | variant | ALN mean | ALN p95 | persistence mean | linear mean | ALN batched ns/state | \
+         ALN single ns/state | hardware estimate (gate delays) | variables worse than persistence |\n\
+         |---|---:|---:|---:|---:|---:|---:|---:|---:|"
+    );
+    for v in variants {
+        let mean = |model: &str| {
+            overall(&v.summary, model).map_or("—".into(), |(m, _)| format!("{m:.4}"))
+        };
+        let p95 = overall(&v.summary, "aln").map_or("—".into(), |(_, p)| format!("{p:.2}"));
+        let ns = |path: &str| {
+            v.timings
+                .iter()
+                .find(|t| {
+                    t.model == "aln"
+                        && (t.path == path || (path == "single" && t.path == "threshold-search"))
+                })
+                .map_or("—".into(), |t| format!("{:.0}", t.ns_per_state))
+        };
+        let worse = worse_than_persistence(&v.summary).len();
+        let total = v.summary.iter().filter(|r| r.model == "aln").count();
+        let _ = writeln!(
+            md,
+            "| {} | {} | {} | {} | {} | {} | {} | {} | {}{} of {} |",
+            v.info.name,
+            mean("aln"),
+            p95,
+            mean("persistence"),
+            mean("linear"),
+            ns("batched"),
+            ns("single"),
+            v.hardware.delays(),
+            if worse > 0 { "⚠ " } else { "" },
+            worse,
+            total
+        );
+    }
+    md.push('\n');
+}
+
+fn file_name(variant: &str, chart: &str) -> String {
+    let safe: String = variant
+        .chars()
+        .map(|c| {
+            if c.is_ascii_alphanumeric() || c == '-' || c == '_' {
+                c
+            } else {
+                '-'
+            }
+        })
+        .collect();
+    format!("{safe}-{chart}.svg")
+}
+
+fn variant_section(md: &mut String, v: &Loaded, dir: &Path) -> Result<()> {
+    let _ = writeln!(md, "## Variant `{}`\n", v.info.name);
+    if !v.info.description.is_empty() {
+        let _ = writeln!(md, "{}\n", v.info.description);
+    }
+
+    let _ = writeln!(md, "### Error by group (paper §4.6)\n");
+    let _ = writeln!(
+        md,
+        "The ALN's best and worst variable of each group, in quantization levels, beside the \
+         baselines' mean error on the same variable.\n\n\
+         | group | | variable | mean | std dev | std err | 5% trim | median | IQR | max | persistence mean | linear mean |\n\
+         |---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|"
+    );
+    let aln: Vec<&SummaryRow> = v.summary.iter().filter(|r| r.model == "aln").collect();
+    let mut groups: Vec<&str> = aln.iter().map(|r| r.group.as_str()).collect();
+    groups.dedup();
+    for group in groups {
+        for (which, pick) in [("best", true), ("worst", false)] {
+            let Some(r) = aln.iter().find(|r| {
+                r.group == group
+                    && if pick {
+                        r.best_in_group
+                    } else {
+                        r.worst_in_group
+                    }
+            }) else {
+                continue;
+            };
+            let s = &r.stats;
+            let baseline = |m: &str| {
+                mean_of(&v.summary, m, &r.variable).map_or("—".into(), |x| format!("{x:.4}"))
+            };
+            let _ = writeln!(
+                md,
+                "| {group} | {which} | {} | {:.4} | {:.4} | {:.4} | {:.4} | {} | {} | {} | {} | {} |",
+                r.variable,
+                s.mean,
+                s.std_dev,
+                s.std_err,
+                s.trimmed_mean,
+                s.median,
+                s.iqr,
+                s.max,
+                baseline("persistence"),
+                baseline("linear")
+            );
+        }
+    }
+    md.push('\n');
+
+    let worse = worse_than_persistence(&v.summary);
+    let _ = writeln!(md, "### Worse than persistence\n");
+    if worse.is_empty() {
+        let _ = writeln!(
+            md,
+            "The ALN beats persistence (mean error) on every variable.\n"
+        );
+    } else {
+        let _ = writeln!(
+            md,
+            "⚠ On {} of {} variables the ALN's mean error is higher than predicting no change:\n\n\
+             | variable | ALN mean | persistence mean |\n|---|---:|---:|",
+            worse.len(),
+            aln.len()
+        );
+        for (variable, mean, persistence) in &worse {
+            let _ = writeln!(md, "| ⚠ {variable} | {mean:.4} | {persistence:.4} |");
+        }
+        md.push('\n');
+    }
+
+    if let Some(worst) = aln
+        .iter()
+        .max_by(|a, b| a.stats.mean.total_cmp(&b.stats.mean))
+    {
+        let name = file_name(&v.info.name, "histogram");
+        let title = format!("{}: errors of {}", v.info.name, worst.variable);
+        atomic::write_bytes(
+            &dir.join(&name),
+            charts::histogram(&title, &worst.stats.histogram).as_bytes(),
+        )?;
+        let _ = writeln!(
+            md,
+            "### Error histogram of the worst variable, `{}` (paper §4.5)\n",
+            worst.variable
+        );
+        let _ = writeln!(md, "![histogram]({name})\n");
+        let _ = writeln!(
+            md,
+            "| error (levels) | 0 | 1 | 2 | 3 | 4 | 5 | 6 | 7 | 8 | 9 | 10+ |"
+        );
+        let _ = writeln!(
+            md,
+            "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"
+        );
+        let counts: Vec<String> = worst.stats.histogram.iter().map(u64::to_string).collect();
+        let _ = writeln!(md, "| count | {} |\n", counts.join(" | "));
+    }
+
+    let name = file_name(&v.info.name, "training");
+    let series = vec![("mean errors per tree".to_string(), v.training.clone())];
+    let title = format!("{}: training errors per epoch", v.info.name);
+    atomic::write_bytes(
+        &dir.join(&name),
+        charts::lines(&title, "epoch", "errors per tree", &series).as_bytes(),
+    )?;
+    let _ = writeln!(md, "### Training\n\n![training errors per epoch]({name})\n");
+
+    let h = &v.hardware;
+    let _ = writeln!(md, "### Hardware estimate (paper §5)\n");
+    let _ = match h.kind {
+        ModelKind::BitForest => writeln!(
+            md,
+            "Pruned trees are at most {} gate delays deep (mean {:.1}); decoding a {}-bit code takes \
+             about twice its width: {} + 2·{} = **{} gate delays** per predicted state, all trees \
+             in parallel.\n",
+            h.max_depth,
+            h.mean_depth,
+            h.max_width,
+            h.max_depth,
+            h.max_width,
+            h.delays()
+        ),
+        ModelKind::Threshold => writeln!(
+            md,
+            "Pruned trees are at most {} gate delays deep (mean {:.1}); the binary search over {} \
+             levels takes {} evaluations in sequence: {}·{} = **{} gate delays** per predicted state.\n",
+            h.max_depth,
+            h.mean_depth,
+            h.max_width + 1,
+            h.levels_steps,
+            h.max_depth,
+            h.levels_steps,
+            h.delays()
+        ),
+    };
+    let _ = writeln!(
+        md,
+        "Closed-loop rollout (the predictor fed its own output) is not measured yet.\n"
+    );
+    Ok(())
+}
