@@ -214,10 +214,12 @@ fn cache_reuses_and_reruns_only_what_changed() {
     assert_eq!(cached(&first), [false, false, false, false, false, false]);
     assert!(first.variants[0].artifacts.keys().eq([
         "codebook",
+        "horizons",
         "levels",
         "model",
         "pairs",
         "predictions",
+        "rollout",
         "stats",
         "summary",
         "timings",
@@ -440,6 +442,7 @@ fn stages_run_alone_on_explicit_files_match_the_pipeline() {
         path.display().to_string()
     };
     let (model, codebook, levels) = (artifact("model"), artifact("codebook"), artifact("levels"));
+    let trajectory = artifact("trajectory");
     let out = alnlab(
         dir.path(),
         &[
@@ -447,6 +450,8 @@ fn stages_run_alone_on_explicit_files_match_the_pipeline() {
             "test",
             "--manifest",
             "m.toml",
+            "--trajectory",
+            &trajectory,
             "--model",
             &model,
             "--codebook",

@@ -59,6 +59,20 @@ def check_summary(predictions_path, summary_path):
     return len(summary)
 
 
+def check_rollout(predictions_path, rollout_path):
+    """One step of the closed loop is the open-loop prediction: the rollout's
+    first-step errors equal the predictions' for the same rows, for every
+    model (the true levels come from the trajectory log, quantized anew)."""
+    key = lambda r, row: (r["model"], r["variable"], row)
+    one_step = {key(r, r["row"]): r["error"]
+                for r in pq.read_table(predictions_path, columns=["model", "variable", "row", "error"]).to_pylist()}
+    first = [r for r in pq.read_table(rollout_path).to_pylist() if r["horizon"] == 1]
+    assert first, "no rollout"
+    for r in first:
+        assert one_step[key(r, r["start"])] == r["error"], r
+    return len(first)
+
+
 def check_report(report_dir):
     """The report exists and every chart it shows parses as an SVG document."""
     report = Path(report_dir) / "report.md"
@@ -124,9 +138,10 @@ def main(run_json: str, report_dir: str) -> int:
                 assert row["x." + name] == x[name], (row["step"], name)
                 assert row["y." + name] == y[name], (row["step"], name)
         summaries = check_summary(artifacts["predictions"]["path"], artifacts["summary"]["path"])
+        rolled = check_rollout(artifacts["predictions"]["path"], artifacts["rollout"]["path"])
         print(f"{variant['name']}: {len(frames)} /state messages decoded, "
               f"{len(pairs)} pair rows match, {checked} Parquet files read, "
-              f"{summaries} summary rows recomputed")
+              f"{summaries} summary rows recomputed, {rolled} first rollout steps match")
     print(f"report: {check_report(report_dir)} SVG charts parse")
     return 0
 

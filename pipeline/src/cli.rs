@@ -144,13 +144,19 @@ pub enum Command {
         out: PathBuf,
     },
     /// Run the test stage alone: the model's predictions for every test row,
-    /// beside the persistence and linear baselines, and their timings.
+    /// beside the persistence and linear baselines, their timings, and
+    /// closed-loop rollouts.
     #[command(after_help = "Example:
-  alnlab test --manifest experiments/quickstart.toml --model /tmp/train/model.aln \\
-      --codebook /tmp/quantize/codebook.parquet --levels /tmp/quantize/levels.parquet --out /tmp/test")]
+  alnlab test --manifest experiments/quickstart.toml --trajectory /tmp/sim/trajectory.mcap \\
+      --model /tmp/train/model.aln --codebook /tmp/quantize/codebook.parquet \\
+      --levels /tmp/quantize/levels.parquet --out /tmp/test")]
     Test {
         #[command(flatten)]
         from: ManifestArgs,
+        /// The trajectory log written by simulate (the true closed-loop
+        /// trajectories).
+        #[arg(long)]
+        trajectory: PathBuf,
         /// The model written by train.
         #[arg(long)]
         model: PathBuf,
@@ -160,7 +166,8 @@ pub enum Command {
         /// The levels table written by quantize.
         #[arg(long)]
         levels: PathBuf,
-        /// Folder to write predictions.parquet and timings.parquet into.
+        /// Folder to write predictions.parquet, timings.parquet and
+        /// rollout.parquet into.
         #[arg(long)]
         out: PathBuf,
     },
@@ -396,6 +403,7 @@ pub fn execute(cli: Cli) -> Result<()> {
         ),
         Command::Test {
             from,
+            trajectory,
             model,
             codebook,
             levels,
@@ -405,15 +413,29 @@ pub fn execute(cli: Cli) -> Result<()> {
             "test",
             |s| &s.test,
             &[
+                ("trajectory", &trajectory),
                 ("model", &model),
                 ("codebook", &codebook),
                 ("levels", &levels),
             ],
             &out,
-            &[alnlab_test::PREDICTIONS_FILE, alnlab_test::TIMINGS_FILE],
+            &[
+                alnlab_test::PREDICTIONS_FILE,
+                alnlab_test::TIMINGS_FILE,
+                alnlab_test::ROLLOUT_FILE,
+            ],
             quiet,
             |params, _seed, provenance, bar| {
-                alnlab_test::run(params, &model, &codebook, &levels, provenance, &out, bar)
+                alnlab_test::run(
+                    params,
+                    &trajectory,
+                    &model,
+                    &codebook,
+                    &levels,
+                    provenance,
+                    &out,
+                    bar,
+                )
             },
         ),
         Command::Bench(Bench::Summarize { json }) => {

@@ -40,6 +40,7 @@ pub fn render(record: &RunRecord, reports: &Path) -> Result<PathBuf> {
                     })
                     .collect(),
                 summary: artifact("summary")?,
+                horizons: artifact("horizons")?,
                 timings: artifact("timings")?,
                 training: artifact("training")?,
                 model: artifact("model")?,

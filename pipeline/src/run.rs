@@ -251,6 +251,7 @@ impl Graph<'_> {
             alnlab_test::FORMAT_VERSION,
             &params,
             &[
+                ("trajectory", &simulate),
                 ("model", &train),
                 ("codebook", &quantize),
                 ("levels", &quantize),
@@ -258,10 +259,12 @@ impl Graph<'_> {
             &[
                 ("predictions", alnlab_test::PREDICTIONS_FILE),
                 ("timings", alnlab_test::TIMINGS_FILE),
+                ("rollout", alnlab_test::ROLLOUT_FILE),
             ],
             |provenance, dir, bar| {
                 alnlab_test::run(
                     &stages.test,
+                    &trajectory,
                     &model,
                     &codebook,
                     &levels,
@@ -274,14 +277,19 @@ impl Graph<'_> {
 
         // Summarizing has no parameters of its own.
         let params = stage_params(seed, &());
-        let predictions = test.path("predictions");
+        let (predictions, rollout) = (test.path("predictions"), test.path("rollout"));
         self.stage(
             "summarize",
             alnlab_summarize::FORMAT_VERSION,
             &params,
-            &[("predictions", &test)],
-            &[("summary", alnlab_summarize::SUMMARY_FILE)],
-            |provenance, dir, bar| alnlab_summarize::run(&predictions, provenance, dir, bar),
+            &[("predictions", &test), ("rollout", &test)],
+            &[
+                ("summary", alnlab_summarize::SUMMARY_FILE),
+                ("horizons", alnlab_summarize::HORIZONS_FILE),
+            ],
+            |provenance, dir, bar| {
+                alnlab_summarize::run(&predictions, &rollout, provenance, dir, bar)
+            },
         )?;
         Ok(())
     }

@@ -1,6 +1,7 @@
-//! `alnlab bench summarize`: the summarize stage on 10⁷ errors — three
-//! models × 64 variables × 52 084 test rows, errors mostly small with a long
-//! tail, as predictions are — read, summarized and written.
+//! `alnlab bench summarize`: the summarize stage on 10⁷ one-step errors —
+//! three models × 64 variables × 52 084 test rows, errors mostly small with
+//! a long tail, as predictions are — plus closed-loop errors (10 horizons ×
+//! 100 starts per model and variable): read, summarized and written.
 
 use std::collections::BTreeMap;
 use std::sync::Arc;
@@ -58,18 +59,34 @@ pub fn run() -> Result<SummarizeBench> {
         DictionaryArray::new(UInt16Array::from(keys), Arc::new(StringArray::from(values)))
     };
     let rows: Vec<u32> = (0..total).map(|i| (i % ROWS) as u32).collect();
+    let names: Vec<&str> = names.iter().map(String::as_str).collect();
+    // The rollout: the first 1000 errors of each model and variable, as 10
+    // horizons × 100 starts.
+    let keep: Vec<usize> = (0..total).filter(|i| i % ROWS < 1000).collect();
+    let pick = |column: &[u16]| -> Vec<u16> { keep.iter().map(|&i| column[i]).collect() };
+    let horizons = keep.iter().map(|i| (i % ROWS / 100) as u16 + 1);
+    let starts = keep.iter().map(|i| (i % 100) as u32);
+    let rollout = table::batch(vec![
+        (
+            "model",
+            Arc::new(dictionary(pick(&model), MODELS.to_vec())) as Arc<dyn Array>,
+        ),
+        (
+            "variable",
+            Arc::new(dictionary(pick(&variable), names.clone())),
+        ),
+        ("horizon", Arc::new(UInt16Array::from_iter_values(horizons))),
+        ("start", Arc::new(UInt32Array::from_iter_values(starts))),
+        ("error", Arc::new(UInt16Array::from(pick(&error)))),
+    ]);
+    let rollout_path = dir.path().join("rollout.parquet");
+    table::write_parquet(&rollout_path, &rollout, &provenance)?;
     let batch = table::batch(vec![
         (
             "model",
             Arc::new(dictionary(model, MODELS.to_vec())) as Arc<dyn Array>,
         ),
-        (
-            "variable",
-            Arc::new(dictionary(
-                variable,
-                names.iter().map(String::as_str).collect(),
-            )),
-        ),
+        ("variable", Arc::new(dictionary(variable, names))),
         ("row", Arc::new(UInt32Array::from(rows))),
         ("error", Arc::new(UInt16Array::from(error))),
     ]);
@@ -77,11 +94,18 @@ pub fn run() -> Result<SummarizeBench> {
     table::write_parquet(&predictions, &batch, &provenance)?;
 
     let clock = Instant::now();
-    crate::run(&predictions, &provenance, dir.path(), &Silent)?;
+    crate::run(
+        &predictions,
+        &rollout_path,
+        &provenance,
+        dir.path(),
+        &Silent,
+    )?;
     let seconds = clock.elapsed().as_secs_f64();
+    let errors = (total + keep.len()) as u64;
     Ok(SummarizeBench {
         seconds,
-        errors: total as u64,
-        errors_per_s: total as f64 / seconds,
+        errors,
+        errors_per_s: errors as f64 / seconds,
     })
 }

@@ -1,7 +1,9 @@
 //! The summarize stage (paper §4.5–4.6; DESIGN.md §6–7): reads
-//! `predictions.parquet` and writes `summary.parquet` — per model (the ALN
-//! and each baseline) and variable, the error statistics of [`stats`], and
-//! which variables are the best and the worst of their group. [`report`]
+//! `predictions.parquet` and `rollout.parquet` and writes `summary.parquet` —
+//! per model (the ALN and each baseline) and variable, the error statistics
+//! of [`stats`], and which variables are the best and the worst of their
+//! group — and `horizons.parquet`, the closed-loop errors per model and
+//! horizon, over all variables and starts. [`report`]
 //! renders a run's summaries, timings and training logs as Markdown and SVG.
 
 pub mod bench;
@@ -28,6 +30,8 @@ use crate::stats::{ErrorCounts, ErrorStats, HISTOGRAM_BINS};
 pub const FORMAT_VERSION: u32 = 1;
 /// File name of the summary table.
 pub const SUMMARY_FILE: &str = "summary.parquet";
+/// File name of the closed-loop table.
+pub const HORIZONS_FILE: &str = "horizons.parquet";
 /// File name of the report.
 pub const REPORT_FILE: &str = "report.md";
 
@@ -44,18 +48,124 @@ pub struct SummaryRow {
     pub worst_in_group: bool,
 }
 
-/// Reads the predictions, summarizes them, writes `summary.parquet`.
+/// One row of `horizons.parquet`: a model's closed-loop errors after
+/// `horizon` steps, over all variables and starts.
+#[derive(Clone, Debug, PartialEq)]
+pub struct HorizonRow {
+    pub model: String,
+    pub horizon: u16,
+    pub stats: ErrorStats,
+}
+
+/// Reads the predictions and rollouts, summarizes them, writes
+/// `summary.parquet` and `horizons.parquet`.
 pub fn run(
     predictions_path: &Path,
+    rollout_path: &Path,
     provenance: &Provenance,
     out_dir: &Path,
     progress: &dyn Progress,
 ) -> Result<()> {
-    progress.start("summarize", 1, "tables");
+    progress.start("summarize", 2, "tables");
     let rows = summarize(predictions_path)?;
     write(&out_dir.join(SUMMARY_FILE), &rows, provenance)?;
     progress.advance(1);
+    let horizons = summarize_horizons(rollout_path)?;
+    write_horizons(&out_dir.join(HORIZONS_FILE), &horizons, provenance)?;
+    progress.advance(1);
     Ok(())
+}
+
+/// The closed-loop rows of a rollout table, by model then horizon.
+pub fn summarize_horizons(rollout_path: &Path) -> Result<Vec<HorizonRow>> {
+    let table = Table::read_columns(rollout_path, &["model", "horizon", "error"])?;
+    let models = table.column::<DictionaryArray<UInt16Type>>("model")?;
+    let horizons = table.column::<UInt16Array>("horizon")?.values();
+    let errors = table.column::<UInt16Array>("error")?.values();
+    let names = dictionary_names(models, rollout_path)?;
+    let last = horizons.iter().copied().max().unwrap_or(0) as usize;
+    let mut counts = vec![ErrorCounts::default(); names.len() * (last + 1)];
+    for ((&m, &h), &e) in models.keys().values().iter().zip(horizons).zip(errors) {
+        counts[usize::from(m) * (last + 1) + usize::from(h)].add(u32::from(e), 1);
+    }
+    let mut rows = Vec::new();
+    for (m, model) in names.iter().enumerate() {
+        for h in 0..=last {
+            if let Some(stats) = counts[m * (last + 1) + h].stats() {
+                rows.push(HorizonRow {
+                    model: model.clone(),
+                    horizon: h as u16,
+                    stats,
+                });
+            }
+        }
+    }
+    Ok(rows)
+}
+
+/// The strings of a dictionary column's values.
+fn dictionary_names(column: &DictionaryArray<UInt16Type>, path: &Path) -> Result<Vec<String>> {
+    let values = column
+        .values()
+        .as_string_opt::<i32>()
+        .ok_or_else(|| Error::bad_file(path, "model and variable must be string dictionaries"))?;
+    Ok(values
+        .iter()
+        .map(|v| v.unwrap_or_default().to_string())
+        .collect())
+}
+
+fn write_horizons(path: &Path, rows: &[HorizonRow], provenance: &Provenance) -> Result<()> {
+    let number = |f: fn(&ErrorStats) -> f64| -> Arc<dyn Array> {
+        Arc::new(Float64Array::from_iter_values(
+            rows.iter().map(|r| f(&r.stats)),
+        ))
+    };
+    let batch = table::batch(vec![
+        (
+            "model",
+            Arc::new(StringArray::from_iter_values(rows.iter().map(|r| &r.model)))
+                as Arc<dyn Array>,
+        ),
+        (
+            "horizon",
+            Arc::new(UInt16Array::from_iter_values(
+                rows.iter().map(|r| r.horizon),
+            )),
+        ),
+        (
+            "n",
+            Arc::new(UInt64Array::from_iter_values(
+                rows.iter().map(|r| r.stats.n),
+            )),
+        ),
+        ("mean", number(|s| s.mean)),
+        ("trimmed_mean", number(|s| s.trimmed_mean)),
+        ("median", number(|s| s.median)),
+        ("p95", number(|s| s.p95)),
+        (
+            "max",
+            Arc::new(UInt32Array::from_iter_values(
+                rows.iter().map(|r| r.stats.max),
+            )),
+        ),
+    ]);
+    table::write_parquet(path, &batch, provenance)
+}
+
+/// Reads `horizons.parquet` back: (model, horizon, mean, 95th percentile)
+/// per row.
+pub fn read_horizons(path: &Path) -> Result<Vec<(String, u16, f64, f64)>> {
+    let table = Table::read(path)?;
+    let models = table.strings("model")?;
+    let horizons = table.column::<UInt16Array>("horizon")?.values();
+    let (mean, p95) = (
+        table.f64_column("mean")?.values(),
+        table.f64_column("p95")?.values(),
+    );
+    Ok((0..table.num_rows())
+        .map(|i| (models[i].clone(), horizons[i], mean[i], p95[i]))
+        .collect())
 }
 
 /// The summary rows of a predictions table, by model and variable in the
@@ -282,13 +392,43 @@ mod tests {
         ]);
         let predictions = dir.path().join("predictions.parquet");
         table::write_parquet(&predictions, &batch, &provenance).unwrap();
+        // The rollout: model 0 after 1 and 2 steps, model 1 after 1.
+        let rollout = table::batch(vec![
+            (
+                "model",
+                Arc::new(dictionary(vec![0, 0, 0, 1], vec!["aln", "persistence"]))
+                    as Arc<dyn Array>,
+            ),
+            (
+                "variable",
+                Arc::new(dictionary(
+                    vec![0, 1, 0, 0],
+                    vec!["a.1.x", "a.2.x", "v.1.x"],
+                )),
+            ),
+            ("horizon", Arc::new(UInt16Array::from(vec![1, 1, 2, 1]))),
+            ("error", Arc::new(UInt16Array::from(vec![1, 3, 5, 0]))),
+        ]);
+        let rollout_path = dir.path().join("rollout.parquet");
+        table::write_parquet(&rollout_path, &rollout, &provenance).unwrap();
+        let silent = alnlab_common::Silent;
         run(
             &predictions,
+            &rollout_path,
             &provenance,
             dir.path(),
-            &alnlab_common::Silent,
+            &silent,
         )
         .unwrap();
+        let horizons = read_horizons(&dir.path().join(HORIZONS_FILE)).unwrap();
+        assert_eq!(
+            horizons,
+            [
+                ("aln".to_string(), 1, 2.0, 2.9),
+                ("aln".to_string(), 2, 5.0, 5.0),
+                ("persistence".to_string(), 1, 0.0, 0.0)
+            ]
+        );
         let rows = read(&dir.path().join(SUMMARY_FILE)).unwrap();
         // (Compared as text: std dev is NaN for n = 1, and NaN ≠ NaN.)
         let computed = summarize(&predictions).unwrap();

@@ -40,6 +40,7 @@ pub struct VariantInfo {
     pub description: String,
     pub stages: Vec<StageTime>,
     pub summary: PathBuf,
+    pub horizons: PathBuf,
     pub timings: PathBuf,
     pub training: PathBuf,
     pub model: PathBuf,
@@ -66,6 +67,8 @@ struct Timing {
 struct Loaded<'a> {
     info: &'a VariantInfo,
     summary: Vec<SummaryRow>,
+    /// (model, horizon, mean, 95th percentile) of the closed-loop errors.
+    horizons: Vec<(String, u16, f64, f64)>,
     timings: Vec<Timing>,
     /// Mean training errors per tree, per epoch (1-based).
     training: Vec<(f64, f64)>,
@@ -135,6 +138,7 @@ pub fn render(run: &RunInfo, dir: &Path) -> Result<PathBuf> {
 
 fn load(info: &VariantInfo) -> Result<Loaded<'_>> {
     let summary = crate::read(&info.summary)?;
+    let horizons = crate::read_horizons(&info.horizons)?;
     let table = Table::read(&info.timings)?;
     let text = |name: &str| table.strings(name);
     let (models, paths) = (text("model")?, text("path")?);
@@ -190,6 +194,7 @@ fn load(info: &VariantInfo) -> Result<Loaded<'_>> {
     Ok(Loaded {
         info,
         summary,
+        horizons,
         timings,
         training,
         hardware,
@@ -466,9 +471,69 @@ fn variant_section(md: &mut String, v: &Loaded, dir: &Path) -> Result<()> {
             h.delays()
         ),
     };
+    closed_loop(md, v, dir)
+}
+
+/// Error against closed-loop horizon: each model fed its own output.
+fn closed_loop(md: &mut String, v: &Loaded, dir: &Path) -> Result<()> {
     let _ = writeln!(
         md,
-        "Closed-loop rollout (the predictor fed its own output) is not measured yet.\n"
+        "### Closed loop
+"
     );
+    if v.horizons.is_empty() {
+        let _ = writeln!(
+            md,
+            "No test row has enough logged frames after it for a rollout.\n"
+        );
+        return Ok(());
+    }
+    let mut models: Vec<&str> = v.horizons.iter().map(|h| h.0.as_str()).collect();
+    models.dedup();
+    let series: Vec<(String, Vec<(f64, f64)>)> = models
+        .iter()
+        .map(|&m| {
+            let points = v.horizons.iter().filter(|h| h.0 == m);
+            (
+                m.to_string(),
+                points.map(|h| (f64::from(h.1), h.2)).collect(),
+            )
+        })
+        .collect();
+    let name = file_name(&v.info.name, "closed-loop");
+    let title = format!("{}: closed-loop error against horizon", v.info.name);
+    let chart = charts::lines(&title, "steps fed back", "mean error (levels)", &series);
+    atomic::write_bytes(&dir.join(&name), chart.as_bytes())?;
+    let _ = writeln!(
+        md,
+        "From the true state of test rows, each model is fed its own predictions; its levels \
+         are scored against the logged trajectory at every step (all variables pooled).\n\n\
+         ![closed-loop error against horizon]({name})\n"
+    );
+    let _ = write!(md, "| steps |");
+    for m in &models {
+        let _ = write!(md, " {m} mean | {m} p95 |");
+    }
+    let _ = write!(md, "\n|---:|");
+    for _ in &models {
+        let _ = write!(md, "---:|---:|");
+    }
+    md.push('\n');
+    let mut steps: Vec<u16> = v.horizons.iter().map(|h| h.1).collect();
+    steps.sort_unstable();
+    steps.dedup();
+    for step in steps {
+        let _ = write!(md, "| {step} |");
+        for m in &models {
+            match v.horizons.iter().find(|h| h.0 == *m && h.1 == step) {
+                Some(h) => {
+                    let _ = write!(md, " {:.3} | {:.1} |", h.2, h.3);
+                }
+                None => md.push_str(" — | — |"),
+            }
+        }
+        md.push('\n');
+    }
+    md.push('\n');
     Ok(())
 }

@@ -7,21 +7,26 @@
 //!   absolute error in levels;
 //! - `timings.parquet`: ns per predicted state for each model and evaluation
 //!   path, with the threads used and the machine's cores — a measurement,
-//!   the one artifact that differs between equal runs.
+//!   the one artifact that differs between equal runs;
+//! - `rollout.parquet`: the closed-loop errors ([`rollout`]) per model,
+//!   variable, horizon and start row.
 
 pub mod baseline;
 pub mod predict;
+pub mod rollout;
 
 use std::path::Path;
 use std::sync::Arc;
 
 use alnlab_common::hash::sha256_file;
-use alnlab_common::params::{self, Fraction, ParamError};
+use alnlab_common::params::{self, Count, Fraction, ParamError};
+use alnlab_common::state_log::StateLog;
 use alnlab_common::table::{self, Table};
 use alnlab_common::{Error, Progress, Provenance, Result};
 use alnlab_quantize::Codebook;
 use alnlab_quantize::codes::Codec;
 use alnlab_train::model::Model;
+use arrow_array::types::UInt16Type;
 use arrow_array::{Array, DictionaryArray, Float64Array, StringArray, UInt16Array, UInt32Array};
 use serde::{Deserialize, Serialize};
 
@@ -34,17 +39,33 @@ pub const FORMAT_VERSION: u32 = 1;
 pub const PREDICTIONS_FILE: &str = "predictions.parquet";
 /// File name of the timings table.
 pub const TIMINGS_FILE: &str = "timings.parquet";
+/// File name of the closed-loop rollout table.
+pub const ROLLOUT_FILE: &str = "rollout.parquet";
 
 /// The models of `predictions.parquet`, in order.
 pub const MODELS: [&str; 3] = ["aln", "persistence", "linear"];
 
 /// The `[test]` table of a manifest.
-#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct Params {
     /// Rate limiting (§4.7): each decoded variable moves at most this
     /// fraction of its levels from its current level. Off when absent.
     pub rate_limit: Option<Fraction>,
+    /// Closed-loop rollouts run this many steps (frames).
+    pub horizon: Count,
+    /// … from at most this many test rows, spread over the test set.
+    pub rollout_starts: Count,
+}
+
+impl Default for Params {
+    fn default() -> Self {
+        Params {
+            rate_limit: None,
+            horizon: Count(10),
+            rollout_starts: Count(200),
+        }
+    }
 }
 
 impl Params {
@@ -77,6 +98,7 @@ pub struct TestRows {
 #[allow(clippy::too_many_arguments)]
 pub fn run(
     params: &Params,
+    trajectory_path: &Path,
     model_path: &Path,
     codebook_path: &Path,
     levels_path: &Path,
@@ -149,7 +171,7 @@ pub fn run(
         rows: test_rows,
     };
 
-    progress.start("test", 3, "models");
+    progress.start("test", 4, "steps");
     let windows = params.windows(&codecs);
     let (aln, mut timings) = predict::aln(&model, &codecs, &test.x, windows.as_deref());
     progress.advance(1);
@@ -161,6 +183,42 @@ pub fn run(
     timings.push(linear_timing);
     progress.advance(1);
 
+    // Closed loop, from the true levels of spread-out test rows.
+    let log = StateLog::read(trajectory_path)?;
+    let scenes = levels.column::<StringArray>("scene")?;
+    let runs = levels.column::<UInt32Array>("run")?.values();
+    let steps = levels.column::<UInt32Array>("step")?.values();
+    let starts: Vec<rollout::Start> = test
+        .rows
+        .iter()
+        .map(|&r| rollout::Start {
+            scene: scenes.value(r),
+            run: runs[r],
+            frame: steps[r],
+        })
+        .collect();
+    let horizon = params.horizon.get();
+    let truth = rollout::truth(
+        &log,
+        &learned,
+        &starts,
+        horizon,
+        params.rollout_starts.get(),
+    );
+    let from: Vec<Vec<u16>> = test
+        .x
+        .iter()
+        .map(|x| truth.starts.iter().map(|&k| x[k]).collect())
+        .collect();
+    let rolled = [
+        rollout::roll(from.clone(), horizon, |x| {
+            predict::aln(&model, &codecs, x, windows.as_deref()).0
+        }),
+        rollout::roll(from.clone(), horizon, |x| x.to_vec()),
+        rollout::roll(from, horizon, |x| predict::linear(&linear, x, &levels_of).0),
+    ];
+    progress.advance(1);
+
     write_predictions(
         &out_dir.join(PREDICTIONS_FILE),
         &names,
@@ -168,11 +226,64 @@ pub fn run(
         &[&aln, &persistence, &linear_levels],
         provenance,
     )?;
+    let start_rows: Vec<u32> = truth.starts.iter().map(|&k| test.rows[k] as u32).collect();
+    write_rollout(
+        &out_dir.join(ROLLOUT_FILE),
+        &names,
+        &start_rows,
+        &truth,
+        &rolled,
+        provenance,
+    )?;
     write_timings(&out_dir.join(TIMINGS_FILE), &timings, provenance)
 }
 
-/// `predictions.parquet`: one row per model, variable and test row; model
-/// and variable dictionary-encoded (small keys, quick to group by).
+/// `rollout.parquet`: one row per model, variable, horizon and start.
+fn write_rollout(
+    path: &Path,
+    names: &[&str],
+    start_rows: &[u32],
+    truth: &rollout::Truth,
+    rolled: &[Vec<Vec<Vec<u16>>>; 3],
+    provenance: &Provenance,
+) -> Result<()> {
+    let (mut model, mut variable, mut horizon) = (Vec::new(), Vec::new(), Vec::new());
+    let (mut start, mut error) = (Vec::new(), Vec::new());
+    for (m, levels) in rolled.iter().enumerate() {
+        for v in 0..names.len() {
+            for (h, (predicted, true_levels)) in levels.iter().zip(&truth.levels).enumerate() {
+                for (s, &row) in start_rows.iter().enumerate() {
+                    model.push(m as u16);
+                    variable.push(v as u16);
+                    horizon.push(h as u16 + 1);
+                    start.push(row);
+                    error.push(predicted[v][s].abs_diff(true_levels[v][s]));
+                }
+            }
+        }
+    }
+    let batch = table::batch(vec![
+        (
+            "model",
+            Arc::new(dictionary(model, &MODELS)) as Arc<dyn Array>,
+        ),
+        ("variable", Arc::new(dictionary(variable, names))),
+        ("horizon", Arc::new(UInt16Array::from(horizon))),
+        ("start", Arc::new(UInt32Array::from(start))),
+        ("error", Arc::new(UInt16Array::from(error))),
+    ]);
+    table::write_parquet(path, &batch, provenance)
+}
+
+/// A dictionary-encoded string column: small keys, quick to group by.
+fn dictionary(keys: Vec<u16>, values: &[&str]) -> DictionaryArray<UInt16Type> {
+    DictionaryArray::new(
+        UInt16Array::from(keys),
+        Arc::new(StringArray::from(values.to_vec())),
+    )
+}
+
+/// `predictions.parquet`: one row per model, variable and test row.
 fn write_predictions(
     path: &Path,
     names: &[&str],
@@ -195,12 +306,6 @@ fn write_predictions(
             }
         }
     }
-    let dictionary = |keys: Vec<u16>, values: &[&str]| {
-        DictionaryArray::new(
-            UInt16Array::from(keys),
-            Arc::new(StringArray::from(values.to_vec())),
-        )
-    };
     let batch = table::batch(vec![
         (
             "model",
