@@ -605,7 +605,19 @@ fn the_report_renders_with_its_charts_and_renders_again_the_same() {
     .unwrap();
     let models: std::collections::BTreeSet<&str> =
         summary.iter().map(|r| r.model.as_str()).collect();
-    assert!(models.into_iter().eq(["aln", "linear", "persistence"]));
+    assert!(models.into_iter().eq([
+        "aln",
+        "linear",
+        "persistence",
+        "simulator@1/frame",
+        "simulator@10/frame",
+        "simulator@2/frame",
+        "simulator@5/frame"
+    ]));
+    // At the logged step (dt = 0.001: 10 steps per 0.01 s frame) the
+    // simulator reproduces the log: no error at all.
+    let exact = summary.iter().filter(|r| r.model == "simulator@10/frame");
+    assert!(exact.clone().count() > 0 && exact.clone().all(|r| r.stats.max == 0));
     let report_path = dir.path().join("reports/e2e/report.md");
     let report = std::fs::read_to_string(&report_path).unwrap();
     for heading in [

@@ -118,6 +118,12 @@ impl Stepper {
         }
     }
 
+    /// Forgets the tracked momentum: the next step tracks it afresh from its
+    /// state (for stepping on from a state of another trajectory).
+    pub fn restart(&mut self) {
+        self.momentum = None;
+    }
+
     /// Advances `state` by `dt`.
     pub fn step(
         &mut self,

@@ -3,7 +3,8 @@
 //! - `trajectory.mcap`: one `/state` message per logged frame (see
 //!   [`alnlab_common::state_log`]) holding the generalized state and the
 //!   paper's variables; `/tf` and `/scene` in Foxglove's schemas at the
-//!   viewing rate; an `alnlab.model` metadata record per scene;
+//!   viewing rate; per scene an `alnlab.model` metadata record (the model)
+//!   and an `alnlab.scene` record (what re-simulates it, see [`replay`]);
 //! - `stats.parquet`: min, max, mean, std and n per variable over all runs of
 //!   all scenes (paper §4.2).
 //!
@@ -20,6 +21,7 @@ pub mod integrate;
 pub mod model;
 #[cfg(test)]
 mod reference;
+pub mod replay;
 pub mod scene;
 pub mod spatial;
 mod stats;
@@ -46,7 +48,7 @@ pub use crate::scene::{Scene, SceneKind};
 
 /// Version of what this stage writes; part of every cache key, bumped when the
 /// same parameters would produce different bytes.
-pub const FORMAT_VERSION: u32 = 2;
+pub const FORMAT_VERSION: u32 = 3;
 
 /// File name of the trajectory log.
 pub const TRAJECTORY_FILE: &str = "trajectory.mcap";
@@ -54,6 +56,9 @@ pub const TRAJECTORY_FILE: &str = "trajectory.mcap";
 pub const STATS_FILE: &str = "stats.parquet";
 /// Name of the metadata records holding each scene's model.
 pub const MODEL_RECORD: &str = "alnlab.model";
+/// Name of the metadata records holding what re-simulates each scene: its
+/// resolved parameters, its index and the experiment seed ([`replay`]).
+pub const SCENE_RECORD: &str = "alnlab.scene";
 
 /// The `[simulate]` table of a manifest.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -215,6 +220,29 @@ pub fn generalized_state(model: &Model, state: &State, out: &mut Vec<f64>) {
     }
 }
 
+/// The state a logged generalized state stands for (the inverse of
+/// [`generalized_state`]); `None` if `values` has the wrong length.
+pub fn state_from_generalized(model: &Model, values: &[f64]) -> Option<State> {
+    let free = model.root == Root::Free;
+    let expected = if free { 6 } else { 3 } + 7 * model.len();
+    if values.len() != expected {
+        return None;
+    }
+    let mut state = State::rest(model, Vector3::new(values[0], values[1], values[2]));
+    let mut at = 3;
+    if free {
+        state.root_v = Vector3::new(values[3], values[4], values[5]);
+        at = 6;
+    }
+    for (q, w) in state.orient.iter_mut().zip(state.rates.iter_mut()) {
+        let v = &values[at..at + 7];
+        *q = nalgebra::Unit::new_unchecked(nalgebra::Quaternion::new(v[3], v[0], v[1], v[2]));
+        *w = Vector3::new(v[4], v[5], v[6]);
+        at += 7;
+    }
+    Some(state)
+}
+
 /// The forces of a scene at one instant: control torques (held over a step)
 /// and contacts.
 pub struct SceneForces<'a> {
@@ -289,6 +317,10 @@ pub fn run(
     let mut log_time_ns = 0u64;
     for (scene_index, p) in prepared.iter().enumerate() {
         log.metadata(MODEL_RECORD, model_record(p))?;
+        log.metadata(
+            SCENE_RECORD,
+            replay::scene_record(&p.scene, scene_index, seed),
+        )?;
         let frame_ns = (p.scene.frame_dt.get() * 1e9).round() as u64;
         let view_every = ((1.0 / params.view_rate.get()) / p.scene.frame_dt.get())
             .round()
@@ -334,24 +366,9 @@ pub fn simulate_run(
     mut on_frame: impl FnMut(&StateFrame, &Kinematics) -> Result<()>,
 ) -> Result<()> {
     let scene = &p.scene;
-    let model = &p.model;
     let mut rng = scene::run_rng(seed, scene_index, run);
-    let mut state = scene.initial_state(model, &mut rng);
-    let hinges = model.len() - 1;
-    let mut controller = Controller::new(
-        scene.controller(),
-        hinges,
-        scene::run_seed(seed ^ 0xC0DE, scene_index, run),
-    );
-    let mut forces = SceneForces {
-        surfaces: &p.surfaces,
-        points: &p.points,
-        g: vec![Vector3::zeros(); model.len()],
-        hinge_damping: scene.hinge_damping.expect("resolved"),
-    };
-    let mut hinge_torques = vec![Vector3::zeros(); hinges];
-    let mut stepper = Stepper::new(model);
-    let mut eval = Evaluation::new(model);
+    let mut state = scene.initial_state(&p.model, &mut rng);
+    let mut runner = Runner::new(p, seed, scene_index, run);
     let dt = scene.dt.get();
     let steps_per_frame = scene.steps_per_frame();
     let mut frame = StateFrame {
@@ -364,40 +381,107 @@ pub fn simulate_run(
     let mut step = 0u64;
     for index in 0..scene.frames_per_run() {
         if index > 0 {
-            for _ in 0..steps_per_frame {
-                controller.torques(step as f64 * dt, &mut hinge_torques);
-                forces.g[1..].copy_from_slice(&hinge_torques);
-                stepper.step(model, &mut state, dt, scene.integrator, &mut forces);
-                step += 1;
-                if !state.is_finite() {
-                    return Err(blow_up(p, run, step, &p.layout.state, &{
-                        let mut v = Vec::new();
-                        generalized_state(model, &state, &mut v);
-                        v
-                    }));
-                }
-            }
+            runner
+                .advance(&mut state, step, steps_per_frame, dt)
+                .map_err(|at| {
+                    let mut v = Vec::new();
+                    generalized_state(&p.model, &state, &mut v);
+                    blow_up(p, run, at, &p.layout.state, &v)
+                })?;
+            step += steps_per_frame;
         }
-        controller.torques(step as f64 * dt, &mut hinge_torques);
-        forces.g[1..].copy_from_slice(&hinge_torques);
-        eval.run(model, &state, &mut forces);
-        generalized_state(model, &state, &mut frame.state);
-        p.variables.values(
-            &state,
-            &eval.kin,
-            &eval.ws.accel,
-            &forces.g,
-            &eval.f_ext,
-            &mut frame.variables,
-        );
+        runner.observe(&state, step as f64 * dt, &mut frame);
         if let Some(err) = check(p, run, step, &frame) {
             return Err(err);
         }
         frame.time = index as f64 * scene.frame_dt.get();
         frame.frame = index as u32;
-        on_frame(&frame, &eval.kin)?;
+        on_frame(&frame, &runner.eval.kin)?;
     }
     Ok(())
+}
+
+/// The moving parts of one run of a scene: its controller (seeded by the
+/// run), forces, integrator and an evaluation for observing frames.
+pub(crate) struct Runner<'a> {
+    p: &'a Prepared,
+    controller: Controller,
+    forces: SceneForces<'a>,
+    hinge_torques: Vec<Vector3<f64>>,
+    stepper: Stepper,
+    eval: Evaluation,
+}
+
+impl<'a> Runner<'a> {
+    pub(crate) fn new(p: &'a Prepared, seed: u64, scene_index: usize, run: u32) -> Runner<'a> {
+        let model = &p.model;
+        let hinges = model.len() - 1;
+        Runner {
+            p,
+            controller: Controller::new(
+                p.scene.controller(),
+                hinges,
+                scene::run_seed(seed ^ 0xC0DE, scene_index, run),
+            ),
+            forces: SceneForces {
+                surfaces: &p.surfaces,
+                points: &p.points,
+                g: vec![Vector3::zeros(); model.len()],
+                hinge_damping: p.scene.hinge_damping.expect("resolved"),
+            },
+            hinge_torques: vec![Vector3::zeros(); hinges],
+            stepper: Stepper::new(model),
+            eval: Evaluation::new(model),
+        }
+    }
+
+    /// Takes `steps` steps of `dt`, the first being step number `first` of
+    /// the run (at time first·dt; the controller's torques are those of each
+    /// step's start). On a non-finite state, the number of the step that
+    /// made it.
+    pub(crate) fn advance(
+        &mut self,
+        state: &mut State,
+        first: u64,
+        steps: u64,
+        dt: f64,
+    ) -> std::result::Result<(), u64> {
+        let (model, scene) = (&self.p.model, &self.p.scene);
+        for step in first..first + steps {
+            self.controller
+                .torques(step as f64 * dt, &mut self.hinge_torques);
+            self.forces.g[1..].copy_from_slice(&self.hinge_torques);
+            self.stepper
+                .step(model, state, dt, scene.integrator, &mut self.forces);
+            if !state.is_finite() {
+                return Err(step + 1);
+            }
+        }
+        Ok(())
+    }
+
+    /// Forgets what the integrator tracked, to step on from another state of
+    /// the same run.
+    pub(crate) fn restart(&mut self) {
+        self.stepper.restart();
+    }
+
+    /// The frame of `state` at time `t`: its generalized state and variables.
+    pub(crate) fn observe(&mut self, state: &State, t: f64, frame: &mut StateFrame) {
+        let p = self.p;
+        self.controller.torques(t, &mut self.hinge_torques);
+        self.forces.g[1..].copy_from_slice(&self.hinge_torques);
+        self.eval.run(&p.model, state, &mut self.forces);
+        generalized_state(&p.model, state, &mut frame.state);
+        p.variables.values(
+            state,
+            &self.eval.kin,
+            &self.eval.ws.accel,
+            &self.forces.g,
+            &self.eval.f_ext,
+            &mut frame.variables,
+        );
+    }
 }
 
 fn check(p: &Prepared, run: u32, step: u64, frame: &StateFrame) -> Option<Error> {

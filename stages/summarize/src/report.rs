@@ -61,6 +61,7 @@ struct Timing {
     ns_per_state: f64,
     threads: u32,
     cores: u32,
+    failed: u32,
 }
 
 /// A variant's artifacts, read.
@@ -123,9 +124,9 @@ pub fn render(run: &RunInfo, dir: &Path) -> Result<PathBuf> {
     let _ = writeln!(
         md,
         "![ns per predicted state against error](speed.svg)\n\nEach point is one model and evaluation \
-         path of one variant: its ns per predicted state on this machine against its error averaged \
-         over the variables (mean filled, 95th percentile hollow). The re-simulation baseline \
-         (the simulator itself at coarser steps) is not measured yet.\n"
+         path of one variant: its ns per predicted state (for the simulator, per re-simulated \
+         frame, at several integration steps per frame) on this machine against its error \
+         averaged over the variables (mean filled, 95th percentile hollow).\n"
     );
 
     for v in &variants {
@@ -145,6 +146,7 @@ fn load(info: &VariantInfo) -> Result<Loaded<'_>> {
     let ns = table.column::<Float64Array>("ns_per_state")?.values();
     let threads = table.column::<UInt32Array>("threads")?.values();
     let cores = table.column::<UInt32Array>("cores")?.values();
+    let failed = table.column::<UInt32Array>("failed")?.values();
     let timings = (0..table.num_rows())
         .map(|i| Timing {
             model: models[i].clone(),
@@ -152,6 +154,7 @@ fn load(info: &VariantInfo) -> Result<Loaded<'_>> {
             ns_per_state: ns[i],
             threads: threads[i],
             cores: cores[i],
+            failed: failed[i],
         })
         .collect();
 
@@ -385,6 +388,8 @@ fn variant_section(md: &mut String, v: &Loaded, dir: &Path) -> Result<()> {
     }
     md.push('\n');
 
+    models_table(md, v);
+
     let worse = worse_than_persistence(&v.summary);
     let _ = writeln!(md, "### Worse than persistence\n");
     if worse.is_empty() {
@@ -472,6 +477,51 @@ fn variant_section(md: &mut String, v: &Loaded, dir: &Path) -> Result<()> {
         ),
     };
     closed_loop(md, v, dir)
+}
+
+/// Every model beside the ALN: its error over all variables and its speed.
+fn models_table(md: &mut String, v: &Loaded) {
+    let _ = writeln!(
+        md,
+        "### Every model\n\nErrors averaged over the variables; time per predicted state (the \
+         simulator: per re-simulated frame, `simulator@k/frame` taking k integration steps per \
+         frame); frames a simulator could not step are scored as the worst prediction.\n\n\
+         | model | mean | 5% trim | p95 | max | ns/state (path, threads) | failed |\n\
+         |---|---:|---:|---:|---:|---|---:|"
+    );
+    let mut models: Vec<&str> = v.summary.iter().map(|r| r.model.as_str()).collect();
+    models.dedup();
+    for model in models {
+        let rows: Vec<&SummaryRow> = v.summary.iter().filter(|r| r.model == model).collect();
+        let n = rows.len() as f64;
+        let average = |f: fn(&SummaryRow) -> f64| rows.iter().map(|r| f(r)).sum::<f64>() / n;
+        let max = rows.iter().map(|r| r.stats.max).max().unwrap_or(0);
+        let speed: Vec<String> = v
+            .timings
+            .iter()
+            .filter(|t| t.model == model)
+            .map(|t| format!("{:.0} ({}, {})", t.ns_per_state, t.path, t.threads))
+            .collect();
+        let failed: u32 = v
+            .timings
+            .iter()
+            .filter(|t| t.model == model)
+            .map(|t| t.failed)
+            .sum();
+        let _ = writeln!(
+            md,
+            "| {model} | {:.4} | {:.4} | {:.2} | {max} | {} | {failed} |",
+            average(|r| r.stats.mean),
+            average(|r| r.stats.trimmed_mean),
+            average(|r| r.stats.p95),
+            if speed.is_empty() {
+                "—".into()
+            } else {
+                speed.join("; ")
+            },
+        );
+    }
+    md.push('\n');
 }
 
 /// Error against closed-loop horizon: each model fed its own output.

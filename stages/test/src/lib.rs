@@ -2,9 +2,10 @@
 //! predicts the next level of every learned variable for every test row of
 //! `levels.parquet`, and scores it beside the baselines ([`baseline`]) on
 //! the same rows. Writes
-//! - `predictions.parquet`: per model (`aln`, `persistence`, `linear`),
-//!   variable and test row: the true level, the predicted level and the
-//!   absolute error in levels;
+//! - `predictions.parquet`: per model (`aln`, `persistence`, `linear`, and
+//!   `simulator@<steps>/frame` for each re-simulation step of
+//!   [`resimulate`]), variable and test row: the true level, the predicted
+//!   level and the absolute error in levels;
 //! - `timings.parquet`: ns per predicted state for each model and evaluation
 //!   path, with the threads used and the machine's cores — a measurement,
 //!   the one artifact that differs between equal runs;
@@ -13,6 +14,7 @@
 
 pub mod baseline;
 pub mod predict;
+pub mod resimulate;
 pub mod rollout;
 
 use std::path::Path;
@@ -42,7 +44,8 @@ pub const TIMINGS_FILE: &str = "timings.parquet";
 /// File name of the closed-loop rollout table.
 pub const ROLLOUT_FILE: &str = "rollout.parquet";
 
-/// The models of `predictions.parquet`, in order.
+/// The models of `predictions.parquet` and `rollout.parquet`, in order (the
+/// re-simulation baselines follow in predictions).
 pub const MODELS: [&str; 3] = ["aln", "persistence", "linear"];
 
 /// The `[test]` table of a manifest.
@@ -56,6 +59,10 @@ pub struct Params {
     pub horizon: Count,
     /// … from at most this many test rows, spread over the test set.
     pub rollout_starts: Count,
+    /// The simulator as a baseline: each test row's frame re-simulated with
+    /// this many integration steps per frame, for each number given (empty:
+    /// no such baseline).
+    pub resimulate_steps: Vec<Count>,
 }
 
 impl Default for Params {
@@ -64,6 +71,7 @@ impl Default for Params {
             rate_limit: None,
             horizon: Count(10),
             rollout_starts: Count(200),
+            resimulate_steps: vec![Count(10), Count(5), Count(2), Count(1)],
         }
     }
 }
@@ -183,7 +191,7 @@ pub fn run(
     timings.push(linear_timing);
     progress.advance(1);
 
-    // Closed loop, from the true levels of spread-out test rows.
+    // The simulator re-stepping each test row's logged frame.
     let log = StateLog::read(trajectory_path)?;
     let scenes = levels.column::<StringArray>("scene")?;
     let runs = levels.column::<UInt32Array>("run")?.values();
@@ -197,6 +205,19 @@ pub fn run(
             frame: steps[r],
         })
         .collect();
+    let replays = alnlab_simulate::replay::SceneReplay::from_log(&log)
+        .map_err(|m| Error::bad_file(trajectory_path, m))?;
+    let resimulated: Vec<resimulate::Resimulated> = params
+        .resimulate_steps
+        .iter()
+        .map(|steps| {
+            resimulate::baseline(&log, &replays, &learned, &starts, &test.y, steps.0)
+                .map_err(|e| e.context(&format!("re-simulating with {} steps per frame", steps.0)))
+        })
+        .collect::<Result<_>>()?;
+    timings.extend(resimulated.iter().map(|r| r.timing.clone()));
+
+    // Closed loop, from the true levels of spread-out test rows.
     let horizon = params.horizon.get();
     let truth = rollout::truth(
         &log,
@@ -219,11 +240,17 @@ pub fn run(
     ];
     progress.advance(1);
 
+    let mut models: Vec<(&str, &Vec<Vec<u16>>)> = vec![
+        ("aln", &aln),
+        ("persistence", &persistence),
+        ("linear", &linear_levels),
+    ];
+    models.extend(resimulated.iter().map(|r| (r.name.as_str(), &r.levels)));
     write_predictions(
         &out_dir.join(PREDICTIONS_FILE),
         &names,
         &test,
-        &[&aln, &persistence, &linear_levels],
+        &models,
         provenance,
     )?;
     let start_rows: Vec<u32> = truth.starts.iter().map(|&k| test.rows[k] as u32).collect();
@@ -288,12 +315,12 @@ fn write_predictions(
     path: &Path,
     names: &[&str],
     test: &TestRows,
-    predicted: &[&Vec<Vec<u16>>; 3],
+    predicted: &[(&str, &Vec<Vec<u16>>)],
     provenance: &Provenance,
 ) -> Result<()> {
     let (mut model, mut variable, mut row) = (Vec::new(), Vec::new(), Vec::new());
     let (mut truth, mut guess, mut error) = (Vec::new(), Vec::new(), Vec::new());
-    for (m, levels) in predicted.iter().enumerate() {
+    for (m, (_, levels)) in predicted.iter().enumerate() {
         for v in 0..names.len() {
             for (k, &r) in test.rows.iter().enumerate() {
                 let (t, p) = (test.y[v][k], levels[v][k]);
@@ -306,10 +333,11 @@ fn write_predictions(
             }
         }
     }
+    let model_names: Vec<&str> = predicted.iter().map(|(name, _)| *name).collect();
     let batch = table::batch(vec![
         (
             "model",
-            Arc::new(dictionary(model, &MODELS)) as Arc<dyn Array>,
+            Arc::new(dictionary(model, &model_names)) as Arc<dyn Array>,
         ),
         ("variable", Arc::new(dictionary(variable, names))),
         ("row", Arc::new(UInt32Array::from(row))),
@@ -320,7 +348,8 @@ fn write_predictions(
     table::write_parquet(path, &batch, provenance)
 }
 
-/// `timings.parquet`: one row per model and evaluation path.
+/// `timings.parquet`: one row per model and evaluation path (with the states
+/// it failed to predict).
 fn write_timings(path: &Path, timings: &[Timing], provenance: &Provenance) -> Result<()> {
     let cores = std::thread::available_parallelism().map_or(1, |n| n.get()) as u32;
     let column =
@@ -329,7 +358,7 @@ fn write_timings(path: &Path, timings: &[Timing], provenance: &Provenance) -> Re
         (
             "model",
             Arc::new(StringArray::from_iter_values(
-                timings.iter().map(|t| t.model),
+                timings.iter().map(|t| t.model.as_str()),
             )) as Arc<dyn Array>,
         ),
         (
@@ -346,6 +375,7 @@ fn write_timings(path: &Path, timings: &[Timing], provenance: &Provenance) -> Re
         ),
         ("states", Arc::new(column(|t| t.states as u32))),
         ("threads", Arc::new(column(|t| t.threads as u32))),
+        ("failed", Arc::new(column(|t| t.failed as u32))),
         (
             "cores",
             Arc::new(UInt32Array::from(vec![cores; timings.len()])),

@@ -23,13 +23,15 @@ use crate::baseline::Linear;
 /// One measured evaluation path.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Timing {
-    pub model: &'static str,
+    pub model: String,
     /// `batched`, `single` or `threshold-search`.
     pub path: &'static str,
     pub ns_per_state: f64,
     /// States timed.
     pub states: usize,
     pub threads: usize,
+    /// States the model could not predict (a re-simulation that blew up).
+    pub failed: usize,
 }
 
 /// The ALN's predicted levels `[variable][row]` for the current levels `x`
@@ -110,11 +112,12 @@ fn bit_forest(
         })
         .collect();
     let batched = Timing {
-        model: "aln",
+        model: "aln".into(),
         path: "batched",
         ns_per_state: clock.elapsed().as_nanos() as f64 / rows as f64,
         states: rows,
         threads: rayon::current_num_threads(),
+        failed: 0,
     };
 
     let mut votes = Vec::new();
@@ -128,11 +131,12 @@ fn bit_forest(
         }
     }
     let single = Timing {
-        model: "aln",
+        model: "aln".into(),
         path: "single",
         ns_per_state: clock.elapsed().as_nanos() as f64 / rows as f64,
         states: rows,
         threads: 1,
+        failed: 0,
     };
     assert_eq!(
         single_levels, levels,
@@ -183,11 +187,12 @@ fn threshold_search(
         }
     }
     let timing = Timing {
-        model: "aln",
+        model: "aln".into(),
         path: "threshold-search",
         ns_per_state: clock.elapsed().as_nanos() as f64 / rows as f64,
         states: rows,
         threads: 1,
+        failed: 0,
     };
     (levels, timing)
 }
@@ -208,11 +213,12 @@ pub fn linear(model: &Linear, x: &[Vec<u16>], levels: &[usize]) -> (Vec<Vec<u16>
         }
     }
     let timing = Timing {
-        model: "linear",
+        model: "linear".into(),
         path: "single",
         ns_per_state: clock.elapsed().as_nanos() as f64 / rows.max(1) as f64,
         states: rows,
         threads: 1,
+        failed: 0,
     };
     (out, timing)
 }
