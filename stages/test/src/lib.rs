@@ -44,10 +44,6 @@ pub const TIMINGS_FILE: &str = "timings.parquet";
 /// File name of the closed-loop rollout table.
 pub const ROLLOUT_FILE: &str = "rollout.parquet";
 
-/// The models of `predictions.parquet` and `rollout.parquet`, in order (the
-/// re-simulation baselines follow in predictions).
-pub const MODELS: [&str; 3] = ["aln", "persistence", "linear"];
-
 /// The `[test]` table of a manifest.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
@@ -205,13 +201,14 @@ pub fn run(
             frame: steps[r],
         })
         .collect();
+    let frames = rollout::LoggedFrames::new(&log, &learned);
     let replays = alnlab_simulate::replay::SceneReplay::from_log(&log)
         .map_err(|m| Error::bad_file(trajectory_path, m))?;
     let resimulated: Vec<resimulate::Resimulated> = params
         .resimulate_steps
         .iter()
         .map(|steps| {
-            resimulate::baseline(&log, &replays, &learned, &starts, &test.y, steps.0)
+            resimulate::baseline(&frames, &replays, &learned, &starts, &test.y, steps.0)
                 .map_err(|e| e.context(&format!("re-simulating with {} steps per frame", steps.0)))
         })
         .collect::<Result<_>>()?;
@@ -220,7 +217,7 @@ pub fn run(
     // Closed loop, from the true levels of spread-out test rows.
     let horizon = params.horizon.get();
     let truth = rollout::truth(
-        &log,
+        &frames,
         &learned,
         &starts,
         horizon,
@@ -231,13 +228,34 @@ pub fn run(
         .iter()
         .map(|x| truth.starts.iter().map(|&k| x[k]).collect())
         .collect();
-    let rolled = [
-        rollout::roll(from.clone(), horizon, |x| {
-            predict::aln(&model, &codecs, x, windows.as_deref()).0
-        }),
-        rollout::roll(from.clone(), horizon, |x| x.to_vec()),
-        rollout::roll(from, horizon, |x| predict::linear(&linear, x, &levels_of).0),
+    let mut rolled = vec![
+        (
+            "aln".to_string(),
+            rollout::roll(from.clone(), horizon, |x| {
+                predict::aln(&model, &codecs, x, windows.as_deref()).0
+            }),
+        ),
+        (
+            "persistence".to_string(),
+            rollout::roll(from.clone(), horizon, |x| x.to_vec()),
+        ),
+        (
+            "linear".to_string(),
+            rollout::roll(from, horizon, |x| predict::linear(&linear, x, &levels_of).0),
+        ),
     ];
+    let start_rows: Vec<rollout::Start> = truth.starts.iter().map(|&k| starts[k]).collect();
+    for (steps, r) in params.resimulate_steps.iter().zip(&resimulated) {
+        let levels = resimulate::rollout(
+            &frames,
+            &replays,
+            &learned,
+            &start_rows,
+            &truth.levels,
+            steps.0,
+        )?;
+        rolled.push((r.name.clone(), levels));
+    }
     progress.advance(1);
 
     let mut models: Vec<(&str, &Vec<Vec<u16>>)> = vec![
@@ -254,6 +272,10 @@ pub fn run(
         provenance,
     )?;
     let start_rows: Vec<u32> = truth.starts.iter().map(|&k| test.rows[k] as u32).collect();
+    let rolled: Vec<(&str, &Vec<Vec<Vec<u16>>>)> = rolled
+        .iter()
+        .map(|(name, levels)| (name.as_str(), levels))
+        .collect();
     write_rollout(
         &out_dir.join(ROLLOUT_FILE),
         &names,
@@ -271,12 +293,12 @@ fn write_rollout(
     names: &[&str],
     start_rows: &[u32],
     truth: &rollout::Truth,
-    rolled: &[Vec<Vec<Vec<u16>>>; 3],
+    rolled: &[(&str, &Vec<Vec<Vec<u16>>>)],
     provenance: &Provenance,
 ) -> Result<()> {
     let (mut model, mut variable, mut horizon) = (Vec::new(), Vec::new(), Vec::new());
     let (mut start, mut error) = (Vec::new(), Vec::new());
-    for (m, levels) in rolled.iter().enumerate() {
+    for (m, (_, levels)) in rolled.iter().enumerate() {
         for v in 0..names.len() {
             for (h, (predicted, true_levels)) in levels.iter().zip(&truth.levels).enumerate() {
                 for (s, &row) in start_rows.iter().enumerate() {
@@ -289,10 +311,11 @@ fn write_rollout(
             }
         }
     }
+    let model_names: Vec<&str> = rolled.iter().map(|(name, _)| *name).collect();
     let batch = table::batch(vec![
         (
             "model",
-            Arc::new(dictionary(model, &MODELS)) as Arc<dyn Array>,
+            Arc::new(dictionary(model, &model_names)) as Arc<dyn Array>,
         ),
         ("variable", Arc::new(dictionary(variable, names))),
         ("horizon", Arc::new(UInt16Array::from(horizon))),

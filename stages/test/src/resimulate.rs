@@ -9,13 +9,13 @@
 use std::collections::{BTreeMap, HashMap};
 use std::time::Instant;
 
-use alnlab_common::state_log::{StateFrame, StateLog};
+use alnlab_common::state_log::StateFrame;
 use alnlab_common::{Error, Result};
 use alnlab_quantize::Entry;
 use alnlab_simulate::replay::{Replayer, SceneReplay};
 
 use crate::predict::Timing;
-use crate::rollout::Start;
+use crate::rollout::{LoggedFrames, Start};
 
 /// One re-simulation baseline's predictions.
 pub struct Resimulated {
@@ -30,69 +30,15 @@ pub struct Resimulated {
 /// Re-simulates every test row's frame with `steps` steps per frame. `y` are
 /// the true next levels `[variable][test row]`.
 pub fn baseline(
-    log: &StateLog,
+    frames: &LoggedFrames,
     replays: &BTreeMap<String, SceneReplay>,
     learned: &[&Entry],
     rows: &[Start],
     y: &[Vec<u16>],
     steps: u64,
 ) -> Result<Resimulated> {
-    let mut frames: HashMap<(&str, u32, u32), &StateFrame> = HashMap::new();
-    let mut columns: HashMap<&str, Vec<Option<usize>>> = HashMap::new();
-    for scene in &log.scenes {
-        let name = scene.layout.scene.as_str();
-        let names = &scene.layout.variables;
-        let found = learned
-            .iter()
-            .map(|e| names.iter().position(|n| *n == e.variable));
-        columns.insert(name, found.collect());
-        for f in &scene.frames {
-            frames.insert((name, f.run, f.frame), f);
-        }
-    }
-    // In time order within each run, so each run's controller only moves
-    // forward.
-    let mut order: Vec<usize> = (0..rows.len()).collect();
-    order.sort_by_key(|&k| (rows[k].scene, rows[k].run, rows[k].frame));
-    let mut replayers: HashMap<&str, Replayer> = replays
-        .iter()
-        .map(|(name, r)| (name.as_str(), r.replayer()))
-        .collect();
-    let mut levels = vec![vec![0u16; rows.len()]; learned.len()];
-    let mut next = StateFrame {
-        time: 0.0,
-        run: 0,
-        frame: 0,
-        state: Vec::new(),
-        variables: Vec::new(),
-    };
-    let mut failed = 0;
     let clock = Instant::now();
-    for k in order {
-        let row = &rows[k];
-        let from = frames
-            .get(&(row.scene, row.run, row.frame))
-            .ok_or_else(|| {
-                Error::Invalid(format!(
-                    "test row of scene `{}`, run {}, frame {} is not in the trajectory log",
-                    row.scene, row.run, row.frame
-                ))
-            })?;
-        let replayer = replayers.get_mut(row.scene).ok_or_else(|| {
-            Error::Invalid(format!(
-                "scene `{}` is not in the trajectory log",
-                row.scene
-            ))
-        })?;
-        let stepped = replayer.next_frame(from, steps, &mut next);
-        for (v, entry) in learned.iter().enumerate() {
-            levels[v][k] = match (&stepped, columns[row.scene][v]) {
-                (Ok(()), Some(c)) => entry.quantizer.level(next.variables[c]).0,
-                _ => farthest(y[v][k], entry.quantizer.levels),
-            };
-        }
-        failed += usize::from(stepped.is_err());
-    }
+    let (levels, failed) = simulate(frames, replays, learned, rows, 1, steps, |v, k, _| y[v][k])?;
     let name = format!("simulator@{steps}/frame");
     let timing = Timing {
         model: name.clone(),
@@ -102,11 +48,90 @@ pub fn baseline(
         threads: 1,
         failed,
     };
+    let levels = levels.into_iter().next().expect("one frame ahead");
     Ok(Resimulated {
         name,
         levels,
         timing,
     })
+}
+
+/// The simulator fed its own frames for `horizon` frames from each start
+/// row: levels `[h][variable][start]`, scored against `truth[h][v][s]`.
+pub fn rollout(
+    frames: &LoggedFrames,
+    replays: &BTreeMap<String, SceneReplay>,
+    learned: &[&Entry],
+    starts: &[Start],
+    truth: &[Vec<Vec<u16>>],
+    steps: u64,
+) -> Result<Vec<Vec<Vec<u16>>>> {
+    let horizon = truth.len();
+    let (levels, _) = simulate(
+        frames,
+        replays,
+        learned,
+        starts,
+        horizon,
+        steps,
+        |v, k, h| truth[h][v][k],
+    )?;
+    Ok(levels)
+}
+
+/// Steps each row's logged frame `horizon` frames on, each from the last:
+/// levels `[h][v][row]`, and the rows that blew up (whose levels from then on
+/// are the farthest from `truth(v, row, h)`).
+fn simulate(
+    frames: &LoggedFrames,
+    replays: &BTreeMap<String, SceneReplay>,
+    learned: &[&Entry],
+    rows: &[Start],
+    horizon: usize,
+    steps: u64,
+    truth: impl Fn(usize, usize, usize) -> u16,
+) -> Result<(Vec<Vec<Vec<u16>>>, usize)> {
+    // In time order within each run, so each run's controller mostly moves
+    // forward.
+    let mut order: Vec<usize> = (0..rows.len()).collect();
+    order.sort_by_key(|&k| (rows[k].scene, rows[k].run, rows[k].frame));
+    let mut replayers: HashMap<&str, Replayer> = replays
+        .iter()
+        .map(|(name, r)| (name.as_str(), r.replayer()))
+        .collect();
+    let mut levels = vec![vec![vec![0u16; rows.len()]; learned.len()]; horizon];
+    let mut next = StateFrame {
+        time: 0.0,
+        run: 0,
+        frame: 0,
+        state: Vec::new(),
+        variables: Vec::new(),
+    };
+    let mut failed = 0;
+    for k in order {
+        let row = &rows[k];
+        let missing = || {
+            Error::Invalid(format!(
+                "test row of scene `{}`, run {}, frame {} is not in the trajectory log",
+                row.scene, row.run, row.frame
+            ))
+        };
+        let mut current = frames.get(row, 0).ok_or_else(missing)?.clone();
+        let replayer = replayers.get_mut(row.scene).ok_or_else(missing)?;
+        let mut blown = false;
+        for (h, at_h) in levels.iter_mut().enumerate() {
+            blown = blown || replayer.next_frame(&current, steps, &mut next).is_err();
+            for (v, entry) in learned.iter().enumerate() {
+                at_h[v][k] = match (blown, frames.level(row.scene, &next, v, entry)) {
+                    (false, Some(level)) => level,
+                    _ => farthest(truth(v, k, h), entry.quantizer.levels),
+                };
+            }
+            std::mem::swap(&mut current, &mut next);
+        }
+        failed += usize::from(blown);
+    }
+    Ok((levels, failed))
 }
 
 /// The level farthest from `truth` among `levels` levels.

@@ -7,7 +7,7 @@
 
 use std::collections::HashMap;
 
-use alnlab_common::state_log::StateLog;
+use alnlab_common::state_log::{StateFrame, StateLog};
 use alnlab_quantize::Entry;
 
 /// The true levels after each step from a set of start rows.
@@ -19,45 +19,73 @@ pub struct Truth {
 }
 
 /// Where a test row starts: its scene, run and frame.
+#[derive(Clone, Copy, Debug)]
 pub struct Start<'a> {
     pub scene: &'a str,
     pub run: u32,
     pub frame: u32,
 }
 
+/// The frames of a trajectory log by (scene, run, frame), and where each
+/// learned variable sits among each scene's variables.
+pub struct LoggedFrames<'a> {
+    frames: HashMap<(&'a str, u32, u32), &'a StateFrame>,
+    columns: HashMap<&'a str, Vec<Option<usize>>>,
+}
+
+impl<'a> LoggedFrames<'a> {
+    /// Indexes `log` for the `learned` variables.
+    pub fn new(log: &'a StateLog, learned: &[&Entry]) -> LoggedFrames<'a> {
+        let mut frames = HashMap::new();
+        let mut columns = HashMap::new();
+        for scene in &log.scenes {
+            let name = scene.layout.scene.as_str();
+            let names = &scene.layout.variables;
+            let found = learned
+                .iter()
+                .map(|e| names.iter().position(|n| *n == e.variable));
+            columns.insert(name, found.collect());
+            for f in &scene.frames {
+                frames.insert((name, f.run, f.frame), f);
+            }
+        }
+        LoggedFrames { frames, columns }
+    }
+
+    /// The frame `after` frames after a row's, if logged.
+    pub fn get(&self, row: &Start, after: u32) -> Option<&'a StateFrame> {
+        self.frames
+            .get(&(row.scene, row.run, row.frame + after))
+            .copied()
+    }
+
+    /// The level of learned variable `v` in a frame of `scene`, if the scene
+    /// has the variable.
+    pub fn level(&self, scene: &str, frame: &StateFrame, v: usize, entry: &Entry) -> Option<u16> {
+        let column = self.columns.get(scene)?[v]?;
+        Some(entry.quantizer.level(frame.variables[column]).0)
+    }
+}
+
 /// The true levels for up to `most` starts, spread evenly over the test rows
 /// whose next `horizon` frames are in the log (a start too close to the end
 /// of its run, or in a scene lacking a learned variable, is left out).
 pub fn truth(
-    log: &StateLog,
+    frames: &LoggedFrames,
     learned: &[&Entry],
     rows: &[Start],
     horizon: usize,
     most: usize,
 ) -> Truth {
-    // (scene, run, frame) → the frame's variables; per scene, where each
-    // learned variable sits in them.
-    let mut frames = HashMap::new();
-    let mut columns = HashMap::new();
-    for scene in &log.scenes {
-        let names = &scene.layout.variables;
-        let found: Option<Vec<usize>> = learned
-            .iter()
-            .map(|e| names.iter().position(|n| *n == e.variable))
-            .collect();
-        if let Some(found) = found {
-            columns.insert(scene.layout.scene.as_str(), found);
-            for f in &scene.frames {
-                frames.insert((scene.layout.scene.as_str(), f.run, f.frame), &f.variables);
-            }
-        }
-    }
+    let scored = |r: &Start, h: u32| {
+        frames.get(r, h).is_some_and(|f| {
+            (0..learned.len()).all(|v| frames.level(r.scene, f, v, learned[v]).is_some())
+        })
+    };
     let eligible: Vec<usize> = rows
         .iter()
         .enumerate()
-        .filter(|(_, r)| {
-            (1..=horizon as u32).all(|h| frames.contains_key(&(r.scene, r.run, r.frame + h)))
-        })
+        .filter(|(_, r)| (1..=horizon as u32).all(|h| scored(r, h)))
         .map(|(k, _)| k)
         .collect();
     let take = most.min(eligible.len());
@@ -74,8 +102,8 @@ pub fn truth(
                         .iter()
                         .map(|&k| {
                             let r = &rows[k];
-                            let values = frames[&(r.scene, r.run, r.frame + h)];
-                            entry.quantizer.level(values[columns[r.scene][v]]).0
+                            let frame = frames.get(r, h).expect("eligible");
+                            frames.level(r.scene, frame, v, entry).expect("eligible")
                         })
                         .collect()
                 })
