@@ -216,6 +216,17 @@ fn overall(summary: &[SummaryRow], model: &str) -> Option<(f64, f64)> {
     })
 }
 
+/// The models other than the ALN, in summary order.
+fn baseline_models(summary: &[SummaryRow]) -> Vec<&str> {
+    let mut models: Vec<&str> = summary
+        .iter()
+        .map(|r| r.model.as_str())
+        .filter(|m| *m != "aln")
+        .collect();
+    models.dedup();
+    models
+}
+
 /// The mean error of `model` for `variable`.
 fn mean_of(summary: &[SummaryRow], model: &str, variable: &str) -> Option<f64> {
     summary
@@ -281,12 +292,27 @@ fn reproducibility(md: &mut String, run: &RunInfo, variants: &[Loaded]) {
 
 fn side_by_side(md: &mut String, variants: &[Loaded]) {
     let _ = writeln!(md, "## Variants side by side\n");
-    let _ = writeln!(
+    let mut baselines: Vec<&str> = Vec::new();
+    for v in variants {
+        for b in baseline_models(&v.summary) {
+            if !baselines.contains(&b) {
+                baselines.push(b);
+            }
+        }
+    }
+    let _ = write!(
         md,
         "Errors in quantization levels, averaged over the variables.\n\n\
-         | variant | ALN mean | ALN p95 | persistence mean | linear mean | ALN batched ns/state | \
-         ALN single ns/state | hardware estimate (gate delays) | variables worse than persistence |\n\
-         |---|---:|---:|---:|---:|---:|---:|---:|---:|"
+         | variant | ALN mean | ALN p95 |"
+    );
+    for b in &baselines {
+        let _ = write!(md, " {b} mean |");
+    }
+    let _ = writeln!(
+        md,
+        " ALN batched ns/state | ALN single ns/state | hardware estimate (gate delays) | \
+         variables worse than persistence |\n|---|---:|---:|{}---:|---:|---:|---:|",
+        "---:|".repeat(baselines.len())
     );
     for v in variants {
         let mean = |model: &str| {
@@ -304,14 +330,16 @@ fn side_by_side(md: &mut String, variants: &[Loaded]) {
         };
         let worse = worse_than_persistence(&v.summary).len();
         let total = v.summary.iter().filter(|r| r.model == "aln").count();
+        let baseline_means: String = baselines
+            .iter()
+            .map(|b| format!(" {} |", mean(b)))
+            .collect();
         let _ = writeln!(
             md,
-            "| {} | {} | {} | {} | {} | {} | {} | {} | {}{} of {} |",
+            "| {} | {} | {} |{baseline_means} {} | {} | {} | {}{} of {} |",
             v.info.name,
             mean("aln"),
             p95,
-            mean("persistence"),
-            mean("linear"),
             ns("batched"),
             ns("single"),
             v.hardware.delays(),
@@ -344,12 +372,20 @@ fn variant_section(md: &mut String, v: &Loaded, dir: &Path) -> Result<()> {
     }
 
     let _ = writeln!(md, "### Error by group (paper §4.6)\n");
-    let _ = writeln!(
+    let baselines = baseline_models(&v.summary);
+    let _ = write!(
         md,
         "The ALN's best and worst variable of each group, in quantization levels, beside the \
          baselines' mean error on the same variable.\n\n\
-         | group | | variable | mean | std dev | std err | 5% trim | median | IQR | max | persistence mean | linear mean |\n\
-         |---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|"
+         | group | | variable | mean | std dev | std err | 5% trim | median | IQR | max |"
+    );
+    for b in &baselines {
+        let _ = write!(md, " {b} mean |");
+    }
+    let _ = writeln!(
+        md,
+        "\n|---|---|---|---:|---:|---:|---:|---:|---:|---:|{}",
+        "---:|".repeat(baselines.len())
     );
     let aln: Vec<&SummaryRow> = v.summary.iter().filter(|r| r.model == "aln").collect();
     let mut groups: Vec<&str> = aln.iter().map(|r| r.group.as_str()).collect();
@@ -370,19 +406,14 @@ fn variant_section(md: &mut String, v: &Loaded, dir: &Path) -> Result<()> {
             let baseline = |m: &str| {
                 mean_of(&v.summary, m, &r.variable).map_or("—".into(), |x| format!("{x:.4}"))
             };
+            let others: String = baselines
+                .iter()
+                .map(|b| format!(" {} |", baseline(b)))
+                .collect();
             let _ = writeln!(
                 md,
-                "| {group} | {which} | {} | {:.4} | {:.4} | {:.4} | {:.4} | {} | {} | {} | {} | {} |",
-                r.variable,
-                s.mean,
-                s.std_dev,
-                s.std_err,
-                s.trimmed_mean,
-                s.median,
-                s.iqr,
-                s.max,
-                baseline("persistence"),
-                baseline("linear")
+                "| {group} | {which} | {} | {:.4} | {:.4} | {:.4} | {:.4} | {} | {} | {} |{others}",
+                r.variable, s.mean, s.std_dev, s.std_err, s.trimmed_mean, s.median, s.iqr, s.max,
             );
         }
     }
