@@ -179,6 +179,23 @@ impl Params {
     }
 }
 
+/// The rows of `levels.parquet` in the `split` given (`train` or `test`):
+/// those marked so or `both`.
+pub fn split_rows(levels: &Table, split: &str) -> Result<Vec<usize>> {
+    let column = levels.column::<StringArray>("split")?;
+    Ok((0..levels.num_rows())
+        .filter(|&r| [split, "both"].contains(&column.value(r)))
+        .collect())
+}
+
+/// The levels of `variable` in `levels.parquet` on one side of the pairs
+/// (`x`, the current frame, or `y`, the next).
+pub fn level_column<'a>(levels: &'a Table, side: &str, variable: &str) -> Result<&'a [u16]> {
+    Ok(levels
+        .column::<UInt16Array>(&format!("{side}.{variable}"))?
+        .values())
+}
+
 /// A seed per variable: FNV-1a of the name mixed into the experiment seed.
 pub fn variable_seed(seed: u64, variable: &str) -> u64 {
     alnlab_common::hash::fnv1a(variable.as_bytes(), seed)
@@ -236,6 +253,17 @@ impl Codebook {
     /// The learned entries, in table order.
     pub fn learned(&self) -> impl Iterator<Item = &Entry> {
         self.entries.iter().filter(|e| e.learned)
+    }
+
+    /// The codecs of the learned entries, in table order; an entry whose
+    /// parameters make no code is an error naming `path` (the codebook's).
+    pub fn learned_codecs(&self, path: &Path) -> Result<Vec<Codec>> {
+        self.learned()
+            .map(|e| {
+                e.codec()
+                    .map_err(|m| Error::bad_file(path, format!("{}: {m}", e.variable)))
+            })
+            .collect()
     }
 
     /// Reads `codebook.parquet`.

@@ -25,8 +25,8 @@ use alnlab_common::params::{self, Count, Fraction, ParamError};
 use alnlab_common::state_log::StateLog;
 use alnlab_common::table::{self, Table};
 use alnlab_common::{Error, Progress, Provenance, Result};
-use alnlab_quantize::Codebook;
 use alnlab_quantize::codes::Codec;
+use alnlab_quantize::{Codebook, level_column, split_rows};
 use alnlab_train::model::Model;
 use arrow_array::types::UInt16Type;
 use arrow_array::{Array, DictionaryArray, Float64Array, StringArray, UInt16Array, UInt32Array};
@@ -136,25 +136,10 @@ pub fn run(
             format!("predicts {outputs:?}, but the codebook learns {names:?}"),
         ));
     }
-    let codecs: Vec<Codec> = learned
-        .iter()
-        .map(|e| {
-            e.codec()
-                .map_err(|m| Error::bad_file(codebook_path, format!("{}: {m}", e.variable)))
-        })
-        .collect::<Result<_>>()?;
+    let codecs = codebook.learned_codecs(codebook_path)?;
     let levels = Table::read(levels_path)?;
-    let split = levels.column::<StringArray>("split")?;
-    let rows_of = |wanted: &str| -> Vec<usize> {
-        (0..levels.num_rows())
-            .filter(|&r| [wanted, "both"].contains(&split.value(r)))
-            .collect()
-    };
-    let column = |side: &str, variable: &str| -> Result<&[u16]> {
-        Ok(levels
-            .column::<UInt16Array>(&format!("{side}.{variable}"))?
-            .values())
-    };
+    let rows_of = |split: &str| split_rows(&levels, split);
+    let column = |side: &str, variable: &str| level_column(&levels, side, variable);
     let select = |side: &str, rows: &[usize]| -> Result<Vec<Vec<u16>>> {
         names
             .iter()
@@ -164,11 +149,11 @@ pub fn run(
             })
             .collect()
     };
-    let test_rows = rows_of("test");
+    let test_rows = rows_of("test")?;
     if test_rows.is_empty() {
         return Err(Error::bad_file(levels_path, "has no test rows"));
     }
-    let train_rows = rows_of("train");
+    let train_rows = rows_of("train")?;
     let test = TestRows {
         x: select("x", &test_rows)?,
         y: select("y", &test_rows)?,
@@ -177,7 +162,8 @@ pub fn run(
 
     progress.start("test", 4, "steps");
     let windows = params.windows(&codecs);
-    let (aln, mut timings) = predict::aln(&model, &codecs, &test.x, windows.as_deref());
+    let predictor = predict::Aln::new(&model, &codecs);
+    let (aln, mut timings) = predictor.timed(&test.x, windows.as_deref());
     progress.advance(1);
     let persistence = test.x.clone();
     progress.advance(1);
@@ -232,7 +218,7 @@ pub fn run(
         (
             "aln".to_string(),
             rollout::roll(from.clone(), horizon, |x| {
-                predict::aln(&model, &codecs, x, windows.as_deref()).0
+                predictor.levels(x, windows.as_deref())
             }),
         ),
         (

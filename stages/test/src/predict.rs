@@ -34,24 +34,212 @@ pub struct Timing {
     pub failed: usize,
 }
 
-/// The ALN's predicted levels `[variable][row]` for the current levels `x`
-/// (`[variable][row]`), and the timings of its evaluation paths. `windows`
-/// rate-limits each variable to within that many levels of its current one.
-pub fn aln(
-    model: &Model,
-    codecs: &[Codec],
-    x: &[Vec<u16>],
-    windows: Option<&[usize]>,
-) -> (Vec<Vec<u16>>, Vec<Timing>) {
-    let refs: Vec<&Codec> = codecs.iter().collect();
-    let columns: Vec<&[u16]> = x.iter().map(Vec::as_slice).collect();
-    let inputs = encode(&refs, &columns);
-    match model.header.model {
-        ModelKind::BitForest => bit_forest(model, codecs, x, &inputs, windows),
-        ModelKind::Threshold => {
-            let (levels, timing) = threshold_search(model, codecs, x, &inputs, windows);
-            (levels, vec![timing])
+/// A trained model made ready to predict: a bit-forest compiled once, or a
+/// threshold model's voters with the codes of its candidate levels.
+pub struct Aln<'a> {
+    codecs: &'a [Codec],
+    compiled: Compiled<'a>,
+}
+
+enum Compiled<'a> {
+    BitForest(Predictor),
+    Threshold {
+        voters: Vec<Vec<&'a Tree>>,
+        thermometers: Vec<Codec>,
+    },
+}
+
+/// How long `f` takes per state, as the timing of `path`.
+fn timed<T>(
+    path: &'static str,
+    states: usize,
+    threads: usize,
+    f: impl FnOnce() -> T,
+) -> (T, Timing) {
+    let clock = Instant::now();
+    let out = f();
+    let timing = Timing {
+        model: "aln".into(),
+        path,
+        ns_per_state: clock.elapsed().as_nanos() as f64 / states.max(1) as f64,
+        states,
+        threads,
+        failed: 0,
+    };
+    (out, timing)
+}
+
+impl<'a> Aln<'a> {
+    /// Prepares `model`, whose outputs are decoded by `codecs`.
+    pub fn new(model: &'a Model, codecs: &'a [Codec]) -> Aln<'a> {
+        let compiled = match model.header.model {
+            ModelKind::BitForest => {
+                let widths: Vec<usize> = model.header.outputs.iter().map(|(_, w)| *w).collect();
+                let trees = model.trees.iter().map(|(id, tree)| (*id, tree));
+                Compiled::BitForest(Predictor::new(trees, &widths, model.header.vote))
+            }
+            ModelKind::Threshold => Compiled::Threshold {
+                voters: model
+                    .trees
+                    .chunks(model.header.vote as usize)
+                    .map(|chunk| chunk.iter().map(|(_, tree)| tree).collect())
+                    .collect(),
+                thermometers: codecs
+                    .iter()
+                    .map(|c| Codec::new(Code::Thermometer, c.levels(), None).expect("levels ≥ 2"))
+                    .collect(),
+            },
+        };
+        Aln { codecs, compiled }
+    }
+
+    /// The predicted levels `[variable][row]` for the current levels `x`
+    /// (`[variable][row]`) by the fastest path; `windows` rate-limits each
+    /// variable to within that many levels of its current one.
+    pub fn levels(&self, x: &[Vec<u16>], windows: Option<&[usize]>) -> Vec<Vec<u16>> {
+        let inputs = self.encode(x);
+        match &self.compiled {
+            Compiled::BitForest(predictor) => self.batched(predictor, x, &inputs, windows),
+            Compiled::Threshold {
+                voters,
+                thermometers,
+            } => self.search(voters, thermometers, x, &inputs, windows),
         }
+    }
+
+    /// The same levels, with the timing of every evaluation path (a
+    /// bit-forest's batched and single-row paths must agree).
+    pub fn timed(&self, x: &[Vec<u16>], windows: Option<&[usize]>) -> (Vec<Vec<u16>>, Vec<Timing>) {
+        let inputs = self.encode(x);
+        let rows = inputs.rows();
+        match &self.compiled {
+            Compiled::BitForest(predictor) => {
+                let threads = rayon::current_num_threads();
+                let (levels, batched) = timed("batched", rows, threads, || {
+                    self.batched(predictor, x, &inputs, windows)
+                });
+                let (single_levels, single) = timed("single", rows, 1, || {
+                    self.single(predictor, x, &inputs, windows)
+                });
+                assert_eq!(
+                    single_levels, levels,
+                    "parsimonious and bit-sliced evaluation disagree"
+                );
+                (levels, vec![batched, single])
+            }
+            Compiled::Threshold {
+                voters,
+                thermometers,
+            } => {
+                let (levels, timing) = timed("threshold-search", rows, 1, || {
+                    self.search(voters, thermometers, x, &inputs, windows)
+                });
+                (levels, vec![timing])
+            }
+        }
+    }
+
+    fn encode(&self, x: &[Vec<u16>]) -> BitMatrix {
+        let refs: Vec<&Codec> = self.codecs.iter().collect();
+        let columns: Vec<&[u16]> = x.iter().map(Vec::as_slice).collect();
+        encode(&refs, &columns)
+    }
+
+    /// All rows bit-sliced, decoded in parallel by variable.
+    fn batched(
+        &self,
+        predictor: &Predictor,
+        x: &[Vec<u16>],
+        inputs: &BitMatrix,
+        windows: Option<&[usize]>,
+    ) -> Vec<Vec<u16>> {
+        let rows = inputs.rows();
+        let sliced = Columns::from_rows(inputs, &(0..rows).collect::<Vec<_>>());
+        let out = predictor.predict(&sliced);
+        out.par_iter()
+            .zip(self.codecs)
+            .enumerate()
+            .map(|(v, (columns, codec))| {
+                let mut levels = Vec::with_capacity(rows);
+                let mut code = vec![0u64; columns.bits.div_ceil(64)];
+                let mut words = [0u64; 64];
+                for w in 0..columns.words {
+                    let samples = (rows - 64 * w).min(64);
+                    if columns.bits <= 64 {
+                        columns.transpose_word(w, &mut words);
+                    }
+                    for (i, &word) in words.iter().enumerate().take(samples) {
+                        if columns.bits <= 64 {
+                            code[0] = word;
+                        } else {
+                            code.fill(0);
+                            for b in 0..columns.bits {
+                                code[b / 64] |= (columns.column(b)[w] >> i & 1) << (b % 64);
+                            }
+                        }
+                        let window = windows.map(|w| w[v]);
+                        levels.push(decode(codec, &code, x[v][64 * w + i], window));
+                    }
+                }
+                levels
+            })
+            .collect()
+    }
+
+    /// One row at a time, parsimoniously.
+    // A row index reads the inputs and the current levels at once.
+    #[allow(clippy::needless_range_loop)]
+    fn single(
+        &self,
+        predictor: &Predictor,
+        x: &[Vec<u16>],
+        inputs: &BitMatrix,
+        windows: Option<&[usize]>,
+    ) -> Vec<Vec<u16>> {
+        let mut votes = Vec::new();
+        let mut codes = vec![Vec::new(); self.codecs.len()];
+        let mut levels = vec![Vec::with_capacity(inputs.rows()); self.codecs.len()];
+        for r in 0..inputs.rows() {
+            predictor.predict_one(inputs.row(r), &mut votes, &mut codes);
+            for (v, (codec, code)) in self.codecs.iter().zip(&codes).enumerate() {
+                levels[v].push(decode(codec, code, x[v][r], windows.map(|w| w[v])));
+            }
+        }
+        levels
+    }
+
+    /// One row at a time, by binary search over each variable's levels.
+    #[allow(clippy::needless_range_loop)]
+    fn search(
+        &self,
+        voters: &[Vec<&Tree>],
+        thermometers: &[Codec],
+        x: &[Vec<u16>],
+        inputs: &BitMatrix,
+        windows: Option<&[usize]>,
+    ) -> Vec<Vec<u16>> {
+        let mut levels = vec![Vec::with_capacity(inputs.rows()); self.codecs.len()];
+        let mut scratch = Vec::new();
+        for r in 0..inputs.rows() {
+            for (v, trees) in voters.iter().enumerate() {
+                let level = threshold::predict(
+                    trees,
+                    inputs.bits(),
+                    &thermometers[v],
+                    inputs.row(r),
+                    &mut scratch,
+                );
+                let level = match windows {
+                    Some(w) => {
+                        let current = usize::from(x[v][r]);
+                        level.clamp(current.saturating_sub(w[v]), current + w[v])
+                    }
+                    None => level,
+                };
+                levels[v].push(level.min(self.codecs[v].levels() - 1) as u16);
+            }
+        }
+        levels
     }
 }
 
@@ -62,139 +250,6 @@ fn decode(codec: &Codec, code: &[u64], current: u16, window: Option<usize>) -> u
         None => codec.decode(code),
     };
     level as u16
-}
-
-// A row index reads the inputs, the current levels and the outputs at once.
-#[allow(clippy::needless_range_loop)]
-fn bit_forest(
-    model: &Model,
-    codecs: &[Codec],
-    x: &[Vec<u16>],
-    inputs: &BitMatrix,
-    windows: Option<&[usize]>,
-) -> (Vec<Vec<u16>>, Vec<Timing>) {
-    let rows = inputs.rows();
-    let widths: Vec<usize> = model.header.outputs.iter().map(|(_, w)| *w).collect();
-    let trees = model.trees.iter().map(|(id, tree)| (*id, tree));
-    let predictor = Predictor::new(trees, &widths, model.header.vote);
-    let window = |v: usize| windows.map(|w| w[v]);
-
-    let sliced = Columns::from_rows(inputs, &(0..rows).collect::<Vec<_>>());
-    let clock = Instant::now();
-    let out = predictor.predict(&sliced);
-    let levels: Vec<Vec<u16>> = out
-        .par_iter()
-        .zip(codecs)
-        .enumerate()
-        .map(|(v, (columns, codec))| {
-            let mut levels = Vec::with_capacity(rows);
-            let mut code = vec![0u64; columns.bits.div_ceil(64)];
-            let mut words = [0u64; 64];
-            for w in 0..columns.words {
-                let samples = (rows - 64 * w).min(64);
-                if columns.bits <= 64 {
-                    columns.transpose_word(w, &mut words);
-                }
-                for (i, &word) in words.iter().enumerate().take(samples) {
-                    let s = 64 * w + i;
-                    if columns.bits <= 64 {
-                        code[0] = word;
-                    } else {
-                        code.fill(0);
-                        for b in 0..columns.bits {
-                            code[b / 64] |= (columns.column(b)[w] >> i & 1) << (b % 64);
-                        }
-                    }
-                    levels.push(decode(codec, &code, x[v][s], window(v)));
-                }
-            }
-            levels
-        })
-        .collect();
-    let batched = Timing {
-        model: "aln".into(),
-        path: "batched",
-        ns_per_state: clock.elapsed().as_nanos() as f64 / rows as f64,
-        states: rows,
-        threads: rayon::current_num_threads(),
-        failed: 0,
-    };
-
-    let mut votes = Vec::new();
-    let mut codes = vec![Vec::new(); codecs.len()];
-    let mut single_levels = vec![Vec::with_capacity(rows); codecs.len()];
-    let clock = Instant::now();
-    for r in 0..rows {
-        predictor.predict_one(inputs.row(r), &mut votes, &mut codes);
-        for (v, (codec, code)) in codecs.iter().zip(&codes).enumerate() {
-            single_levels[v].push(decode(codec, code, x[v][r], window(v)));
-        }
-    }
-    let single = Timing {
-        model: "aln".into(),
-        path: "single",
-        ns_per_state: clock.elapsed().as_nanos() as f64 / rows as f64,
-        states: rows,
-        threads: 1,
-        failed: 0,
-    };
-    assert_eq!(
-        single_levels, levels,
-        "parsimonious and bit-sliced evaluation disagree"
-    );
-    (levels, vec![batched, single])
-}
-
-#[allow(clippy::needless_range_loop)]
-fn threshold_search(
-    model: &Model,
-    codecs: &[Codec],
-    x: &[Vec<u16>],
-    inputs: &BitMatrix,
-    windows: Option<&[usize]>,
-) -> (Vec<Vec<u16>>, Timing) {
-    let vote = model.header.vote as usize;
-    let voters: Vec<Vec<&Tree>> = model
-        .trees
-        .chunks(vote)
-        .map(|chunk| chunk.iter().map(|(_, tree)| tree).collect())
-        .collect();
-    let thermometers: Vec<Codec> = codecs
-        .iter()
-        .map(|c| Codec::new(Code::Thermometer, c.levels(), None).expect("levels ≥ 2"))
-        .collect();
-    let rows = inputs.rows();
-    let mut levels = vec![Vec::with_capacity(rows); codecs.len()];
-    let mut scratch = Vec::new();
-    let clock = Instant::now();
-    for r in 0..rows {
-        for (v, trees) in voters.iter().enumerate() {
-            let level = threshold::predict(
-                trees,
-                inputs.bits(),
-                &thermometers[v],
-                inputs.row(r),
-                &mut scratch,
-            );
-            let level = match windows {
-                Some(w) => {
-                    let current = usize::from(x[v][r]);
-                    level.clamp(current.saturating_sub(w[v]), current + w[v])
-                }
-                None => level,
-            };
-            levels[v].push(level.min(codecs[v].levels() - 1) as u16);
-        }
-    }
-    let timing = Timing {
-        model: "aln".into(),
-        path: "threshold-search",
-        ns_per_state: clock.elapsed().as_nanos() as f64 / rows as f64,
-        states: rows,
-        threads: 1,
-        failed: 0,
-    };
-    (levels, timing)
 }
 
 /// The linear baseline's levels `[variable][row]`, timed one row at a time.
@@ -272,7 +327,9 @@ mod tests {
         let (model, codec) = successor_model();
         let x = vec![(0..63u16).rev().collect::<Vec<_>>()];
         // (The two paths' levels are compared inside.)
-        let (levels, timings) = aln(&model, std::slice::from_ref(&codec), &x, None);
+        let codecs = std::slice::from_ref(&codec);
+        let aln = Aln::new(&model, codecs);
+        let (levels, timings) = aln.timed(&x, None);
         let error: usize = levels[0]
             .iter()
             .zip(&x[0])
@@ -292,7 +349,12 @@ mod tests {
         );
 
         // Rate limited to 0 levels: nothing moves.
-        let (still, _) = aln(&model, std::slice::from_ref(&codec), &x, Some(&[0]));
+        let (still, _) = aln.timed(&x, Some(&[0]));
+        assert_eq!(
+            aln.levels(&x, None),
+            levels,
+            "the fast path alone gives the same levels"
+        );
         assert_eq!(still, x);
     }
 }

@@ -21,10 +21,10 @@ use alnlab_common::hash::sha256_file;
 use alnlab_common::params::{self, Count, ParamError};
 use alnlab_common::table::{self, Table};
 use alnlab_common::{Error, Progress, Provenance, Result};
-use alnlab_quantize::Codebook;
 use alnlab_quantize::bits::encode;
 use alnlab_quantize::codes::Codec;
-use arrow_array::{Array, Float64Array, StringArray, UInt16Array, UInt32Array, UInt64Array};
+use alnlab_quantize::{Codebook, level_column, split_rows};
+use arrow_array::{Array, Float64Array, StringArray, UInt32Array, UInt64Array};
 use serde::{Deserialize, Serialize};
 
 use crate::forest::Columns;
@@ -153,25 +153,12 @@ pub fn run(
             "has no learned variable: nothing to train",
         ));
     }
-    let codecs: Vec<Codec> = learned
-        .iter()
-        .map(|e| {
-            e.codec()
-                .map_err(|m| Error::bad_file(codebook_path, format!("{}: {m}", e.variable)))
-        })
-        .collect::<Result<_>>()?;
-    let split = levels.column::<StringArray>("split")?;
-    let rows: Vec<usize> = (0..levels.num_rows())
-        .filter(|&r| matches!(split.value(r), "train" | "both"))
-        .collect();
+    let codecs = codebook.learned_codecs(codebook_path)?;
+    let rows = split_rows(&levels, "train")?;
     if rows.is_empty() {
         return Err(Error::bad_file(levels_path, "has no training rows"));
     }
-    let column = |side: &str, variable: &str| -> Result<&[u16]> {
-        Ok(levels
-            .column::<UInt16Array>(&format!("{side}.{variable}"))?
-            .values())
-    };
+    let column = |side: &str, variable: &str| level_column(&levels, side, variable);
     let x_columns: Vec<&[u16]> = learned
         .iter()
         .map(|e| column("x", &e.variable))
