@@ -655,3 +655,82 @@ fn the_report_renders_with_its_charts_and_renders_again_the_same() {
         stderr(&out)
     );
 }
+
+/// A committed manifest, shrunk to test size: its structure kept, its sizes
+/// (runs, durations, rows, tree sizes, epochs, rollouts) cut down.
+fn cut_down(text: &str) -> String {
+    fn shrink(table: &mut toml::Table) {
+        let cap = |table: &mut toml::Table, key: &str, most: i64| {
+            if let Some(toml::Value::Integer(v)) = table.get_mut(key) {
+                *v = (*v).min(most);
+            }
+        };
+        let cap_float = |table: &mut toml::Table, key: &str, most: f64| {
+            if let Some(toml::Value::Float(v)) = table.get_mut(key) {
+                *v = v.min(most);
+            }
+        };
+        if let Some(toml::Value::Array(scenes)) = table.get_mut("scene") {
+            for scene in scenes.iter_mut().filter_map(toml::Value::as_table_mut) {
+                cap(scene, "runs", 1);
+                cap_float(scene, "duration", 20.0);
+            }
+        }
+        cap(table, "train_rows", 60);
+        cap(table, "test_rows", 150);
+        cap(table, "leaves", 64);
+        cap(table, "epochs", 2);
+        cap(table, "rollout_starts", 10);
+        for (_, value) in table.iter_mut() {
+            match value {
+                toml::Value::Table(inner) => shrink(inner),
+                toml::Value::Array(items) => items
+                    .iter_mut()
+                    .filter_map(toml::Value::as_table_mut)
+                    .for_each(shrink),
+                _ => {}
+            }
+        }
+    }
+    let mut document: toml::Table = text.parse().unwrap();
+    shrink(&mut document);
+    // Dotted variant overrides (`train.leaves = …`) are keys of their own.
+    if let Some(toml::Value::Array(variants)) = document.get_mut("variant") {
+        for variant in variants.iter_mut().filter_map(toml::Value::as_table_mut) {
+            for (key, most) in [("train.leaves", 64), ("train.epochs", 2)] {
+                if let Some(toml::Value::Integer(v)) = variant.get_mut(key) {
+                    *v = (*v).min(most);
+                }
+            }
+        }
+    }
+    toml::to_string(&document).unwrap()
+}
+
+#[test]
+fn every_committed_experiment_runs_when_cut_down() {
+    let experiments = Path::new(env!("CARGO_MANIFEST_DIR")).join("experiments");
+    let mut names: Vec<PathBuf> = std::fs::read_dir(&experiments)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.extension().is_some_and(|e| e == "toml"))
+        .collect();
+    names.sort();
+    assert!(names.len() >= 2, "{names:?}");
+    for path in names {
+        let dir = tempfile::tempdir().unwrap();
+        let text = cut_down(&std::fs::read_to_string(&path).unwrap());
+        write_manifest(dir.path(), "m.toml", &text);
+        let out = alnlab(dir.path(), &["-q", "run", "m.toml"]);
+        assert!(
+            out.status.success(),
+            "{}: {}\n{text}",
+            path.display(),
+            stderr(&out)
+        );
+        let experiment: toml::Table = text.parse().unwrap();
+        let name = experiment["experiment"]["name"].as_str().unwrap();
+        let report = dir.path().join("reports").join(name).join("report.md");
+        assert!(report.exists(), "{}: no report", path.display());
+    }
+}
