@@ -731,6 +731,20 @@ fn every_committed_experiment_runs_when_cut_down() {
         let experiment: toml::Table = text.parse().unwrap();
         let name = experiment["experiment"]["name"].as_str().unwrap();
         let report = dir.path().join("reports").join(name).join("report.md");
-        assert!(report.exists(), "{}: no report", path.display());
+        let report = std::fs::read_to_string(&report).unwrap();
+        let paper = experiment["experiment"].get("compare_with_paper");
+        if paper.and_then(toml::Value::as_bool) == Some(true) {
+            assert!(
+                report.contains("### Beside the paper (§4.6)"),
+                "{}",
+                path.display()
+            );
+            assert!(
+                report.contains("| a | best | 0.6953 |"),
+                "the paper's own figure"
+            );
+        } else {
+            assert!(!report.contains("Beside the paper"), "{}", path.display());
+        }
     }
 }

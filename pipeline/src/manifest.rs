@@ -38,6 +38,10 @@ pub struct Experiment {
     /// What the experiment is for.
     #[serde(default)]
     pub description: String,
+    /// Set the report's §4.6 table beside the paper's own numbers (for
+    /// experiments made as the paper's: L = 214 and its variables).
+    #[serde(default)]
+    pub compare_with_paper: bool,
 }
 
 /// One variant: the stage parameters with its overrides applied.

@@ -57,6 +57,7 @@ pub fn render(record: &RunRecord, reports: &Path) -> Result<PathBuf> {
         started: record.started.clone(),
         wall_seconds: record.wall_seconds,
         variants,
+        compare_with_paper: record.compare_with_paper,
     };
     report::render(&run, &reports.join(&record.experiment))
 }

@@ -45,6 +45,9 @@ pub struct RunRecord {
     pub finished: String,
     pub wall_seconds: f64,
     pub variants: Vec<VariantRecord>,
+    /// The manifest asked for the paper's §4.6 numbers in the report.
+    #[serde(default)]
+    pub compare_with_paper: bool,
 }
 
 /// What one variant's stages did.
@@ -154,6 +157,7 @@ pub fn run(manifest: &Manifest, options: &RunOptions) -> Result<RunRecord> {
         finished: humantime::format_rfc3339_seconds(SystemTime::now()).to_string(),
         wall_seconds: clock.elapsed().as_secs_f64(),
         variants: records,
+        compare_with_paper: manifest.experiment.compare_with_paper,
     };
     let path = options.out.join(&manifest.experiment.name).join("run.json");
     let json = serde_json::to_vec_pretty(&record).expect("records serialize");

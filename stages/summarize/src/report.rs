@@ -32,7 +32,16 @@ pub struct RunInfo {
     pub started: String,
     pub wall_seconds: f64,
     pub variants: Vec<VariantInfo>,
+    /// Set the §4.6 table beside the paper's numbers ([`PAPER_TABLE`]).
+    pub compare_with_paper: bool,
 }
+
+/// The paper's §4.6 results table (Armstrong, Supynuk & Green, "Adaptive
+/// Logic Networks and Robot Control", §4.6: error in quantization levels of
+/// the best and worst variable of each group, 9000 test samples), as
+/// published: group, best|worst, mean, std dev, std err, 5% trimmed mean,
+/// median, IQR, max.
+pub const PAPER_TABLE: &str = include_str!("../data/paper-table-4-6.csv");
 
 /// What the report needs of one variant: its stage times and artifacts.
 pub struct VariantInfo {
@@ -130,7 +139,7 @@ pub fn render(run: &RunInfo, dir: &Path) -> Result<PathBuf> {
     );
 
     for v in &variants {
-        variant_section(&mut md, v, dir)?;
+        variant_section(&mut md, v, dir, run.compare_with_paper)?;
     }
     let path = dir.join(REPORT_FILE);
     atomic::write_bytes(&path, md.as_bytes())?;
@@ -365,7 +374,12 @@ fn file_name(variant: &str, chart: &str) -> String {
     format!("{safe}-{chart}.svg")
 }
 
-fn variant_section(md: &mut String, v: &Loaded, dir: &Path) -> Result<()> {
+fn variant_section(
+    md: &mut String,
+    v: &Loaded,
+    dir: &Path,
+    compare_with_paper: bool,
+) -> Result<()> {
     let _ = writeln!(md, "## Variant `{}`\n", v.info.name);
     if !v.info.description.is_empty() {
         let _ = writeln!(md, "{}\n", v.info.description);
@@ -419,6 +433,9 @@ fn variant_section(md: &mut String, v: &Loaded, dir: &Path) -> Result<()> {
     }
     md.push('\n');
 
+    if compare_with_paper {
+        beside_the_paper(md, v);
+    }
     models_table(md, v);
 
     let worse = worse_than_persistence(&v.summary);
@@ -508,6 +525,50 @@ fn variant_section(md: &mut String, v: &Loaded, dir: &Path) -> Result<()> {
         ),
     };
     closed_loop(md, v, dir)
+}
+
+/// Our best and worst variable of each group beside the paper's (§4.6).
+fn beside_the_paper(md: &mut String, v: &Loaded) {
+    let _ = writeln!(
+        md,
+        "### Beside the paper (§4.6)\n\nThe paper's numbers as published (its table of §4.6), ours \
+         for the same group and rank; errors in quantization levels. Our variables and ranges are \
+         our simulator's, not DynaTree's, so a row compares like with like only as far as the \
+         groups do.\n\n\
+         | group | | paper mean | our mean (variable) | paper 5% trim | ours | paper median | ours | \
+         paper IQR | ours | paper max | ours |\n\
+         |---|---|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|"
+    );
+    // Groups are named as in the paper's table (ω is omega, R roll and pitch).
+    for line in PAPER_TABLE.lines().skip(1) {
+        let f: Vec<&str> = line.split(',').collect();
+        let (group, which) = (f[0], f[1]);
+        let ours = v.summary.iter().find(|r| {
+            r.model == "aln"
+                && r.group == group
+                && if which == "best" {
+                    r.best_in_group
+                } else {
+                    r.worst_in_group
+                }
+        });
+        let (mean, trim, median, iqr, max) = match ours {
+            Some(r) => (
+                format!("{:.4} ({})", r.stats.mean, r.variable),
+                format!("{:.4}", r.stats.trimmed_mean),
+                r.stats.median.to_string(),
+                r.stats.iqr.to_string(),
+                r.stats.max.to_string(),
+            ),
+            None => ("—".into(), "—".into(), "—".into(), "—".into(), "—".into()),
+        };
+        let _ = writeln!(
+            md,
+            "| {group} | {which} | {} | {mean} | {} | {trim} | {} | {median} | {} | {iqr} | {} | {max} |",
+            f[2], f[5], f[6], f[7], f[8]
+        );
+    }
+    md.push('\n');
 }
 
 /// Every model beside the ALN: its error over all variables and its speed.
