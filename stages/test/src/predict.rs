@@ -161,26 +161,8 @@ impl<'a> Aln<'a> {
             .enumerate()
             .map(|(v, (columns, codec))| {
                 let mut levels = Vec::with_capacity(rows);
-                let mut code = vec![0u64; columns.bits.div_ceil(64)];
-                let mut words = [0u64; 64];
-                for w in 0..columns.words {
-                    let samples = (rows - 64 * w).min(64);
-                    if columns.bits <= 64 {
-                        columns.transpose_word(w, &mut words);
-                    }
-                    for (i, &word) in words.iter().enumerate().take(samples) {
-                        if columns.bits <= 64 {
-                            code[0] = word;
-                        } else {
-                            code.fill(0);
-                            for b in 0..columns.bits {
-                                code[b / 64] |= (columns.column(b)[w] >> i & 1) << (b % 64);
-                            }
-                        }
-                        let window = windows.map(|w| w[v]);
-                        levels.push(decode(codec, &code, x[v][64 * w + i], window));
-                    }
-                }
+                let window = windows.map(|w| w[v]);
+                columns.for_each_row(|s, code| levels.push(decode(codec, code, x[v][s], window)));
                 levels
             })
             .collect()

@@ -137,15 +137,7 @@ pub fn predict() -> PredictBench {
             .zip(out)
             .map(|(codec, columns)| {
                 let mut sum = 0;
-                let mut codes = [0u64; 64];
-                for w in 0..columns.words {
-                    columns.transpose_word(w, &mut codes);
-                    let samples = (columns.count - 64 * w).min(64);
-                    sum += codes[..samples]
-                        .iter()
-                        .map(|c| codec.decode(&[*c]))
-                        .sum::<usize>();
-                }
+                columns.for_each_row(|_, code| sum += codec.decode(code));
                 sum
             })
             .sum()

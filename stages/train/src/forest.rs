@@ -63,6 +63,32 @@ impl Columns {
         }
         transpose(rows);
     }
+
+    /// Hands each sample's bits to `f`, in sample order, as ⌈bits/64⌉ words:
+    /// a 64×64 transpose per word of samples when the rows fit one word.
+    pub fn for_each_row(&self, mut f: impl FnMut(usize, &[u64])) {
+        let samples = |w: usize| (self.count - 64 * w).min(64);
+        if self.bits <= 64 {
+            let mut rows = [0u64; 64];
+            for w in 0..self.words {
+                self.transpose_word(w, &mut rows);
+                for (i, row) in rows[..samples(w)].iter().enumerate() {
+                    f(64 * w + i, std::slice::from_ref(row));
+                }
+            }
+            return;
+        }
+        let mut row = vec![0u64; self.bits.div_ceil(64)];
+        for w in 0..self.words {
+            for i in 0..samples(w) {
+                row.fill(0);
+                for b in 0..self.bits {
+                    row[b / 64] |= (self.data[b * self.words + w] >> i & 1) << (b % 64);
+                }
+                f(64 * w + i, &row);
+            }
+        }
+    }
 }
 
 /// Transposes a 64×64 bit matrix in place (bit c of `m[r]` ↔ bit r of
@@ -427,6 +453,33 @@ mod tests {
                     }
                 }
             }
+        }
+    }
+
+    #[test]
+    fn every_row_comes_out_whole_however_wide() {
+        let mut rng = ChaCha8Rng::seed_from_u64(13);
+        for bits in [5, 64, 130] {
+            let columns = Columns {
+                count: 100,
+                bits,
+                words: 2,
+                data: (0..2 * bits).map(|_| rng.random()).collect(),
+            };
+            let mut seen = 0;
+            columns.for_each_row(|s, row| {
+                assert_eq!(s, seen);
+                for b in 0..bits {
+                    let expected = columns.column(b)[s / 64] >> (s % 64) & 1;
+                    assert_eq!(
+                        row[b / 64] >> (b % 64) & 1,
+                        expected,
+                        "bits {bits}, sample {s}"
+                    );
+                }
+                seen += 1;
+            });
+            assert_eq!(seen, 100);
         }
     }
 
