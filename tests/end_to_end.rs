@@ -596,7 +596,12 @@ fn threshold_models_train_one_tree_per_variable_the_same_on_any_thread_count() {
 #[test]
 fn the_report_renders_with_its_charts_and_renders_again_the_same() {
     let dir = tempfile::tempdir().unwrap();
-    write_manifest(dir.path(), "m.toml", MANIFEST);
+    let notes = "notes = \"The box tumbles; *nothing* to learn.\"\n";
+    write_manifest(
+        dir.path(),
+        "m.toml",
+        &MANIFEST.replace("seed = 11\n", &format!("seed = 11\n{notes}")),
+    );
     let record = run_ok(dir.path(), &["m.toml"]);
     let summary = alnlab_summarize::read(
         &dir.path()
@@ -621,12 +626,31 @@ fn the_report_renders_with_its_charts_and_renders_again_the_same() {
     let report_path = dir.path().join("reports/e2e/report.md");
     let report = std::fs::read_to_string(&report_path).unwrap();
     for heading in [
+        "## Findings",
+        "- **`base`**: the ALN's mean error is ",
+        "## Notes from the experimenter\n\nThe box tumbles; *nothing* to learn.",
         "## Reproducibility",
         "Error by group (paper §4.6)",
         "## Speed against error",
     ] {
         assert!(report.contains(heading), "{heading} missing:\n{report}");
     }
+    // The findings' verdict follows the numbers.
+    let mean = |model: &str| {
+        let rows: Vec<f64> = summary
+            .iter()
+            .filter(|r| r.model == model)
+            .map(|r| r.stats.mean)
+            .collect();
+        rows.iter().sum::<f64>() / rows.len() as f64
+    };
+    let verdict = if mean("aln") < mean("persistence") {
+        "better"
+    } else {
+        "worse"
+    };
+    let expected = format!("{verdict} than persistence ({:.3})", mean("persistence"));
+    assert!(report.contains(&expected), "{expected}\n{report}");
     // Every chart the report shows exists and is an SVG document.
     let charts: Vec<&str> = report
         .split("](")

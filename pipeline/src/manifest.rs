@@ -42,6 +42,10 @@ pub struct Experiment {
     /// experiments made as the paper's: L = 214 and its variables).
     #[serde(default)]
     pub compare_with_paper: bool,
+    /// The experimenter's reading of the results (Markdown), printed in the
+    /// report under the computed findings.
+    #[serde(default)]
+    pub notes: String,
 }
 
 /// One variant: the stage parameters with its overrides applied.

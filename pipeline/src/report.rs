@@ -58,6 +58,8 @@ pub fn render(record: &RunRecord, reports: &Path) -> Result<PathBuf> {
         wall_seconds: record.wall_seconds,
         variants,
         compare_with_paper: record.compare_with_paper,
+        description: record.description.clone(),
+        notes: record.notes.clone(),
     };
     report::render(&run, &reports.join(&record.experiment))
 }

@@ -48,6 +48,12 @@ pub struct RunRecord {
     /// The manifest asked for the paper's §4.6 numbers in the report.
     #[serde(default)]
     pub compare_with_paper: bool,
+    /// The manifest's description of the experiment.
+    #[serde(default)]
+    pub description: String,
+    /// The manifest's notes on the results.
+    #[serde(default)]
+    pub notes: String,
 }
 
 /// What one variant's stages did.
@@ -158,6 +164,8 @@ pub fn run(manifest: &Manifest, options: &RunOptions) -> Result<RunRecord> {
         wall_seconds: clock.elapsed().as_secs_f64(),
         variants: records,
         compare_with_paper: manifest.experiment.compare_with_paper,
+        description: manifest.experiment.description.clone(),
+        notes: manifest.experiment.notes.clone(),
     };
     let path = options.out.join(&manifest.experiment.name).join("run.json");
     let json = serde_json::to_vec_pretty(&record).expect("records serialize");

@@ -7,7 +7,10 @@
 //! the ALN predicts worse than persistence, flagged; the §4.5 histogram of
 //! the worst variable; training errors per epoch; the §5 hardware estimate.
 //! Across variants: one side-by-side table and the speed-against-error
-//! chart. A reproducibility block heads it all.
+//! chart. The findings in plain sentences ([`findings`]) head it all, then
+//! a reproducibility block.
+
+mod findings;
 
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
@@ -34,6 +37,10 @@ pub struct RunInfo {
     pub variants: Vec<VariantInfo>,
     /// Set the §4.6 table beside the paper's numbers ([`PAPER_TABLE`]).
     pub compare_with_paper: bool,
+    /// What the experiment is for (the manifest's description).
+    pub description: String,
+    /// The experimenter's reading of the results (Markdown), if any.
+    pub notes: String,
 }
 
 /// The paper's §4.6 results table (Armstrong, Supynuk & Green, "Adaptive
@@ -83,6 +90,22 @@ struct Loaded<'a> {
     /// Mean training errors per tree, per epoch (1-based).
     training: Vec<(f64, f64)>,
     hardware: Hardware,
+    coverage: Coverage,
+    /// Bytes the trees take in memory while training: two counters per
+    /// internal node, a literal per leaf.
+    tree_bytes: usize,
+}
+
+/// How much of its input a tree can see: leaves are wired to literals (an
+/// input bit or its complement) at random when the tree is made, so with
+/// fewer leaves than literals most inputs reach no leaf at all.
+struct Coverage {
+    leaves: usize,
+    /// Literals per tree: twice its input bits.
+    literals: usize,
+    /// Distinct literals on a tree's leaves, as a fraction of `literals`,
+    /// averaged over the trees.
+    read: f64,
 }
 
 /// The §5 estimate from the pruned trees.
@@ -112,6 +135,7 @@ pub fn render(run: &RunInfo, dir: &Path) -> Result<PathBuf> {
     let variants: Vec<Loaded> = run.variants.iter().map(load).collect::<Result<_>>()?;
     let mut md = String::new();
     let _ = writeln!(md, "# {} — report\n", run.experiment);
+    findings::findings(&mut md, run, &variants);
     reproducibility(&mut md, run, &variants);
     side_by_side(&mut md, &variants);
 
@@ -203,6 +227,33 @@ fn load(info: &VariantInfo) -> Result<Loaded<'_>> {
         // A thermometer of w bits has w + 1 levels: ⌈log₂(w + 1)⌉ steps.
         levels_steps: (max_width + 1).next_power_of_two().trailing_zeros(),
     };
+    let literals = 2 * match model.header.model {
+        ModelKind::BitForest => model.header.inputs,
+        ModelKind::Threshold => model.header.inputs + max_width,
+    };
+    let mut seen = Vec::new();
+    let read = model
+        .trees
+        .iter()
+        .map(|(_, tree)| {
+            seen.clear();
+            seen.extend_from_slice(tree.literals());
+            seen.sort_unstable();
+            seen.dedup();
+            seen.len() as f64 / literals as f64
+        })
+        .sum::<f64>()
+        / model.trees.len().max(1) as f64;
+    let coverage = Coverage {
+        leaves: model.trees.first().map_or(0, |(_, t)| t.leaves()),
+        literals,
+        read,
+    };
+    let tree_bytes = model
+        .trees
+        .iter()
+        .map(|(_, t)| 2 * (t.leaves() - 1) + std::mem::size_of_val(t.literals()))
+        .sum();
     Ok(Loaded {
         info,
         summary,
@@ -210,6 +261,8 @@ fn load(info: &VariantInfo) -> Result<Loaded<'_>> {
         timings,
         training,
         hardware,
+        coverage,
+        tree_bytes,
     })
 }
 
@@ -311,7 +364,8 @@ fn side_by_side(md: &mut String, variants: &[Loaded]) {
     }
     let _ = write!(
         md,
-        "Errors in quantization levels, averaged over the variables.\n\n\
+        "Errors in quantization levels, averaged over the variables; training time as computed \
+         (also when the stage was cached); the trees' memory while training.\n\n\
          | variant | ALN mean | ALN p95 |"
     );
     for b in &baselines {
@@ -320,7 +374,8 @@ fn side_by_side(md: &mut String, variants: &[Loaded]) {
     let _ = writeln!(
         md,
         " ALN batched ns/state | ALN single ns/state | hardware estimate (gate delays) | \
-         variables worse than persistence |\n|---|---:|---:|{}---:|---:|---:|---:|",
+         training (s) | trees (MiB) | variables worse than persistence |\n\
+         |---|---:|---:|{}---:|---:|---:|---:|---:|---:|",
         "---:|".repeat(baselines.len())
     );
     for v in variants {
@@ -345,13 +400,19 @@ fn side_by_side(md: &mut String, variants: &[Loaded]) {
             .collect();
         let _ = writeln!(
             md,
-            "| {} | {} | {} |{baseline_means} {} | {} | {} | {}{} of {} |",
+            "| {} | {} | {} |{baseline_means} {} | {} | {} | {} | {:.1} | {}{} of {} |",
             v.info.name,
             mean("aln"),
             p95,
             ns("batched"),
             ns("single"),
             v.hardware.delays(),
+            v.info
+                .stages
+                .iter()
+                .find(|s| s.stage == "train")
+                .map_or("—".into(), |s| format!("{:.1}", s.compute_seconds)),
+            v.tree_bytes as f64 / (1024.0 * 1024.0),
             if worse > 0 { "⚠ " } else { "" },
             worse,
             total
