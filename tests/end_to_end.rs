@@ -1,66 +1,13 @@
 //! End-to-end tests of the `alnlab` binary: real stages, real files.
 
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output, Stdio};
+use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
 use alnlab::run::RunRecord;
 
-const MANIFEST: &str = r#"
-[experiment]
-name = "e2e"
-seed = 11
-
-[[simulate.scene]]
-name = "box"
-runs = 2
-duration = 3.0
-dt = 0.001
-frame_dt = 0.01
-
-[stride]
-n = 5
-test_fraction = 0.4
-
-[train]
-leaves = 64
-epochs = 2
-"#;
-
-fn alnlab(dir: &Path, args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_alnlab"))
-        .current_dir(dir)
-        .args(args)
-        .output()
-        .expect("alnlab runs")
-}
-
-fn stderr(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).into_owned()
-}
-
-fn write_manifest(dir: &Path, name: &str, text: &str) -> PathBuf {
-    let path = dir.join(name);
-    std::fs::write(&path, text).unwrap();
-    path
-}
-
-fn run_ok(dir: &Path, args: &[&str]) -> RunRecord {
-    let mut full = vec!["-q", "run"];
-    full.extend_from_slice(args);
-    let out = alnlab(dir, &full);
-    assert!(
-        out.status.success(),
-        "alnlab {full:?} failed: {}",
-        stderr(&out)
-    );
-    let out_dir = args
-        .iter()
-        .position(|a| *a == "--out")
-        .map_or("runs", |i| args[i + 1]);
-    let json = std::fs::read(dir.join(out_dir).join("e2e/run.json")).unwrap();
-    serde_json::from_slice(&json).unwrap()
-}
+mod common;
+use common::{MANIFEST, alnlab, artifact_bytes, run_ok, stderr, write_manifest};
 
 /// The stages of a variant, in order.
 const STAGES: [&str; 6] = [
@@ -77,43 +24,6 @@ fn cached(record: &RunRecord) -> Vec<bool> {
     let stages = &record.variants[0].stages;
     assert!(stages.iter().map(|s| s.stage.as_str()).eq(STAGES));
     stages.iter().map(|s| s.cached).collect()
-}
-
-/// Bytes of every artifact file of the first variant, by role; the training
-/// log as its columns less `seconds` and the timings less `ns_per_state`
-/// (measurements, the only values in artifacts that differ between equal
-/// runs).
-fn artifact_bytes(dir: &Path, record: &RunRecord) -> Vec<(String, Vec<u8>)> {
-    record.variants[0]
-        .artifacts
-        .iter()
-        .map(|(role, a)| {
-            let path = dir.join(&a.path);
-            let bytes = match role.as_str() {
-                "training" => table_without(&path, "seconds"),
-                "timings" => table_without(&path, "ns_per_state"),
-                _ => std::fs::read(&path).unwrap(),
-            };
-            (role.clone(), bytes)
-        })
-        .collect()
-}
-
-/// A table's columns but one, as text.
-fn table_without(path: &Path, measured: &str) -> Vec<u8> {
-    let table = alnlab_common::table::Table::read(path).unwrap();
-    let schema = table.batch.schema();
-    let mut text = String::new();
-    for (field, column) in schema.fields().iter().zip(table.batch.columns()) {
-        if field.name() != measured {
-            text.push_str(&format!("{}: {:?}\n", field.name(), column));
-        }
-    }
-    assert!(
-        schema.field_with_name(measured).is_ok(),
-        "{measured} is a column"
-    );
-    text.into_bytes()
 }
 
 #[test]

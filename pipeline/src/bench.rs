@@ -27,6 +27,7 @@ pub fn worm_training() -> Result<TrainBench> {
         force: false,
         variant: None,
         quiet: true,
+        datasets: dir.path().join("datasets"),
     };
     let record = run::run(&manifest, &options)?;
     let variant = &record.variants[0];

@@ -63,6 +63,29 @@ pub enum Command {
         /// Folder for reports: the run's goes to `<reports>/<experiment>/`.
         #[arg(long, default_value = "reports")]
         reports: PathBuf,
+        /// The dataset archive a manifest's `[data] dataset` refers to.
+        #[arg(long, default_value = "datasets")]
+        datasets: PathBuf,
+    },
+    /// Archive, list, verify and restore datasets: a run's simulate and
+    /// stride outputs (and optionally its quantized levels), kept
+    /// content-addressed under the archive folder with a catalog.
+    ///
+    /// A manifest runs on an archived dataset instead of simulating with
+    /// `[data] dataset = "NAME@VERSION"`.
+    #[command(after_help = "Examples:
+  alnlab dataset archive --run runs/quickstart --variant walk --name worm-small
+  alnlab dataset list
+  alnlab dataset show worm-small@1
+  alnlab dataset verify
+  alnlab dataset restore worm-small@1 --to /tmp/worm-small
+  alnlab dataset remove worm-small@1")]
+    Dataset {
+        /// The archive folder.
+        #[arg(long, default_value = "datasets", global = true)]
+        datasets: PathBuf,
+        #[command(subcommand)]
+        command: DatasetCommand,
     },
     /// Render a run's report again from its record and artifacts, without
     /// recomputing anything.
@@ -192,6 +215,75 @@ pub struct ManifestArgs {
     variant: Option<String>,
 }
 
+/// The `alnlab dataset` subcommands.
+#[derive(Debug, Subcommand)]
+pub enum DatasetCommand {
+    /// Archive a run's trajectory log, statistics and pairs (with
+    /// --with-levels also its codebook and levels) as a new version of NAME;
+    /// content already archived is stored once.
+    #[command(after_help = "Example:
+  alnlab dataset archive --run runs/quickstart --variant walk --name worm-small")]
+    Archive {
+        /// The run's folder, `<out>/<experiment>`, holding run.json.
+        #[arg(long)]
+        run: PathBuf,
+        /// The variant whose data to archive (needed when the run has several).
+        #[arg(long)]
+        variant: Option<String>,
+        /// The dataset's name: letters, digits, `-`, `_`.
+        #[arg(long)]
+        name: String,
+        /// Also archive the quantize outputs; a run on the dataset then
+        /// starts at train.
+        #[arg(long)]
+        with_levels: bool,
+    },
+    /// List the archived datasets.
+    #[command(after_help = "Example:
+  alnlab dataset list")]
+    List,
+    /// Show one dataset's catalog entry: files, hashes, provenance.
+    #[command(after_help = "Example:
+  alnlab dataset show worm-small@1")]
+    Show {
+        /// NAME (latest version), NAME@VERSION or a sha256 prefix.
+        dataset: String,
+    },
+    /// Re-hash every file of one dataset, or of all; exit code 1 if any is
+    /// damaged, naming the dataset, the file and both hashes.
+    #[command(after_help = "Examples:
+  alnlab dataset verify
+  alnlab dataset verify worm-small@1")]
+    Verify {
+        /// NAME, NAME@VERSION or a sha256 prefix; all datasets if left out.
+        dataset: Option<String>,
+    },
+    /// Copy a dataset's files into a folder, verifying them first.
+    #[command(after_help = "Example:
+  alnlab dataset restore worm-small@1 --to /tmp/worm-small")]
+    Restore {
+        /// NAME, NAME@VERSION or a sha256 prefix.
+        dataset: String,
+        /// The folder to copy the files into.
+        #[arg(long)]
+        to: PathBuf,
+    },
+    /// Remove one dataset version, and the files no other version uses.
+    /// Refuses while a manifest in experiments/ uses it, unless --force.
+    #[command(after_help = "Example:
+  alnlab dataset remove worm-small@1")]
+    Remove {
+        /// NAME@VERSION or a sha256 prefix.
+        dataset: String,
+        /// Remove it even if a manifest uses it.
+        #[arg(long)]
+        force: bool,
+        /// The folder of manifests to check for users of the dataset.
+        #[arg(long, default_value = "experiments")]
+        experiments: PathBuf,
+    },
+}
+
 /// The benchmarks.
 #[derive(Debug, Subcommand)]
 pub enum Bench {
@@ -285,6 +377,7 @@ pub fn execute(cli: Cli) -> Result<()> {
             force,
             variant,
             reports,
+            datasets,
         } => {
             let manifest = Manifest::load(&manifest)?;
             let options = RunOptions {
@@ -292,6 +385,7 @@ pub fn execute(cli: Cli) -> Result<()> {
                 force,
                 variant,
                 quiet,
+                datasets,
             };
             let record = run(&manifest, &options)?;
             for variant in &record.variants {
@@ -313,6 +407,7 @@ pub fn execute(cli: Cli) -> Result<()> {
             println!("report:     {}", report.display());
             Ok(())
         }
+        Command::Dataset { datasets, command } => crate::dataset_cli::execute(&datasets, command),
         Command::Report { run_dir, reports } => {
             let record = crate::report::read_record(&run_dir)?;
             let report = crate::report::render(&record, &reports)?;
@@ -571,7 +666,6 @@ fn run_alone<P: serde::Serialize>(
     let seed = manifest.experiment.seed;
     let provenance = Provenance {
         stage: stage.into(),
-        manifest_sha256: manifest.sha256.clone(),
         params: stage_params(seed, params),
         inputs: inputs
             .iter()
@@ -597,6 +691,7 @@ fn bench_cache(
         force: false,
         variant: None,
         quiet,
+        datasets: PathBuf::from("datasets"),
     };
     let warm = Manifest::load(manifest)?;
     run(&warm, &options)?;

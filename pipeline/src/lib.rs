@@ -8,6 +8,8 @@
 pub mod bench;
 pub mod cache;
 pub mod cli;
+pub mod dataset;
+pub mod dataset_cli;
 pub mod manifest;
 pub mod progress;
 pub mod report;

@@ -4,6 +4,9 @@
 //! misspelt key, a wrong type, an out-of-range value, a broken relation
 //! between fields, also inside a variant — names the file, line and column,
 //! the key, and what is allowed.
+//!
+//! A manifest either simulates its data (`[[simulate.scene]]`, `[stride]`)
+//! or takes it from the dataset archive (`[data] dataset = "NAME@VERSION"`).
 
 use std::fmt;
 use std::path::{Path, PathBuf};
@@ -22,6 +25,8 @@ pub struct Manifest {
     pub sha256: String,
     /// The `[experiment]` table.
     pub experiment: Experiment,
+    /// The `[data]` table, when the data come from the dataset archive.
+    pub data: Option<Data>,
     /// The variants in manifest order; a manifest without `[[variant]]` has
     /// one, named `base`.
     pub variants: Vec<Variant>,
@@ -48,6 +53,16 @@ pub struct Experiment {
     pub notes: String,
 }
 
+/// The `[data]` table: where the data come from instead of simulate and
+/// stride.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Data {
+    /// An archived dataset: `NAME@VERSION`, or a prefix of at least 8 hex
+    /// digits of its sha256 (see `alnlab dataset list`).
+    pub dataset: String,
+}
+
 /// One variant: the stage parameters with its overrides applied.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Variant {
@@ -57,6 +72,10 @@ pub struct Variant {
     pub description: String,
     /// The resolved parameters of every stage.
     pub stages: Stages,
+    /// Whether the manifest, with this variant's overrides, has a
+    /// `[quantize]` table (an archived dataset with levels must not be
+    /// quantized again).
+    pub sets_quantize: bool,
 }
 
 /// The parameters of every stage, one table each.
@@ -85,6 +104,8 @@ pub struct Stages {
 #[serde(deny_unknown_fields)]
 struct Document {
     experiment: Experiment,
+    #[serde(default)]
+    data: Option<Data>,
     #[serde(default)]
     simulate: alnlab_simulate::Params,
     #[serde(default)]
@@ -156,17 +177,19 @@ impl Manifest {
         let mut base = root.into_inner();
         let variant_entries = take_variants(&mut base, &locate)?;
 
-        let (experiment, base_stages) =
+        let (experiment, data, base_stages) =
             split(deserialize(&base, root_span.clone(), &locate, None)?);
         check_experiment(&experiment, &base, &locate)?;
+        let from_dataset = data.is_some();
         let mut variants = Vec::new();
         if variant_entries.is_empty() {
             let stages = base_stages;
-            validate(&stages, &base, &locate, None)?;
+            validate(&stages, &base, &locate, None, from_dataset)?;
             variants.push(Variant {
                 name: "base".into(),
                 description: String::new(),
                 stages,
+                sets_quantize: has_key(&base, "quantize"),
             });
         }
         for entry in variant_entries {
@@ -174,18 +197,20 @@ impl Manifest {
             let mut merged = base.clone();
             merge(&mut merged, overrides);
             let doc = deserialize(&merged, root_span.clone(), &locate, Some(&name))?;
-            let (_, stages) = split(doc);
-            validate(&stages, &merged, &locate, Some(&name))?;
+            let (_, _, stages) = split(doc);
+            validate(&stages, &merged, &locate, Some(&name), from_dataset)?;
             variants.push(Variant {
                 name,
                 description,
                 stages,
+                sets_quantize: has_key(&merged, "quantize"),
             });
         }
         Ok(Manifest {
             path: path.to_path_buf(),
             sha256: sha256_hex(text.as_bytes()),
             experiment,
+            data,
             variants,
         })
     }
@@ -212,21 +237,41 @@ impl Manifest {
     /// The fully resolved manifest of one variant, as TOML.
     pub fn resolved_toml(&self, variant: &Variant) -> String {
         #[derive(Serialize)]
-        struct Resolved<'a> {
+        struct Simulated<'a> {
             experiment: &'a Experiment,
             #[serde(flatten)]
             stages: &'a Stages,
         }
-        toml::to_string(&Resolved {
-            experiment: &self.experiment,
-            stages: &variant.stages,
-        })
+        /// The archived dataset stands for simulate and stride.
+        #[derive(Serialize)]
+        struct Archived<'a> {
+            experiment: &'a Experiment,
+            data: &'a Data,
+            quantize: &'a alnlab_quantize::Params,
+            train: &'a alnlab_train::Params,
+            test: &'a alnlab_test::Params,
+        }
+        let stages = &variant.stages;
+        match &self.data {
+            None => toml::to_string(&Simulated {
+                experiment: &self.experiment,
+                stages,
+            }),
+            Some(data) => toml::to_string(&Archived {
+                experiment: &self.experiment,
+                data,
+                quantize: &stages.quantize,
+                train: &stages.train,
+                test: &stages.test,
+            }),
+        }
         .expect("resolved parameters serialize to TOML")
     }
 }
 
-/// The experiment table and the stages' parameters, every default filled in.
-fn split(document: Document) -> (Experiment, Stages) {
+/// The experiment and data tables and the stages' parameters, every default
+/// filled in.
+fn split(document: Document) -> (Experiment, Option<Data>, Stages) {
     let stages = Stages {
         simulate: document.simulate.resolve(),
         stride: document.stride,
@@ -234,7 +279,7 @@ fn split(document: Document) -> (Experiment, Stages) {
         train: document.train,
         test: document.test,
     };
-    (document.experiment, stages)
+    (document.experiment, document.data, stages)
 }
 
 /// Maps byte spans to lines and columns and builds located errors.
@@ -323,6 +368,11 @@ fn search_value(value: &DeValue, offset: usize, path: &mut Vec<String>, best: &m
 
 /// The span of the value at a dotted `path`, or of its nearest present
 /// ancestor (a defaulted field has no span of its own).
+/// Whether `table` has `key`.
+fn has_key(table: &DeTable, key: &str) -> bool {
+    table.iter().any(|(k, _)| k.get_ref() == key)
+}
+
 fn span_of(table: &DeTable, path: &[&str]) -> Option<std::ops::Range<usize>> {
     let (first, rest) = path.split_first()?;
     let (key, value) = table.iter().find(|(k, _)| k.get_ref() == first)?;
@@ -484,10 +534,34 @@ fn validate(
     table: &DeTable,
     locate: &Locator,
     variant: Option<&str>,
+    from_dataset: bool,
 ) -> Result<(), ManifestError> {
+    if from_dataset {
+        // The dataset holds the simulate and stride outputs: their
+        // parameters would be silently ignored, so they are an error.
+        for stage in ["simulate", "stride"] {
+            if has_key(table, stage) {
+                return Err(locate.error(
+                    span_of(table, &[stage]),
+                    stage.into(),
+                    variant,
+                    format!(
+                        "the data come from `[data] dataset`, which holds the simulate and \
+                         stride outputs; remove `{stage}` (or `[data]`)"
+                    ),
+                ));
+            }
+        }
+    }
     let checks = [
-        ("simulate", stages.simulate.validate()),
-        ("stride", stages.stride.validate()),
+        (
+            "simulate",
+            from_dataset_or(from_dataset, || stages.simulate.validate()),
+        ),
+        (
+            "stride",
+            from_dataset_or(from_dataset, || stages.stride.validate()),
+        ),
         ("quantize", stages.quantize.validate()),
         ("train", stages.train.validate()),
         ("test", stages.test.validate()),
@@ -502,6 +576,12 @@ fn validate(
             Err(locate.error(span_of(table, &path), path.join("."), variant, message))
         }
     }
+}
+
+/// A stage check that is skipped when an archived dataset stands for the
+/// stage.
+fn from_dataset_or<E>(from_dataset: bool, check: impl FnOnce() -> Result<(), E>) -> Result<(), E> {
+    if from_dataset { Ok(()) } else { check() }
 }
 
 /// Whether `s` is a non-empty name of ASCII letters, digits, `-` and `_`.
@@ -556,6 +636,32 @@ simulate.scene = [{ name = "box", duration = 2.0, integrator = "rk4" }]
         assert_eq!(m.variants[0].stages.simulate.scene[0].dt.get(), 1e-3);
         let toml = m.resolved_toml(&m.variants[0]);
         assert!(toml.contains("n = 3"), "{toml}");
+    }
+
+    #[test]
+    fn data_from_the_archive_stands_for_simulate_and_stride() {
+        let text = "[experiment]\nname = \"x\"\nseed = 1\n\n[data]\ndataset = \"worm@2\"\n\n\
+                    [train]\nleaves = 64\n\n[[variant]]\nname = \"q\"\nquantize.levels = 16\n";
+        let m = parse(text).unwrap();
+        assert_eq!(m.data.as_ref().unwrap().dataset, "worm@2");
+        assert!(m.variants[0].sets_quantize);
+        let toml = m.resolved_toml(&m.variants[0]);
+        assert!(
+            toml.contains("[data]") && toml.contains("[quantize]"),
+            "{toml}"
+        );
+        assert!(
+            !toml.contains("[simulate") && !toml.contains("[stride]"),
+            "{toml}"
+        );
+        // A variant that sets a stride parameter is refused where it does.
+        let err = parse(&format!("{text}stride.n = 3\n")).unwrap_err();
+        assert_eq!(err.variant.as_deref(), Some("q"));
+        assert_eq!(
+            (err.key.as_str(), err.position.map(|p| p.0)),
+            ("stride", Some(14))
+        );
+        assert!(err.message.contains("remove `stride`"), "{err}");
     }
 
     #[test]

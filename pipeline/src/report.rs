@@ -60,6 +60,10 @@ pub fn render(record: &RunRecord, reports: &Path) -> Result<PathBuf> {
         compare_with_paper: record.compare_with_paper,
         description: record.description.clone(),
         notes: record.notes.clone(),
+        dataset: record
+            .dataset
+            .as_ref()
+            .map(|d| (d.dataset.clone(), d.sha256.clone())),
     };
     report::render(&run, &reports.join(&record.experiment))
 }

@@ -1,10 +1,15 @@
 //! `alnlab run`: the stage graph of one manifest, executed in-process through
 //! the artifact cache, with a run record at the end.
 //!
-//! The graph today is simulate → stride → quantize → train; each later
-//! stage joins it when it is built. For every variant, each stage's cache key is computed from its
-//! parameters and its inputs' hashes; a stage runs only when no finished
-//! artifact has that key (or with `--force`).
+//! The graph is simulate → stride → quantize → train → test → summarize; a
+//! manifest with `[data] dataset` starts instead from an archived dataset
+//! (restored into the cache as a `dataset` artifact), which stands for
+//! simulate and stride — and quantize, when it holds levels. For every
+//! variant, each stage's cache key is computed from its parameters and its
+//! inputs' hashes; a stage runs only when no finished artifact has that key
+//! (or with `--force`). Restored files hash as the originals did, so the
+//! stages after a dataset have the same keys, and make the same bytes, as in
+//! the run it was archived from.
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::fs::{self, File};
@@ -16,6 +21,7 @@ use alnlab_common::{ALNLAB_VERSION, Error, Provenance, Result};
 use serde::{Deserialize, Serialize};
 
 use crate::cache::{Artifact, Cache, StageKey};
+use crate::dataset::{Archive, Entry};
 use crate::manifest::{Manifest, Variant};
 use crate::progress::Bar;
 
@@ -30,7 +36,12 @@ pub struct RunOptions {
     pub variant: Option<String>,
     /// No progress bars.
     pub quiet: bool,
+    /// The dataset archive `[data] dataset` refers to.
+    pub datasets: PathBuf,
 }
+
+/// Version of the `dataset` artifact's layout (part of its cache key).
+const DATASET_FORMAT_VERSION: u32 = 1;
 
 /// `<out>/<experiment>/run.json`: what a run did and what it produced.
 #[derive(Clone, Debug, Serialize, Deserialize)]
@@ -54,6 +65,18 @@ pub struct RunRecord {
     /// The manifest's notes on the results.
     #[serde(default)]
     pub notes: String,
+    /// The archived dataset the data came from, if any.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub dataset: Option<DatasetRef>,
+}
+
+/// An archived dataset, as a run record names it.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct DatasetRef {
+    /// `name@version`.
+    pub dataset: String,
+    /// Its catalog entry's sha256.
+    pub sha256: String,
 }
 
 /// What one variant's stages did.
@@ -131,6 +154,28 @@ pub fn run(manifest: &Manifest, options: &RunOptions) -> Result<RunRecord> {
         Some(name) => vec![manifest.variant(name)?],
         None => manifest.variants.iter().collect(),
     };
+    let archive = Archive::new(&options.datasets);
+    let dataset = match &manifest.data {
+        Some(data) => {
+            let entry = archive
+                .find_pinned(&data.dataset)
+                .map_err(|e| e.context(&format!("{}: [data] dataset", manifest.path.display())))?;
+            archive.require_whole(&entry)?;
+            for variant in &variants {
+                if entry.has_levels() && variant.sets_quantize {
+                    return Err(Error::Invalid(format!(
+                        "{}: variant `{}`: dataset {} holds quantized levels, so the run starts at \
+                         train; remove `quantize` (or archive the dataset without levels)",
+                        manifest.path.display(),
+                        variant.name,
+                        entry.label()
+                    )));
+                }
+            }
+            Some(entry)
+        }
+        None => None,
+    };
     let _lock = OutLock::acquire(&options.out)?;
     let cache = Cache::new(&options.out);
     cache.sweep_unfinished()?;
@@ -141,6 +186,7 @@ pub fn run(manifest: &Manifest, options: &RunOptions) -> Result<RunRecord> {
             manifest,
             options,
             cache: &cache,
+            dataset: dataset.as_ref().map(|entry| (&archive, entry)),
             made_now: &mut made_now,
             record: VariantRecord {
                 name: variant.name.clone(),
@@ -166,6 +212,10 @@ pub fn run(manifest: &Manifest, options: &RunOptions) -> Result<RunRecord> {
         compare_with_paper: manifest.experiment.compare_with_paper,
         description: manifest.experiment.description.clone(),
         notes: manifest.experiment.notes.clone(),
+        dataset: dataset.as_ref().map(|entry| DatasetRef {
+            dataset: entry.label(),
+            sha256: entry.sha256.clone(),
+        }),
     };
     let path = options.out.join(&manifest.experiment.name).join("run.json");
     let json = serde_json::to_vec_pretty(&record).expect("records serialize");
@@ -178,6 +228,8 @@ struct Graph<'a> {
     manifest: &'a Manifest,
     options: &'a RunOptions,
     cache: &'a Cache,
+    /// The archived dataset standing for the first stages, if any.
+    dataset: Option<(&'a Archive, &'a Entry)>,
     /// Keys made by this run, so `--force` makes shared artifacts only once.
     made_now: &'a mut BTreeSet<String>,
     record: VariantRecord,
@@ -188,49 +240,77 @@ impl Graph<'_> {
         let seed = self.manifest.experiment.seed;
         let stages = &variant.stages;
 
-        let params = stage_params(seed, &stages.simulate);
-        let simulate = self.stage(
-            "simulate",
-            alnlab_simulate::FORMAT_VERSION,
-            &params,
-            &[],
-            &[
-                ("trajectory", alnlab_simulate::TRAJECTORY_FILE),
-                ("stats", alnlab_simulate::STATS_FILE),
-            ],
-            |provenance, dir, bar| {
-                alnlab_simulate::run(&stages.simulate, seed, provenance, dir, bar)
-            },
-        )?;
+        let archived = match self.dataset {
+            Some((archive, entry)) => Some((self.dataset_stage(archive, entry)?, entry)),
+            None => None,
+        };
 
-        let params = stage_params(seed, &stages.stride);
+        let simulate = match &archived {
+            Some((artifact, _)) => artifact.clone(),
+            None => {
+                let params = stage_params(seed, &stages.simulate);
+                self.stage(
+                    "simulate",
+                    alnlab_simulate::FORMAT_VERSION,
+                    &params,
+                    &[],
+                    &[
+                        ("trajectory", alnlab_simulate::TRAJECTORY_FILE),
+                        ("stats", alnlab_simulate::STATS_FILE),
+                    ],
+                    |provenance, dir, bar| {
+                        alnlab_simulate::run(&stages.simulate, seed, provenance, dir, bar)
+                    },
+                )?
+            }
+        };
+
         let trajectory = simulate.path("trajectory");
-        let stride = self.stage(
-            "stride",
-            alnlab_stride::FORMAT_VERSION,
-            &params,
-            &[("trajectory", &simulate)],
-            &[("pairs", alnlab_stride::PAIRS_FILE)],
-            |provenance, dir, bar| {
-                alnlab_stride::run(&stages.stride, seed, &trajectory, provenance, dir, bar)
-            },
-        )?;
+        let stride = match &archived {
+            Some((artifact, _)) => artifact.clone(),
+            None => {
+                let params = stage_params(seed, &stages.stride);
+                self.stage(
+                    "stride",
+                    alnlab_stride::FORMAT_VERSION,
+                    &params,
+                    &[("trajectory", &simulate)],
+                    &[("pairs", alnlab_stride::PAIRS_FILE)],
+                    |provenance, dir, bar| {
+                        alnlab_stride::run(&stages.stride, seed, &trajectory, provenance, dir, bar)
+                    },
+                )?
+            }
+        };
 
-        let params = stage_params(seed, &stages.quantize);
         let (pairs, stats) = (stride.path("pairs"), simulate.path("stats"));
-        let quantize = self.stage(
-            "quantize",
-            alnlab_quantize::FORMAT_VERSION,
-            &params,
-            &[("pairs", &stride), ("stats", &simulate)],
-            &[
-                ("codebook", alnlab_quantize::CODEBOOK_FILE),
-                ("levels", alnlab_quantize::LEVELS_FILE),
-            ],
-            |provenance, dir, bar| {
-                alnlab_quantize::run(&stages.quantize, seed, &pairs, &stats, provenance, dir, bar)
-            },
-        )?;
+        let quantize = match &archived {
+            Some((artifact, entry)) if entry.has_levels() => artifact.clone(),
+            _ => {
+                let params = stage_params(seed, &stages.quantize);
+                self.stage(
+                    "quantize",
+                    alnlab_quantize::FORMAT_VERSION,
+                    &params,
+                    &[("pairs", &stride), ("stats", &simulate)],
+                    &[
+                        ("codebook", alnlab_quantize::CODEBOOK_FILE),
+                        ("levels", alnlab_quantize::LEVELS_FILE),
+                    ],
+                    |provenance, dir, bar| {
+                        alnlab_quantize::run(
+                            &stages.quantize,
+                            seed,
+                            &pairs,
+                            &stats,
+                            provenance,
+                            dir,
+                            bar,
+                        )
+                    },
+                )?
+            }
+        };
 
         let params = stage_params(seed, &stages.train);
         let (codebook, levels) = (quantize.path("codebook"), quantize.path("levels"));
@@ -306,6 +386,30 @@ impl Graph<'_> {
         Ok(())
     }
 
+    /// The archived dataset's files, restored (verified) into the cache as
+    /// one artifact keyed by their content.
+    fn dataset_stage(&mut self, archive: &Archive, entry: &Entry) -> Result<Artifact> {
+        let files: Vec<serde_json::Value> = entry
+            .files
+            .iter()
+            .map(|f| serde_json::json!({ "role": f.role, "name": f.name, "sha256": f.sha256 }))
+            .collect();
+        let params = serde_json::json!({ "files": files });
+        let outputs: Vec<(&str, &str)> = entry
+            .files
+            .iter()
+            .map(|f| (f.role.as_str(), f.name.as_str()))
+            .collect();
+        self.stage(
+            "dataset",
+            DATASET_FORMAT_VERSION,
+            &params,
+            &[],
+            &outputs,
+            |_, dir, _| archive.restore(entry, None, dir),
+        )
+    }
+
     /// Finds or makes one stage's artifact and records it.
     #[allow(clippy::too_many_arguments)]
     fn stage(
@@ -341,7 +445,6 @@ impl Graph<'_> {
             None => {
                 let provenance = Provenance {
                     stage: name.into(),
-                    manifest_sha256: self.manifest.sha256.clone(),
                     params: params.clone(),
                     inputs: input_hashes,
                 };

@@ -23,6 +23,10 @@ pub enum Error {
     /// A simulation or computation left its valid domain (e.g. blew up).
     #[error("{0}")]
     Diverged(String),
+    /// Stored data is not what its record says it is (a hash mismatch, a
+    /// missing file): nothing the user's input can fix.
+    #[error("{0}")]
+    Corrupt(String),
 }
 
 impl Error {
@@ -48,13 +52,14 @@ impl Error {
         match self {
             Error::Invalid(m) => Error::Invalid(format!("{context}: {m}")),
             Error::Diverged(m) => Error::Diverged(format!("{context}: {m}")),
+            Error::Corrupt(m) => Error::Corrupt(format!("{context}: {m}")),
             other => other,
         }
     }
 
     /// The process exit code for this error: 2 for what the user can fix
     /// (a missing or unreadable input, bad files, bad parameters, an unstable
-    /// scene), 1 otherwise (e.g. a full disk).
+    /// scene), 1 otherwise (e.g. a full disk, corrupt stored data).
     pub fn exit_code(&self) -> i32 {
         use std::io::ErrorKind::{IsADirectory, NotADirectory, NotFound, PermissionDenied};
         match self {
@@ -63,6 +68,7 @@ impl Error {
                 _ => 1,
             },
             Error::BadFile { .. } | Error::Invalid(_) | Error::Diverged(_) => 2,
+            Error::Corrupt(_) => 1,
         }
     }
 }

@@ -1,7 +1,7 @@
 //! SHA-256 content hashes, as lowercase hex.
 
 use std::fs::File;
-use std::io::Read;
+use std::io::{Read, Write};
 use std::path::Path;
 
 use sha2::{Digest, Sha256};
@@ -15,17 +15,26 @@ pub fn sha256_hex(bytes: &[u8]) -> String {
 
 /// SHA-256 of the file at `path`, streamed, hex encoded.
 pub fn sha256_file(path: &Path) -> Result<String> {
+    copy_hashing(path, &mut std::io::sink()).map(|(sha256, _)| sha256)
+}
+
+/// Copies the file at `path` into `out`, returning the SHA-256 (hex) and
+/// length of what was copied: one read serves both.
+pub fn copy_hashing(path: &Path, out: &mut impl Write) -> Result<(String, u64)> {
     let mut file = File::open(path).map_err(|e| Error::io(path, e))?;
     let mut hasher = Sha256::new();
     let mut buf = vec![0u8; 1 << 16];
+    let mut total = 0u64;
     loop {
         let n = file.read(&mut buf).map_err(|e| Error::io(path, e))?;
         if n == 0 {
             break;
         }
         hasher.update(&buf[..n]);
+        out.write_all(&buf[..n]).map_err(|e| Error::io(path, e))?;
+        total += n as u64;
     }
-    Ok(hex(&hasher.finalize()))
+    Ok((hex(&hasher.finalize()), total))
 }
 
 /// Mixes a 64-bit `key` (e.g. a scene, run and step packed together) into

@@ -8,14 +8,13 @@ use serde::{Deserialize, Serialize};
 use crate::ALNLAB_VERSION;
 
 /// The origin of one artifact. Every field is deterministic (no clock, no
-/// host name), so equal inputs give byte-identical artifacts.
+/// host name) and follows from the stage's cache key alone (not the manifest
+/// that happened to ask for it), so equal inputs give byte-identical
+/// artifacts whichever manifest — or archived dataset — they came from.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct Provenance {
     /// The stage that wrote the artifact (`simulate`, `stride`, …).
     pub stage: String,
-    /// SHA-256 of the manifest of the run that first produced the artifact
-    /// (empty when the stage ran alone, without a manifest).
-    pub manifest_sha256: String,
     /// The stage's resolved parameters, as canonical JSON.
     pub params: serde_json::Value,
     /// SHA-256 of each input file, by role (`trajectory`, `stats`, …).
@@ -29,10 +28,6 @@ impl Provenance {
         vec![
             ("alnlab.stage".into(), self.stage.clone()),
             ("alnlab.version".into(), ALNLAB_VERSION.into()),
-            (
-                "alnlab.manifest_sha256".into(),
-                self.manifest_sha256.clone(),
-            ),
             ("alnlab.params".into(), self.params.to_string()),
             (
                 "alnlab.inputs".into(),

@@ -181,7 +181,6 @@ mod tests {
     fn provenance() -> Provenance {
         Provenance {
             stage: "test".into(),
-            manifest_sha256: "00".into(),
             params: serde_json::json!({"k": 1}),
             inputs: [("pairs".to_string(), "ab".to_string())].into(),
         }

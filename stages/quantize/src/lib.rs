@@ -32,7 +32,7 @@ use crate::codes::{Code, Codec, binary_width};
 use crate::walk::WalkSpec;
 
 /// Version of what this stage writes (part of every cache key).
-pub const FORMAT_VERSION: u32 = 1;
+pub const FORMAT_VERSION: u32 = 2;
 /// File name of the codebook.
 pub const CODEBOOK_FILE: &str = "codebook.parquet";
 /// File name of the levels table.

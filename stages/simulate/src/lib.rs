@@ -48,7 +48,7 @@ pub use crate::scene::{Scene, SceneKind};
 
 /// Version of what this stage writes; part of every cache key, bumped when the
 /// same parameters would produce different bytes.
-pub const FORMAT_VERSION: u32 = 3;
+pub const FORMAT_VERSION: u32 = 4;
 
 /// File name of the trajectory log.
 pub const TRAJECTORY_FILE: &str = "trajectory.mcap";

@@ -150,7 +150,6 @@ mod tests {
         };
         let provenance = Provenance {
             stage: "simulate".into(),
-            manifest_sha256: String::new(),
             params: serde_json::Value::Null,
             inputs: Default::default(),
         };

@@ -19,7 +19,7 @@ use arrow_array::{Array, Float64Array, StringArray, UInt32Array};
 use serde::{Deserialize, Serialize};
 
 /// Version of what this stage writes (part of every cache key).
-pub const FORMAT_VERSION: u32 = 2;
+pub const FORMAT_VERSION: u32 = 3;
 /// File name of the pairs table.
 pub const PAIRS_FILE: &str = "pairs.parquet";
 

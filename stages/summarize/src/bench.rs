@@ -32,7 +32,6 @@ pub fn run() -> Result<SummarizeBench> {
     let dir = tempfile::tempdir().map_err(|e| Error::io(&temp, e))?;
     let provenance = Provenance {
         stage: "bench".into(),
-        manifest_sha256: String::new(),
         params: serde_json::Value::Null,
         inputs: BTreeMap::new(),
     };

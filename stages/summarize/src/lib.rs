@@ -27,7 +27,7 @@ use arrow_array::{
 use crate::stats::{ErrorCounts, ErrorStats, HISTOGRAM_BINS};
 
 /// Version of what this stage writes (part of every cache key).
-pub const FORMAT_VERSION: u32 = 1;
+pub const FORMAT_VERSION: u32 = 2;
 /// File name of the summary table.
 pub const SUMMARY_FILE: &str = "summary.parquet";
 /// File name of the closed-loop table.
@@ -354,7 +354,6 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let provenance = Provenance {
             stage: "test".into(),
-            manifest_sha256: String::new(),
             params: serde_json::Value::Null,
             inputs: BTreeMap::new(),
         };

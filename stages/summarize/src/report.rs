@@ -41,6 +41,8 @@ pub struct RunInfo {
     pub description: String,
     /// The experimenter's reading of the results (Markdown), if any.
     pub notes: String,
+    /// The archived dataset the data came from (`name@version`, sha256).
+    pub dataset: Option<(String, String)>,
 }
 
 /// The paper's §4.6 results table (Armstrong, Supynuk & Green, "Adaptive
@@ -321,6 +323,9 @@ fn reproducibility(md: &mut String, run: &RunInfo, variants: &[Loaded]) {
     let _ = writeln!(md, "| | |\n|---|---|");
     let _ = writeln!(md, "| manifest | `{}` |", run.manifest_path);
     let _ = writeln!(md, "| manifest sha256 | `{}` |", run.manifest_sha256);
+    if let Some((dataset, sha256)) = &run.dataset {
+        let _ = writeln!(md, "| dataset | {dataset} (sha256 `{sha256}`) |");
+    }
     let _ = writeln!(md, "| seed | {} |", run.seed);
     let _ = writeln!(md, "| alnlab | {} |", run.alnlab_version);
     let commit = run

@@ -35,7 +35,7 @@ use serde::{Deserialize, Serialize};
 use crate::predict::Timing;
 
 /// Version of what this stage writes (part of every cache key).
-pub const FORMAT_VERSION: u32 = 1;
+pub const FORMAT_VERSION: u32 = 2;
 
 /// File name of the predictions table.
 pub const PREDICTIONS_FILE: &str = "predictions.parquet";

@@ -1,0 +1,246 @@
+//! What each `alnlab dataset` subcommand does, on top of [`crate::dataset`].
+
+use std::path::{Path, PathBuf};
+
+use alnlab_common::{Error, Result};
+
+use crate::cli::DatasetCommand;
+use crate::dataset::{
+    Archive, BASE_ROLES, DatasetProvenance, Entry, LEVEL_ROLES, Source, check_name,
+};
+use crate::report::read_record;
+use crate::run::VariantRecord;
+
+/// Runs one `alnlab dataset` subcommand on the archive in `datasets`.
+pub fn execute(datasets: &Path, command: DatasetCommand) -> Result<()> {
+    let archive = Archive::new(datasets);
+    match command {
+        DatasetCommand::Archive {
+            run,
+            variant,
+            name,
+            with_levels,
+        } => archive_run(&archive, &run, variant.as_deref(), &name, with_levels),
+        DatasetCommand::List => {
+            let catalog = archive.catalog()?;
+            if catalog.datasets.is_empty() {
+                println!("no datasets in {}", archive.dir().display());
+            }
+            for entry in &catalog.datasets {
+                let roles: Vec<&str> = entry.files.iter().map(|f| f.role.as_str()).collect();
+                println!(
+                    "{:<24} {}  {:>10}  {}  {}/{}  [{}]",
+                    entry.label(),
+                    &entry.sha256[..12.min(entry.sha256.len())],
+                    human_bytes(entry.bytes),
+                    entry.created,
+                    entry.provenance.experiment,
+                    entry.provenance.variant,
+                    roles.join(", ")
+                );
+            }
+            Ok(())
+        }
+        DatasetCommand::Show { dataset } => {
+            let entry = archive.find(&dataset)?;
+            print!("{}", show(&entry));
+            Ok(())
+        }
+        DatasetCommand::Verify { dataset } => {
+            let entries = match dataset {
+                Some(reference) => vec![archive.find(&reference)?],
+                None => archive.catalog()?.datasets,
+            };
+            let mut problems = Vec::new();
+            for entry in &entries {
+                let found = archive.verify(entry)?;
+                if found.is_empty() {
+                    println!("ok       {} ({} files)", entry.label(), entry.files.len());
+                } else {
+                    println!("DAMAGED  {}", entry.label());
+                }
+                problems.extend(found);
+            }
+            if problems.is_empty() {
+                return Ok(());
+            }
+            let list: Vec<String> = problems.iter().map(ToString::to_string).collect();
+            Err(Error::Corrupt(format!(
+                "{} problem(s) in {}:\n  {}",
+                problems.len(),
+                archive.dir().display(),
+                list.join("\n  ")
+            )))
+        }
+        DatasetCommand::Restore { dataset, to } => {
+            let entry = archive.find(&dataset)?;
+            archive.restore(&entry, None, &to)?;
+            for file in &entry.files {
+                println!("{}", to.join(&file.name).display());
+            }
+            Ok(())
+        }
+        DatasetCommand::Remove {
+            dataset,
+            force,
+            experiments,
+        } => {
+            let entry = archive.remove(&dataset, force, &experiments)?;
+            println!("removed {}", entry.label());
+            Ok(())
+        }
+    }
+}
+
+/// `alnlab dataset archive`: the chosen variant's data files of a run.
+fn archive_run(
+    archive: &Archive,
+    run_dir: &Path,
+    variant: Option<&str>,
+    name: &str,
+    with_levels: bool,
+) -> Result<()> {
+    check_name(name)?;
+    let record = read_record(run_dir)?;
+    let roles: Vec<&str> = if with_levels {
+        BASE_ROLES.iter().chain(&LEVEL_ROLES).copied().collect()
+    } else {
+        BASE_ROLES.to_vec()
+    };
+    let chosen = pick_variant(&record.variants, variant, &roles, run_dir)?;
+    let mut sources = Vec::new();
+    for &role in &roles {
+        let artifact = chosen.artifacts.get(role).ok_or_else(|| {
+            Error::bad_file(
+                &run_dir.join("run.json"),
+                format!("variant `{}` has no `{role}` artifact", chosen.name),
+            )
+        })?;
+        let path = PathBuf::from(&artifact.path);
+        let file_name = path
+            .file_name()
+            .map(|n| n.to_string_lossy().into_owned())
+            .unwrap_or_else(|| role.to_string());
+        sources.push(Source {
+            role: role.to_string(),
+            name: file_name,
+            path,
+        });
+    }
+    let provenance = DatasetProvenance {
+        experiment: record.experiment.clone(),
+        variant: chosen.name.clone(),
+        manifest: record.manifest_path.clone(),
+        manifest_sha256: record.manifest_sha256.clone(),
+        seed: record.seed,
+        alnlab_version: record.alnlab_version.clone(),
+        git_commit: record.git_commit.clone().unwrap_or_default(),
+    };
+    let (entry, new) = archive.archive(name, &sources, provenance)?;
+    if new {
+        println!(
+            "archived {} ({}, sha256 {})",
+            entry.label(),
+            human_bytes(entry.bytes),
+            entry.sha256
+        );
+    } else {
+        println!("already archived as {} (nothing stored)", entry.label());
+    }
+    Ok(())
+}
+
+/// The variant to archive: the one named, the only one, or any when all
+/// variants share the same data files.
+fn pick_variant<'a>(
+    variants: &'a [VariantRecord],
+    name: Option<&str>,
+    roles: &[&str],
+    run_dir: &Path,
+) -> Result<&'a VariantRecord> {
+    let names = || {
+        variants
+            .iter()
+            .map(|v| v.name.as_str())
+            .collect::<Vec<_>>()
+            .join(", ")
+    };
+    if let Some(name) = name {
+        return variants.iter().find(|v| v.name == name).ok_or_else(|| {
+            Error::Invalid(format!(
+                "{}: no variant `{name}`; the run has: {}",
+                run_dir.display(),
+                names()
+            ))
+        });
+    }
+    let data = |v: &VariantRecord| -> Vec<Option<String>> {
+        roles
+            .iter()
+            .map(|r| v.artifacts.get(*r).map(|a| a.sha256.clone()))
+            .collect()
+    };
+    match variants {
+        [] => Err(Error::bad_file(
+            &run_dir.join("run.json"),
+            "the run has no variants",
+        )),
+        [first, rest @ ..] if rest.iter().all(|v| data(v) == data(first)) => Ok(first),
+        _ => Err(Error::Invalid(format!(
+            "{}: the variants' data differ; choose one with --variant ({})",
+            run_dir.display(),
+            names()
+        ))),
+    }
+}
+
+/// A catalog entry for people.
+fn show(entry: &Entry) -> String {
+    let p = &entry.provenance;
+    let mut text = format!(
+        "dataset     {}\nsha256      {}\ncreated     {}\nsize        {}\n\
+         experiment  {} (variant {})\nmanifest    {} (sha256 {})\nseed        {}\n\
+         alnlab      {}\ngit commit  {}\nfiles:\n",
+        entry.label(),
+        entry.sha256,
+        entry.created,
+        human_bytes(entry.bytes),
+        p.experiment,
+        p.variant,
+        p.manifest,
+        p.manifest_sha256,
+        p.seed,
+        p.alnlab_version,
+        if p.git_commit.is_empty() {
+            "(not in a git checkout)"
+        } else {
+            &p.git_commit
+        },
+    );
+    for f in &entry.files {
+        text.push_str(&format!(
+            "  {:<11} {:<18} {:>10}  {}\n",
+            f.role,
+            f.name,
+            human_bytes(f.bytes),
+            f.sha256
+        ));
+    }
+    text
+}
+
+/// "1.2 MiB".
+fn human_bytes(bytes: u64) -> String {
+    const UNITS: [&str; 4] = ["B", "KiB", "MiB", "GiB"];
+    let mut value = bytes as f64;
+    let mut unit = 0;
+    while value >= 1024.0 && unit + 1 < UNITS.len() {
+        value /= 1024.0;
+        unit += 1;
+    }
+    if unit == 0 {
+        format!("{bytes} B")
+    } else {
+        format!("{value:.1} {}", UNITS[unit])
+    }
+}
