@@ -28,6 +28,7 @@ pub fn worm_training() -> Result<TrainBench> {
         variant: None,
         quiet: true,
         datasets: dir.path().join("datasets"),
+        until: None,
     };
     let record = run::run(&manifest, &options)?;
     let variant = &record.variants[0];

@@ -99,6 +99,19 @@ impl Cache {
         }
     }
 
+    /// A store with the cache's layout rooted at `root` (for work kept
+    /// apart from the cache, such as training shards).
+    pub fn at(root: &Path) -> Cache {
+        Cache {
+            root: root.to_path_buf(),
+        }
+    }
+
+    /// The store's root folder.
+    pub fn root(&self) -> &Path {
+        &self.root
+    }
+
     fn dir(&self, stage: &str, key: &str) -> PathBuf {
         self.root.join(stage).join(key)
     }

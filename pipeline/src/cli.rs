@@ -4,12 +4,14 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use alnlab_common::hash::sha256_file;
+use alnlab_common::table::Table;
 use alnlab_common::{Error, Provenance, Result};
 use clap::{Parser, Subcommand};
 
 use crate::manifest::{Manifest, Stages};
 use crate::progress::Bar;
 use crate::run::{RunOptions, run, stage_params};
+use alnlab_train::shard::Shard;
 
 /// alnlab — how well, and how fast, can adaptive logic networks predict the
 /// motion of articulated rigid bodies?
@@ -45,8 +47,11 @@ pub enum Command {
     /// same <OUT> waits until the first is done.
     #[command(after_help = "Examples:
   alnlab run
-  alnlab run experiments/quickstart.toml --out runs --variant base
-  alnlab run experiments/quickstart.toml --force")]
+  alnlab run experiments/quickstart.toml --out runs --variant walk
+  alnlab run experiments/quickstart.toml --force
+  alnlab run experiments/paper.toml --until quantize
+  alnlab run experiments/paper.toml --train-shard 1/2 & alnlab run experiments/paper.toml --train-shard 2/2
+  alnlab run experiments/paper.toml            # merges the two shards instead of training")]
     Run {
         /// The experiment manifest.
         #[arg(default_value = "experiments/quickstart.toml")]
@@ -66,6 +71,30 @@ pub enum Command {
         /// The dataset archive a manifest's `[data] dataset` refers to.
         #[arg(long, default_value = "datasets")]
         datasets: PathBuf,
+        /// Stop after this stage; writes no run record and no report (for
+        /// workflow engines running one stage at a time).
+        #[arg(long, value_parser = clap::builder::PossibleValuesParser::new(crate::run::STAGES))]
+        until: Option<String>,
+        /// Train only shard K of N of the variant's forest (after bringing it
+        /// up to quantize), into <OUT>/shards/; a later run through train
+        /// merges the complete set instead of training. Needs --variant when
+        /// the manifest has several.
+        #[arg(long, value_name = "K/N", conflicts_with = "until")]
+        train_shard: Option<Shard>,
+    },
+    /// Join the partial models of `train --shard K/N` (all N of them) into
+    /// the model file and training log one process would have written.
+    #[command(after_help = "Example:
+  alnlab train --manifest m.toml --codebook c.parquet --levels l.parquet --shard 1/2 --out s1
+  alnlab train --manifest m.toml --codebook c.parquet --levels l.parquet --shard 2/2 --out s2
+  alnlab merge-models s1 s2 --out merged")]
+    MergeModels {
+        /// The shards' folders (each with model.aln and training.parquet).
+        #[arg(required = true)]
+        parts: Vec<PathBuf>,
+        /// Folder to write model.aln and training.parquet into.
+        #[arg(long)]
+        out: PathBuf,
     },
     /// Archive, list, verify and restore datasets: a run's simulate and
     /// stride outputs (and optionally its quantized levels), kept
@@ -165,6 +194,10 @@ pub enum Command {
         /// Folder to write model.aln and training.parquet into.
         #[arg(long)]
         out: PathBuf,
+        /// Train only shard K of N of the trees: a partial model, for
+        /// `alnlab merge-models`.
+        #[arg(long, value_name = "K/N")]
+        shard: Option<Shard>,
     },
     /// Run the test stage alone: the model's predictions for every test row,
     /// beside the persistence and linear baselines, their timings, and
@@ -378,6 +411,8 @@ pub fn execute(cli: Cli) -> Result<()> {
             variant,
             reports,
             datasets,
+            until,
+            train_shard,
         } => {
             let manifest = Manifest::load(&manifest)?;
             let options = RunOptions {
@@ -386,7 +421,17 @@ pub fn execute(cli: Cli) -> Result<()> {
                 variant,
                 quiet,
                 datasets,
+                until,
             };
+            if let Some(shard) = train_shard {
+                let variant = match &options.variant {
+                    Some(name) => name.clone(),
+                    None => only_variant(&manifest)?,
+                };
+                let dir = crate::run::train_shard(&manifest, &options, &variant, shard)?;
+                println!("shard {shard} of `{variant}`: {}", dir.display());
+                return Ok(());
+            }
             let record = run(&manifest, &options)?;
             for variant in &record.variants {
                 for stage in &variant.stages {
@@ -396,6 +441,9 @@ pub fn execute(cli: Cli) -> Result<()> {
                         record.experiment, variant.name, stage.stage, stage.wall_seconds
                     );
                 }
+            }
+            if options.until.is_some() {
+                return Ok(());
             }
             let path = options.out.join(&record.experiment).join("run.json");
             println!(
@@ -408,6 +456,16 @@ pub fn execute(cli: Cli) -> Result<()> {
             Ok(())
         }
         Command::Dataset { datasets, command } => crate::dataset_cli::execute(&datasets, command),
+        Command::MergeModels { parts, out } => {
+            // The merged files carry the parts' provenance (the train
+            // stage's parameters and inputs, the same for every part).
+            let log = parts[0].join(alnlab_train::TRAINING_FILE);
+            let provenance = Provenance::from_key_values(&Table::read(&log)?.metadata)
+                .ok_or_else(|| Error::bad_file(&log, "has no alnlab provenance"))?;
+            alnlab_train::shard::merge(&parts, &provenance, &out)?;
+            println!("{}", out.join(alnlab_train::MODEL_FILE).display());
+            Ok(())
+        }
         Command::Report { run_dir, reports } => {
             let record = crate::report::read_record(&run_dir)?;
             let report = crate::report::render(&record, &reports)?;
@@ -484,6 +542,7 @@ pub fn execute(cli: Cli) -> Result<()> {
             codebook,
             levels,
             out,
+            shard,
         } => run_alone(
             &from,
             "train",
@@ -493,7 +552,10 @@ pub fn execute(cli: Cli) -> Result<()> {
             &[alnlab_train::MODEL_FILE, alnlab_train::TRAINING_FILE],
             quiet,
             |params, seed, provenance, bar| {
-                alnlab_train::run(params, seed, &codebook, &levels, provenance, &out, bar)
+                let shard = shard.unwrap_or(Shard::ALL);
+                alnlab_train::run(
+                    params, seed, shard, &codebook, &levels, provenance, &out, bar,
+                )
             },
         ),
         Command::Test {
@@ -692,6 +754,7 @@ fn bench_cache(
         variant: None,
         quiet,
         datasets: PathBuf::from("datasets"),
+        until: None,
     };
     let warm = Manifest::load(manifest)?;
     run(&warm, &options)?;
@@ -734,4 +797,19 @@ fn bench_cache(
         );
     }
     Ok(())
+}
+
+/// The manifest's one variant, or an error asking to choose.
+fn only_variant(manifest: &Manifest) -> Result<String> {
+    match manifest.variants.as_slice() {
+        [one] => Ok(one.name.clone()),
+        many => Err(Error::Invalid(format!(
+            "{}: --train-shard needs --variant: the manifest has {}",
+            manifest.path.display(),
+            many.iter()
+                .map(|v| v.name.as_str())
+                .collect::<Vec<_>>()
+                .join(", ")
+        ))),
+    }
 }

@@ -24,6 +24,7 @@ use crate::cache::{Artifact, Cache, StageKey};
 use crate::dataset::{Archive, Entry};
 use crate::manifest::{Manifest, Variant};
 use crate::progress::Bar;
+use alnlab_train::shard::Shard;
 
 /// How to run.
 #[derive(Clone, Debug)]
@@ -38,7 +39,21 @@ pub struct RunOptions {
     pub quiet: bool,
     /// The dataset archive `[data] dataset` refers to.
     pub datasets: PathBuf,
+    /// Stop after this stage (one of [`STAGES`]): no run record, no report.
+    /// How a workflow engine runs the graph one stage at a time.
+    pub until: Option<String>,
 }
+
+/// The stages of the graph, in order (`dataset` stands for simulate and
+/// stride when the data come from the archive).
+pub const STAGES: [&str; 6] = [
+    "simulate",
+    "stride",
+    "quantize",
+    "train",
+    "test",
+    "summarize",
+];
 
 /// Version of the `dataset` artifact's layout (part of its cache key).
 const DATASET_FORMAT_VERSION: u32 = 1;
@@ -217,9 +232,11 @@ pub fn run(manifest: &Manifest, options: &RunOptions) -> Result<RunRecord> {
             sha256: entry.sha256.clone(),
         }),
     };
-    let path = options.out.join(&manifest.experiment.name).join("run.json");
-    let json = serde_json::to_vec_pretty(&record).expect("records serialize");
-    alnlab_common::atomic::write_bytes(&path, &json)?;
+    if options.until.is_none() {
+        let path = options.out.join(&manifest.experiment.name).join("run.json");
+        let json = serde_json::to_vec_pretty(&record).expect("records serialize");
+        alnlab_common::atomic::write_bytes(&path, &json)?;
+    }
     Ok(record)
 }
 
@@ -236,6 +253,11 @@ struct Graph<'a> {
 }
 
 impl Graph<'_> {
+    /// Whether the walk ends after `stage` (`--until`).
+    fn stops_after(&self, stage: &str) -> bool {
+        self.options.until.as_deref() == Some(stage)
+    }
+
     fn run_variant(&mut self, variant: &Variant) -> Result<()> {
         let seed = self.manifest.experiment.seed;
         let stages = &variant.stages;
@@ -265,6 +287,9 @@ impl Graph<'_> {
             }
         };
 
+        if self.stops_after("simulate") {
+            return Ok(());
+        }
         let trajectory = simulate.path("trajectory");
         let stride = match &archived {
             Some((artifact, _)) => artifact.clone(),
@@ -283,6 +308,9 @@ impl Graph<'_> {
             }
         };
 
+        if self.stops_after("stride") {
+            return Ok(());
+        }
         let (pairs, stats) = (stride.path("pairs"), simulate.path("stats"));
         let quantize = match &archived {
             Some((artifact, entry)) if entry.has_levels() => artifact.clone(),
@@ -312,8 +340,12 @@ impl Graph<'_> {
             }
         };
 
+        if self.stops_after("quantize") {
+            return Ok(());
+        }
         let params = stage_params(seed, &stages.train);
         let (codebook, levels) = (quantize.path("codebook"), quantize.path("levels"));
+        let shards = shard_store(&self.options.out);
         let train = self.stage(
             "train",
             alnlab_train::FORMAT_VERSION,
@@ -324,17 +356,30 @@ impl Graph<'_> {
                 ("training", alnlab_train::TRAINING_FILE),
             ],
             |provenance, dir, bar| {
-                alnlab_train::run(
-                    &stages.train,
-                    seed,
-                    &codebook,
-                    &levels,
-                    provenance,
-                    dir,
-                    bar,
-                )
+                // A complete set of shards trained for this key is merged
+                // instead of training again.
+                match complete_shards(&shards, &train_key(provenance)) {
+                    Some(parts) => alnlab_train::shard::merge(&parts, provenance, dir),
+                    None => alnlab_train::run(
+                        &stages.train,
+                        seed,
+                        Shard::ALL,
+                        &codebook,
+                        &levels,
+                        provenance,
+                        dir,
+                        bar,
+                    ),
+                }
             },
         )?;
+        let merged = shards.root().join("train").join(&train.record.key);
+        if merged.exists() {
+            fs::remove_dir_all(&merged).map_err(|e| Error::io(&merged, e))?;
+        }
+        if self.stops_after("train") {
+            return Ok(());
+        }
 
         let params = stage_params(seed, &stages.test);
         let model = train.path("model");
@@ -366,6 +411,9 @@ impl Graph<'_> {
                 )
             },
         )?;
+        if self.stops_after("test") {
+            return Ok(());
+        }
 
         // Summarizing has no parameters of its own.
         let params = stage_params(seed, &());
@@ -501,4 +549,113 @@ fn git_commit(path: &Path) -> Option<String> {
         .ok()?;
     let commit = String::from_utf8(output.stdout).ok()?.trim().to_string();
     (output.status.success() && !commit.is_empty()).then_some(commit)
+}
+
+/// Where sharded training keeps the partial models: `<out>/shards/train/
+/// <train key>/<K>-of-<N>/`, outside the cache (whose sweep of unfinished
+/// work must not touch a shard another process is still training).
+fn shard_store(out: &Path) -> Cache {
+    Cache::at(&out.join("shards"))
+}
+
+/// The train stage's cache key, from its provenance (which holds exactly
+/// the key's parameters and input hashes).
+fn train_key(provenance: &Provenance) -> String {
+    StageKey {
+        stage: "train",
+        format_version: alnlab_train::FORMAT_VERSION,
+        params: &provenance.params,
+        inputs: provenance.inputs.clone(),
+    }
+    .hash()
+}
+
+/// The folders of a complete set of finished shards (1..=N of one N) for the
+/// train stage with `key`, if there is one.
+fn complete_shards(shards: &Cache, key: &str) -> Option<Vec<PathBuf>> {
+    let dir = shards.root().join("train").join(key);
+    let mut counts: Vec<u32> = fs::read_dir(&dir)
+        .ok()?
+        .flatten()
+        .filter_map(|e| {
+            let name = e.file_name().to_string_lossy().into_owned();
+            name.split_once("-of-")?.1.parse().ok()
+        })
+        .collect();
+    counts.sort_unstable();
+    counts.dedup();
+    counts.into_iter().find_map(|count| {
+        (1..=count)
+            .map(|index| shards.lookup("train", &shard_key(key, Shard { index, count })))
+            .map(|found| found.map(|artifact| artifact.dir))
+            .collect()
+    })
+}
+
+/// A shard's key in the shard store: the train key and the shard.
+fn shard_key(train_key: &str, shard: Shard) -> String {
+    format!("{train_key}/{}-of-{}", shard.index, shard.count)
+}
+
+/// `alnlab run --train-shard K/N`: brings the variant up to quantize through
+/// the cache (holding the output folder's lock, as a run does), then — the
+/// lock released, so that shards train side by side — trains shard K of N of
+/// its forest into the shard store, unless it is there already. A later run
+/// through train merges the complete set. Returns the shard's folder.
+pub fn train_shard(
+    manifest: &Manifest,
+    options: &RunOptions,
+    variant: &str,
+    shard: Shard,
+) -> Result<PathBuf> {
+    let variant = manifest.variant(variant)?;
+    let upstream = RunOptions {
+        until: Some("quantize".into()),
+        variant: Some(variant.name.clone()),
+        ..options.clone()
+    };
+    let record = run(manifest, &upstream)?;
+    let quantized = &record.variants[0].artifacts;
+    let seed = manifest.experiment.seed;
+    let params = stage_params(seed, &variant.stages.train);
+    let inputs: BTreeMap<String, String> = ["codebook", "levels"]
+        .iter()
+        .map(|role| (role.to_string(), quantized[*role].sha256.clone()))
+        .collect();
+    let provenance = Provenance {
+        stage: "train".into(),
+        params,
+        inputs,
+    };
+    let key = shard_key(&train_key(&provenance), shard);
+    let shards = shard_store(&options.out);
+    if let Some(done) = shards.lookup("train", &key) {
+        return Ok(done.dir);
+    }
+    let path = |role: &str| PathBuf::from(&quantized[role].path);
+    let (codebook, levels) = (path("codebook"), path("levels"));
+    let label = format!(
+        "{}/{} shard {shard}",
+        manifest.experiment.name, variant.name
+    );
+    let bar = Bar::new(&label, options.quiet);
+    let outputs = [
+        ("model", alnlab_train::MODEL_FILE),
+        ("training", alnlab_train::TRAINING_FILE),
+    ];
+    let made = shards
+        .make("train", &key, &outputs, |dir| {
+            alnlab_train::run(
+                &variant.stages.train,
+                seed,
+                shard,
+                &codebook,
+                &levels,
+                &provenance,
+                dir,
+                &bar,
+            )
+        })
+        .map_err(|e| e.context(&format!("variant `{}`, train shard {shard}", variant.name)))?;
+    Ok(made.dir)
 }

@@ -22,6 +22,16 @@ pub struct Provenance {
 }
 
 impl Provenance {
+    /// The provenance written by [`Provenance::key_values`] into a file's
+    /// metadata, read back; `None` if the metadata does not hold one.
+    pub fn from_key_values(metadata: &BTreeMap<String, String>) -> Option<Provenance> {
+        Some(Provenance {
+            stage: metadata.get("alnlab.stage")?.clone(),
+            params: serde_json::from_str(metadata.get("alnlab.params")?).ok()?,
+            inputs: serde_json::from_str(metadata.get("alnlab.inputs")?).ok()?,
+        })
+    }
+
     /// The key-value pairs written into a file's metadata, keys prefixed
     /// `alnlab.`.
     pub fn key_values(&self) -> Vec<(String, String)> {
@@ -34,5 +44,22 @@ impl Provenance {
                 serde_json::to_string(&self.inputs).expect("a string map serializes"),
             ),
         ]
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn key_values_read_back() {
+        let provenance = Provenance {
+            stage: "train".into(),
+            params: serde_json::json!({ "seed": 3, "params": { "leaves": 64 } }),
+            inputs: BTreeMap::from([("levels".to_string(), "ab".to_string())]),
+        };
+        let metadata: BTreeMap<String, String> = provenance.key_values().into_iter().collect();
+        assert_eq!(Provenance::from_key_values(&metadata), Some(provenance));
+        assert_eq!(Provenance::from_key_values(&BTreeMap::new()), None);
     }
 }

@@ -274,6 +274,7 @@ mod tests {
     use alnlab_quantize::walk::WalkSpec;
     use alnlab_train::forest::{self, Columns};
     use alnlab_train::model::Header;
+    use alnlab_train::shard::Shard;
     use alnlab_train::tree::TreeSpec;
 
     /// A forest (vote 3) trained on y = x + 1 over 64 walk-coded levels, and
@@ -298,7 +299,7 @@ mod tests {
             counter_bound: 3,
             initial_spread: 1,
         };
-        let trained = forest::train(&tree, 10, 3, 1, &inputs, &targets, &|| {});
+        let trained = forest::train(&tree, 10, 3, 1, Shard::ALL, &inputs, &targets, &|| {});
         let header = Header {
             codebook_sha256: String::new(),
             params: serde_json::Value::Null,
@@ -307,6 +308,7 @@ mod tests {
             outputs: vec![("v".into(), 23)],
             vote: 3,
             counter_bound: 3,
+            shard: None,
         };
         let trees = trained.into_iter().map(|t| (t.id, t.tree)).collect();
         (Model { header, trees }, codec)

@@ -15,6 +15,7 @@ use rayon::prelude::*;
 use serde::Serialize;
 
 use crate::forest::{self, Columns, Predictor};
+use crate::shard::Shard;
 use crate::tree::TreeSpec;
 
 /// The figures of `alnlab bench train`, with stable keys for `--json`.
@@ -109,7 +110,16 @@ fn spec(inputs: usize) -> TreeSpec {
 pub fn train() -> TrainBench {
     let (_, inputs, targets) = data(1000);
     let clock = Instant::now();
-    let trained = forest::train(&spec(inputs.bits), 10, 1, 7, &inputs, &targets, &|| {});
+    let trained = forest::train(
+        &spec(inputs.bits),
+        10,
+        1,
+        7,
+        Shard::ALL,
+        &inputs,
+        &targets,
+        &|| {},
+    );
     let seconds = clock.elapsed().as_secs_f64();
     let updates: usize = trained
         .iter()
@@ -128,7 +138,16 @@ pub fn train() -> TrainBench {
 /// states: every tree, the votes and the decoding of every variable.
 pub fn predict() -> PredictBench {
     let (codecs, inputs, targets) = data(1024);
-    let trained = forest::train(&spec(inputs.bits), 10, 1, 7, &inputs, &targets, &|| {});
+    let trained = forest::train(
+        &spec(inputs.bits),
+        10,
+        1,
+        7,
+        Shard::ALL,
+        &inputs,
+        &targets,
+        &|| {},
+    );
     let widths = vec![23; VARIABLES];
     let predictor = Predictor::new(trained.iter().map(|t| (t.id, &t.tree)), &widths, 1);
     let decode_all = |out: &[Columns]| -> usize {

@@ -12,6 +12,7 @@ use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
 
 use crate::compiled::{BLOCK, Block, Chains, Programs};
+use crate::shard::Shard;
 use crate::tree::{EpochLog, Pruned, Samples, Tree, TreeSpec};
 
 /// Bit-sliced columns: bit `b` of sample `s` is bit `s % 64` of
@@ -135,13 +136,16 @@ pub struct Trained {
     pub seconds: Vec<f64>,
 }
 
-/// Trains one tree per (variable, bit, voter): `targets[v]` holds variable
-/// v's target bits as columns over the same samples as `inputs`.
+/// Trains one tree per (variable, bit, voter) — those of `shard` —:
+/// `targets[v]` holds variable v's target bits as columns over the same
+/// samples as `inputs`.
+#[allow(clippy::too_many_arguments)]
 pub fn train(
     spec: &TreeSpec,
     epochs: usize,
     vote: u32,
     seed: u64,
+    shard: Shard,
     inputs: &Columns,
     targets: &[Columns],
     on_tree_done: &(dyn Fn() + Sync),
@@ -158,6 +162,9 @@ pub fn train(
                 })
             })
         })
+        .enumerate()
+        .filter(|&(position, _)| shard.owns(position))
+        .map(|(_, id)| id)
         .collect();
     ids.par_iter()
         .map(|&id| {
@@ -372,7 +379,16 @@ mod tests {
         let (train_rows, test_rows): (Vec<usize>, Vec<usize>) = (0..1200).partition(|&r| r < 800);
         let inputs = Columns::from_rows(&x_bits, &train_rows);
         let targets = [Columns::from_rows(&y_bits, &train_rows)];
-        let trained = train(&spec(512, 23), 10, vote, seed, &inputs, &targets, &|| {});
+        let trained = train(
+            &spec(512, 23),
+            10,
+            vote,
+            seed,
+            Shard::ALL,
+            &inputs,
+            &targets,
+            &|| {},
+        );
         let predictor = Predictor::new(trained.iter().map(|t| (t.id, &t.tree)), &[23], vote);
         let test_inputs = Columns::from_rows(&x_bits, &test_rows);
         let predicted = &predictor.predict(&test_inputs)[0];
@@ -402,7 +418,7 @@ mod tests {
     }
 
     #[test]
-    fn training_is_the_same_on_any_number_of_threads() {
+    fn training_is_the_same_on_any_number_of_threads_or_shards() {
         let mut rng = ChaCha8Rng::seed_from_u64(5);
         let inputs = Columns {
             count: 200,
@@ -421,12 +437,35 @@ mod tests {
                 .num_threads(threads)
                 .build()
                 .unwrap();
-            pool.install(|| train(&spec(64, 30), 3, 3, 9, &inputs, &targets, &|| {}))
-                .into_iter()
-                .map(|t| (t.id, t.tree, t.epochs))
-                .collect::<Vec<_>>()
+            pool.install(|| {
+                train(
+                    &spec(64, 30),
+                    3,
+                    3,
+                    9,
+                    Shard::ALL,
+                    &inputs,
+                    &targets,
+                    &|| {},
+                )
+            })
+            .into_iter()
+            .map(|t| (t.id, t.tree, t.epochs))
+            .collect::<Vec<_>>()
         };
         assert_eq!(run(1), run(2));
+        // Three shards trained apart hold, together, exactly the same trees.
+        let whole = run(1);
+        let mut parts: Vec<_> = (1..=3)
+            .flat_map(|index| {
+                let shard = Shard { index, count: 3 };
+                train(&spec(64, 30), 3, 3, 9, shard, &inputs, &targets, &|| {})
+            })
+            .map(|t| (t.id, t.tree, t.epochs))
+            .collect();
+        assert_ne!(parts, whole, "dealt round-robin, not in order");
+        parts.sort_by_key(|(id, _, _)| *id);
+        assert_eq!(parts, whole);
     }
 
     #[test]

@@ -11,6 +11,7 @@ pub mod bench;
 pub mod compiled;
 pub mod forest;
 pub mod model;
+pub mod shard;
 pub mod threshold;
 pub mod tree;
 
@@ -29,6 +30,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::forest::Columns;
 use crate::model::{Header, Model};
+use crate::shard::Shard;
 use crate::tree::TreeSpec;
 
 /// Version of what this stage writes (part of every cache key).
@@ -133,10 +135,14 @@ impl Params {
     }
 }
 
-/// Reads the codebook and levels, trains, writes the model and the log.
+/// Reads the codebook and levels, trains `shard`'s trees ([`Shard::ALL`]
+/// for the whole forest), writes the model (a partial one for a part) and
+/// the log.
+#[allow(clippy::too_many_arguments)]
 pub fn run(
     params: &Params,
     seed: u64,
+    shard: Shard,
     codebook_path: &Path,
     levels_path: &Path,
     provenance: &Provenance,
@@ -184,12 +190,14 @@ pub fn run(
                 .collect();
             let widths: Vec<usize> = targets.iter().map(|t| t.bits).collect();
             let total_trees = widths.iter().sum::<usize>() * vote as usize;
-            progress.start("train", total_trees as u64, "trees");
+            let own = (0..total_trees).filter(|&p| shard.owns(p)).count();
+            progress.start("train", own as u64, "trees");
             let trained = forest::train(
                 &spec,
                 params.epochs.get(),
                 vote,
                 seed,
+                shard,
                 &inputs,
                 &targets,
                 &tick,
@@ -217,7 +225,9 @@ pub fn run(
                 .zip(&codecs)
                 .map(|(y, c)| (y.as_slice(), c.levels()))
                 .collect();
-            progress.start("train", (targets.len() * vote as usize) as u64, "trees");
+            let total_trees = targets.len() * vote as usize;
+            let own = (0..total_trees).filter(|&p| shard.owns(p)).count();
+            progress.start("train", own as u64, "trees");
             let candidates = threshold::Candidates {
                 near: params.threshold_near as usize,
                 far: params.threshold_far as usize,
@@ -227,6 +237,7 @@ pub fn run(
                 params.epochs.get(),
                 vote,
                 seed,
+                shard,
                 candidates,
                 &x_train,
                 &targets,
@@ -250,6 +261,7 @@ pub fn run(
                 .collect(),
             vote,
             counter_bound: spec.counter_bound,
+            shard: shard.is_part().then_some(shard),
         },
         trees: trained.iter().map(|t| (t.id, t.tree.clone())).collect(),
     };

@@ -23,6 +23,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::ModelKind;
 use crate::forest::TreeId;
+use crate::shard::Shard;
 use crate::tree::{Function, Tree};
 
 /// The file's magic bytes.
@@ -50,6 +51,10 @@ pub struct Header {
     pub vote: u32,
     /// Counter bound the trees were trained with.
     pub counter_bound: i8,
+    /// For a shard's partial model, which shard: the file then holds only
+    /// the trees [`Shard::owns`]. Absent from whole models.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub shard: Option<Shard>,
 }
 
 /// A model: its header and its trees.
@@ -133,7 +138,7 @@ impl Model {
         let mut trees = Vec::new();
         // Each tree's input bits, in file order.
         let vote = header.vote as usize;
-        let tree_inputs: Vec<usize> = match header.model {
+        let all_inputs: Vec<usize> = match header.model {
             ModelKind::BitForest => header
                 .outputs
                 .iter()
@@ -145,6 +150,13 @@ impl Model {
                 .flat_map(|&(_, width)| std::iter::repeat_n(header.inputs + width, vote))
                 .collect(),
         };
+        let shard = header.shard.unwrap_or(Shard::ALL);
+        let tree_inputs: Vec<usize> = all_inputs
+            .into_iter()
+            .enumerate()
+            .filter(|&(position, _)| shard.owns(position))
+            .map(|(_, inputs)| inputs)
+            .collect();
         for (t, &inputs) in tree_inputs.iter().enumerate() {
             let what = format!("tree {t}");
             let fields: Vec<u32> = (0..4)
@@ -227,6 +239,7 @@ mod tests {
                 outputs: vec![("a.1.x".into(), 3), ("a.1.y".into(), 3)],
                 vote: 1,
                 counter_bound: 3,
+                shard: None,
             },
             trees,
         }

@@ -14,6 +14,7 @@ use std::time::Instant;
 use rayon::prelude::*;
 
 use crate::forest::{Columns, Trained, TreeId};
+use crate::shard::Shard;
 use crate::tree::{EpochLog, Samples, Tree, TreeSpec};
 
 /// The first level in `0..levels` at which `below` (true for levels under
@@ -153,6 +154,7 @@ pub fn train_forest(
     epochs: usize,
     vote: u32,
     seed: u64,
+    shard: Shard,
     candidates: Candidates,
     x: &BitMatrix,
     targets: &[(&[u16], usize)],
@@ -166,6 +168,9 @@ pub fn train_forest(
                 vote: voter,
             })
         })
+        .enumerate()
+        .filter(|&(position, _)| shard.owns(position))
+        .map(|(_, id)| id)
         .collect();
     ids.par_iter()
         .map(|&id| {

@@ -1,0 +1,224 @@
+//! Sharded training: the K-th of N disjoint, deterministic subsets of a
+//! forest's trees, trained by one process each, and the N partial models
+//! merged back into the model file a single process would have written.
+//!
+//! Trees are dealt round-robin in their canonical order (variable, bit,
+//! voter): shard K of N owns the trees at positions K − 1, K − 1 + N, … .
+//! Every tree's seed comes from its identity alone, so a tree trained in a
+//! shard is the tree trained in one process, and merging is a sort.
+
+use std::fmt;
+use std::path::{Path, PathBuf};
+use std::str::FromStr;
+use std::sync::Arc;
+
+use alnlab_common::table::{self, Table};
+use alnlab_common::{Error, Provenance, Result};
+use arrow_array::{Array, Float64Array, StringArray, UInt32Array, UInt64Array};
+use serde::{Deserialize, Serialize};
+
+use crate::model::Model;
+use crate::{MODEL_FILE, TRAINING_FILE};
+
+/// Shard `index` (1-based) of `count`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Shard {
+    pub index: u32,
+    pub count: u32,
+}
+
+impl Shard {
+    /// The whole forest: shard 1 of 1.
+    pub const ALL: Shard = Shard { index: 1, count: 1 };
+
+    /// Whether the tree at `position` in canonical order is this shard's.
+    pub fn owns(&self, position: usize) -> bool {
+        position % self.count as usize == (self.index - 1) as usize
+    }
+
+    /// Whether this is a part of a forest (not all of it).
+    pub fn is_part(&self) -> bool {
+        self.count > 1
+    }
+}
+
+impl fmt::Display for Shard {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{}/{}", self.index, self.count)
+    }
+}
+
+impl FromStr for Shard {
+    type Err = String;
+
+    fn from_str(s: &str) -> std::result::Result<Shard, String> {
+        let bad = || format!("expected K/N with 1 ≤ K ≤ N (e.g. 2/4), found {s:?}");
+        let (k, n) = s.split_once('/').ok_or_else(bad)?;
+        let (index, count): (u32, u32) = (
+            k.trim().parse().map_err(|_| bad())?,
+            n.trim().parse().map_err(|_| bad())?,
+        );
+        if index == 0 || index > count {
+            return Err(bad());
+        }
+        Ok(Shard { index, count })
+    }
+}
+
+/// Merges the partial models and training logs in `parts` (each a folder
+/// written by a sharded train stage) into `out_dir`: the model file byte for
+/// byte as one process would write it, the log with its rows in tree order.
+pub fn merge(parts: &[PathBuf], provenance: &Provenance, out_dir: &Path) -> Result<()> {
+    let mut models = Vec::new();
+    for dir in parts {
+        let path = dir.join(MODEL_FILE);
+        let model = Model::read(&path)?;
+        let shard = model
+            .header
+            .shard
+            .ok_or_else(|| Error::bad_file(&path, "is a whole model, not a shard's part"))?;
+        models.push((path, shard, model));
+    }
+    let Some((first_path, first_shard, first)) = models.first() else {
+        return Err(Error::Invalid("merge: no partial models given".into()));
+    };
+    let count = first_shard.count;
+    let mut seen = vec![false; count as usize];
+    for (path, shard, model) in &models {
+        let mut header = model.header.clone();
+        header.shard = first.header.shard;
+        if header != first.header {
+            return Err(Error::bad_file(
+                path,
+                format!(
+                    "was trained with other parameters or data than {}",
+                    first_path.display()
+                ),
+            ));
+        }
+        if shard.count != count {
+            return Err(Error::bad_file(
+                path,
+                format!("is shard {shard}, the others are of {count}"),
+            ));
+        }
+        let slot = &mut seen[(shard.index - 1) as usize];
+        if *slot {
+            return Err(Error::bad_file(path, format!("repeats shard {shard}")));
+        }
+        *slot = true;
+    }
+    let missing: Vec<String> = (1..=count)
+        .filter(|k| !seen[(*k - 1) as usize])
+        .map(|k| format!("{k}/{count}"))
+        .collect();
+    if !missing.is_empty() {
+        return Err(Error::Invalid(format!(
+            "merge: shard(s) {} missing",
+            missing.join(", ")
+        )));
+    }
+
+    let mut header = first.header.clone();
+    header.shard = None;
+    let mut trees: Vec<_> = models.into_iter().flat_map(|(_, _, m)| m.trees).collect();
+    trees.sort_by_key(|(id, _)| *id);
+    let order: Vec<String> = header.outputs.iter().map(|(v, _)| v.clone()).collect();
+    Model { header, trees }.write(&out_dir.join(MODEL_FILE))?;
+    merge_logs(parts, &order, provenance, &out_dir.join(TRAINING_FILE))
+}
+
+/// One row of a training log.
+struct LogRow {
+    variable: String,
+    bit: u32,
+    vote: u32,
+    epoch: u32,
+    errors: u64,
+    updates: u64,
+    seconds: f64,
+}
+
+fn merge_logs(
+    parts: &[PathBuf],
+    variables: &[String],
+    provenance: &Provenance,
+    path: &Path,
+) -> Result<()> {
+    let mut rows = Vec::new();
+    for dir in parts {
+        let log = dir.join(TRAINING_FILE);
+        let table = Table::read(&log)?;
+        let names = table.strings("variable")?;
+        let u32s = |name: &str| {
+            table
+                .column::<UInt32Array>(name)
+                .map(|c| c.values().to_vec())
+        };
+        let (bit, vote, epoch) = (u32s("bit")?, u32s("vote")?, u32s("epoch")?);
+        let errors = table.column::<UInt64Array>("errors")?.values().to_vec();
+        let updates = table.column::<UInt64Array>("updates")?.values().to_vec();
+        let seconds = table.f64_column("seconds")?.values().to_vec();
+        for (i, variable) in names.into_iter().enumerate() {
+            rows.push(LogRow {
+                variable,
+                bit: bit[i],
+                vote: vote[i],
+                epoch: epoch[i],
+                errors: errors[i],
+                updates: updates[i],
+                seconds: seconds[i],
+            });
+        }
+    }
+    let position = |v: &str| variables.iter().position(|x| *x == v).unwrap_or(usize::MAX);
+    rows.sort_by_key(|r| (position(&r.variable), r.bit, r.vote, r.epoch));
+    let column =
+        |f: fn(&LogRow) -> u32| Arc::new(UInt32Array::from_iter_values(rows.iter().map(f)));
+    let batch = table::batch(vec![
+        (
+            "variable",
+            Arc::new(StringArray::from_iter_values(
+                rows.iter().map(|r| r.variable.as_str()),
+            )) as Arc<dyn Array>,
+        ),
+        ("bit", column(|r| r.bit)),
+        ("vote", column(|r| r.vote)),
+        ("epoch", column(|r| r.epoch)),
+        (
+            "errors",
+            Arc::new(UInt64Array::from_iter_values(rows.iter().map(|r| r.errors))),
+        ),
+        (
+            "updates",
+            Arc::new(UInt64Array::from_iter_values(
+                rows.iter().map(|r| r.updates),
+            )),
+        ),
+        (
+            "seconds",
+            Arc::new(Float64Array::from_iter_values(
+                rows.iter().map(|r| r.seconds),
+            )),
+        ),
+    ]);
+    table::write_parquet(path, &batch, provenance)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn shards_parse_and_deal_every_tree_once() {
+        assert_eq!("2/4".parse::<Shard>(), Ok(Shard { index: 2, count: 4 }));
+        for bad in ["0/4", "5/4", "4", "a/b", "1/0", ""] {
+            assert!(bad.parse::<Shard>().is_err(), "{bad}");
+        }
+        let shards: Vec<Shard> = (1..=3).map(|index| Shard { index, count: 3 }).collect();
+        for position in 0..100 {
+            assert_eq!(shards.iter().filter(|s| s.owns(position)).count(), 1);
+        }
+        assert!((0..100).all(|p| Shard::ALL.owns(p)));
+    }
+}
