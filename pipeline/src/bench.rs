@@ -48,3 +48,133 @@ pub fn worm_training() -> Result<TrainBench> {
         threads: rayon::current_num_threads(),
     })
 }
+
+/// `alnlab bench shards`: a manifest's forest trained in one process
+/// against the same forest trained in N processes (one shard each) and
+/// merged.
+#[derive(Debug, serde::Serialize)]
+pub struct ShardBench {
+    pub shards: u32,
+    pub trees: usize,
+    /// The train stage in-process, all cores (s).
+    pub in_process_seconds: f64,
+    /// The N shard processes side by side, start to last exit (s).
+    pub processes_seconds: f64,
+    /// Merging the N partial models (s).
+    pub merge_seconds: f64,
+    /// (processes + merge) / in-process.
+    pub ratio: f64,
+    /// Whether the merged model file equals the in-process one byte for byte.
+    pub identical: bool,
+}
+
+/// Brings `manifest`'s variant up to quantize in a temporary folder, then
+/// trains its forest in-process and as `shards` processes of this binary
+/// (`train --shard K/N`, each given its share of the cores), and merges.
+pub fn shards(manifest_path: &Path, variant: &str, shards: u32) -> Result<ShardBench> {
+    use alnlab_common::Error;
+    use alnlab_train::shard::{self, Shard};
+    use std::time::Instant;
+
+    let manifest = Manifest::load(manifest_path)?;
+    let variant = manifest.variant(variant)?;
+    let temp = std::env::temp_dir();
+    let dir = tempfile::tempdir().map_err(|e| Error::io(&temp, e))?;
+    let options = RunOptions {
+        out: dir.path().join("runs"),
+        force: false,
+        variant: Some(variant.name.clone()),
+        quiet: true,
+        datasets: Path::new("datasets").to_path_buf(),
+        until: Some("quantize".into()),
+    };
+    let record = run::run(&manifest, &options)?;
+    let artifacts = &record.variants[0].artifacts;
+    let path = |role: &str| Path::new(&artifacts[role].path).to_path_buf();
+    let (codebook, levels) = (path("codebook"), path("levels"));
+    let seed = manifest.experiment.seed;
+    let provenance = alnlab_common::Provenance {
+        stage: "train".into(),
+        params: run::stage_params(seed, &variant.stages.train),
+        inputs: ["codebook", "levels"]
+            .iter()
+            .map(|r| (r.to_string(), artifacts[*r].sha256.clone()))
+            .collect(),
+    };
+
+    let whole = dir.path().join("whole");
+    let clock = Instant::now();
+    alnlab_train::run(
+        &variant.stages.train,
+        seed,
+        Shard::ALL,
+        &codebook,
+        &levels,
+        &provenance,
+        &whole,
+        &alnlab_common::progress::Silent,
+    )?;
+    let in_process_seconds = clock.elapsed().as_secs_f64();
+
+    let exe = std::env::current_exe().map_err(|e| Error::io(Path::new("alnlab"), e))?;
+    let threads = (rayon::current_num_threads() / shards as usize).max(1);
+    let parts: Vec<_> = (1..=shards)
+        .map(|k| dir.path().join(format!("part-{k}")))
+        .collect();
+    let clock = Instant::now();
+    let children = parts
+        .iter()
+        .zip(1..=shards)
+        .map(|(out, k)| {
+            std::process::Command::new(&exe)
+                .env("RAYON_NUM_THREADS", threads.to_string())
+                .arg("-q")
+                .arg("train")
+                .arg("--manifest")
+                .arg(manifest_path)
+                .args([
+                    "--variant",
+                    &variant.name,
+                    "--shard",
+                    &format!("{k}/{shards}"),
+                ])
+                .arg("--codebook")
+                .arg(&codebook)
+                .arg("--levels")
+                .arg(&levels)
+                .arg("--out")
+                .arg(out)
+                .stdout(std::process::Stdio::null())
+                .spawn()
+                .map_err(|e| Error::io(&exe, e))
+        })
+        .collect::<Result<Vec<_>>>()?;
+    for (k, mut child) in (1..=shards).zip(children) {
+        let status = child.wait().map_err(|e| Error::io(&exe, e))?;
+        if !status.success() {
+            return Err(Error::Invalid(format!(
+                "bench: shard {k}/{shards} failed ({status})"
+            )));
+        }
+    }
+    let processes_seconds = clock.elapsed().as_secs_f64();
+    let merged = dir.path().join("merged");
+    let clock = Instant::now();
+    shard::merge(&parts, &provenance, &merged)?;
+    let merge_seconds = clock.elapsed().as_secs_f64();
+
+    let model =
+        |d: &Path| std::fs::read(d.join(alnlab_train::MODEL_FILE)).map_err(|e| Error::io(d, e));
+    let identical = model(&whole)? == model(&merged)?;
+    Ok(ShardBench {
+        shards,
+        trees: Model::read(&whole.join(alnlab_train::MODEL_FILE))?
+            .trees
+            .len(),
+        in_process_seconds,
+        processes_seconds,
+        merge_seconds,
+        ratio: (processes_seconds + merge_seconds) / in_process_seconds,
+        identical,
+    })
+}

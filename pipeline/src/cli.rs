@@ -116,6 +116,9 @@ pub enum Command {
         #[command(subcommand)]
         command: DatasetCommand,
     },
+    /// Export an experiment as a workflow for another engine.
+    #[command(subcommand)]
+    Export(ExportCommand),
     /// Render a run's report again from its record and artifacts, without
     /// recomputing anything.
     #[command(after_help = "Example:
@@ -248,6 +251,41 @@ pub struct ManifestArgs {
     variant: Option<String>,
 }
 
+/// The `alnlab export` subcommands.
+#[derive(Debug, Subcommand)]
+pub enum ExportCommand {
+    /// Write a Snakefile and config.yaml that run the experiment's stages as
+    /// Snakemake jobs (training in --shards jobs per variant) on the same
+    /// output folder `alnlab run` uses: the cache and the run record are
+    /// shared. See docs/cluster.md.
+    #[command(after_help = "Examples:
+  alnlab export snakemake experiments/quickstart.toml --shards 4 -o workflow
+  snakemake --snakefile workflow/Snakefile --directory workflow --cores 2
+  snakemake --snakefile workflow/Snakefile --directory workflow --executor slurm --jobs 32")]
+    Snakemake {
+        /// The experiment manifest.
+        manifest: PathBuf,
+        /// Training jobs per variant (1: one job trains the whole forest).
+        #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=1024))]
+        shards: u32,
+        /// Folder to write Snakefile and config.yaml into.
+        #[arg(short, long)]
+        output: PathBuf,
+        /// The run's output folder (cache, run records), as for `alnlab run`.
+        #[arg(long, default_value = "runs")]
+        out: PathBuf,
+        /// Folder for the report.
+        #[arg(long, default_value = "reports")]
+        reports: PathBuf,
+        /// The dataset archive, for a manifest with `[data] dataset`.
+        #[arg(long, default_value = "datasets")]
+        datasets: PathBuf,
+        /// The alnlab binary the jobs run (default: this one).
+        #[arg(long)]
+        alnlab: Option<PathBuf>,
+    },
+}
+
 /// The `alnlab dataset` subcommands.
 #[derive(Debug, Subcommand)]
 pub enum DatasetCommand {
@@ -378,6 +416,26 @@ pub enum Bench {
         #[arg(long)]
         json: bool,
     },
+    /// Time sharded training: the manifest's forest trained in one process
+    /// (all cores) against SHARDS processes of `train --shard K/N` side by
+    /// side (each given its share of the cores) and the merge; checks the
+    /// merged model equals the in-process one byte for byte.
+    #[command(after_help = "Example:
+  alnlab bench shards experiments/paper.toml --shards 2 --json")]
+    Shards {
+        /// The experiment manifest (its data are made in a temporary folder).
+        #[arg(default_value = "experiments/paper.toml")]
+        manifest: PathBuf,
+        /// The variant (default: the first).
+        #[arg(long)]
+        variant: Option<String>,
+        /// Training processes.
+        #[arg(long, default_value_t = 2, value_parser = clap::value_parser!(u32).range(1..=64))]
+        shards: u32,
+        /// Print one JSON object.
+        #[arg(long)]
+        json: bool,
+    },
     /// Time a fully cached `run` of a manifest (the no-op re-run).
     ///
     /// Runs the manifest once to fill the cache, then times REPEAT re-runs
@@ -456,6 +514,36 @@ pub fn execute(cli: Cli) -> Result<()> {
             Ok(())
         }
         Command::Dataset { datasets, command } => crate::dataset_cli::execute(&datasets, command),
+        Command::Export(ExportCommand::Snakemake {
+            manifest,
+            shards,
+            output,
+            out,
+            reports,
+            datasets,
+            alnlab,
+        }) => {
+            let manifest = Manifest::load(&manifest)?;
+            let alnlab = match alnlab {
+                Some(path) => path,
+                None => std::env::current_exe().map_err(|e| Error::io(Path::new("alnlab"), e))?,
+            };
+            let export = crate::export::Export {
+                manifest: &manifest,
+                alnlab,
+                shards,
+                out,
+                reports,
+                datasets,
+            };
+            crate::export::snakemake(&export, &output)?;
+            println!(
+                "{0}/Snakefile, {0}/config.yaml — run with: snakemake --snakefile {0}/Snakefile \
+                 --directory {0} --cores 2",
+                output.display()
+            );
+            Ok(())
+        }
         Command::MergeModels { parts, out } => {
             // The merged files carry the parts' provenance (the train
             // stage's parameters and inputs, the same for every part).
@@ -595,6 +683,40 @@ pub fn execute(cli: Cli) -> Result<()> {
                 )
             },
         ),
+        Command::Bench(Bench::Shards {
+            manifest,
+            variant,
+            shards,
+            json,
+        }) => {
+            let variant = match variant {
+                Some(v) => v,
+                None => Manifest::load(&manifest)?.variants[0].name.clone(),
+            };
+            let figures = crate::bench::shards(&manifest, &variant, shards)?;
+            print_figures(&figures, json, |f| {
+                println!(
+                    "{} trees: in-process {:.2} s; {} processes {:.2} s + merge {:.2} s = {:.2}× \
+                     ({})",
+                    f.trees,
+                    f.in_process_seconds,
+                    f.shards,
+                    f.processes_seconds,
+                    f.merge_seconds,
+                    f.ratio,
+                    if f.identical {
+                        "merged model identical"
+                    } else {
+                        "MERGED MODEL DIFFERS"
+                    }
+                )
+            });
+            if figures.identical {
+                Ok(())
+            } else {
+                Err(Error::Invalid("bench: the merged model differs".into()))
+            }
+        }
         Command::Bench(Bench::Summarize { json }) => {
             let figures = alnlab_summarize::bench::run()?;
             print_figures(&figures, json, |figures| {

@@ -10,6 +10,7 @@ pub mod cache;
 pub mod cli;
 pub mod dataset;
 pub mod dataset_cli;
+pub mod export;
 pub mod manifest;
 pub mod progress;
 pub mod report;

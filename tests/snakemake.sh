@@ -1,0 +1,49 @@
+#!/usr/bin/env bash
+# The Snakemake export end to end (run by .ci/run). The quickstart exported
+# with 4 training shards per variant runs under `snakemake --cores 2`; on the
+# way, a shard given a bad input fails the workflow with the shard named, and
+# the re-run resumes without redoing the finished shards. The result must
+# equal `alnlab run`'s on the same manifest.
+#
+# Usage: tests/snakemake.sh ALNLAB SNAKEMAKE PYTHON WORK_DIR
+set -euo pipefail
+alnlab=$(realpath "$1")
+snakemake=$2
+python=$3
+work=$4
+rm -rf "$work"
+mkdir -p "$work"
+
+"$alnlab" -q run experiments/quickstart.toml --out "$work/direct" --reports "$work/direct-reports" >/dev/null
+"$alnlab" export snakemake experiments/quickstart.toml --shards 4 -o "$work/wf" \
+  --out "$work/runs" --reports "$work/reports" --alnlab "$alnlab" >/dev/null
+smk() { "$snakemake" --snakefile "$work/wf/Snakefile" --directory "$work/wf" --cores 2 "$@"; }
+mark="$work/runs/quickstart/snakemake"
+
+# Variant walk up to two of its four shards.
+smk "$mark/walk/train-shard-1-of-4.done" "$mark/walk/train-shard-2-of-4.done" >"$work/first.log" 2>&1
+stamps() { stat -c '%n %y' "$mark/walk/train-shard-1-of-4.done" "$mark/walk/train-shard-2-of-4.done"; }
+before=$(stamps)
+
+# A bad input for the remaining shards: walk's levels table (the only one
+# quantized so far) loses its Parquet footer, keeping its size.
+levels=$(ls "$work"/runs/cache/quantize/*/levels.parquet)
+[ "$(echo "$levels" | wc -l)" = 1 ]
+cp "$levels" "$work/levels.good"
+"$python" -c 'import sys; f = open(sys.argv[1], "r+b"); f.seek(-8, 2); f.write(bytes(8))' "$levels"
+if smk >"$work/failed.log" 2>&1; then
+  echo "snakemake: the workflow should have failed on walk's shards 3 and 4"
+  exit 1
+fi
+grep -A8 "Error in rule train_shard" "$work/failed.log" | grep -Eq "walk/train-shard-[34]-of-4" || {
+  echo "snakemake: the failure does not name the shard"; cat "$work/failed.log"; exit 1; }
+grep -q "levels.parquet: not a readable Parquet file" "$mark"/walk/train-shard-[34]-of-4.log || {
+  echo "snakemake: the shard's log does not name the bad input"; exit 1; }
+
+# Repaired, the workflow resumes; the finished shards are not run again.
+cp "$work/levels.good" "$levels"
+smk >"$work/resumed.log" 2>&1 || { cat "$work/resumed.log"; exit 1; }
+[ "$before" = "$(stamps)" ] || { echo "snakemake: finished shards were run again"; exit 1; }
+
+"$python" tests/snakemake_check.py "$work/direct/quickstart/run.json" "$work/runs/quickstart/run.json" \
+  "$work/direct-reports/quickstart/report.md" "$work/reports/quickstart/report.md"

@@ -1,0 +1,62 @@
+"""Checks that a run made by the exported Snakemake workflow equals the same
+manifest run by `alnlab run`: every artifact byte for byte (the measured
+columns of the training log and the timings aside), and every error table of
+the report.
+
+Usage: python snakemake_check.py DIRECT_RUN_JSON WORKFLOW_RUN_JSON DIRECT_REPORT WORKFLOW_REPORT
+(run by tests/snakemake.sh)."""
+
+import json
+import sys
+
+import pyarrow.parquet as pq
+
+# The only values that differ between equal runs: measurements.
+MEASURED = {"training": "seconds", "timings": "ns_per_state"}
+
+
+def artifacts(path):
+    record = json.load(open(path))
+    return {
+        (v["name"], role): a["path"]
+        for v in record["variants"]
+        for role, a in v["artifacts"].items()
+    }
+
+
+def same_table_but(a, b, column):
+    ta, tb = pq.read_table(a), pq.read_table(b)
+    return ta.drop_columns([column]).equals(tb.drop_columns([column]))
+
+
+def error_tables(report):
+    """The report's lines that hold errors, not times: the §4.6 group tables,
+    the variables worse than persistence, the histogram, the closed loop."""
+    keep, lines = False, []
+    for line in open(report, encoding="utf-8"):
+        if line.startswith("#"):
+            keep = any(
+                title in line
+                for title in ("Error by group", "Worse than persistence", "Error histogram", "Closed loop")
+            )
+        if keep:
+            lines.append(line)
+    return lines
+
+
+def main(direct_json, workflow_json, direct_report, workflow_report):
+    direct, workflow = artifacts(direct_json), artifacts(workflow_json)
+    assert direct.keys() == workflow.keys(), (sorted(direct), sorted(workflow))
+    for (variant, role), path in sorted(direct.items()):
+        other = workflow[(variant, role)]
+        if role in MEASURED:
+            assert same_table_but(path, other, MEASURED[role]), (variant, role)
+        else:
+            assert open(path, "rb").read() == open(other, "rb").read(), (variant, role, path, other)
+    a, b = error_tables(direct_report), error_tables(workflow_report)
+    assert a == b and len(a) > 20, "the reports' error tables differ"
+    print(f"snakemake: {len(direct)} artifacts equal to alnlab run's; {len(a)} report lines equal")
+
+
+if __name__ == "__main__":
+    main(*sys.argv[1:])
