@@ -10,9 +10,11 @@ set -euo pipefail
 alnlab=$(realpath "$1")
 snakemake=$2
 python=$3
-work=$4
-rm -rf "$work"
-mkdir -p "$work"
+rm -rf "$4"
+mkdir -p "$4"
+# Absolute: the workflow runs in its own folder, and targets must name the
+# rules' (absolute) outputs.
+work=$(realpath "$4")
 
 "$alnlab" -q run experiments/quickstart.toml --out "$work/direct" --reports "$work/direct-reports" >/dev/null
 "$alnlab" export snakemake experiments/quickstart.toml --shards 4 -o "$work/wf" \
