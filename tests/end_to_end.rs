@@ -4,20 +4,10 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
-use alnlab::run::RunRecord;
+use alnlab::run::{RunRecord, STAGES};
 
 mod common;
 use common::{MANIFEST, alnlab, artifact_bytes, run_ok, stderr, write_manifest};
-
-/// The stages of a variant, in order.
-const STAGES: [&str; 6] = [
-    "simulate",
-    "stride",
-    "quantize",
-    "train",
-    "test",
-    "summarize",
-];
 
 /// Whether each stage of the first variant (in [`STAGES`] order) was cached.
 fn cached(record: &RunRecord) -> Vec<bool> {

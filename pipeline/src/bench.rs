@@ -83,24 +83,17 @@ pub fn shards(manifest_path: &Path, variant: &str, shards: u32) -> Result<ShardB
     let options = RunOptions {
         out: dir.path().join("runs"),
         force: false,
-        variant: Some(variant.name.clone()),
+        variant: None,
         quiet: true,
         datasets: Path::new("datasets").to_path_buf(),
-        until: Some("quantize".into()),
+        until: None,
     };
-    let record = run::run(&manifest, &options)?;
-    let artifacts = &record.variants[0].artifacts;
-    let path = |role: &str| Path::new(&artifacts[role].path).to_path_buf();
-    let (codebook, levels) = (path("codebook"), path("levels"));
+    let run::TrainInputs {
+        codebook,
+        levels,
+        provenance,
+    } = run::up_to_train(&manifest, &options, variant)?;
     let seed = manifest.experiment.seed;
-    let provenance = alnlab_common::Provenance {
-        stage: "train".into(),
-        params: run::stage_params(seed, &variant.stages.train),
-        inputs: ["codebook", "levels"]
-            .iter()
-            .map(|r| (r.to_string(), artifacts[*r].sha256.clone()))
-            .collect(),
-    };
 
     let whole = dir.path().join("whole");
     let clock = Instant::now();

@@ -597,6 +597,43 @@ fn shard_key(train_key: &str, shard: Shard) -> String {
     format!("{train_key}/{}-of-{}", shard.index, shard.count)
 }
 
+/// What the train stage of a variant reads, and the provenance it writes.
+pub struct TrainInputs {
+    pub codebook: PathBuf,
+    pub levels: PathBuf,
+    pub provenance: Provenance,
+}
+
+/// Runs `variant` up to quantize through the cache (holding the output
+/// folder's lock while it does, as a run does) and returns what its train
+/// stage would be given.
+pub fn up_to_train(
+    manifest: &Manifest,
+    options: &RunOptions,
+    variant: &Variant,
+) -> Result<TrainInputs> {
+    let upstream = RunOptions {
+        until: Some("quantize".into()),
+        variant: Some(variant.name.clone()),
+        ..options.clone()
+    };
+    let record = run(manifest, &upstream)?;
+    let quantized = &record.variants[0].artifacts;
+    let path = |role: &str| PathBuf::from(&quantized[role].path);
+    Ok(TrainInputs {
+        codebook: path("codebook"),
+        levels: path("levels"),
+        provenance: Provenance {
+            stage: "train".into(),
+            params: stage_params(manifest.experiment.seed, &variant.stages.train),
+            inputs: ["codebook", "levels"]
+                .iter()
+                .map(|role| (role.to_string(), quantized[*role].sha256.clone()))
+                .collect(),
+        },
+    })
+}
+
 /// `alnlab run --train-shard K/N`: brings the variant up to quantize through
 /// the cache (holding the output folder's lock, as a run does), then — the
 /// lock released, so that shards train side by side — trains shard K of N of
@@ -609,31 +646,17 @@ pub fn train_shard(
     shard: Shard,
 ) -> Result<PathBuf> {
     let variant = manifest.variant(variant)?;
-    let upstream = RunOptions {
-        until: Some("quantize".into()),
-        variant: Some(variant.name.clone()),
-        ..options.clone()
-    };
-    let record = run(manifest, &upstream)?;
-    let quantized = &record.variants[0].artifacts;
+    let TrainInputs {
+        codebook,
+        levels,
+        provenance,
+    } = up_to_train(manifest, options, variant)?;
     let seed = manifest.experiment.seed;
-    let params = stage_params(seed, &variant.stages.train);
-    let inputs: BTreeMap<String, String> = ["codebook", "levels"]
-        .iter()
-        .map(|role| (role.to_string(), quantized[*role].sha256.clone()))
-        .collect();
-    let provenance = Provenance {
-        stage: "train".into(),
-        params,
-        inputs,
-    };
     let key = shard_key(&train_key(&provenance), shard);
     let shards = shard_store(&options.out);
     if let Some(done) = shards.lookup("train", &key) {
         return Ok(done.dir);
     }
-    let path = |role: &str| PathBuf::from(&quantized[role].path);
-    let (codebook, levels) = (path("codebook"), path("levels"));
     let label = format!(
         "{}/{} shard {shard}",
         manifest.experiment.name, variant.name

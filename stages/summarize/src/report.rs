@@ -593,6 +593,30 @@ fn variant_section(
     closed_loop(md, v, dir)
 }
 
+/// The rows of the paper's §4.6 table (its CSV fields: group, best|worst,
+/// mean, …), each with the ALN's variable of the same group and rank, if
+/// the run has that group. Groups are named as in the paper's table (ω is
+/// omega, R roll and pitch).
+fn paper_rows(summary: &[SummaryRow]) -> Vec<(Vec<&'static str>, Option<&SummaryRow>)> {
+    PAPER_TABLE
+        .lines()
+        .skip(1)
+        .map(|line| {
+            let f: Vec<&'static str> = line.split(',').collect();
+            let ours = summary.iter().find(|r| {
+                r.model == "aln"
+                    && r.group == f[0]
+                    && if f[1] == "best" {
+                        r.best_in_group
+                    } else {
+                        r.worst_in_group
+                    }
+            });
+            (f, ours)
+        })
+        .collect()
+}
+
 /// Our best and worst variable of each group beside the paper's (§4.6).
 fn beside_the_paper(md: &mut String, v: &Loaded) {
     let _ = writeln!(
@@ -605,19 +629,8 @@ fn beside_the_paper(md: &mut String, v: &Loaded) {
          paper IQR | ours | paper max | ours |\n\
          |---|---|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|"
     );
-    // Groups are named as in the paper's table (ω is omega, R roll and pitch).
-    for line in PAPER_TABLE.lines().skip(1) {
-        let f: Vec<&str> = line.split(',').collect();
+    for (f, ours) in paper_rows(&v.summary) {
         let (group, which) = (f[0], f[1]);
-        let ours = v.summary.iter().find(|r| {
-            r.model == "aln"
-                && r.group == group
-                && if which == "best" {
-                    r.best_in_group
-                } else {
-                    r.worst_in_group
-                }
-        });
         let (mean, trim, median, iqr, max) = match ours {
             Some(r) => (
                 format!("{:.4} ({})", r.stats.mean, r.variable),

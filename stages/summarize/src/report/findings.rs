@@ -5,7 +5,7 @@
 
 use std::fmt::Write as _;
 
-use super::{Loaded, PAPER_TABLE, RunInfo, overall, worse_than_persistence};
+use super::{Loaded, RunInfo, overall, paper_rows, worse_than_persistence};
 
 /// The simulator baseline at the fewest integration steps per frame that
 /// the variant ran: (model name, steps per frame).
@@ -230,21 +230,11 @@ fn across_variants(md: &mut String, variants: &[Loaded]) {
 fn against_the_paper(md: &mut String, variants: &[Loaded]) {
     for v in variants {
         let (mut lower, mut rows, mut far_higher) = (0, 0, Vec::new());
-        for line in PAPER_TABLE.lines().skip(1) {
-            let f: Vec<&str> = line.split(',').collect();
+        for (f, ours) in paper_rows(&v.summary) {
             let (group, which) = (f[0], f[1]);
             let Ok(paper) = f[2].parse::<f64>() else {
                 continue;
             };
-            let ours = v.summary.iter().find(|r| {
-                r.model == "aln"
-                    && r.group == group
-                    && if which == "best" {
-                        r.best_in_group
-                    } else {
-                        r.worst_in_group
-                    }
-            });
             if let Some(r) = ours {
                 rows += 1;
                 if r.stats.mean < paper {
