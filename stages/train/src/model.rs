@@ -75,36 +75,66 @@ fn function_code(f: Function) -> u8 {
 
 const FUNCTIONS: [Function; 4] = [Function::And, Function::Left, Function::Right, Function::Or];
 
-impl Model {
-    /// Writes the model to `path` (atomically).
-    pub fn write(&self, path: &Path) -> Result<()> {
-        let header = serde_json::to_vec(&self.header).expect("headers serialize");
-        let mut bytes = Vec::new();
-        bytes.extend_from_slice(MAGIC);
-        bytes.extend_from_slice(&MODEL_FORMAT.to_le_bytes());
-        bytes.extend_from_slice(&(header.len() as u32).to_le_bytes());
-        bytes.extend_from_slice(&header);
-        for (id, tree) in &self.trees {
-            for x in [id.variable, id.bit, id.vote, tree.leaves() as u32] {
-                bytes.extend_from_slice(&x.to_le_bytes());
-            }
-            for literal in tree.literals() {
-                bytes.extend_from_slice(&literal.to_le_bytes());
-            }
-            let functions = tree.functions();
-            let mut packed = vec![0u8; functions.len().div_ceil(4)];
-            for (i, f) in functions.iter().enumerate() {
-                packed[i / 4] |= function_code(*f) << (2 * (i % 4));
-            }
-            bytes.extend_from_slice(&packed);
-        }
-        atomic::write_file(path, |out| {
-            out.write_all(&bytes).map_err(|e| Error::io(path, e))
-        })
-    }
+/// A model file's header and its trees' records as stored, unparsed: what
+/// merging shards needs (a sort of records) without rebuilding any tree.
+#[derive(Clone, Debug, PartialEq)]
+pub struct RawModel {
+    pub header: Header,
+    /// Each tree's identity and its whole record (identity, leaves,
+    /// literals, packed functions), in file order.
+    pub records: Vec<(TreeId, Vec<u8>)>,
+}
 
-    /// Reads a model file.
-    pub fn read(path: &Path) -> Result<Model> {
+/// The bytes of one tree's record.
+fn tree_record(id: TreeId, tree: &Tree) -> Vec<u8> {
+    let mut bytes = Vec::with_capacity(16 + 4 * tree.leaves() + tree.leaves() / 4);
+    for x in [id.variable, id.bit, id.vote, tree.leaves() as u32] {
+        bytes.extend_from_slice(&x.to_le_bytes());
+    }
+    for literal in tree.literals() {
+        bytes.extend_from_slice(&literal.to_le_bytes());
+    }
+    let functions = tree.functions();
+    let mut packed = vec![0u8; functions.len().div_ceil(4)];
+    for (i, f) in functions.iter().enumerate() {
+        packed[i / 4] |= function_code(*f) << (2 * (i % 4));
+    }
+    bytes.extend_from_slice(&packed);
+    bytes
+}
+
+/// Writes a model file: magic, version, header, then the tree records.
+fn write_file<'a>(
+    path: &Path,
+    header: &Header,
+    records: impl Iterator<Item = std::borrow::Cow<'a, [u8]>>,
+) -> Result<()> {
+    let json = serde_json::to_vec(header).expect("headers serialize");
+    atomic::write_file(path, |out| {
+        let io = |e| Error::io(path, e);
+        out.write_all(MAGIC).map_err(io)?;
+        out.write_all(&MODEL_FORMAT.to_le_bytes()).map_err(io)?;
+        out.write_all(&(json.len() as u32).to_le_bytes())
+            .map_err(io)?;
+        out.write_all(&json).map_err(io)?;
+        for record in records {
+            out.write_all(&record).map_err(io)?;
+        }
+        Ok(())
+    })
+}
+
+fn u32_of(b: &[u8]) -> u32 {
+    u32::from_le_bytes(b.try_into().expect("4 bytes"))
+}
+
+impl RawModel {
+    /// Reads a model file's header and splits its trees' records, checking
+    /// the layout: magic, version, the number of trees the header implies
+    /// (for a shard's part, the shard's trees), power-of-two leaves, and
+    /// nothing after the last tree. Returns each tree's input bits too, for
+    /// the checks that need a parsed tree.
+    fn read_checked(path: &Path) -> Result<(RawModel, Vec<usize>)> {
         let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
         let bad = |what: String| Error::bad_file(path, what);
         let mut at = 0usize;
@@ -125,7 +155,6 @@ impl Model {
         if take(16, "the magic")? != MAGIC {
             return Err(bad("not an alnlab model file (wrong magic bytes)".into()));
         }
-        let u32_of = |b: &[u8]| u32::from_le_bytes(b.try_into().expect("4 bytes"));
         let version = u32_of(take(4, "the format version")?);
         if version != MODEL_FORMAT {
             return Err(bad(format!(
@@ -135,7 +164,6 @@ impl Model {
         let header_len = u32_of(take(4, "the header length")?) as usize;
         let header: Header = serde_json::from_slice(take(header_len, "the header")?)
             .map_err(|e| bad(format!("corrupt header ({e})")))?;
-        let mut trees = Vec::new();
         // Each tree's input bits, in file order.
         let vote = header.vote as usize;
         let all_inputs: Vec<usize> = match header.model {
@@ -157,25 +185,70 @@ impl Model {
             .filter(|&(position, _)| shard.owns(position))
             .map(|(_, inputs)| inputs)
             .collect();
-        for (t, &inputs) in tree_inputs.iter().enumerate() {
+        let mut records = Vec::with_capacity(tree_inputs.len());
+        for t in 0..tree_inputs.len() {
             let what = format!("tree {t}");
-            let fields: Vec<u32> = (0..4)
-                .map(|_| take(4, &what).map(u32_of))
-                .collect::<Result<_>>()?;
-            let (id, leaves) = (
-                TreeId {
-                    variable: fields[0],
-                    bit: fields[1],
-                    vote: fields[2],
-                },
-                fields[3] as usize,
-            );
+            let head = take(16, &what)?;
+            let fields: Vec<u32> = head.chunks_exact(4).map(u32_of).collect();
+            let id = TreeId {
+                variable: fields[0],
+                bit: fields[1],
+                vote: fields[2],
+            };
+            let leaves = fields[3] as usize;
             if leaves < 2 || !leaves.is_power_of_two() {
                 return Err(bad(format!(
                     "tree {t}: {leaves} leaves is not a power of two ≥ 2"
                 )));
             }
-            let literals: Vec<u32> = take(4 * leaves, &what)?
+            let mut record = head.to_vec();
+            record.extend_from_slice(take(4 * leaves + (leaves - 1).div_ceil(4), &what)?);
+            records.push((id, record));
+        }
+        if at != bytes.len() {
+            return Err(bad(format!(
+                "{} bytes after the last tree",
+                bytes.len() - at
+            )));
+        }
+        Ok((RawModel { header, records }, tree_inputs))
+    }
+
+    /// Reads a model file without parsing its trees.
+    pub fn read(path: &Path) -> Result<RawModel> {
+        RawModel::read_checked(path).map(|(raw, _)| raw)
+    }
+
+    /// Writes the model file (atomically).
+    pub fn write(&self, path: &Path) -> Result<()> {
+        write_file(
+            path,
+            &self.header,
+            self.records.iter().map(|(_, r)| r.as_slice().into()),
+        )
+    }
+}
+
+impl Model {
+    /// Writes the model to `path` (atomically).
+    pub fn write(&self, path: &Path) -> Result<()> {
+        write_file(
+            path,
+            &self.header,
+            self.trees
+                .iter()
+                .map(|(id, tree)| tree_record(*id, tree).into()),
+        )
+    }
+
+    /// Reads a model file.
+    pub fn read(path: &Path) -> Result<Model> {
+        let (raw, tree_inputs) = RawModel::read_checked(path)?;
+        let bad = |what: String| Error::bad_file(path, what);
+        let mut trees = Vec::with_capacity(raw.records.len());
+        for (t, ((id, record), inputs)) in raw.records.iter().zip(tree_inputs).enumerate() {
+            let leaves = u32_of(&record[12..16]) as usize;
+            let literals: Vec<u32> = record[16..16 + 4 * leaves]
                 .chunks_exact(4)
                 .map(u32_of)
                 .collect();
@@ -184,22 +257,19 @@ impl Model {
                     "tree {t}: literal {l} beyond its {inputs} inputs"
                 )));
             }
-            let packed = take((leaves - 1).div_ceil(4), &what)?;
+            let packed = &record[16 + 4 * leaves..];
             let functions: Vec<Function> = (0..leaves - 1)
                 .map(|i| FUNCTIONS[usize::from(packed[i / 4] >> (2 * (i % 4)) & 3)])
                 .collect();
             trees.push((
-                id,
-                Tree::from_functions(&functions, literals, header.counter_bound),
+                *id,
+                Tree::from_functions(&functions, literals, raw.header.counter_bound),
             ));
         }
-        if at != bytes.len() {
-            return Err(bad(format!(
-                "{} bytes after the last tree",
-                bytes.len() - at
-            )));
-        }
-        Ok(Model { header, trees })
+        Ok(Model {
+            header: raw.header,
+            trees,
+        })
     }
 }
 
@@ -303,6 +373,42 @@ mod tests {
             std::fs::metadata(&path).unwrap().len() as usize,
             24 + header + 6 * 288
         );
+    }
+
+    #[test]
+    fn raw_records_and_shard_parts_round_trip_byte_for_byte() {
+        let dir = tempfile::tempdir().unwrap();
+        let (whole, again) = (dir.path().join("whole.aln"), dir.path().join("again.aln"));
+        let m = model();
+        m.write(&whole).unwrap();
+        let raw = RawModel::read(&whole).unwrap();
+        assert_eq!(raw.records.len(), m.trees.len());
+        raw.write(&again).unwrap();
+        assert_eq!(
+            std::fs::read(&whole).unwrap(),
+            std::fs::read(&again).unwrap()
+        );
+
+        // A shard's part holds its trees only, and reads back as such.
+        let shard = Shard { index: 2, count: 4 };
+        let mut part = m.clone();
+        part.header.shard = Some(shard);
+        part.trees = m
+            .trees
+            .iter()
+            .enumerate()
+            .filter(|(p, _)| shard.owns(*p))
+            .map(|(_, t)| t.clone())
+            .collect();
+        let path = dir.path().join("part.aln");
+        part.write(&path).unwrap();
+        assert_eq!(Model::read(&path).unwrap(), part);
+        // A whole model's trees under a part's header are too many.
+        let mut wrong = m.clone();
+        wrong.header.shard = Some(shard);
+        wrong.write(&path).unwrap();
+        let err = Model::read(&path).unwrap_err().to_string();
+        assert!(err.contains("bytes after the last tree"), "{err}");
     }
 
     #[test]

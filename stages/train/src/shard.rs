@@ -17,7 +17,7 @@ use alnlab_common::{Error, Provenance, Result};
 use arrow_array::{Array, Float64Array, StringArray, UInt32Array, UInt64Array};
 use serde::{Deserialize, Serialize};
 
-use crate::model::Model;
+use crate::model::RawModel;
 use crate::{MODEL_FILE, TRAINING_FILE};
 
 /// Shard `index` (1-based) of `count`.
@@ -72,7 +72,9 @@ pub fn merge(parts: &[PathBuf], provenance: &Provenance, out_dir: &Path) -> Resu
     let mut models = Vec::new();
     for dir in parts {
         let path = dir.join(MODEL_FILE);
-        let model = Model::read(&path)?;
+        // The records are copied as they are, not parsed into trees: the
+        // model's reader checks the merged file when it is used.
+        let model = RawModel::read(&path)?;
         let shard = model
             .header
             .shard
@@ -121,10 +123,10 @@ pub fn merge(parts: &[PathBuf], provenance: &Provenance, out_dir: &Path) -> Resu
 
     let mut header = first.header.clone();
     header.shard = None;
-    let mut trees: Vec<_> = models.into_iter().flat_map(|(_, _, m)| m.trees).collect();
-    trees.sort_by_key(|(id, _)| *id);
+    let mut records: Vec<_> = models.into_iter().flat_map(|(_, _, m)| m.records).collect();
+    records.sort_by_key(|(id, _)| *id);
     let order: Vec<String> = header.outputs.iter().map(|(v, _)| v.clone()).collect();
-    Model { header, trees }.write(&out_dir.join(MODEL_FILE))?;
+    RawModel { header, records }.write(&out_dir.join(MODEL_FILE))?;
     merge_logs(parts, &order, provenance, &out_dir.join(TRAINING_FILE))
 }
 
