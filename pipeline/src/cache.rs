@@ -11,7 +11,7 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use alnlab_common::hash::{sha256_file, sha256_hex};
-use alnlab_common::{Error, Result, atomic};
+use alnlab_common::{Error, Provenance, Result, atomic};
 use serde::{Deserialize, Serialize};
 
 /// Name of the record inside every artifact folder.
@@ -31,6 +31,18 @@ pub struct StageKey<'a> {
 }
 
 impl StageKey<'_> {
+    /// The cache key of the artifact `provenance` describes: a stage's
+    /// provenance holds exactly its key's name, parameters and input hashes.
+    pub fn of(provenance: &Provenance, format_version: u32) -> String {
+        StageKey {
+            stage: &provenance.stage,
+            format_version,
+            params: &provenance.params,
+            inputs: provenance.inputs.clone(),
+        }
+        .hash()
+    }
+
     /// The cache key: SHA-256 of the canonical JSON of the whole key.
     pub fn hash(&self) -> String {
         sha256_hex(

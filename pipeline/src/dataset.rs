@@ -415,16 +415,19 @@ impl Archive {
         )))
     }
 
-    /// Copies `entry`'s files (only those with `roles`, or all) into `to`
-    /// under their names, after verifying the whole dataset; each file is
-    /// hashed again as it is copied and written atomically.
-    pub fn restore(&self, entry: &Entry, roles: Option<&[&str]>, to: &Path) -> Result<()> {
+    /// Copies `entry`'s files into `to` under their names, after verifying
+    /// the whole dataset (so a damaged one writes nothing).
+    pub fn restore(&self, entry: &Entry, to: &Path) -> Result<()> {
         self.require_whole(entry)?;
+        self.copy_out(entry, to)
+    }
+
+    /// Copies `entry`'s files into `to` under their names, each hashed as it
+    /// is copied and written atomically: for a caller that has verified the
+    /// dataset already (a run, before it starts) and removes `to` on failure.
+    pub fn copy_out(&self, entry: &Entry, to: &Path) -> Result<()> {
         fs::create_dir_all(to).map_err(|e| Error::io(to, e))?;
         for file in &entry.files {
-            if roles.is_some_and(|r| !r.contains(&file.role.as_str())) {
-                continue;
-            }
             let source = self.object(&file.sha256);
             let target = to.join(&file.name);
             atomic::write_file(&target, |out| {
@@ -658,7 +661,7 @@ mod tests {
 
         // Restoring refuses, and writes nothing.
         let to = dir.path().join("restored");
-        let err = archive.restore(&entry, None, &to).unwrap_err();
+        let err = archive.restore(&entry, &to).unwrap_err();
         assert_eq!(err.exit_code(), 1);
         assert!(err.to_string().contains("dataset d@1 is damaged"), "{err}");
         assert!(!to.exists());
@@ -689,7 +692,7 @@ mod tests {
         let files = sources(dir.path(), ["log", "stats", "pairs"]);
         let (entry, _) = archive.archive("d", &files, provenance()).unwrap();
         let to = dir.path().join("out");
-        archive.restore(&entry, None, &to).unwrap();
+        archive.restore(&entry, &to).unwrap();
         for source in &files {
             assert_eq!(
                 fs::read(to.join(&source.name)).unwrap(),

@@ -74,7 +74,7 @@ pub fn execute(datasets: &Path, command: DatasetCommand) -> Result<()> {
         }
         DatasetCommand::Restore { dataset, to } => {
             let entry = archive.find(&dataset)?;
-            archive.restore(&entry, None, &to)?;
+            archive.restore(&entry, &to)?;
             for file in &entry.files {
                 println!("{}", to.join(&file.name).display());
             }

@@ -454,7 +454,8 @@ impl Graph<'_> {
             &params,
             &[],
             &outputs,
-            |_, dir, _| archive.restore(entry, None, dir),
+            // `run` verified the whole dataset before it began.
+            |_, dir, _| archive.copy_out(entry, dir),
         )
     }
 
@@ -474,13 +475,12 @@ impl Graph<'_> {
             .iter()
             .map(|(role, artifact)| (role.to_string(), artifact.sha256(role).to_string()))
             .collect();
-        let key = StageKey {
-            stage: name,
-            format_version,
-            params,
-            inputs: input_hashes.clone(),
-        }
-        .hash();
+        let provenance = Provenance {
+            stage: name.into(),
+            params: params.clone(),
+            inputs: input_hashes,
+        };
+        let key = StageKey::of(&provenance, format_version);
         let reuse = !self.options.force || self.made_now.contains(&key);
         let found = if reuse {
             self.cache.lookup(name, &key)
@@ -491,11 +491,6 @@ impl Graph<'_> {
         let artifact = match found {
             Some(artifact) => artifact,
             None => {
-                let provenance = Provenance {
-                    stage: name.into(),
-                    params: params.clone(),
-                    inputs: input_hashes,
-                };
                 let label = format!("{}/{}", self.manifest.experiment.name, self.record.name);
                 let bar = Bar::new(&label, self.options.quiet);
                 let context = format!("variant `{}`, stage {name}", self.record.name);
@@ -558,16 +553,9 @@ fn shard_store(out: &Path) -> Cache {
     Cache::at(&out.join("shards"))
 }
 
-/// The train stage's cache key, from its provenance (which holds exactly
-/// the key's parameters and input hashes).
+/// The train stage's cache key, from its provenance.
 fn train_key(provenance: &Provenance) -> String {
-    StageKey {
-        stage: "train",
-        format_version: alnlab_train::FORMAT_VERSION,
-        params: &provenance.params,
-        inputs: provenance.inputs.clone(),
-    }
-    .hash()
+    StageKey::of(provenance, alnlab_train::FORMAT_VERSION)
 }
 
 /// The folders of a complete set of finished shards (1..=N of one N) for the
