@@ -98,6 +98,23 @@ struct Loaded<'a> {
     tree_bytes: usize,
 }
 
+impl Loaded<'_> {
+    /// ns per state of `model` on evaluation `path`.
+    fn ns(&self, model: &str, path: &str) -> Option<f64> {
+        self.timings
+            .iter()
+            .find(|t| t.model == model && t.path == path)
+            .map(|t| t.ns_per_state)
+    }
+
+    /// ns per state of the ALN one state at a time: the parsimonious path of
+    /// a bit-forest, the binary search of a threshold model.
+    fn aln_single_ns(&self) -> Option<f64> {
+        self.ns("aln", "single")
+            .or_else(|| self.ns("aln", "threshold-search"))
+    }
+}
+
 /// How much of its input a tree can see: leaves are wired to literals (an
 /// input bit or its complement) at random when the tree is made, so with
 /// fewer leaves than literals most inputs reach no leaf at all.
@@ -388,15 +405,7 @@ fn side_by_side(md: &mut String, variants: &[Loaded]) {
             overall(&v.summary, model).map_or("—".into(), |(m, _)| format!("{m:.4}"))
         };
         let p95 = overall(&v.summary, "aln").map_or("—".into(), |(_, p)| format!("{p:.2}"));
-        let ns = |path: &str| {
-            v.timings
-                .iter()
-                .find(|t| {
-                    t.model == "aln"
-                        && (t.path == path || (path == "single" && t.path == "threshold-search"))
-                })
-                .map_or("—".into(), |t| format!("{:.0}", t.ns_per_state))
-        };
+        let ns = |t: Option<f64>| t.map_or("—".into(), |t| format!("{t:.0}"));
         let worse = worse_than_persistence(&v.summary).len();
         let total = v.summary.iter().filter(|r| r.model == "aln").count();
         let baseline_means: String = baselines
@@ -409,8 +418,8 @@ fn side_by_side(md: &mut String, variants: &[Loaded]) {
             v.info.name,
             mean("aln"),
             p95,
-            ns("batched"),
-            ns("single"),
+            ns(v.ns("aln", "batched")),
+            ns(v.aln_single_ns()),
             v.hardware.delays(),
             v.info
                 .stages

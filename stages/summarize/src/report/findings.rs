@@ -19,14 +19,6 @@ fn coarsest_simulator<'a>(v: &'a Loaded) -> Option<(&'a str, u32)> {
         .min_by_key(|&(_, steps)| steps)
 }
 
-/// ns per state of `model` on `path`.
-fn ns(v: &Loaded, model: &str, path: &str) -> Option<f64> {
-    v.timings
-        .iter()
-        .find(|t| t.model == model && t.path == path)
-        .map(|t| t.ns_per_state)
-}
-
 /// "1.23 µs" for a time in ns.
 fn micros(ns: f64) -> String {
     format!("{:.1} µs", ns / 1000.0)
@@ -120,11 +112,11 @@ fn variant_findings(md: &mut String, v: &Loaded) {
     });
     md.push_str(&sentence);
 
-    let batched = ns(v, "aln", "batched");
-    let single = ns(v, "aln", "single").or_else(|| ns(v, "aln", "threshold-search"));
+    let batched = v.ns("aln", "batched");
+    let single = v.aln_single_ns();
     if let (Some(aln_ns), Some((simulator, steps))) = (batched.or(single), coarsest_simulator(v))
         && let (Some(sim_ns), Some((sim_mean, _))) =
-            (ns(v, simulator, "single"), overall(&v.summary, simulator))
+            (v.ns(simulator, "single"), overall(&v.summary, simulator))
     {
         let path = if batched.is_some() {
             "batched"
@@ -213,7 +205,7 @@ fn across_variants(md: &mut String, variants: &[Loaded]) {
     );
     let fastest = variants
         .iter()
-        .filter_map(|v| Some((v.info.name.as_str(), ns(v, "aln", "batched")?)))
+        .filter_map(|v| Some((v.info.name.as_str(), v.ns("aln", "batched")?)))
         .min_by(|a, b| a.1.total_cmp(&b.1));
     if let Some((name, t)) = fastest {
         let _ = write!(
