@@ -4,15 +4,16 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
-use alnlab::run::{RunRecord, STAGES};
+use alnlab::run::RunRecord;
+use alnlab::stages;
 
 mod common;
 use common::{MANIFEST, alnlab, artifact_bytes, run_ok, stderr, write_manifest};
 
-/// Whether each stage of the first variant (in [`STAGES`] order) was cached.
+/// Whether each stage of the first variant (in the stage table's order) was cached.
 fn cached(record: &RunRecord) -> Vec<bool> {
     let stages = &record.variants[0].stages;
-    assert!(stages.iter().map(|s| s.stage.as_str()).eq(STAGES));
+    assert!(stages.iter().map(|s| s.stage.as_str()).eq(stages::names()));
     stages.iter().map(|s| s.cached).collect()
 }
 
@@ -459,8 +460,8 @@ fn quantize_parameters_are_checked_with_their_place() {
 
 #[test]
 fn threshold_models_train_one_tree_per_variable_the_same_on_any_thread_count() {
-    use alnlab_train::ModelKind;
-    use alnlab_train::model::Model;
+    use alnlab_aln::ModelKind;
+    use alnlab_aln::model::Model;
     let dir = tempfile::tempdir().unwrap();
     let text =
         format!("{MANIFEST}\n[[variant]]\nname = \"threshold\"\ntrain.model = \"threshold\"\n");

@@ -3,10 +3,10 @@
 
 use std::path::Path;
 
+use alnlab_aln::model::Model;
 use alnlab_common::Result;
 use alnlab_common::table::Table;
 use alnlab_train::bench::TrainBench;
-use alnlab_train::model::Model;
 use arrow_array::UInt64Array;
 
 use crate::manifest::Manifest;
@@ -72,8 +72,9 @@ pub struct ShardBench {
 /// trains its forest in-process and as `shards` processes of this binary
 /// (`train --shard K/N`, each given its share of the cores), and merges.
 pub fn shards(manifest_path: &Path, variant: &str, shards: u32) -> Result<ShardBench> {
+    use alnlab_aln::shard::Shard;
     use alnlab_common::Error;
-    use alnlab_train::shard::{self, Shard};
+    use alnlab_train::shard;
     use std::time::Instant;
 
     let manifest = Manifest::load(manifest_path)?;
@@ -88,11 +89,8 @@ pub fn shards(manifest_path: &Path, variant: &str, shards: u32) -> Result<ShardB
         datasets: Path::new("datasets").to_path_buf(),
         until: None,
     };
-    let run::TrainInputs {
-        codebook,
-        levels,
-        provenance,
-    } = run::up_to_train(&manifest, &options, variant)?;
+    let run::TrainInputs { inputs, provenance } = run::up_to_train(&manifest, &options, variant)?;
+    let (codebook, levels) = (&inputs["codebook"], &inputs["levels"]);
     let seed = manifest.experiment.seed;
 
     let whole = dir.path().join("whole");
@@ -101,8 +99,8 @@ pub fn shards(manifest_path: &Path, variant: &str, shards: u32) -> Result<ShardB
         &variant.stages.train,
         seed,
         Shard::ALL,
-        &codebook,
-        &levels,
+        codebook,
+        levels,
         &provenance,
         &whole,
         &alnlab_common::progress::Silent,
@@ -132,9 +130,9 @@ pub fn shards(manifest_path: &Path, variant: &str, shards: u32) -> Result<ShardB
                     &format!("{k}/{shards}"),
                 ])
                 .arg("--codebook")
-                .arg(&codebook)
+                .arg(codebook)
                 .arg("--levels")
-                .arg(&levels)
+                .arg(levels)
                 .arg("--out")
                 .arg(out)
                 .stdout(std::process::Stdio::null())

@@ -15,6 +15,7 @@ use std::path::{Path, PathBuf};
 use alnlab_common::{Error, Result, atomic};
 
 use crate::manifest::Manifest;
+use crate::stages::{self, Hints, STAGES};
 
 /// What to export.
 pub struct Export<'a> {
@@ -48,7 +49,34 @@ pub fn snakemake(export: &Export, dir: &Path) -> Result<()> {
         .map(|v| v.stages.train.leaves.get() * v.stages.train.vote.get())
         .max()
         .unwrap_or(1);
-    let train_mb = 1024 + leaves / 64;
+    let forest_mb = (leaves / 64) as u64;
+    // Resource hints per rule: each stage's from the stage table, then the
+    // workflow's own rules (a training shard holds a forest as train does).
+    let mut hints: Vec<(&str, Hints)> = STAGES.iter().map(|s| (s.name, s.hints)).collect();
+    let train = stages::find("train").expect("the table has a train stage");
+    hints.push((
+        "train_shard",
+        Hints {
+            threads: 1,
+            ..train.hints
+        },
+    ));
+    hints.push((
+        "run_record",
+        Hints {
+            threads: 1,
+            mem_mb: 1024,
+            runtime: 10,
+            holds_forest: false,
+        },
+    ));
+    let line = |value: &dyn Fn(&Hints) -> u64| {
+        let entries: Vec<String> = hints
+            .iter()
+            .map(|(rule, h)| format!("{rule}: {}", value(h)))
+            .collect();
+        format!("{{{}}}", entries.join(", "))
+    };
     let config = format!(
         "# Written by `alnlab export snakemake` for {manifest_path}; edit freely.\n\
          # `alnlab` is the binary the rules call: on a cluster, a path every node can run.\n\
@@ -56,14 +84,25 @@ pub fn snakemake(export: &Export, dir: &Path) -> Result<()> {
          manifest: {manifest_file:?}\n\
          experiment: {experiment:?}\n\
          variants: [{variants}]\n\
+         stages: [{stages}]\n\
+         sharded_stage: {sharded:?}\n\
          out: {out:?}\n\
          reports: {reports:?}\n\
          datasets: {datasets:?}\n\
          shards: {shards}\n\
          # Resource hints per rule: threads (cores), memory (MB), run time (minutes).\n\
-         threads: {{simulate: 2, stride: 1, quantize: 1, train_shard: 1, train: 2, test: 2, summarize: 1, run_record: 1}}\n\
-         mem_mb: {{simulate: 2048, stride: 1024, quantize: 1024, train_shard: {train_mb}, train: {train_mb}, test: {train_mb}, summarize: 2048, run_record: 1024}}\n\
-         runtime: {{simulate: 60, stride: 10, quantize: 10, train_shard: 120, train: 120, test: 60, summarize: 10, run_record: 10}}\n",
+         threads: {threads}\n\
+         mem_mb: {mem_mb}\n\
+         runtime: {runtime}\n",
+        stages = STAGES
+            .iter()
+            .map(|s| format!("{:?}", s.name))
+            .collect::<Vec<_>>()
+            .join(", "),
+        sharded = train.name,
+        threads = line(&|h| u64::from(h.threads)),
+        mem_mb = line(&|h| h.mem_mb + if h.holds_forest { forest_mb } else { 0 }),
+        runtime = line(&|h| u64::from(h.runtime)),
         manifest_path = manifest.path.display(),
         alnlab = absolute(&export.alnlab)?,
         manifest_file = absolute(&manifest.path)?,

@@ -3,11 +3,9 @@
 
 use std::process::ExitCode;
 
-use clap::Parser;
-
 fn main() -> ExitCode {
-    let cli = alnlab::cli::Cli::parse();
-    match alnlab::cli::execute(cli) {
+    let matches = alnlab::cli::command().get_matches();
+    match alnlab::cli::execute(&matches) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
             eprintln!("error: {e}");

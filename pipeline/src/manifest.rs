@@ -16,6 +16,11 @@ use serde::{Deserialize, Serialize};
 use serde_spanned::Spanned;
 use toml::de::{DeTable, DeValue};
 
+use crate::stages::{Archived, STAGES, Stage};
+
+mod locate;
+use locate::{Locator, has_key, span_of};
+
 /// A parsed, validated manifest with every variant resolved.
 #[derive(Debug)]
 pub struct Manifest {
@@ -96,7 +101,7 @@ pub struct Stages {
     pub train: alnlab_train::Params,
     /// `[test]`
     #[serde(default)]
-    pub test: alnlab_test::Params,
+    pub test: alnlab_evaluate::Params,
 }
 
 /// The whole document as deserialized (variants handled separately).
@@ -115,7 +120,7 @@ struct Document {
     #[serde(default)]
     train: alnlab_train::Params,
     #[serde(default)]
-    test: alnlab_test::Params,
+    test: alnlab_evaluate::Params,
 }
 
 /// An error in a manifest, located in the file.
@@ -234,38 +239,30 @@ impl Manifest {
         self.variants.iter().map(|v| v.name.as_str()).collect()
     }
 
-    /// The fully resolved manifest of one variant, as TOML.
+    /// The fully resolved manifest of one variant, as TOML (without the
+    /// tables of stages an archived dataset stands for).
     pub fn resolved_toml(&self, variant: &Variant) -> String {
         #[derive(Serialize)]
-        struct Simulated<'a> {
+        struct Resolved<'a> {
             experiment: &'a Experiment,
+            #[serde(skip_serializing_if = "Option::is_none")]
+            data: Option<&'a Data>,
             #[serde(flatten)]
             stages: &'a Stages,
         }
-        /// The archived dataset stands for simulate and stride.
-        #[derive(Serialize)]
-        struct Archived<'a> {
-            experiment: &'a Experiment,
-            data: &'a Data,
-            quantize: &'a alnlab_quantize::Params,
-            train: &'a alnlab_train::Params,
-            test: &'a alnlab_test::Params,
+        let resolved = Resolved {
+            experiment: &self.experiment,
+            data: self.data.as_ref(),
+            stages: &variant.stages,
+        };
+        let mut table =
+            toml::Table::try_from(&resolved).expect("resolved parameters serialize to TOML");
+        if self.data.is_some() {
+            for stage in STAGES.iter().filter(|s| s.archived == Archived::Always) {
+                table.remove(stage.name);
+            }
         }
-        let stages = &variant.stages;
-        match &self.data {
-            None => toml::to_string(&Simulated {
-                experiment: &self.experiment,
-                stages,
-            }),
-            Some(data) => toml::to_string(&Archived {
-                experiment: &self.experiment,
-                data,
-                quantize: &stages.quantize,
-                train: &stages.train,
-                test: &stages.test,
-            }),
-        }
-        .expect("resolved parameters serialize to TOML")
+        toml::to_string(&table).expect("resolved parameters serialize to TOML")
     }
 }
 
@@ -280,118 +277,6 @@ fn split(document: Document) -> (Experiment, Option<Data>, Stages) {
         test: document.test,
     };
     (document.experiment, document.data, stages)
-}
-
-/// Maps byte spans to lines and columns and builds located errors.
-struct Locator<'a> {
-    text: &'a str,
-    file: &'a Path,
-}
-
-impl Locator<'_> {
-    fn position(&self, offset: usize) -> (usize, usize) {
-        let before = &self.text[..offset.min(self.text.len())];
-        let line = before.matches('\n').count() + 1;
-        let column = before.rsplit('\n').next().map_or(0, |l| l.chars().count()) + 1;
-        (line, column)
-    }
-
-    fn error(
-        &self,
-        span: Option<std::ops::Range<usize>>,
-        key: String,
-        variant: Option<&str>,
-        message: String,
-    ) -> ManifestError {
-        ManifestError {
-            file: self.file.to_path_buf(),
-            position: span.map(|s| self.position(s.start)),
-            key,
-            variant: variant.map(str::to_string),
-            message,
-        }
-    }
-
-    /// A toml error, with the key found from its position in `table`.
-    fn toml_error(
-        &self,
-        e: &toml::de::Error,
-        table: Option<&DeTable>,
-        variant: Option<&str>,
-    ) -> ManifestError {
-        let key = match (table, e.span()) {
-            (Some(t), Some(span)) => key_at(t, span.start).join("."),
-            _ => String::new(),
-        };
-        self.error(e.span(), key, variant, e.message().trim().to_string())
-    }
-}
-
-/// The dotted path of the innermost key whose key or value span contains
-/// `offset`. Header tables (`[stride]`) span only their header, so the whole
-/// tree is searched rather than pruned by the parents' spans.
-fn key_at(table: &DeTable, offset: usize) -> Vec<String> {
-    let mut best: Option<(usize, Vec<String>)> = None;
-    search_table(table, offset, &mut Vec::new(), &mut best);
-    best.map(|(_, path)| path).unwrap_or_default()
-}
-
-type Found = Option<(usize, Vec<String>)>;
-
-fn search_table(table: &DeTable, offset: usize, path: &mut Vec<String>, best: &mut Found) {
-    for (key, value) in table.iter() {
-        path.push(key.get_ref().to_string());
-        for span in [key.span(), value.span()] {
-            let hit = span.contains(&offset) || (span.end == offset && !span.is_empty());
-            if hit && best.as_ref().is_none_or(|(len, _)| span.len() < *len) {
-                *best = Some((span.len(), path.clone()));
-            }
-        }
-        search_value(value.get_ref(), offset, path, best);
-        path.pop();
-    }
-}
-
-fn search_value(value: &DeValue, offset: usize, path: &mut Vec<String>, best: &mut Found) {
-    match value {
-        DeValue::Table(t) => search_table(t, offset, path, best),
-        DeValue::Array(items) => {
-            for (i, item) in items.iter().enumerate() {
-                path.push(i.to_string());
-                search_value(item.get_ref(), offset, path, best);
-                path.pop();
-            }
-        }
-        _ => {}
-    }
-}
-
-/// The span of the value at a dotted `path`, or of its nearest present
-/// ancestor (a defaulted field has no span of its own).
-/// Whether `table` has `key`.
-fn has_key(table: &DeTable, key: &str) -> bool {
-    table.iter().any(|(k, _)| k.get_ref() == key)
-}
-
-fn span_of(table: &DeTable, path: &[&str]) -> Option<std::ops::Range<usize>> {
-    let (first, rest) = path.split_first()?;
-    let (key, value) = table.iter().find(|(k, _)| k.get_ref() == first)?;
-    let inner = match value.get_ref() {
-        DeValue::Table(t) => span_of(t, rest),
-        DeValue::Array(items) => rest.split_first().and_then(|(i, rest)| {
-            let item = items.get(i.parse::<usize>().ok()?)?;
-            match item.get_ref() {
-                DeValue::Table(t) => span_of(t, rest).or(Some(item.span())),
-                _ => Some(item.span()),
-            }
-        }),
-        _ => None,
-    };
-    inner.or(Some(if rest.is_empty() {
-        value.span()
-    } else {
-        key.span()
-    }))
 }
 
 /// Removes `[[variant]]` from the base document and returns its entries.
@@ -536,39 +421,32 @@ fn validate(
     variant: Option<&str>,
     from_dataset: bool,
 ) -> Result<(), ManifestError> {
-    if from_dataset {
-        // The dataset holds the simulate and stride outputs: their
-        // parameters would be silently ignored, so they are an error.
-        for stage in ["simulate", "stride"] {
-            if has_key(table, stage) {
-                return Err(locate.error(
-                    span_of(table, &[stage]),
-                    stage.into(),
-                    variant,
-                    format!(
-                        "the data come from `[data] dataset`, which holds the simulate and \
-                         stride outputs; remove `{stage}` (or `[data]`)"
-                    ),
-                ));
-            }
-        }
+    // With `[data]`, the dataset holds the outputs of the stages it always
+    // stands for: their parameters would be silently ignored, so they are an
+    // error, and they are not checked.
+    let archived = |stage: &&Stage| from_dataset && stage.archived == Archived::Always;
+    if let Some(stage) = STAGES
+        .iter()
+        .filter(archived)
+        .find(|s| has_key(table, s.name))
+    {
+        let held: Vec<&str> = STAGES.iter().filter(archived).map(|s| s.name).collect();
+        return Err(locate.error(
+            span_of(table, &[stage.name]),
+            stage.name.into(),
+            variant,
+            format!(
+                "the data come from `[data] dataset`, which holds the {} outputs; remove `{}` \
+                 (or `[data]`)",
+                held.join(" and "),
+                stage.name
+            ),
+        ));
     }
-    let checks = [
-        (
-            "simulate",
-            from_dataset_or(from_dataset, || stages.simulate.validate()),
-        ),
-        (
-            "stride",
-            from_dataset_or(from_dataset, || stages.stride.validate()),
-        ),
-        ("quantize", stages.quantize.validate()),
-        ("train", stages.train.validate()),
-        ("test", stages.test.validate()),
-    ];
-    let failure = checks
-        .into_iter()
-        .find_map(|(stage, check)| check.err().map(|(key, message)| (stage, key, message)));
+    let failure = STAGES.iter().filter(|s| !archived(s)).find_map(|stage| {
+        let check = (stage.validate)(stages);
+        check.err().map(|(key, message)| (stage.name, key, message))
+    });
     match failure {
         None => Ok(()),
         Some((stage, key, message)) => {
@@ -576,12 +454,6 @@ fn validate(
             Err(locate.error(span_of(table, &path), path.join("."), variant, message))
         }
     }
-}
-
-/// A stage check that is skipped when an archived dataset stands for the
-/// stage.
-fn from_dataset_or<E>(from_dataset: bool, check: impl FnOnce() -> Result<(), E>) -> Result<(), E> {
-    if from_dataset { Ok(()) } else { check() }
 }
 
 /// Whether `s` is a non-empty name of ASCII letters, digits, `-` and `_`.

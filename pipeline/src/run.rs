@@ -24,7 +24,8 @@ use crate::cache::{Artifact, Cache, StageKey};
 use crate::dataset::{Archive, Entry};
 use crate::manifest::{Manifest, Variant};
 use crate::progress::Bar;
-use alnlab_train::shard::Shard;
+use crate::stages::{self, Archived, Call, STAGES, Stage, stage_params};
+use alnlab_aln::shard::Shard;
 
 /// How to run.
 #[derive(Clone, Debug)]
@@ -39,21 +40,11 @@ pub struct RunOptions {
     pub quiet: bool,
     /// The dataset archive `[data] dataset` refers to.
     pub datasets: PathBuf,
-    /// Stop after this stage (one of [`STAGES`]): no run record, no report.
+    /// Stop after this stage (one of the stage table's): no run record, no
+    /// report.
     /// How a workflow engine runs the graph one stage at a time.
     pub until: Option<String>,
 }
-
-/// The stages of the graph, in order (`dataset` stands for simulate and
-/// stride when the data come from the archive).
-pub const STAGES: [&str; 6] = [
-    "simulate",
-    "stride",
-    "quantize",
-    "train",
-    "test",
-    "summarize",
-];
 
 /// Version of the `dataset` artifact's layout (part of its cache key).
 const DATASET_FORMAT_VERSION: u32 = 1;
@@ -253,184 +244,39 @@ struct Graph<'a> {
 }
 
 impl Graph<'_> {
-    /// Whether the walk ends after `stage` (`--until`).
-    fn stops_after(&self, stage: &str) -> bool {
-        self.options.until.as_deref() == Some(stage)
-    }
-
+    /// Walks the stage table for `variant`: each stage finds or makes its
+    /// artifact from the artifacts of the stages it reads; an archived
+    /// dataset stands for the stages it holds.
     fn run_variant(&mut self, variant: &Variant) -> Result<()> {
         let seed = self.manifest.experiment.seed;
-        let stages = &variant.stages;
-
         let archived = match self.dataset {
             Some((archive, entry)) => Some((self.dataset_stage(archive, entry)?, entry)),
             None => None,
         };
-
-        let simulate = match &archived {
-            Some((artifact, _)) => artifact.clone(),
-            None => {
-                let params = stage_params(seed, &stages.simulate);
-                self.stage(
-                    "simulate",
-                    alnlab_simulate::FORMAT_VERSION,
-                    &params,
-                    &[],
-                    &[
-                        ("trajectory", alnlab_simulate::TRAJECTORY_FILE),
-                        ("stats", alnlab_simulate::STATS_FILE),
-                    ],
-                    |provenance, dir, bar| {
-                        alnlab_simulate::run(&stages.simulate, seed, provenance, dir, bar)
-                    },
-                )?
-            }
-        };
-
-        if self.stops_after("simulate") {
-            return Ok(());
-        }
-        let trajectory = simulate.path("trajectory");
-        let stride = match &archived {
-            Some((artifact, _)) => artifact.clone(),
-            None => {
-                let params = stage_params(seed, &stages.stride);
-                self.stage(
-                    "stride",
-                    alnlab_stride::FORMAT_VERSION,
-                    &params,
-                    &[("trajectory", &simulate)],
-                    &[("pairs", alnlab_stride::PAIRS_FILE)],
-                    |provenance, dir, bar| {
-                        alnlab_stride::run(&stages.stride, seed, &trajectory, provenance, dir, bar)
-                    },
-                )?
-            }
-        };
-
-        if self.stops_after("stride") {
-            return Ok(());
-        }
-        let (pairs, stats) = (stride.path("pairs"), simulate.path("stats"));
-        let quantize = match &archived {
-            Some((artifact, entry)) if entry.has_levels() => artifact.clone(),
-            _ => {
-                let params = stage_params(seed, &stages.quantize);
-                self.stage(
-                    "quantize",
-                    alnlab_quantize::FORMAT_VERSION,
-                    &params,
-                    &[("pairs", &stride), ("stats", &simulate)],
-                    &[
-                        ("codebook", alnlab_quantize::CODEBOOK_FILE),
-                        ("levels", alnlab_quantize::LEVELS_FILE),
-                    ],
-                    |provenance, dir, bar| {
-                        alnlab_quantize::run(
-                            &stages.quantize,
-                            seed,
-                            &pairs,
-                            &stats,
-                            provenance,
-                            dir,
-                            bar,
-                        )
-                    },
-                )?
-            }
-        };
-
-        if self.stops_after("quantize") {
-            return Ok(());
-        }
-        let params = stage_params(seed, &stages.train);
-        let (codebook, levels) = (quantize.path("codebook"), quantize.path("levels"));
-        let shards = shard_store(&self.options.out);
-        let train = self.stage(
-            "train",
-            alnlab_train::FORMAT_VERSION,
-            &params,
-            &[("codebook", &quantize), ("levels", &quantize)],
-            &[
-                ("model", alnlab_train::MODEL_FILE),
-                ("training", alnlab_train::TRAINING_FILE),
-            ],
-            |provenance, dir, bar| {
-                // A complete set of shards trained for this key is merged
-                // instead of training again.
-                match complete_shards(&shards, &train_key(provenance)) {
-                    Some(parts) => alnlab_train::shard::merge(&parts, provenance, dir),
-                    None => alnlab_train::run(
-                        &stages.train,
-                        seed,
-                        Shard::ALL,
-                        &codebook,
-                        &levels,
-                        provenance,
-                        dir,
-                        bar,
-                    ),
+        let mut made: BTreeMap<&str, Artifact> = BTreeMap::new();
+        for stage in STAGES {
+            let from_archive = archived.as_ref().filter(|(_, entry)| match stage.archived {
+                Archived::Always => true,
+                Archived::WithLevels => entry.has_levels(),
+                Archived::Never => false,
+            });
+            let artifact = match from_archive {
+                Some((artifact, _)) => artifact.clone(),
+                None => {
+                    let inputs: Vec<(&str, &Artifact)> = stage
+                        .inputs
+                        .iter()
+                        .map(|i| (i.role, &made[i.from]))
+                        .collect();
+                    let params = stage_params(seed, (stage.params)(&variant.stages));
+                    self.stage(stage, &params, &inputs, variant)?
                 }
-            },
-        )?;
-        let merged = shards.root().join("train").join(&train.record.key);
-        if merged.exists() {
-            fs::remove_dir_all(&merged).map_err(|e| Error::io(&merged, e))?;
+            };
+            made.insert(stage.name, artifact);
+            if self.options.until.as_deref() == Some(stage.name) {
+                break;
+            }
         }
-        if self.stops_after("train") {
-            return Ok(());
-        }
-
-        let params = stage_params(seed, &stages.test);
-        let model = train.path("model");
-        let test = self.stage(
-            "test",
-            alnlab_test::FORMAT_VERSION,
-            &params,
-            &[
-                ("trajectory", &simulate),
-                ("model", &train),
-                ("codebook", &quantize),
-                ("levels", &quantize),
-            ],
-            &[
-                ("predictions", alnlab_test::PREDICTIONS_FILE),
-                ("timings", alnlab_test::TIMINGS_FILE),
-                ("rollout", alnlab_test::ROLLOUT_FILE),
-            ],
-            |provenance, dir, bar| {
-                alnlab_test::run(
-                    &stages.test,
-                    &trajectory,
-                    &model,
-                    &codebook,
-                    &levels,
-                    provenance,
-                    dir,
-                    bar,
-                )
-            },
-        )?;
-        if self.stops_after("test") {
-            return Ok(());
-        }
-
-        // Summarizing has no parameters of its own.
-        let params = stage_params(seed, &());
-        let (predictions, rollout) = (test.path("predictions"), test.path("rollout"));
-        self.stage(
-            "summarize",
-            alnlab_summarize::FORMAT_VERSION,
-            &params,
-            &[("predictions", &test), ("rollout", &test)],
-            &[
-                ("summary", alnlab_summarize::SUMMARY_FILE),
-                ("horizons", alnlab_summarize::HORIZONS_FILE),
-            ],
-            |provenance, dir, bar| {
-                alnlab_summarize::run(&predictions, &rollout, provenance, dir, bar)
-            },
-        )?;
         Ok(())
     }
 
@@ -448,7 +294,7 @@ impl Graph<'_> {
             .iter()
             .map(|f| (f.role.as_str(), f.name.as_str()))
             .collect();
-        self.stage(
+        self.find_or_make(
             "dataset",
             DATASET_FORMAT_VERSION,
             &params,
@@ -459,9 +305,58 @@ impl Graph<'_> {
         )
     }
 
-    /// Finds or makes one stage's artifact and records it.
-    #[allow(clippy::too_many_arguments)]
+    /// Finds or makes one stage's artifact: a stage that runs in shards
+    /// merges a complete set of finished shards instead of running again.
     fn stage(
+        &mut self,
+        stage: &'static Stage,
+        params: &serde_json::Value,
+        inputs: &[(&str, &Artifact)],
+        variant: &Variant,
+    ) -> Result<Artifact> {
+        let shards = shard_store(&self.options.out);
+        let seed = self.manifest.experiment.seed;
+        let artifact = self.find_or_make(
+            stage.name,
+            stage.format_version,
+            params,
+            inputs,
+            stage.outputs,
+            |provenance, dir, bar| {
+                let key = StageKey::of(provenance, stage.format_version);
+                if let Some(merge) = stage.merge_shards
+                    && let Some(parts) = complete_shards(&shards, stage.name, &key)
+                {
+                    return merge(&parts, provenance, dir);
+                }
+                (stage.run)(&Call {
+                    stages: &variant.stages,
+                    seed,
+                    inputs: stage
+                        .inputs
+                        .iter()
+                        .zip(inputs)
+                        .map(|(input, (_, artifact))| (input.role, artifact.path(input.role)))
+                        .collect(),
+                    shard: Shard::ALL,
+                    provenance,
+                    out_dir: dir,
+                    progress: bar,
+                })
+            },
+        )?;
+        if stage.merge_shards.is_some() {
+            let merged = shards.root().join(stage.name).join(&artifact.record.key);
+            if merged.exists() {
+                fs::remove_dir_all(&merged).map_err(|e| Error::io(&merged, e))?;
+            }
+        }
+        Ok(artifact)
+    }
+
+    /// Finds or makes the artifact of `name` with these parameters and
+    /// inputs, and records it.
+    fn find_or_make(
         &mut self,
         name: &str,
         format_version: u32,
@@ -523,12 +418,6 @@ impl Graph<'_> {
     }
 }
 
-/// The parameters a stage's cache key and provenance are made of: the
-/// experiment seed and the stage's resolved table.
-pub fn stage_params(seed: u64, params: &impl Serialize) -> serde_json::Value {
-    serde_json::json!({ "seed": seed, "params": params })
-}
-
 /// The commit of the git checkout holding `path`, if there is one.
 fn git_commit(path: &Path) -> Option<String> {
     let dir = path
@@ -546,22 +435,17 @@ fn git_commit(path: &Path) -> Option<String> {
     (output.status.success() && !commit.is_empty()).then_some(commit)
 }
 
-/// Where sharded training keeps the partial models: `<out>/shards/train/
-/// <train key>/<K>-of-<N>/`, outside the cache (whose sweep of unfinished
-/// work must not touch a shard another process is still training).
+/// Where sharded stages keep their parts: `<out>/shards/<stage>/<stage
+/// key>/<K>-of-<N>/`, outside the cache (whose sweep of unfinished work must
+/// not touch a shard another process is still training).
 fn shard_store(out: &Path) -> Cache {
     Cache::at(&out.join("shards"))
 }
 
-/// The train stage's cache key, from its provenance.
-fn train_key(provenance: &Provenance) -> String {
-    StageKey::of(provenance, alnlab_train::FORMAT_VERSION)
-}
-
-/// The folders of a complete set of finished shards (1..=N of one N) for the
-/// train stage with `key`, if there is one.
-fn complete_shards(shards: &Cache, key: &str) -> Option<Vec<PathBuf>> {
-    let dir = shards.root().join("train").join(key);
+/// The folders of a complete set of finished shards (1..=N of one N) of
+/// `stage` with cache key `key`, if there is one.
+fn complete_shards(shards: &Cache, stage: &str, key: &str) -> Option<Vec<PathBuf>> {
+    let dir = shards.root().join(stage).join(key);
     let mut counts: Vec<u32> = fs::read_dir(&dir)
         .ok()?
         .flatten()
@@ -574,55 +458,68 @@ fn complete_shards(shards: &Cache, key: &str) -> Option<Vec<PathBuf>> {
     counts.dedup();
     counts.into_iter().find_map(|count| {
         (1..=count)
-            .map(|index| shards.lookup("train", &shard_key(key, Shard { index, count })))
+            .map(|index| shards.lookup(stage, &shard_key(key, Shard { index, count })))
             .map(|found| found.map(|artifact| artifact.dir))
             .collect()
     })
 }
 
-/// A shard's key in the shard store: the train key and the shard.
-fn shard_key(train_key: &str, shard: Shard) -> String {
-    format!("{train_key}/{}-of-{}", shard.index, shard.count)
+/// A shard's key in the shard store: the stage's key and the shard.
+fn shard_key(stage_key: &str, shard: Shard) -> String {
+    format!("{stage_key}/{}-of-{}", shard.index, shard.count)
 }
 
-/// What the train stage of a variant reads, and the provenance it writes.
+/// What a variant's train stage reads, and the provenance it writes.
 pub struct TrainInputs {
-    pub codebook: PathBuf,
-    pub levels: PathBuf,
+    pub inputs: BTreeMap<&'static str, PathBuf>,
     pub provenance: Provenance,
 }
 
-/// Runs `variant` up to quantize through the cache (holding the output
-/// folder's lock while it does, as a run does) and returns what its train
-/// stage would be given.
+/// The stage that runs in shards.
+fn train_stage() -> &'static Stage {
+    stages::find("train").expect("the table has a train stage")
+}
+
+/// Runs `variant` up to the stage before train through the cache (holding
+/// the output folder's lock while it does, as a run does) and returns what
+/// its train stage would be given.
 pub fn up_to_train(
     manifest: &Manifest,
     options: &RunOptions,
     variant: &Variant,
 ) -> Result<TrainInputs> {
+    let train = train_stage();
+    let before = STAGES
+        .iter()
+        .take_while(|s| s.name != train.name)
+        .last()
+        .expect("a stage before train");
     let upstream = RunOptions {
-        until: Some("quantize".into()),
+        until: Some(before.name.into()),
         variant: Some(variant.name.clone()),
         ..options.clone()
     };
     let record = run(manifest, &upstream)?;
-    let quantized = &record.variants[0].artifacts;
-    let path = |role: &str| PathBuf::from(&quantized[role].path);
+    let made = &record.variants[0].artifacts;
     Ok(TrainInputs {
-        codebook: path("codebook"),
-        levels: path("levels"),
+        inputs: train
+            .inputs
+            .iter()
+            .map(|i| (i.role, PathBuf::from(&made[i.role].path)))
+            .collect(),
         provenance: Provenance {
-            stage: "train".into(),
-            params: stage_params(manifest.experiment.seed, &variant.stages.train),
-            inputs: ["codebook", "levels"]
+            stage: train.name.into(),
+            params: stage_params(manifest.experiment.seed, (train.params)(&variant.stages)),
+            inputs: train
+                .inputs
                 .iter()
-                .map(|role| (role.to_string(), quantized[*role].sha256.clone()))
+                .map(|i| (i.role.to_string(), made[i.role].sha256.clone()))
                 .collect(),
         },
     })
 }
 
-/// `alnlab run --train-shard K/N`: brings the variant up to quantize through
+/// `alnlab run --train-shard K/N`: brings the variant up to train through
 /// the cache (holding the output folder's lock, as a run does), then — the
 /// lock released, so that shards train side by side — trains shard K of N of
 /// its forest into the shard store, unless it is there already. A later run
@@ -634,15 +531,11 @@ pub fn train_shard(
     shard: Shard,
 ) -> Result<PathBuf> {
     let variant = manifest.variant(variant)?;
-    let TrainInputs {
-        codebook,
-        levels,
-        provenance,
-    } = up_to_train(manifest, options, variant)?;
-    let seed = manifest.experiment.seed;
-    let key = shard_key(&train_key(&provenance), shard);
+    let train = train_stage();
+    let TrainInputs { inputs, provenance } = up_to_train(manifest, options, variant)?;
+    let key = shard_key(&StageKey::of(&provenance, train.format_version), shard);
     let shards = shard_store(&options.out);
-    if let Some(done) = shards.lookup("train", &key) {
+    if let Some(done) = shards.lookup(train.name, &key) {
         return Ok(done.dir);
     }
     let label = format!(
@@ -650,22 +543,17 @@ pub fn train_shard(
         manifest.experiment.name, variant.name
     );
     let bar = Bar::new(&label, options.quiet);
-    let outputs = [
-        ("model", alnlab_train::MODEL_FILE),
-        ("training", alnlab_train::TRAINING_FILE),
-    ];
     let made = shards
-        .make("train", &key, &outputs, |dir| {
-            alnlab_train::run(
-                &variant.stages.train,
-                seed,
+        .make(train.name, &key, train.outputs, |dir| {
+            (train.run)(&Call {
+                stages: &variant.stages,
+                seed: manifest.experiment.seed,
+                inputs,
                 shard,
-                &codebook,
-                &levels,
-                &provenance,
-                dir,
-                &bar,
-            )
+                provenance: &provenance,
+                out_dir: dir,
+                progress: &bar,
+            })
         })
         .map_err(|e| e.context(&format!("variant `{}`, train shard {shard}", variant.name)))?;
     Ok(made.dir)

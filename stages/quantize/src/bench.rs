@@ -6,10 +6,10 @@ use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde::Serialize;
 
-use crate::Quantizer;
-use crate::bits::encode;
-use crate::codes::{Code, Codec};
-use crate::walk::WalkSpec;
+use alnlab_codes::Quantizer;
+use alnlab_codes::bits::encode;
+use alnlab_codes::codes::{Code, Codec};
+use alnlab_codes::walk::WalkSpec;
 
 /// The figures of `alnlab bench quantize`, with stable keys for `--json`.
 #[derive(Debug, Serialize)]

@@ -7,14 +7,10 @@
 //! - `levels.parquet`: `scene`, `run`, `step`, `split`, then the level (u16)
 //!   of every learned `x.` and `y.` value.
 //!
-//! The codes themselves live in [`codes`]; [`bits::encode`] turns level
-//! columns into the bit matrices the train and test stages work on.
+//! The codes themselves, and the codebook's format, live in the
+//! `alnlab-codes` library, which the stages after this one read it with.
 
 pub mod bench;
-pub mod bits;
-pub mod codes;
-pub mod near;
-pub mod walk;
 
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -23,13 +19,12 @@ use std::sync::Arc;
 use alnlab_common::params::{self, Count, ParamError};
 use alnlab_common::table::{self, Table};
 use alnlab_common::{Error, Progress, Provenance, Result};
-use arrow_array::{
-    Array, BooleanArray, Float64Array, StringArray, UInt16Array, UInt32Array, UInt64Array,
-};
+use arrow_array::{Array, Float64Array, StringArray, UInt16Array, UInt32Array};
 use serde::{Deserialize, Serialize};
 
-use crate::codes::{Code, Codec, binary_width};
-use crate::walk::WalkSpec;
+use alnlab_codes::codes::{Code, binary_width};
+use alnlab_codes::walk::WalkSpec;
+use alnlab_codes::{Codebook, Entry, GROUPS, Quantizer, group_of};
 
 /// Version of what this stage writes (part of every cache key).
 pub const FORMAT_VERSION: u32 = 2;
@@ -61,17 +56,6 @@ pub const PAPER_RANGES: [(&str, f64, f64); 8] = [
     ("omega_dot", -1500.0, 2000.0),
     ("v", -18.0, 11.0),
 ];
-
-/// The variable groups of DESIGN.md §6 (roll and pitch form the group `R`).
-pub const GROUPS: [&str; 8] = ["a", "f_E", "g_E", "g", "R", "omega", "omega_dot", "v"];
-
-/// The group of a variable name (`omega_dot.3.x` → `omega_dot`, `roll.2` → `R`).
-pub fn group_of(variable: &str) -> &str {
-    match variable.split('.').next().unwrap_or("") {
-        "roll" | "pitch" => "R",
-        g => g,
-    }
-}
 
 /// The `[quantize]` table of a manifest.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -179,202 +163,9 @@ impl Params {
     }
 }
 
-/// The rows of `levels.parquet` in the `split` given (`train` or `test`):
-/// those marked so or `both`.
-pub fn split_rows(levels: &Table, split: &str) -> Result<Vec<usize>> {
-    let column = levels.column::<StringArray>("split")?;
-    Ok((0..levels.num_rows())
-        .filter(|&r| [split, "both"].contains(&column.value(r)))
-        .collect())
-}
-
-/// The levels of `variable` in `levels.parquet` on one side of the pairs
-/// (`x`, the current frame, or `y`, the next).
-pub fn level_column<'a>(levels: &'a Table, side: &str, variable: &str) -> Result<&'a [u16]> {
-    Ok(levels
-        .column::<UInt16Array>(&format!("{side}.{variable}"))?
-        .values())
-}
-
 /// A seed per variable: FNV-1a of the name mixed into the experiment seed.
 pub fn variable_seed(seed: u64, variable: &str) -> u64 {
     alnlab_common::hash::fnv1a(variable.as_bytes(), seed)
-}
-
-/// Uniform quantization of one variable.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Quantizer {
-    pub min: f64,
-    pub max: f64,
-    pub levels: usize,
-}
-
-impl Quantizer {
-    /// The level of `x` (nearest of L evenly spaced values from min to max)
-    /// and whether it was clamped into the range.
-    #[inline]
-    pub fn level(&self, x: f64) -> (u16, bool) {
-        let top = (self.levels - 1) as f64;
-        let t = (x - self.min) / (self.max - self.min) * top;
-        let clamped = !(0.0..=top).contains(&t);
-        (t.round().clamp(0.0, top) as u16, clamped)
-    }
-
-    /// The value a level stands for.
-    pub fn value(&self, level: usize) -> f64 {
-        self.min + (self.max - self.min) * level as f64 / (self.levels - 1) as f64
-    }
-}
-
-/// One variable's line of the codebook.
-#[derive(Clone, Debug, PartialEq)]
-pub struct Entry {
-    pub variable: String,
-    pub learned: bool,
-    /// Why a variable is not learned (empty if it is).
-    pub note: String,
-    pub quantizer: Quantizer,
-    pub code: Code,
-    pub width: u32,
-    pub walk_step: u32,
-    pub walk_span: u32,
-    pub seed: u64,
-    /// How many of its `x.` and `y.` values were clamped into the range.
-    pub clamped: u64,
-}
-
-/// The codebook: every variable's range, levels and code.
-#[derive(Clone, Debug, PartialEq)]
-pub struct Codebook {
-    pub entries: Vec<Entry>,
-}
-
-impl Codebook {
-    /// The learned entries, in table order.
-    pub fn learned(&self) -> impl Iterator<Item = &Entry> {
-        self.entries.iter().filter(|e| e.learned)
-    }
-
-    /// The codecs of the learned entries, in table order; an entry whose
-    /// parameters make no code is an error naming `path` (the codebook's).
-    pub fn learned_codecs(&self, path: &Path) -> Result<Vec<Codec>> {
-        self.learned()
-            .map(|e| {
-                e.codec()
-                    .map_err(|m| Error::bad_file(path, format!("{}: {m}", e.variable)))
-            })
-            .collect()
-    }
-
-    /// Reads `codebook.parquet`.
-    pub fn read(path: &Path) -> Result<Codebook> {
-        let t = Table::read(path)?;
-        let s = |c| t.column::<StringArray>(c);
-        let f = |c| t.f64_column(c);
-        let u = |c| t.column::<UInt64Array>(c);
-        let (variable, note, code) = (s("variable")?, s("note")?, s("code")?);
-        let (min, max) = (f("min")?, f("max")?);
-        let (levels, width, step, span, seed, clamped) = (
-            u("levels")?,
-            u("width")?,
-            u("walk_step")?,
-            u("walk_span")?,
-            u("seed")?,
-            u("clamped")?,
-        );
-        let learned = t.column::<BooleanArray>("learned")?;
-        let entries = (0..t.num_rows())
-            .map(|r| {
-                let code = match code.value(r) {
-                    "binary" => Code::Binary,
-                    "gray" => Code::Gray,
-                    "walk" => Code::Walk,
-                    "thermometer" => Code::Thermometer,
-                    other => {
-                        return Err(Error::bad_file(
-                            path,
-                            format!("row {r}: unknown code `{other}`"),
-                        ));
-                    }
-                };
-                Ok(Entry {
-                    variable: variable.value(r).to_string(),
-                    learned: learned.value(r),
-                    note: note.value(r).to_string(),
-                    quantizer: Quantizer {
-                        min: min.value(r),
-                        max: max.value(r),
-                        levels: levels.value(r) as usize,
-                    },
-                    code,
-                    width: width.value(r) as u32,
-                    walk_step: step.value(r) as u32,
-                    walk_span: span.value(r) as u32,
-                    seed: seed.value(r),
-                    clamped: clamped.value(r),
-                })
-            })
-            .collect::<Result<_>>()?;
-        Ok(Codebook { entries })
-    }
-
-    fn write(&self, path: &Path, provenance: &Provenance) -> Result<()> {
-        let e = &self.entries;
-        let strings = |f: fn(&Entry) -> &str| -> Arc<dyn Array> {
-            Arc::new(e.iter().map(|x| Some(f(x))).collect::<StringArray>())
-        };
-        let floats = |f: fn(&Entry) -> f64| -> Arc<dyn Array> {
-            Arc::new(
-                e.iter()
-                    .map(f)
-                    .collect::<Vec<_>>()
-                    .into_iter()
-                    .collect::<Float64Array>(),
-            )
-        };
-        let counts = |f: fn(&Entry) -> u64| -> Arc<dyn Array> {
-            Arc::new(
-                e.iter()
-                    .map(f)
-                    .collect::<Vec<_>>()
-                    .into_iter()
-                    .collect::<UInt64Array>(),
-            )
-        };
-        let batch = table::batch(vec![
-            ("variable", strings(|x| &x.variable)),
-            ("group", strings(|x| group_of(&x.variable))),
-            (
-                "learned",
-                Arc::new(e.iter().map(|x| Some(x.learned)).collect::<BooleanArray>()),
-            ),
-            ("note", strings(|x| &x.note)),
-            ("min", floats(|x| x.quantizer.min)),
-            ("max", floats(|x| x.quantizer.max)),
-            ("levels", counts(|x| x.quantizer.levels as u64)),
-            ("code", strings(|x| x.code.name())),
-            ("width", counts(|x| u64::from(x.width))),
-            ("walk_step", counts(|x| u64::from(x.walk_step))),
-            ("walk_span", counts(|x| u64::from(x.walk_span))),
-            ("seed", counts(|x| x.seed)),
-            ("clamped", counts(|x| x.clamped)),
-        ]);
-        table::write_parquet(path, &batch, provenance)
-    }
-}
-
-impl Entry {
-    /// The entry's codec (a walk is redrawn from its seed).
-    pub fn codec(&self) -> std::result::Result<Codec, String> {
-        let walk = (self.code == Code::Walk).then_some(WalkSpec {
-            levels: self.quantizer.levels,
-            width: self.width,
-            step: self.walk_step,
-            span: self.walk_span,
-            seed: self.seed,
-        });
-        Codec::new(self.code, self.quantizer.levels, walk)
-    }
 }
 
 /// Reads `pairs` and `stats`, writes the codebook and the levels table into

@@ -9,10 +9,11 @@ use alnlab_common::{Error, Provenance, Result, Silent};
 use nalgebra::Vector3;
 use serde::Serialize;
 
-use crate::controller::{ControllerKind, ControllerParams};
-use crate::integrate::Stepper;
-use crate::scene::{Scene, SceneKind, run_rng};
-use crate::{Integrator, Params, Prepared, SceneForces};
+use crate::Params;
+use alnlab_physics::controller::{ControllerKind, ControllerParams};
+use alnlab_physics::integrate::Stepper;
+use alnlab_physics::scene::{Scene, SceneKind, run_rng};
+use alnlab_physics::{Integrator, Prepared, SceneForces};
 
 /// The figures of `alnlab bench sim`, with stable keys for `--json`. The
 /// per-step figures time the dynamics alone (passive scenes, semi-implicit

@@ -8,9 +8,9 @@
 use nalgebra::{UnitQuaternion, Vector3};
 use serde_json::{Value, json};
 
-use crate::dynamics::Kinematics;
-use crate::model::Model;
-use crate::scene::{Scene, SceneKind};
+use alnlab_physics::dynamics::Kinematics;
+use alnlab_physics::model::Model;
+use alnlab_physics::scene::{Scene, SceneKind};
 
 /// Topic of the frame transforms.
 pub const TF_TOPIC: &str = "/tf";

@@ -7,16 +7,16 @@
 //! renders a run's summaries, timings and training logs as Markdown and SVG.
 
 pub mod bench;
-pub mod charts;
+mod charts;
 pub mod report;
-pub mod stats;
+mod stats;
 
 use std::path::Path;
 use std::sync::Arc;
 
+use alnlab_codes::group_of;
 use alnlab_common::table::{self, Table};
 use alnlab_common::{Error, Progress, Provenance, Result};
-use alnlab_quantize::group_of;
 use arrow_array::cast::AsArray;
 use arrow_array::types::UInt16Type;
 use arrow_array::{

@@ -15,10 +15,10 @@ mod findings;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
+use alnlab_aln::ModelKind;
+use alnlab_aln::model::Model;
 use alnlab_common::table::Table;
 use alnlab_common::{Result, atomic};
-use alnlab_train::ModelKind;
-use alnlab_train::model::Model;
 use arrow_array::{Float64Array, UInt32Array, UInt64Array};
 
 use crate::charts::{self, SpeedPoint};

@@ -6,17 +6,20 @@
 
 use std::time::Instant;
 
-use alnlab_quantize::bits::encode;
-use alnlab_quantize::codes::{Code, Codec};
-use alnlab_quantize::walk::WalkSpec;
+use alnlab_codes::bits::encode;
+use alnlab_codes::codes::{Code, Codec};
+use alnlab_codes::walk::WalkSpec;
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
 use serde::Serialize;
 
-use crate::forest::{self, Columns, Predictor};
-use crate::shard::Shard;
-use crate::tree::TreeSpec;
+use alnlab_aln::forest::Predictor;
+use alnlab_aln::shard::Shard;
+use alnlab_aln::tree::TreeSpec;
+use alnlab_codes::bits::Columns;
+
+use crate::forest;
 
 /// The figures of `alnlab bench train`, with stable keys for `--json`.
 #[derive(Debug, Serialize)]

@@ -4,34 +4,35 @@
 //! file and `training.parquet` (per tree per epoch: errors, counter updates,
 //! seconds).
 //!
-//! [`tree`] is one ALN, [`forest`] trains and evaluates many, [`model`] is
-//! the file format.
+//! What a model *is* — trees, predictors, the model file — lives in the
+//! `alnlab-aln` library; this stage only trains: [`learn`] (one tree, §3.3),
+//! `forest` (many, in parallel), `threshold` (the §6 predicate) and
+//! [`shard`] (a part of the forest, and merging the parts).
 
 pub mod bench;
-pub mod compiled;
 pub mod forest;
-pub mod model;
+pub mod learn;
 pub mod shard;
-pub mod threshold;
-pub mod tree;
+mod threshold;
 
 use std::path::Path;
 use std::sync::Arc;
 
+use alnlab_codes::bits::encode;
+use alnlab_codes::codes::Codec;
+use alnlab_codes::{Codebook, level_column, split_rows};
 use alnlab_common::hash::sha256_file;
 use alnlab_common::params::{self, Count, ParamError};
 use alnlab_common::table::{self, Table};
 use alnlab_common::{Error, Progress, Provenance, Result};
-use alnlab_quantize::bits::encode;
-use alnlab_quantize::codes::Codec;
-use alnlab_quantize::{Codebook, level_column, split_rows};
 use arrow_array::{Array, Float64Array, StringArray, UInt32Array, UInt64Array};
 use serde::{Deserialize, Serialize};
 
-use crate::forest::Columns;
-use crate::model::{Header, Model};
-use crate::shard::Shard;
-use crate::tree::TreeSpec;
+use alnlab_aln::ModelKind;
+use alnlab_aln::model::{Header, Model};
+use alnlab_aln::shard::Shard;
+use alnlab_aln::tree::TreeSpec;
+use alnlab_codes::bits::Columns;
 
 /// Version of what this stage writes (part of every cache key).
 pub const FORMAT_VERSION: u32 = 3;
@@ -39,19 +40,6 @@ pub const FORMAT_VERSION: u32 = 3;
 pub const MODEL_FILE: &str = "model.aln";
 /// File name of the training log table.
 pub const TRAINING_FILE: &str = "training.parquet";
-
-/// Which model to train (DESIGN.md §5).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum ModelKind {
-    /// One tree per output bit of every learned variable, decoded by the
-    /// variable's code (§4.3).
-    #[default]
-    BitForest,
-    /// One tree per output variable computing [y < f(x)] over the inputs
-    /// and a thermometer-coded candidate y; y found by binary search (§6).
-    Threshold,
-}
 
 /// The `[train]` table of a manifest.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -273,7 +261,7 @@ pub fn run(
 fn write_log(
     path: &Path,
     trained: &[forest::Trained],
-    learned: &[&alnlab_quantize::Entry],
+    learned: &[&alnlab_codes::Entry],
     provenance: &Provenance,
 ) -> Result<()> {
     let rows = trained.iter().flat_map(|t| {

@@ -1,139 +1,71 @@
-//! The threshold-predicate model (paper §6): instead of one tree per output
-//! bit, one tree per output variable computing the predicate
-//! p(y, x) = [y < f(x)] over thermometer-coded inputs and a thermometer-coded
-//! candidate level y. The prediction is the level at which p turns false,
-//! found by binary search over y.
-
-use alnlab_quantize::bits::{BitMatrix, encode};
-use alnlab_quantize::codes::{Code, Codec};
-use rand::{RngExt, SeedableRng};
-use rand_chacha::ChaCha8Rng;
+//! Training the threshold-predicate model (paper §6): one tree per output
+//! variable (and voter) learning p(y, x) = [y < f(x)] from each training
+//! row presented with several candidate levels y. Prediction is
+//! `alnlab_aln::threshold`.
 
 use std::time::Instant;
 
+use alnlab_aln::forest::TreeId;
+use alnlab_aln::shard::Shard;
+use alnlab_aln::tree::{Tree, TreeSpec};
+use alnlab_codes::bits::{BitMatrix, Columns, encode};
+use alnlab_codes::codes::{Code, Codec};
+use rand::{RngExt, SeedableRng};
+use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
 
-use crate::forest::{Columns, Trained, TreeId};
-use crate::shard::Shard;
-use crate::tree::{EpochLog, Samples, Tree, TreeSpec};
+use crate::forest::Trained;
+use crate::learn::{EpochLog, Samples, train_epochs};
 
-/// The first level in `0..levels` at which `below` (true for levels under
-/// the answer, false from it on) is false; `levels` if it never is. With a
-/// predicate that is not monotone, one level where it changes from true to
-/// false (or an end).
-pub fn transition(levels: usize, mut below: impl FnMut(usize) -> bool) -> usize {
-    let (mut lo, mut hi) = (0, levels);
-    while lo < hi {
-        let mid = lo + (hi - lo) / 2;
-        if below(mid) {
-            lo = mid + 1;
-        } else {
-            hi = mid;
+/// Trains a threshold tree for one output variable of `levels` levels on
+/// the rows of `x` with true levels `y`: the tree reads the row's bits
+/// followed by a candidate level in thermometer code, and each row is
+/// presented with candidate levels around its true level (±`near`) and
+/// `far` random ones, labelled [candidate < y].
+#[allow(clippy::too_many_arguments)]
+pub fn train_tree(
+    spec: &TreeSpec,
+    epochs: usize,
+    seed: u64,
+    x: &BitMatrix,
+    y: &[u16],
+    levels: usize,
+    near: usize,
+    far: usize,
+) -> (Tree, Vec<EpochLog>) {
+    let thermometer = Codec::new(Code::Thermometer, levels, None).expect("levels ≥ 2");
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let (mut rows, mut candidates, mut labels) = (Vec::new(), Vec::new(), Vec::new());
+    for (r, &target) in y.iter().enumerate() {
+        let target = usize::from(target);
+        let lo = target.saturating_sub(near);
+        let hi = (target + near).min(levels - 1);
+        let around = lo..=hi;
+        let random = (0..far).map(|_| rng.random_range(0..levels));
+        for candidate in around.chain(random) {
+            rows.push(r);
+            candidates.push(candidate as u16);
+            labels.push(candidate < target);
         }
     }
-    lo
-}
-
-/// A threshold tree for one output variable of `levels` levels, reading
-/// `x_bits` input bits followed by the candidate level in thermometer code.
-pub struct ThresholdModel {
-    pub tree: Tree,
-    pub x_bits: usize,
-    pub thermometer: Codec,
-}
-
-impl ThresholdModel {
-    /// Trains on the rows of `x` (thermometer-coded inputs) with true levels
-    /// `y`: each row is presented with candidate levels around its true
-    /// level (±`near`) and `far` random ones, labelled [candidate < y].
-    #[allow(clippy::too_many_arguments)]
-    pub fn train(
-        spec: &TreeSpec,
-        epochs: usize,
-        seed: u64,
-        x: &BitMatrix,
-        y: &[u16],
-        levels: usize,
-        near: usize,
-        far: usize,
-    ) -> (ThresholdModel, Vec<EpochLog>) {
-        let thermometer = Codec::new(Code::Thermometer, levels, None).expect("levels ≥ 2");
-        let mut rng = ChaCha8Rng::seed_from_u64(seed);
-        let (mut rows, mut candidates, mut labels) = (Vec::new(), Vec::new(), Vec::new());
-        for (r, &target) in y.iter().enumerate() {
-            let target = usize::from(target);
-            let lo = target.saturating_sub(near);
-            let hi = (target + near).min(levels - 1);
-            let around = lo..=hi;
-            let random = (0..far).map(|_| rng.random_range(0..levels));
-            for candidate in around.chain(random) {
-                rows.push(r);
-                candidates.push(candidate as u16);
-                labels.push(candidate < target);
-            }
-        }
-        let x_bits = x.bits();
-        let inputs = joined_columns(x, &rows, &thermometer, &candidates);
-        let mut targets = vec![0u64; inputs.words];
-        for (s, &label) in labels.iter().enumerate() {
-            targets[s / 64] |= u64::from(label) << (s % 64);
-        }
-        let spec = TreeSpec {
-            inputs: inputs.bits,
-            ..*spec
-        };
-        let mut tree = Tree::new(&spec, &mut rng);
-        let samples = Samples {
-            count: inputs.count,
-            words: inputs.words,
-            columns: &inputs.data,
-            targets: &targets,
-        };
-        let log = tree.train_epochs(&samples, epochs, &mut rng);
-        (
-            ThresholdModel {
-                tree,
-                x_bits,
-                thermometer,
-            },
-            log,
-        )
+    let inputs = joined_columns(x, &rows, &thermometer, &candidates);
+    let mut targets = vec![0u64; inputs.words];
+    for (s, &label) in labels.iter().enumerate() {
+        targets[s / 64] |= u64::from(label) << (s % 64);
     }
-
-    /// The predicted level for one row of inputs (packed words of `x_bits`
-    /// bits, zero beyond): binary search for where the predicate turns false.
-    pub fn predict(&self, x_row: &[u64], input: &mut Vec<u64>) -> usize {
-        predict(&[&self.tree], self.x_bits, &self.thermometer, x_row, input)
-    }
-}
-
-/// The level predicted by the majority of `voters` (threshold trees over
-/// `x_bits` input bits and `thermometer`'s candidate) for one row of inputs:
-/// binary search for where the voted predicate turns false. Each tree is
-/// evaluated parsimoniously; `input` is scratch space.
-pub fn predict(
-    voters: &[&Tree],
-    x_bits: usize,
-    thermometer: &Codec,
-    x_row: &[u64],
-    input: &mut Vec<u64>,
-) -> usize {
-    let width = thermometer.width() as usize;
-    input.clear();
-    input.resize((x_bits + width).div_ceil(64), 0);
-    transition(thermometer.levels(), |candidate| {
-        input.fill(0);
-        input[..x_row.len()].copy_from_slice(x_row);
-        // Level k in thermometer code: its first k bits set.
-        for bit in x_bits..x_bits + candidate {
-            input[bit / 64] |= 1 << (bit % 64);
-        }
-        let yes = voters
-            .iter()
-            .filter(|tree| tree.evaluate_parsimonious(input).0)
-            .count();
-        2 * yes > voters.len()
-    })
+    let spec = TreeSpec {
+        inputs: inputs.bits,
+        ..*spec
+    };
+    let mut tree = Tree::new(&spec, &mut rng);
+    let samples = Samples {
+        count: inputs.count,
+        words: inputs.words,
+        columns: &inputs.data,
+        targets: &targets,
+    };
+    let log = train_epochs(&mut tree, &samples, epochs, &mut rng);
+    (tree, log)
 }
 
 /// The candidates each training row is presented with (§6): the levels
@@ -176,7 +108,7 @@ pub fn train_forest(
         .map(|&id| {
             let (y, levels) = targets[id.variable as usize];
             let clock = Instant::now();
-            let (model, epochs_log) = ThresholdModel::train(
+            let (tree, epochs_log) = train_tree(
                 spec,
                 epochs,
                 id.seed(seed),
@@ -190,7 +122,7 @@ pub fn train_forest(
             on_tree_done();
             Trained {
                 id,
-                tree: model.tree,
+                tree,
                 seconds: vec![per_epoch; epochs_log.len()],
                 epochs: epochs_log,
             }
@@ -223,21 +155,7 @@ fn joined_columns(
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn binary_search_finds_the_transition_exactly() {
-        for levels in [2, 3, 64, 214] {
-            for answer in 0..=levels {
-                let mut calls = 0;
-                let found = transition(levels, |y| {
-                    calls += 1;
-                    y < answer
-                });
-                assert_eq!(found, answer, "L = {levels}");
-                assert!(calls <= (levels as f64).log2().ceil() as usize + 1);
-            }
-        }
-    }
+    use alnlab_aln::threshold::predict;
 
     #[test]
     fn a_threshold_tree_learns_the_successor() {
@@ -257,13 +175,18 @@ mod tests {
             initial_spread: 1,
         };
         // Rows 0..400 train (y has 400 entries), rows 400..600 test.
-        let (model, log) = ThresholdModel::train(&spec, 20, 5, &x_bits, &y[..400], levels, 2, 2);
+        let (tree, log) = train_tree(&spec, 20, 5, &x_bits, &y[..400], levels, 2, 2);
         let mut input = Vec::new();
         let errors: Vec<usize> = (400..600)
             .map(|r| {
-                model
-                    .predict(x_bits.row(r), &mut input)
-                    .abs_diff(usize::from(y[r]))
+                predict(
+                    &[&tree],
+                    x_bits.bits(),
+                    &thermometer,
+                    x_bits.row(r),
+                    &mut input,
+                )
+                .abs_diff(usize::from(y[r]))
             })
             .collect();
         let mean = errors.iter().sum::<usize>() as f64 / errors.len() as f64;

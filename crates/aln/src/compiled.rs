@@ -326,15 +326,15 @@ fn emit(tree: &Pruned, g: usize, need: &[u32], code: &mut Vec<u32>) {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::tree::{Scratch, Tree, TreeSpec};
+    use crate::tree::{Function, Scratch, Tree, TreeSpec};
     use rand::{RngExt, SeedableRng};
     use rand_chacha::ChaCha8Rng;
 
-    /// Random trees of 2 to 512 leaves, trained a little so that their
-    /// functions are not just the initial ones, with 64·BLOCK + 5 samples.
+    /// Random trees of 2 to 512 leaves, each node's function drawn
+    /// uniformly, with 64·BLOCK + 5 samples.
     fn cases() -> Vec<(Tree, Vec<Vec<u64>>)> {
         let mut rng = ChaCha8Rng::seed_from_u64(3);
-        let mut scratch = Scratch::default();
+        let functions = [Function::And, Function::Left, Function::Right, Function::Or];
         (0..40)
             .map(|case| {
                 let spec = TreeSpec {
@@ -343,13 +343,14 @@ mod tests {
                     counter_bound: 7,
                     initial_spread: 1,
                 };
-                let mut tree = Tree::new(&spec, &mut rng);
+                let leaves = Tree::new(&spec, &mut rng).literals().to_vec();
+                let nodes: Vec<Function> = (1..spec.leaves)
+                    .map(|_| functions[rng.random_range(0..4)])
+                    .collect();
+                let tree = Tree::from_functions(&nodes, leaves, spec.counter_bound);
                 let samples: Vec<Vec<u64>> = (0..64 * BLOCK + 5)
                     .map(|_| vec![rng.random::<u64>(), rng.random::<u64>()])
                     .collect();
-                for s in &samples[..64] {
-                    tree.train(s, rng.random(), &mut scratch);
-                }
                 (tree, samples)
             })
             .collect()

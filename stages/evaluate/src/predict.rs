@@ -9,13 +9,14 @@
 
 use std::time::Instant;
 
-use alnlab_quantize::bits::{BitMatrix, encode};
-use alnlab_quantize::codes::{Code, Codec};
-use alnlab_train::ModelKind;
-use alnlab_train::forest::{Columns, Predictor};
-use alnlab_train::model::Model;
-use alnlab_train::threshold;
-use alnlab_train::tree::Tree;
+use alnlab_aln::ModelKind;
+use alnlab_aln::forest::Predictor;
+use alnlab_aln::model::Model;
+use alnlab_aln::threshold;
+use alnlab_aln::tree::Tree;
+use alnlab_codes::bits::Columns;
+use alnlab_codes::bits::{BitMatrix, encode};
+use alnlab_codes::codes::{Code, Codec};
 use rayon::prelude::*;
 
 use crate::baseline::Linear;
@@ -271,11 +272,11 @@ pub fn linear(model: &Linear, x: &[Vec<u16>], levels: &[usize]) -> (Vec<Vec<u16>
 #[cfg(test)]
 mod tests {
     use super::*;
-    use alnlab_quantize::walk::WalkSpec;
-    use alnlab_train::forest::{self, Columns};
-    use alnlab_train::model::Header;
-    use alnlab_train::shard::Shard;
-    use alnlab_train::tree::TreeSpec;
+    use alnlab_aln::model::Header;
+    use alnlab_aln::shard::Shard;
+    use alnlab_aln::tree::TreeSpec;
+    use alnlab_codes::walk::WalkSpec;
+    use alnlab_train::forest;
 
     /// A forest (vote 3) trained on y = x + 1 over 64 walk-coded levels, and
     /// its codec.

@@ -9,10 +9,10 @@
 use std::collections::{BTreeMap, HashMap};
 use std::time::Instant;
 
+use alnlab_codes::Entry;
 use alnlab_common::state_log::StateFrame;
 use alnlab_common::{Error, Result};
-use alnlab_quantize::Entry;
-use alnlab_simulate::replay::{Replayer, SceneReplay};
+use alnlab_physics::replay::{Replayer, SceneReplay};
 
 use crate::predict::Timing;
 use crate::rollout::{LoggedFrames, Start};

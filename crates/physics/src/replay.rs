@@ -14,7 +14,11 @@ use std::collections::BTreeMap;
 use alnlab_common::state_log::{StateFrame, StateLog};
 use alnlab_common::{Error, Result};
 
-use crate::{Prepared, Runner, SCENE_RECORD, Scene, state_from_generalized};
+use crate::{Prepared, Runner, Scene, state_from_generalized};
+
+/// Name of the metadata records holding what re-simulates each scene: its
+/// resolved parameters, its index and the experiment seed.
+pub const SCENE_RECORD: &str = "alnlab.scene";
 
 /// The `alnlab.scene` record of a scene.
 pub fn scene_record(scene: &Scene, index: usize, seed: u64) -> BTreeMap<String, String> {
@@ -130,60 +134,5 @@ impl Replayer<'_> {
         next.frame = from.frame + 1;
         next.time = f64::from(next.frame) * p.scene.frame_dt.get();
         Ok(())
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use crate::{Params, TRAJECTORY_FILE};
-    use alnlab_common::{Provenance, Silent};
-
-    #[test]
-    fn at_the_logged_step_a_replayed_frame_is_the_next_logged_frame() {
-        let dir = tempfile::tempdir().unwrap();
-        let scene: Scene =
-            toml::from_str("name = \"worm\"\nkind = \"worm\"\nruns = 1\nduration = 3.0").unwrap();
-        let params = Params {
-            scene: vec![scene.resolve()],
-            ..Params::default()
-        };
-        let provenance = Provenance {
-            stage: "simulate".into(),
-            params: serde_json::Value::Null,
-            inputs: Default::default(),
-        };
-        crate::run(&params, 7, &provenance, dir.path(), &Silent).unwrap();
-        let log = StateLog::read(&dir.path().join(TRAJECTORY_FILE)).unwrap();
-        let replays = SceneReplay::from_log(&log).unwrap();
-        let worm = &replays["worm"];
-        let mut replayer = worm.replayer();
-        let frames = &log.scenes[0].frames;
-        let steps = worm.prepared.scene.steps_per_frame();
-        let mut next = frames[0].clone();
-        let mut worst = 0f64;
-        for pair in frames.windows(2) {
-            replayer.next_frame(&pair[0], steps, &mut next).unwrap();
-            assert_eq!((next.run, next.frame), (pair[1].run, pair[1].frame));
-            for (a, b) in next.state.iter().zip(&pair[1].state) {
-                worst = worst.max((a - b).abs() / b.abs().max(1.0));
-            }
-        }
-        eprintln!("replayed frames at the logged dt: worst state difference {worst:e}");
-        assert!(worst < 1e-9, "{worst:e}");
-        // Coarser steps give another (finite) frame; going back in time
-        // starts the run's controller again, to the same frame as before.
-        replayer.next_frame(&frames[100], 2, &mut next).unwrap();
-        let first = next.clone();
-        replayer.next_frame(&frames[50], 2, &mut next).unwrap();
-        replayer.next_frame(&frames[100], 2, &mut next).unwrap();
-        assert_eq!(next, first);
-        let coarse = next
-            .state
-            .iter()
-            .zip(&frames[101].state)
-            .map(|(a, b)| (a - b).abs())
-            .fold(0.0, f64::max);
-        assert!(coarse > 0.0 && coarse.is_finite(), "{coarse}");
     }
 }

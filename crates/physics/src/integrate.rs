@@ -5,9 +5,21 @@
 
 use nalgebra::{Quaternion, UnitQuaternion, Vector3, Vector6};
 
-use crate::Integrator;
+use serde::{Deserialize, Serialize};
+
 use crate::dynamics::{Derivative, Kinematics, State, Workspace};
 use crate::model::Model;
+
+/// The numerical integrator.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Integrator {
+    /// Velocities first, then positions with the new velocities.
+    #[default]
+    SemiImplicitEuler,
+    /// Classical fourth-order Runge–Kutta.
+    Rk4,
+}
 
 /// The forces acting at one instant: fills the hinge torques and the external
 /// spatial forces (link frame, at the hinge; gravity excluded) for a state

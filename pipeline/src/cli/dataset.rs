@@ -1,15 +1,85 @@
-//! What each `alnlab dataset` subcommand does, on top of [`crate::dataset`].
+//! `alnlab dataset …`: the subcommands and what each does, on top of
+//! [`crate::dataset`].
 
 use std::path::{Path, PathBuf};
 
 use alnlab_common::{Error, Result};
 
-use crate::cli::DatasetCommand;
 use crate::dataset::{
     Archive, BASE_ROLES, DatasetProvenance, Entry, LEVEL_ROLES, Source, check_name,
 };
 use crate::report::read_record;
 use crate::run::VariantRecord;
+use clap::Subcommand;
+
+/// The `alnlab dataset` subcommands.
+#[derive(Debug, Subcommand)]
+pub enum DatasetCommand {
+    /// Archive a run's trajectory log, statistics and pairs (with
+    /// --with-levels also its codebook and levels) as a new version of NAME;
+    /// content already archived is stored once.
+    #[command(after_help = "Example:
+  alnlab dataset archive --run runs/quickstart --variant walk --name worm-small")]
+    Archive {
+        /// The run's folder, `<out>/<experiment>`, holding run.json.
+        #[arg(long)]
+        run: PathBuf,
+        /// The variant whose data to archive (needed when the run has several).
+        #[arg(long)]
+        variant: Option<String>,
+        /// The dataset's name: letters, digits, `-`, `_`.
+        #[arg(long)]
+        name: String,
+        /// Also archive the quantize outputs; a run on the dataset then
+        /// starts at train.
+        #[arg(long)]
+        with_levels: bool,
+    },
+    /// List the archived datasets.
+    #[command(after_help = "Example:
+  alnlab dataset list")]
+    List,
+    /// Show one dataset's catalog entry: files, hashes, provenance.
+    #[command(after_help = "Example:
+  alnlab dataset show worm-small@1")]
+    Show {
+        /// NAME (latest version), NAME@VERSION or a sha256 prefix.
+        dataset: String,
+    },
+    /// Re-hash every file of one dataset, or of all; exit code 1 if any is
+    /// damaged, naming the dataset, the file and both hashes.
+    #[command(after_help = "Examples:
+  alnlab dataset verify
+  alnlab dataset verify worm-small@1")]
+    Verify {
+        /// NAME, NAME@VERSION or a sha256 prefix; all datasets if left out.
+        dataset: Option<String>,
+    },
+    /// Copy a dataset's files into a folder, verifying them first.
+    #[command(after_help = "Example:
+  alnlab dataset restore worm-small@1 --to /tmp/worm-small")]
+    Restore {
+        /// NAME, NAME@VERSION or a sha256 prefix.
+        dataset: String,
+        /// The folder to copy the files into.
+        #[arg(long)]
+        to: PathBuf,
+    },
+    /// Remove one dataset version, and the files no other version uses.
+    /// Refuses while a manifest in experiments/ uses it, unless --force.
+    #[command(after_help = "Example:
+  alnlab dataset remove worm-small@1")]
+    Remove {
+        /// NAME@VERSION or a sha256 prefix.
+        dataset: String,
+        /// Remove it even if a manifest uses it.
+        #[arg(long)]
+        force: bool,
+        /// The folder of manifests to check for users of the dataset.
+        #[arg(long, default_value = "experiments")]
+        experiments: PathBuf,
+    },
+}
 
 /// Runs one `alnlab dataset` subcommand on the archive in `datasets`.
 pub fn execute(datasets: &Path, command: DatasetCommand) -> Result<()> {

@@ -29,16 +29,14 @@ pub enum Code {
 }
 
 impl Code {
-    /// The code's name as in manifests.
-    pub fn name(self) -> &'static str {
-        match self {
-            Code::Binary => "binary",
-            Code::Gray => "gray",
-            Code::Walk => "walk",
-            Code::Thermometer => "thermometer",
-        }
-    }
+    /// Every code.
+    pub const ALL: [Code; 4] = [Code::Binary, Code::Gray, Code::Walk, Code::Thermometer];
 }
+
+// A code's name is its serde name, as in manifests: one mapping for the
+// manifest, the codebook file and every message.
+serde_plain::derive_display_from_serialize!(Code);
+serde_plain::derive_fromstr_from_deserialize!(Code);
 
 /// Bits needed for L levels in binary: ⌈log₂ L⌉ (at least 1).
 pub fn binary_width(levels: usize) -> u32 {

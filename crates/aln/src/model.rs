@@ -18,13 +18,26 @@
 use std::io::Write;
 use std::path::Path;
 
+use alnlab_codes::Codec;
 use alnlab_common::{Error, Result, atomic};
 use serde::{Deserialize, Serialize};
 
-use crate::ModelKind;
 use crate::forest::TreeId;
 use crate::shard::Shard;
 use crate::tree::{Function, Tree};
+
+/// Which model the trees make up (DESIGN.md §5).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum ModelKind {
+    /// One tree per output bit of every learned variable, decoded by the
+    /// variable's code (§4.3).
+    #[default]
+    BitForest,
+    /// One tree per output variable computing [y < f(x)] over the inputs
+    /// and a thermometer-coded candidate y; y found by binary search (§6).
+    Threshold,
+}
 
 /// The file's magic bytes.
 pub const MAGIC: &[u8; 16] = b"ALNLAB-MODEL\0\0\0\0";
@@ -55,6 +68,45 @@ pub struct Header {
     /// the trees [`Shard::owns`]. Absent from whole models.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub shard: Option<Shard>,
+}
+
+impl Header {
+    /// Checks that the model fits the learned variables and their codecs it
+    /// is to be evaluated with: the same variables in the same order, as
+    /// many input bits as the codes are wide together, and each output as
+    /// wide as its code (a bit-forest) or as its candidate's thermometer
+    /// code, levels − 1 (a threshold model). On a mismatch, what differs.
+    pub fn check_fits(&self, learned: &[(&str, &Codec)]) -> std::result::Result<(), String> {
+        let names: Vec<&str> = learned.iter().map(|(n, _)| *n).collect();
+        let outputs: Vec<&str> = self.outputs.iter().map(|(n, _)| n.as_str()).collect();
+        if names != outputs {
+            return Err(format!(
+                "predicts {outputs:?}, but the codebook learns {names:?}"
+            ));
+        }
+        let inputs: usize = learned.iter().map(|(_, c)| c.width() as usize).sum();
+        if self.inputs != inputs {
+            return Err(format!(
+                "reads {} input bits, but the codebook's codes are {inputs} bits wide together",
+                self.inputs
+            ));
+        }
+        for ((name, codec), (_, width)) in learned.iter().zip(&self.outputs) {
+            let expected = match self.model {
+                ModelKind::BitForest => codec.width() as usize,
+                ModelKind::Threshold => codec.levels() - 1,
+            };
+            if *width != expected {
+                return Err(format!(
+                    "`{name}`: the model's output is {width} bits wide, but the codebook's \
+                     {} code of {} levels makes it {expected}",
+                    codec.code(),
+                    codec.levels()
+                ));
+            }
+        }
+        Ok(())
+    }
 }
 
 /// A model: its header and its trees.
@@ -438,5 +490,37 @@ mod tests {
                 .to_string()
                 .contains("model format 9")
         );
+    }
+
+    #[test]
+    fn a_model_fits_only_codecs_of_its_widths() {
+        use alnlab_codes::Code;
+        let gray = Codec::new(Code::Gray, 8, None).unwrap(); // 3 bits
+        let binary16 = Codec::new(Code::Binary, 16, None).unwrap(); // 4 bits
+        let mut header = model().header;
+        header.inputs = 6;
+        header.outputs = vec![("a".into(), 3), ("b".into(), 3)];
+        assert_eq!(header.check_fits(&[("a", &gray), ("b", &gray)]), Ok(()));
+        let renamed = header
+            .check_fits(&[("a", &gray), ("c", &gray)])
+            .unwrap_err();
+        assert!(renamed.contains("the codebook learns"), "{renamed}");
+        let wider = header
+            .check_fits(&[("a", &gray), ("b", &binary16)])
+            .unwrap_err();
+        assert!(wider.contains("codes are 7 bits wide"), "{wider}");
+        header.inputs = 7;
+        let output = header
+            .check_fits(&[("a", &gray), ("b", &binary16)])
+            .unwrap_err();
+        assert!(
+            output.contains("`b`") && output.contains("binary code of 16 levels makes it 4"),
+            "{output}"
+        );
+        // A threshold model's outputs are the candidates' thermometer codes.
+        header.model = ModelKind::Threshold;
+        header.inputs = 6;
+        header.outputs = vec![("a".into(), 7), ("b".into(), 7)];
+        assert_eq!(header.check_fits(&[("a", &gray), ("b", &gray)]), Ok(()));
     }
 }

@@ -12,22 +12,22 @@
 //! - `rollout.parquet`: the closed-loop errors ([`rollout`]) per model,
 //!   variable, horizon and start row.
 
-pub mod baseline;
-pub mod predict;
-pub mod resimulate;
-pub mod rollout;
+mod baseline;
+mod predict;
+mod resimulate;
+mod rollout;
 
 use std::path::Path;
 use std::sync::Arc;
 
+use alnlab_aln::model::Model;
+use alnlab_codes::codes::Codec;
+use alnlab_codes::{Codebook, level_column, split_rows};
 use alnlab_common::hash::sha256_file;
 use alnlab_common::params::{self, Count, Fraction, ParamError};
 use alnlab_common::state_log::StateLog;
 use alnlab_common::table::{self, Table};
 use alnlab_common::{Error, Progress, Provenance, Result};
-use alnlab_quantize::codes::Codec;
-use alnlab_quantize::{Codebook, level_column, split_rows};
-use alnlab_train::model::Model;
 use arrow_array::types::UInt16Type;
 use arrow_array::{Array, DictionaryArray, Float64Array, StringArray, UInt16Array, UInt32Array};
 use serde::{Deserialize, Serialize};
@@ -124,19 +124,14 @@ pub fn run(
     let codebook = Codebook::read(codebook_path)?;
     let learned: Vec<_> = codebook.learned().collect();
     let names: Vec<&str> = learned.iter().map(|e| e.variable.as_str()).collect();
-    let outputs: Vec<&str> = model
-        .header
-        .outputs
-        .iter()
-        .map(|(n, _)| n.as_str())
-        .collect();
-    if names != outputs {
-        return Err(Error::bad_file(
-            model_path,
-            format!("predicts {outputs:?}, but the codebook learns {names:?}"),
-        ));
-    }
     let codecs = codebook.learned_codecs(codebook_path)?;
+    let fitted: Vec<(&str, &Codec)> = names.iter().copied().zip(&codecs).collect();
+    model.header.check_fits(&fitted).map_err(|m| {
+        Error::bad_file(
+            model_path,
+            format!("does not fit the codebook {}: {m}", codebook_path.display()),
+        )
+    })?;
     let levels = Table::read(levels_path)?;
     let rows_of = |split: &str| split_rows(&levels, split);
     let column = |side: &str, variable: &str| level_column(&levels, side, variable);
@@ -188,7 +183,7 @@ pub fn run(
         })
         .collect();
     let frames = rollout::LoggedFrames::new(&log, &learned);
-    let replays = alnlab_simulate::replay::SceneReplay::from_log(&log)
+    let replays = alnlab_physics::replay::SceneReplay::from_log(&log)
         .map_err(|m| Error::bad_file(trajectory_path, m))?;
     let resimulated: Vec<resimulate::Resimulated> = params
         .resimulate_steps

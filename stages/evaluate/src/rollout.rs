@@ -7,8 +7,8 @@
 
 use std::collections::HashMap;
 
+use alnlab_codes::Entry;
 use alnlab_common::state_log::{StateFrame, StateLog};
-use alnlab_quantize::Entry;
 
 /// The true levels after each step from a set of start rows.
 pub struct Truth {

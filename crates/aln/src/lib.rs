@@ -1,0 +1,22 @@
+//! Adaptive logic networks as trained models (paper §3, §5, §6; DESIGN.md
+//! §5): the library every stage that reads or evaluates a model uses. The
+//! train stage makes models; the test and summarize stages read them with
+//! this crate alone, never with the trainer.
+//!
+//! - [`tree`]: one ALN — node counters and functions, random initial trees,
+//!   the adaptation step of §3.3 ([`tree::Tree::adapt`]), full and
+//!   parsimonious evaluation, pruning to AND/OR gates.
+//! - [`forest`]: a bit-forest as a [`forest::Predictor`] (majority vote,
+//!   bit-sliced batches, parsimonious single samples).
+//! - [`threshold`]: the §6 predicate, answered by binary search.
+//! - [`model`]: the `model.aln` file and its [`model::ModelKind`].
+//! - [`shard`]: which trees a partial model holds.
+
+mod compiled;
+pub mod forest;
+pub mod model;
+pub mod shard;
+pub mod threshold;
+pub mod tree;
+
+pub use model::{Model, ModelKind};

@@ -1,0 +1,19 @@
+//! The codes of quantization levels (paper §4.2, §4.4, §6; DESIGN.md §4) and
+//! the codebook that names each variable's code: a library the quantize,
+//! train and test stages share, so that no stage reads another stage's code.
+//!
+//! - [`codes`]: binary, Gray, walk and thermometer codes, every decoder
+//!   defined on every bit pattern; [`Codec`] is one variable's code.
+//! - [`walk`]: the seeded random-walk code and its distance guarantee.
+//! - [`bits`]: level columns → packed bit matrices.
+//! - [`codebook`]: `codebook.parquet` read and written, and the columns of
+//!   `levels.parquet`.
+
+pub mod bits;
+pub mod codebook;
+pub mod codes;
+mod near;
+pub mod walk;
+
+pub use codebook::{Codebook, Entry, GROUPS, Quantizer, group_of, level_column, split_rows};
+pub use codes::{Code, Codec};

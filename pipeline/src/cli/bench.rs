@@ -1,0 +1,317 @@
+//! `alnlab bench …`: the benchmarks, each printing its figures or one JSON
+//! object with `--json`.
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use alnlab_common::{Error, Result};
+use clap::Subcommand;
+
+use crate::manifest::Manifest;
+use crate::run::{RunOptions, run};
+
+/// The benchmarks.
+#[derive(Debug, Subcommand)]
+pub enum Bench {
+    /// Time the simulator: ns per step for the worm with and without
+    /// contacts and for free chains of 1 to 64 links, and the simulate
+    /// stage's throughput with MCAP writing. Medians of REPEAT runs, one core.
+    #[command(after_help = "Example:
+  alnlab bench sim --json")]
+    Sim {
+        /// How many timed runs per figure.
+        #[arg(long, default_value_t = 5)]
+        repeat: usize,
+        /// Print one JSON object.
+        #[arg(long)]
+        json: bool,
+    },
+    /// Time quantization and coding: values quantized and walk-encoded into
+    /// a bit matrix per second, and walk nearest-code decodes per second
+    /// (W = 23, L = 214). Medians of REPEAT runs, one core.
+    #[command(after_help = "Example:
+  alnlab bench quantize --json")]
+    Quantize {
+        /// How many timed runs per figure.
+        #[arg(long, default_value_t = 5)]
+        repeat: usize,
+        /// Print one JSON object.
+        #[arg(long)]
+        json: bool,
+    },
+    /// Time ALN training at the paper's scale (8192 leaves, 10 epochs, 1000
+    /// samples, 23-bit walk codes, all cores) twice: on paper-shaped data
+    /// (64 variables: 1472 trees over 1472 input bits), and on the worm
+    /// simulated and quantized by the stages (its 57 learned variables:
+    /// 1311 trees; the `worm` object of `--json`).
+    #[command(after_help = "Example:
+  alnlab bench train --json")]
+    Train {
+        /// Print one JSON object.
+        #[arg(long)]
+        json: bool,
+    },
+    /// Time the summarize stage on 10⁷ errors (3 models × 64 variables ×
+    /// 52 084 rows): reading predictions.parquet, the statistics, writing
+    /// summary.parquet.
+    #[command(after_help = "Example:
+  alnlab bench summarize --json")]
+    Summarize {
+        /// Print one JSON object.
+        #[arg(long)]
+        json: bool,
+    },
+    /// Time full-state prediction at the paper's scale: all 1472 trees and
+    /// the decoding, bit-sliced in batches and one sample at a time
+    /// (parsimonious), with the fraction of nodes evaluated.
+    #[command(after_help = "Example:
+  alnlab bench predict --json")]
+    Predict {
+        /// Print one JSON object.
+        #[arg(long)]
+        json: bool,
+    },
+    /// Time sharded training: the manifest's forest trained in one process
+    /// (all cores) against SHARDS processes of `train --shard K/N` side by
+    /// side (each given its share of the cores) and the merge; checks the
+    /// merged model equals the in-process one byte for byte.
+    #[command(after_help = "Example:
+  alnlab bench shards experiments/paper.toml --shards 2 --json")]
+    Shards {
+        /// The experiment manifest (its data are made in a temporary folder).
+        #[arg(default_value = "experiments/paper.toml")]
+        manifest: PathBuf,
+        /// The variant (default: the first).
+        #[arg(long)]
+        variant: Option<String>,
+        /// Training processes.
+        #[arg(long, default_value_t = 2, value_parser = clap::value_parser!(u32).range(1..=64))]
+        shards: u32,
+        /// Print one JSON object.
+        #[arg(long)]
+        json: bool,
+    },
+    /// Time a fully cached `run` of a manifest (the no-op re-run).
+    ///
+    /// Runs the manifest once to fill the cache, then times REPEAT re-runs
+    /// that find everything cached, and reports the median.
+    #[command(after_help = "Example:
+  alnlab bench cache experiments/quickstart.toml --json")]
+    Cache {
+        /// The experiment manifest.
+        #[arg(default_value = "experiments/quickstart.toml")]
+        manifest: PathBuf,
+        /// Output folder for the cache.
+        #[arg(long, default_value = "runs")]
+        out: PathBuf,
+        /// How many cached re-runs to time.
+        #[arg(long, default_value_t = 10)]
+        repeat: usize,
+        /// Print one JSON object.
+        #[arg(long)]
+        json: bool,
+    },
+}
+
+/// Runs one benchmark.
+pub fn execute(bench: Bench, quiet: bool) -> Result<()> {
+    match bench {
+        Bench::Cache {
+            manifest,
+            out,
+            repeat,
+            json,
+        } => bench_cache(&manifest, out, repeat.max(1), json, quiet),
+        Bench::Shards {
+            manifest,
+            variant,
+            shards,
+            json,
+        } => {
+            let variant = match variant {
+                Some(v) => v,
+                None => Manifest::load(&manifest)?.variants[0].name.clone(),
+            };
+            let figures = crate::bench::shards(&manifest, &variant, shards)?;
+            print_figures(&figures, json, |f| {
+                println!(
+                    "{} trees: in-process {:.2} s; {} processes {:.2} s + merge {:.2} s = {:.2}× \
+                     ({})",
+                    f.trees,
+                    f.in_process_seconds,
+                    f.shards,
+                    f.processes_seconds,
+                    f.merge_seconds,
+                    f.ratio,
+                    if f.identical {
+                        "merged model identical"
+                    } else {
+                        "MERGED MODEL DIFFERS"
+                    }
+                )
+            });
+            if figures.identical {
+                Ok(())
+            } else {
+                Err(Error::Invalid("bench: the merged model differs".into()))
+            }
+        }
+        Bench::Summarize { json } => {
+            let figures = alnlab_summarize::bench::run()?;
+            print_figures(&figures, json, |figures| {
+                println!(
+                    "summarize: {:.3} s for {} errors ({:.3e} errors/s)",
+                    figures.seconds, figures.errors, figures.errors_per_s
+                );
+            });
+            Ok(())
+        }
+        Bench::Train { json } => {
+            let figures = alnlab_train::bench::train();
+            let worm = crate::bench::worm_training()?;
+            if json {
+                let mut value = serde_json::to_value(&figures).expect("figures serialize");
+                value["worm"] = serde_json::to_value(&worm).expect("figures serialize");
+                println!("{value}");
+            } else {
+                println!(
+                    "paper-shaped data:  {:5.1} s for {} trees on {} threads ({:.3e} node updates/s)",
+                    figures.seconds, figures.trees, figures.threads, figures.node_updates_per_s
+                );
+                println!(
+                    "worm (simulated):   {:5.1} s for {} trees on {} threads ({:.3e} node updates/s)",
+                    worm.seconds, worm.trees, worm.threads, worm.node_updates_per_s
+                );
+            }
+            Ok(())
+        }
+        Bench::Predict { json } => {
+            let figures = alnlab_train::bench::predict();
+            print_figures(&figures, json, |figures| {
+                println!(
+                    "batched (bit-sliced):     {:10.0} ns per state on {} threads, of which decoding {:.0} ns",
+                    figures.batched_ns_per_state, figures.threads, figures.decode_ns_per_state
+                );
+                println!(
+                    "batched, one thread:      {:10.0} ns per state",
+                    figures.batched_one_thread_ns_per_state
+                );
+                println!(
+                    "single (parsimonious):    {:10.0} ns per state, {:.0} leaves tested",
+                    figures.single_ns_per_state, figures.leaves_tested_per_state
+                );
+                println!(
+                    "nodes evaluated:          {:.4} of all (estimate ½·(3/4)^13 = {:.4})",
+                    figures.nodes_evaluated_fraction, figures.estimated_fraction
+                );
+            });
+            Ok(())
+        }
+        Bench::Quantize { repeat, json } => {
+            let figures = alnlab_quantize::bench::run(repeat.max(1));
+            print_figures(&figures, json, |figures| {
+                println!(
+                    "quantize + encode: {:12.0} values/s",
+                    figures.quantize_encode_values_per_s
+                );
+                println!(
+                    "walk decode:       {:12.0} decodes/s",
+                    figures.walk_decodes_per_s
+                );
+            });
+            Ok(())
+        }
+        Bench::Sim { repeat, json } => {
+            let figures = alnlab_simulate::bench::run(repeat.max(1))?;
+            print_figures(&figures, json, |figures| {
+                println!(
+                    "worm without contacts: {:8.0} ns/step",
+                    figures.worm_no_contact_ns_per_step
+                );
+                println!(
+                    "worm with contacts:    {:8.0} ns/step",
+                    figures.worm_contact_ns_per_step
+                );
+                for (links, ns) in &figures.chain_ns_per_step {
+                    println!("free chain, {links:2} links: {ns:8.0} ns/step");
+                }
+                println!(
+                    "simulate stage:        {:8.0} steps/s",
+                    figures.stage_steps_per_s
+                );
+            });
+            Ok(())
+        }
+    }
+}
+
+/// Prints a benchmark's figures: one JSON object with `--json`, else as
+/// `text` words them.
+fn print_figures<T: serde::Serialize>(figures: &T, json: bool, text: impl FnOnce(&T)) {
+    if json {
+        println!(
+            "{}",
+            serde_json::to_string(figures).expect("figures serialize")
+        );
+    } else {
+        text(figures);
+    }
+}
+
+fn bench_cache(
+    manifest: &Path,
+    out: PathBuf,
+    repeat: usize,
+    json: bool,
+    quiet: bool,
+) -> Result<()> {
+    let options = RunOptions {
+        out,
+        force: false,
+        variant: None,
+        quiet,
+        datasets: PathBuf::from("datasets"),
+        until: None,
+    };
+    let warm = Manifest::load(manifest)?;
+    run(&warm, &options)?;
+    let mut seconds = Vec::with_capacity(repeat);
+    for _ in 0..repeat {
+        let clock = Instant::now();
+        // Everything a cached `alnlab run` does after process start.
+        let manifest = Manifest::load(manifest)?;
+        let record = run(&manifest, &options)?;
+        seconds.push(clock.elapsed().as_secs_f64());
+        if record
+            .variants
+            .iter()
+            .flat_map(|v| &v.stages)
+            .any(|s| !s.cached)
+        {
+            return Err(Error::Invalid(
+                "a stage re-ran although nothing changed".into(),
+            ));
+        }
+    }
+    seconds.sort_by(f64::total_cmp);
+    let median = seconds[seconds.len() / 2];
+    if json {
+        println!(
+            "{}",
+            serde_json::json!({
+                "manifest": manifest.display().to_string(),
+                "repeat": repeat,
+                "cached_run_median_s": median,
+                "cached_run_max_s": seconds[seconds.len() - 1],
+            })
+        );
+    } else {
+        println!(
+            "cached re-run of {}: median {:.1} ms, max {:.1} ms over {repeat} runs",
+            manifest.display(),
+            median * 1e3,
+            seconds[seconds.len() - 1] * 1e3
+        );
+    }
+    Ok(())
+}

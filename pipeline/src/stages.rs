@@ -1,0 +1,381 @@
+//! The stage table: every stage of the graph, in order, with what the
+//! pipeline needs to know of it — its format version, what it reads (by role,
+//! and which stage's artifact holds that role), the files it writes, how its
+//! parameters resolve and are checked, how it runs, and what a workflow
+//! engine should give it. The run graph (`run`), the stage-alone
+//! subcommands (`cli::stage`), the manifest checks (`manifest`) and the
+//! Snakemake export (`export`) are all driven by [`STAGES`]: adding a stage
+//! is a new crate and one entry here.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+use alnlab_aln::shard::Shard;
+use alnlab_common::params::ParamError;
+use alnlab_common::{Progress, Provenance, Result};
+use serde::Serialize;
+
+use crate::manifest::Stages;
+
+/// One stage of the graph.
+pub struct Stage {
+    /// Its name: the manifest table, the cache folder, the subcommand.
+    pub name: &'static str,
+    /// One line on what it does (the subcommand's help).
+    pub about: &'static str,
+    /// Version of what it writes; part of every cache key.
+    pub format_version: u32,
+    /// What it reads.
+    pub inputs: &'static [Input],
+    /// What it writes: (role, file name).
+    pub outputs: &'static [(&'static str, &'static str)],
+    /// Whether an archived dataset stands for it.
+    pub archived: Archived,
+    /// Its resolved parameter table, as it enters the cache key (`null` for
+    /// a stage without parameters).
+    pub params: fn(&Stages) -> serde_json::Value,
+    /// Checks relations between its parameters; an error names the key.
+    pub validate: fn(&Stages) -> std::result::Result<(), ParamError>,
+    /// Runs it.
+    pub run: fn(&Call) -> Result<()>,
+    /// For a stage that can run in shards: joins a complete set of shard
+    /// folders into the stage's output folder.
+    pub merge_shards: Option<MergeShards>,
+    /// Resources a workflow engine should give one job of it.
+    pub hints: Hints,
+}
+
+/// Joins the folders of a complete set of shards, written with the
+/// provenance given, into one output folder.
+pub type MergeShards = fn(&[PathBuf], &Provenance, &Path) -> Result<()>;
+
+/// One input of a stage.
+pub struct Input {
+    /// The role, as the producing stage names its output (`trajectory`, …).
+    pub role: &'static str,
+    /// The stage whose artifact holds it.
+    pub from: &'static str,
+}
+
+/// When an archived dataset (`[data] dataset`) stands for a stage.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Archived {
+    /// Never: the stage always runs.
+    Never,
+    /// Always: the dataset holds its outputs.
+    Always,
+    /// When the dataset was archived with its levels (`--with-levels`).
+    WithLevels,
+}
+
+/// Resource hints per job: cores, memory (MB), run time (minutes), and
+/// whether the stage holds a whole forest in memory (its memory then grows
+/// with the forest).
+#[derive(Clone, Copy, Debug)]
+pub struct Hints {
+    pub threads: u32,
+    pub mem_mb: u64,
+    pub runtime: u32,
+    pub holds_forest: bool,
+}
+
+/// What a stage is run with.
+pub struct Call<'a> {
+    /// The variant's resolved parameters (each stage takes its own table).
+    pub stages: &'a Stages,
+    /// The experiment seed.
+    pub seed: u64,
+    /// Every input by role.
+    pub inputs: BTreeMap<&'static str, PathBuf>,
+    /// The shard to train (the train stage; [`Shard::ALL`] otherwise).
+    pub shard: Shard,
+    /// What the outputs carry as provenance.
+    pub provenance: &'a Provenance,
+    /// The folder to write into.
+    pub out_dir: &'a Path,
+    pub progress: &'a dyn Progress,
+}
+
+impl Call<'_> {
+    /// The path of input `role` (the table guarantees it is there).
+    fn input(&self, role: &str) -> &Path {
+        &self.inputs[role]
+    }
+}
+
+fn json(params: &impl Serialize) -> serde_json::Value {
+    serde_json::to_value(params).expect("parameters serialize")
+}
+
+/// The stages, in the order they run.
+pub const STAGES: &[Stage] = &[
+    Stage {
+        name: "simulate",
+        about: "Run the simulate stage alone: write trajectory.mcap and stats.parquet",
+        format_version: alnlab_simulate::FORMAT_VERSION,
+        inputs: &[],
+        outputs: &[
+            ("trajectory", alnlab_simulate::TRAJECTORY_FILE),
+            ("stats", alnlab_simulate::STATS_FILE),
+        ],
+        archived: Archived::Always,
+        params: |s| json(&s.simulate),
+        validate: |s| s.simulate.validate(),
+        run: |c| {
+            let params = &c.stages.simulate;
+            alnlab_simulate::run(params, c.seed, c.provenance, c.out_dir, c.progress)
+        },
+        merge_shards: None,
+        hints: Hints {
+            threads: 2,
+            mem_mb: 2048,
+            runtime: 60,
+            holds_forest: false,
+        },
+    },
+    Stage {
+        name: "stride",
+        about: "Run the stride stage alone: pair every n-th frame with its successor",
+        format_version: alnlab_stride::FORMAT_VERSION,
+        inputs: &[Input {
+            role: "trajectory",
+            from: "simulate",
+        }],
+        outputs: &[("pairs", alnlab_stride::PAIRS_FILE)],
+        archived: Archived::Always,
+        params: |s| json(&s.stride),
+        validate: |s| s.stride.validate(),
+        run: |c| {
+            let trajectory = c.input("trajectory");
+            let params = &c.stages.stride;
+            alnlab_stride::run(
+                params,
+                c.seed,
+                trajectory,
+                c.provenance,
+                c.out_dir,
+                c.progress,
+            )
+        },
+        merge_shards: None,
+        hints: Hints {
+            threads: 1,
+            mem_mb: 1024,
+            runtime: 10,
+            holds_forest: false,
+        },
+    },
+    Stage {
+        name: "quantize",
+        about: "Run the quantize stage alone: ranges, levels and codes per variable",
+        format_version: alnlab_quantize::FORMAT_VERSION,
+        inputs: &[
+            Input {
+                role: "pairs",
+                from: "stride",
+            },
+            Input {
+                role: "stats",
+                from: "simulate",
+            },
+        ],
+        outputs: &[
+            ("codebook", alnlab_quantize::CODEBOOK_FILE),
+            ("levels", alnlab_quantize::LEVELS_FILE),
+        ],
+        archived: Archived::WithLevels,
+        params: |s| json(&s.quantize),
+        validate: |s| s.quantize.validate(),
+        run: |c| {
+            alnlab_quantize::run(
+                &c.stages.quantize,
+                c.seed,
+                c.input("pairs"),
+                c.input("stats"),
+                c.provenance,
+                c.out_dir,
+                c.progress,
+            )
+        },
+        merge_shards: None,
+        hints: Hints {
+            threads: 1,
+            mem_mb: 1024,
+            runtime: 10,
+            holds_forest: false,
+        },
+    },
+    Stage {
+        name: "train",
+        about: "Run the train stage alone: an ALN forest over the training rows",
+        format_version: alnlab_train::FORMAT_VERSION,
+        inputs: &[
+            Input {
+                role: "codebook",
+                from: "quantize",
+            },
+            Input {
+                role: "levels",
+                from: "quantize",
+            },
+        ],
+        outputs: &[
+            ("model", alnlab_train::MODEL_FILE),
+            ("training", alnlab_train::TRAINING_FILE),
+        ],
+        archived: Archived::Never,
+        params: |s| json(&s.train),
+        validate: |s| s.train.validate(),
+        run: |c| {
+            alnlab_train::run(
+                &c.stages.train,
+                c.seed,
+                c.shard,
+                c.input("codebook"),
+                c.input("levels"),
+                c.provenance,
+                c.out_dir,
+                c.progress,
+            )
+        },
+        merge_shards: Some(alnlab_train::shard::merge),
+        hints: Hints {
+            threads: 2,
+            mem_mb: 1024,
+            runtime: 120,
+            holds_forest: true,
+        },
+    },
+    Stage {
+        name: "test",
+        about: "Run the test stage alone: the model's predictions for every test row, beside the \
+                persistence, linear and simulator baselines, their timings, and closed-loop \
+                rollouts",
+        format_version: alnlab_evaluate::FORMAT_VERSION,
+        inputs: &[
+            Input {
+                role: "trajectory",
+                from: "simulate",
+            },
+            Input {
+                role: "model",
+                from: "train",
+            },
+            Input {
+                role: "codebook",
+                from: "quantize",
+            },
+            Input {
+                role: "levels",
+                from: "quantize",
+            },
+        ],
+        outputs: &[
+            ("predictions", alnlab_evaluate::PREDICTIONS_FILE),
+            ("timings", alnlab_evaluate::TIMINGS_FILE),
+            ("rollout", alnlab_evaluate::ROLLOUT_FILE),
+        ],
+        archived: Archived::Never,
+        params: |s| json(&s.test),
+        validate: |s| s.test.validate(),
+        run: |c| {
+            alnlab_evaluate::run(
+                &c.stages.test,
+                c.input("trajectory"),
+                c.input("model"),
+                c.input("codebook"),
+                c.input("levels"),
+                c.provenance,
+                c.out_dir,
+                c.progress,
+            )
+        },
+        merge_shards: None,
+        hints: Hints {
+            threads: 2,
+            mem_mb: 1024,
+            runtime: 60,
+            holds_forest: true,
+        },
+    },
+    Stage {
+        name: "summarize",
+        about: "Run the summarize stage alone: error statistics per model and variable, and \
+                closed-loop error per horizon",
+        format_version: alnlab_summarize::FORMAT_VERSION,
+        inputs: &[
+            Input {
+                role: "predictions",
+                from: "test",
+            },
+            Input {
+                role: "rollout",
+                from: "test",
+            },
+        ],
+        outputs: &[
+            ("summary", alnlab_summarize::SUMMARY_FILE),
+            ("horizons", alnlab_summarize::HORIZONS_FILE),
+        ],
+        archived: Archived::Never,
+        // Summarizing has no parameters of its own.
+        params: |_| serde_json::Value::Null,
+        validate: |_| Ok(()),
+        run: |c| {
+            alnlab_summarize::run(
+                c.input("predictions"),
+                c.input("rollout"),
+                c.provenance,
+                c.out_dir,
+                c.progress,
+            )
+        },
+        merge_shards: None,
+        hints: Hints {
+            threads: 1,
+            mem_mb: 2048,
+            runtime: 10,
+            holds_forest: false,
+        },
+    },
+];
+
+/// The stage called `name`.
+pub fn find(name: &str) -> Option<&'static Stage> {
+    STAGES.iter().find(|s| s.name == name)
+}
+
+/// The names of the stages, in order.
+pub fn names() -> Vec<&'static str> {
+    STAGES.iter().map(|s| s.name).collect()
+}
+
+/// The parameters a stage's cache key and provenance are made of: the
+/// experiment seed and the stage's resolved table.
+pub fn stage_params(seed: u64, params: serde_json::Value) -> serde_json::Value {
+    serde_json::json!({ "seed": seed, "params": params })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_input_comes_from_an_earlier_stage_that_writes_it() {
+        for (k, stage) in STAGES.iter().enumerate() {
+            for input in stage.inputs {
+                let from = STAGES[..k]
+                    .iter()
+                    .find(|s| s.name == input.from)
+                    .unwrap_or_else(|| panic!("{}: no earlier stage {}", stage.name, input.from));
+                assert!(
+                    from.outputs.iter().any(|(role, _)| *role == input.role),
+                    "{}: {} writes no {}",
+                    stage.name,
+                    from.name,
+                    input.role
+                );
+            }
+        }
+    }
+}
