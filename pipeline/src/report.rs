@@ -44,6 +44,7 @@ pub fn render(record: &RunRecord, reports: &Path) -> Result<PathBuf> {
                 timings: artifact("timings")?,
                 training: artifact("training")?,
                 model: artifact("model")?,
+                codebook: artifact("codebook")?,
             })
         })
         .collect::<Result<_>>()?;

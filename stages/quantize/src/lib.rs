@@ -27,7 +27,7 @@ use alnlab_codes::walk::WalkSpec;
 use alnlab_codes::{Codebook, Entry, GROUPS, Quantizer, group_of};
 
 /// Version of what this stage writes (part of every cache key).
-pub const FORMAT_VERSION: u32 = 2;
+pub const FORMAT_VERSION: u32 = 3;
 /// File name of the codebook.
 pub const CODEBOOK_FILE: &str = "codebook.parquet";
 /// File name of the levels table.
@@ -203,6 +203,7 @@ pub fn run(
         }
     }
     let observed = observed_ranges(&stats)?;
+    let scales = group_scales(&observed);
     progress.start("quantize", variables.len() as u64, "variables");
 
     let mut entries = Vec::new();
@@ -254,6 +255,15 @@ pub fn run(
         } else if lo == hi {
             entry.learned = false;
             entry.note = format!("constant ({lo}) in the data");
+        } else if is_round_off(hi - lo, scales[group_of(v)]) {
+            entry.learned = false;
+            entry.note = format!(
+                "constant but for round-off: spread {:.3e} against {:.3e}, the largest magnitude \
+                 of {} in the data",
+                hi - lo,
+                scales[group_of(v)],
+                group_of(v)
+            );
         }
         let codec = entry
             .codec()
@@ -304,6 +314,32 @@ pub fn run(
         &table::batch(batch_columns),
         provenance,
     )
+}
+
+/// A variable whose spread is at most this fraction of its group's scale
+/// (the largest magnitude any variable of the same quantity, and so the same
+/// unit, takes in the data) is constant but for floating-point round-off.
+/// Measured on the committed scenes: round-off spreads are ~1e-14 of the
+/// scale (ω̇ₓ of symmetric links: no torque about a link's own axis), real
+/// ones at least 0.06 — the tolerance sits in between with room either side.
+pub const ROUND_OFF_RELATIVE: f64 = 1e-9;
+/// … or at most this much in SI units, for a quantity that is round-off
+/// throughout (its scale itself is round-off).
+pub const ROUND_OFF_ABSOLUTE: f64 = 1e-12;
+
+/// Whether a spread is round-off for a variable of a group with `scale`.
+fn is_round_off(spread: f64, scale: f64) -> bool {
+    spread <= ROUND_OFF_RELATIVE * scale || spread <= ROUND_OFF_ABSOLUTE
+}
+
+/// The scale of every group: the largest magnitude its variables take.
+fn group_scales<'a>(observed: &BTreeMap<&'a str, (f64, f64)>) -> BTreeMap<&'a str, f64> {
+    let mut scales: BTreeMap<&str, f64> = BTreeMap::new();
+    for (variable, (lo, hi)) in observed {
+        let scale = scales.entry(group_of(variable)).or_default();
+        *scale = scale.max(lo.abs()).max(hi.abs());
+    }
+    scales
 }
 
 /// (min, max) per variable from `stats.parquet`.
@@ -484,6 +520,85 @@ mod tests {
             4,
             "only scene, run, step, split"
         );
+    }
+
+    #[test]
+    fn round_off_is_relative_to_the_group_and_absolute_at_the_floor() {
+        // The pendulum's ω̇ₓ: spread 8.9e-13 against a scale of 125 rad/s².
+        assert!(is_round_off(8.85e-13, 124.9));
+        // The smallest real relative spread in the committed scenes.
+        assert!(!is_round_off(0.06 * 50.0, 50.0));
+        assert!(!is_round_off(1e-7, 1.0));
+        assert!(is_round_off(1e-9, 1.0));
+        // A quantity that is round-off throughout.
+        assert!(is_round_off(5e-13, 5e-13));
+        assert!(!is_round_off(2e-12, 2e-12));
+        let observed = BTreeMap::from([
+            ("omega_dot.1.x", (-1e-13, 1e-13)),
+            ("omega_dot.1.y", (-30.0, 125.0)),
+            ("roll.2", (-3.0, 1.0)),
+            ("pitch.2", (-0.5, 0.5)),
+        ]);
+        let scales = group_scales(&observed);
+        assert_eq!((scales["omega_dot"], scales["R"]), (125.0, 3.0));
+    }
+
+    #[test]
+    fn round_off_variables_of_a_pendulum_are_not_learned() {
+        // A pendulum of symmetric links: no torque about a link's own axis,
+        // so ω̇ₓ is zero but for round-off.
+        let dir = tempfile::tempdir().unwrap();
+        let scene = alnlab_simulate::Scene {
+            name: "pendulum".into(),
+            kind: alnlab_simulate::SceneKind::Pendulum,
+            duration: Positive(2.0),
+            ..Default::default()
+        };
+        let sim = alnlab_simulate::Params {
+            scene: vec![scene],
+            ..Default::default()
+        };
+        alnlab_simulate::run(&sim, 3, &Provenance::default(), dir.path(), &Silent).unwrap();
+        let trajectory = dir.path().join(alnlab_simulate::TRAJECTORY_FILE);
+        let stride = alnlab_stride::Params::default();
+        alnlab_stride::run(
+            &stride,
+            3,
+            &trajectory,
+            &Provenance::default(),
+            dir.path(),
+            &Silent,
+        )
+        .unwrap();
+        quantize(&Params::default(), dir.path()).unwrap();
+        let codebook = Codebook::read(&dir.path().join(CODEBOOK_FILE)).unwrap();
+        let stats = Table::read(&dir.path().join(alnlab_simulate::STATS_FILE)).unwrap();
+        let observed = observed_ranges(&stats).unwrap();
+        let round_off: Vec<&str> = codebook
+            .entries
+            .iter()
+            .filter(|e| e.note.starts_with("constant but for round-off"))
+            .map(|e| e.variable.as_str())
+            .collect();
+        assert_eq!(
+            round_off,
+            ["omega_dot.1.x", "omega_dot.2.x", "omega_dot.3.x"],
+            "{:?}",
+            codebook
+                .entries
+                .iter()
+                .map(|e| (&e.variable, &e.note))
+                .collect::<Vec<_>>()
+        );
+        for v in &round_off {
+            let (lo, hi) = observed[v];
+            assert!(hi > lo && hi - lo < 1e-10, "{v}: spread {}", hi - lo);
+        }
+        // Every variable that moves is learned.
+        for e in codebook.learned() {
+            let (lo, hi) = observed[e.variable.as_str()];
+            assert!(hi - lo > 1e-3, "{}: spread {}", e.variable, hi - lo);
+        }
     }
 
     #[test]

@@ -17,6 +17,7 @@ use std::path::{Path, PathBuf};
 
 use alnlab_aln::ModelKind;
 use alnlab_aln::model::Model;
+use alnlab_codes::Codebook;
 use alnlab_common::table::Table;
 use alnlab_common::{Result, atomic};
 use arrow_array::{Float64Array, UInt32Array, UInt64Array};
@@ -62,6 +63,8 @@ pub struct VariantInfo {
     pub timings: PathBuf,
     pub training: PathBuf,
     pub model: PathBuf,
+    /// The codebook: which variables were learned, and why not the others.
+    pub codebook: PathBuf,
 }
 
 /// One stage of a variant in the run.
@@ -96,6 +99,8 @@ struct Loaded<'a> {
     /// Bytes the trees take in memory while training: two counters per
     /// internal node, a literal per leaf.
     tree_bytes: usize,
+    /// The variables not learned, with the codebook's reason.
+    not_learned: Vec<(String, String)>,
 }
 
 impl Loaded<'_> {
@@ -273,7 +278,14 @@ fn load(info: &VariantInfo) -> Result<Loaded<'_>> {
         .iter()
         .map(|(_, t)| 2 * (t.leaves() - 1) + std::mem::size_of_val(t.literals()))
         .sum();
+    let not_learned = Codebook::read(&info.codebook)?
+        .entries
+        .into_iter()
+        .filter(|e| !e.learned)
+        .map(|e| (e.variable, e.note))
+        .collect();
     Ok(Loaded {
+        not_learned,
         info,
         summary,
         horizons,
@@ -458,6 +470,18 @@ fn variant_section(
     let _ = writeln!(md, "## Variant `{}`\n", v.info.name);
     if !v.info.description.is_empty() {
         let _ = writeln!(md, "{}\n", v.info.description);
+    }
+
+    if !v.not_learned.is_empty() {
+        let _ = writeln!(
+            md,
+            "### Variables not learned\n\nThe data hold them, but they carry nothing to predict; \
+             no model is scored on them.\n\n| variable | why |\n|---|---|"
+        );
+        for (variable, note) in &v.not_learned {
+            let _ = writeln!(md, "| `{variable}` | {note} |");
+        }
+        let _ = writeln!(md);
     }
 
     let _ = writeln!(md, "### Error by group (paper §4.6)\n");
