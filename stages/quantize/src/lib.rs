@@ -372,29 +372,30 @@ mod tests {
     use alnlab_common::params::Positive;
 
     /// Simulates a short worm run and strides it; returns the folder.
-    fn data() -> tempfile::TempDir {
+    /// Simulates `scene` with `seed` and strides it; returns the folder.
+    fn simulated(scene: alnlab_simulate::Scene, seed: u64) -> tempfile::TempDir {
         let dir = tempfile::tempdir().unwrap();
-        let scene = alnlab_simulate::Scene {
-            duration: Positive(3.0),
-            ..Default::default()
-        };
         let sim = alnlab_simulate::Params {
             scene: vec![scene],
             ..Default::default()
         };
-        alnlab_simulate::run(&sim, 5, &Provenance::default(), dir.path(), &Silent).unwrap();
-        let stride = alnlab_stride::Params::default();
+        let provenance = Provenance::default();
+        alnlab_simulate::run(&sim, seed, &provenance, dir.path(), &Silent).unwrap();
         let trajectory = dir.path().join(alnlab_simulate::TRAJECTORY_FILE);
-        alnlab_stride::run(
-            &stride,
-            5,
-            &trajectory,
-            &Provenance::default(),
-            dir.path(),
-            &Silent,
-        )
-        .unwrap();
+        let stride = alnlab_stride::Params::default();
+        alnlab_stride::run(&stride, seed, &trajectory, &provenance, dir.path(), &Silent).unwrap();
         dir
+    }
+
+    /// A short worm run, simulated and strided.
+    fn data() -> tempfile::TempDir {
+        simulated(
+            alnlab_simulate::Scene {
+                duration: Positive(3.0),
+                ..Default::default()
+            },
+            5,
+        )
     }
 
     fn quantize(params: &Params, dir: &Path) -> Result<()> {
@@ -481,28 +482,15 @@ mod tests {
     fn constant_variables_are_not_learned() {
         // Without a controller the hinge torques are absent; make the floor
         // absent too and hold the worm still in zero gravity: nothing moves.
-        let dir = tempfile::tempdir().unwrap();
-        let scene = alnlab_simulate::Scene {
-            kind: alnlab_simulate::SceneKind::Tumbler,
-            initial_spin: Some(0.0),
-            duration: Positive(1.0),
-            ..Default::default()
-        };
-        let sim = alnlab_simulate::Params {
-            scene: vec![scene],
-            ..Default::default()
-        };
-        alnlab_simulate::run(&sim, 1, &Provenance::default(), dir.path(), &Silent).unwrap();
-        let trajectory = dir.path().join(alnlab_simulate::TRAJECTORY_FILE);
-        alnlab_stride::run(
-            &alnlab_stride::Params::default(),
+        let dir = simulated(
+            alnlab_simulate::Scene {
+                kind: alnlab_simulate::SceneKind::Tumbler,
+                initial_spin: Some(0.0),
+                duration: Positive(1.0),
+                ..Default::default()
+            },
             1,
-            &trajectory,
-            &Provenance::default(),
-            dir.path(),
-            &Silent,
-        )
-        .unwrap();
+        );
         quantize(&Params::default(), dir.path()).unwrap();
         let codebook = Codebook::read(&dir.path().join(CODEBOOK_FILE)).unwrap();
         assert_eq!(codebook.learned().count(), 0);
@@ -547,29 +535,15 @@ mod tests {
     fn round_off_variables_of_a_pendulum_are_not_learned() {
         // A pendulum of symmetric links: no torque about a link's own axis,
         // so ω̇ₓ is zero but for round-off.
-        let dir = tempfile::tempdir().unwrap();
-        let scene = alnlab_simulate::Scene {
-            name: "pendulum".into(),
-            kind: alnlab_simulate::SceneKind::Pendulum,
-            duration: Positive(2.0),
-            ..Default::default()
-        };
-        let sim = alnlab_simulate::Params {
-            scene: vec![scene],
-            ..Default::default()
-        };
-        alnlab_simulate::run(&sim, 3, &Provenance::default(), dir.path(), &Silent).unwrap();
-        let trajectory = dir.path().join(alnlab_simulate::TRAJECTORY_FILE);
-        let stride = alnlab_stride::Params::default();
-        alnlab_stride::run(
-            &stride,
+        let dir = simulated(
+            alnlab_simulate::Scene {
+                name: "pendulum".into(),
+                kind: alnlab_simulate::SceneKind::Pendulum,
+                duration: Positive(2.0),
+                ..Default::default()
+            },
             3,
-            &trajectory,
-            &Provenance::default(),
-            dir.path(),
-            &Silent,
-        )
-        .unwrap();
+        );
         quantize(&Params::default(), dir.path()).unwrap();
         let codebook = Codebook::read(&dir.path().join(CODEBOOK_FILE)).unwrap();
         let stats = Table::read(&dir.path().join(alnlab_simulate::STATS_FILE)).unwrap();
