@@ -114,7 +114,8 @@ fn a_run_from_an_archived_dataset_gives_the_same_bytes() {
     let out = alnlab(dir.path(), &["run", "lq.toml"]);
     assert_eq!(out.status.code(), Some(2));
     assert!(
-        stderr(&out).contains("holds quantized levels"),
+        stderr(&out).contains("holds quantized levels")
+            && stderr(&out).contains("so the run starts at train; remove `quantize`"),
         "{}",
         stderr(&out)
     );

@@ -53,7 +53,7 @@ pub fn snakemake(export: &Export, dir: &Path) -> Result<()> {
     // Resource hints per rule: each stage's from the stage table, then the
     // workflow's own rules (a training shard holds a forest as train does).
     let mut hints: Vec<(&str, Hints)> = STAGES.iter().map(|s| (s.name, s.hints)).collect();
-    let train = stages::find("train").expect("the table has a train stage");
+    let train = stages::sharded();
     hints.push((
         "train_shard",
         Hints {

@@ -8,6 +8,7 @@
 //! A manifest either simulates its data (`[[simulate.scene]]`, `[stride]`)
 //! or takes it from the dataset archive (`[data] dataset = "NAME@VERSION"`).
 
+use std::collections::BTreeSet;
 use std::fmt;
 use std::path::{Path, PathBuf};
 
@@ -77,10 +78,9 @@ pub struct Variant {
     pub description: String,
     /// The resolved parameters of every stage.
     pub stages: Stages,
-    /// Whether the manifest, with this variant's overrides, has a
-    /// `[quantize]` table (an archived dataset with levels must not be
-    /// quantized again).
-    pub sets_quantize: bool,
+    /// The stage tables the manifest, with this variant's overrides, sets
+    /// (a stage an archived dataset stands for must not be set).
+    pub tables: BTreeSet<&'static str>,
 }
 
 /// The parameters of every stage, one table each.
@@ -194,7 +194,7 @@ impl Manifest {
                 name: "base".into(),
                 description: String::new(),
                 stages,
-                sets_quantize: has_key(&base, "quantize"),
+                tables: stage_tables(&base),
             });
         }
         for entry in variant_entries {
@@ -208,7 +208,7 @@ impl Manifest {
                 name,
                 description,
                 stages,
-                sets_quantize: has_key(&merged, "quantize"),
+                tables: stage_tables(&merged),
             });
         }
         Ok(Manifest {
@@ -456,6 +456,15 @@ fn validate(
     }
 }
 
+/// The stages whose tables `table` has.
+fn stage_tables(table: &DeTable) -> BTreeSet<&'static str> {
+    STAGES
+        .iter()
+        .map(|s| s.name)
+        .filter(|name| has_key(table, name))
+        .collect()
+}
+
 /// Whether `s` is a non-empty name of ASCII letters, digits, `-` and `_`.
 pub fn is_identifier(s: &str) -> bool {
     !s.is_empty()
@@ -516,7 +525,7 @@ simulate.scene = [{ name = "box", duration = 2.0, integrator = "rk4" }]
                     [train]\nleaves = 64\n\n[[variant]]\nname = \"q\"\nquantize.levels = 16\n";
         let m = parse(text).unwrap();
         assert_eq!(m.data.as_ref().unwrap().dataset, "worm@2");
-        assert!(m.variants[0].sets_quantize);
+        assert!(m.variants[0].tables.contains("quantize"));
         let toml = m.resolved_toml(&m.variants[0]);
         assert!(
             toml.contains("[data]") && toml.contains("[quantize]"),

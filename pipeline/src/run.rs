@@ -167,14 +167,22 @@ pub fn run(manifest: &Manifest, options: &RunOptions) -> Result<RunRecord> {
                 .find_pinned(&data.dataset)
                 .map_err(|e| e.context(&format!("{}: [data] dataset", manifest.path.display())))?;
             archive.require_whole(&entry)?;
+            // The first stage a dataset with levels does not stand for.
+            let start = STAGES.iter().find(|s| !s.archived.holds(true));
             for variant in &variants {
-                if entry.has_levels() && variant.sets_quantize {
+                let set = STAGES
+                    .iter()
+                    .filter(|s| s.archived == Archived::WithLevels)
+                    .find(|s| variant.tables.contains(s.name));
+                if let Some(stage) = set.filter(|_| entry.has_levels()) {
                     return Err(Error::Invalid(format!(
                         "{}: variant `{}`: dataset {} holds quantized levels, so the run starts at \
-                         train; remove `quantize` (or archive the dataset without levels)",
+                         {}; remove `{}` (or archive the dataset without levels)",
                         manifest.path.display(),
                         variant.name,
-                        entry.label()
+                        entry.label(),
+                        start.map_or("", |s| s.name),
+                        stage.name
                     )));
                 }
             }
@@ -255,15 +263,13 @@ impl Graph<'_> {
         };
         let mut made: BTreeMap<&str, Artifact> = BTreeMap::new();
         for stage in STAGES {
-            let from_archive = archived.as_ref().filter(|(_, entry)| match stage.archived {
-                Archived::Always => true,
-                Archived::WithLevels => entry.has_levels(),
-                Archived::Never => false,
-            });
+            let from_archive = archived
+                .as_ref()
+                .filter(|(_, entry)| stage.archived.holds(entry.has_levels()));
             let artifact = match from_archive {
                 Some((artifact, _)) => artifact.clone(),
                 None => {
-                    let inputs: Vec<(&str, &Artifact)> = stage
+                    let inputs: Vec<(&'static str, &Artifact)> = stage
                         .inputs
                         .iter()
                         .map(|i| (i.role, &made[i.from]))
@@ -301,7 +307,7 @@ impl Graph<'_> {
             &[],
             &outputs,
             // `run` verified the whole dataset before it began.
-            |_, dir, _| archive.copy_out(entry, dir),
+            |_, _, dir, _| archive.copy_out(entry, dir),
         )
     }
 
@@ -311,7 +317,7 @@ impl Graph<'_> {
         &mut self,
         stage: &'static Stage,
         params: &serde_json::Value,
-        inputs: &[(&str, &Artifact)],
+        inputs: &[(&'static str, &Artifact)],
         variant: &Variant,
     ) -> Result<Artifact> {
         let shards = shard_store(&self.options.out);
@@ -322,21 +328,18 @@ impl Graph<'_> {
             params,
             inputs,
             stage.outputs,
-            |provenance, dir, bar| {
-                let key = StageKey::of(provenance, stage.format_version);
+            |provenance, key, dir, bar| {
                 if let Some(merge) = stage.merge_shards
-                    && let Some(parts) = complete_shards(&shards, stage.name, &key)
+                    && let Some(parts) = complete_shards(&shards, stage.name, key)
                 {
                     return merge(&parts, provenance, dir);
                 }
                 (stage.run)(&Call {
                     stages: &variant.stages,
                     seed,
-                    inputs: stage
-                        .inputs
+                    inputs: inputs
                         .iter()
-                        .zip(inputs)
-                        .map(|(input, (_, artifact))| (input.role, artifact.path(input.role)))
+                        .map(|&(role, artifact)| (role, artifact.path(role)))
                         .collect(),
                     shard: Shard::ALL,
                     provenance,
@@ -355,7 +358,8 @@ impl Graph<'_> {
     }
 
     /// Finds or makes the artifact of `name` with these parameters and
-    /// inputs, and records it.
+    /// inputs, and records it; `execute` makes it, given the provenance to
+    /// write, the cache key, the folder and a progress bar.
     fn find_or_make(
         &mut self,
         name: &str,
@@ -363,7 +367,7 @@ impl Graph<'_> {
         params: &serde_json::Value,
         inputs: &[(&str, &Artifact)],
         outputs: &[(&str, &str)],
-        execute: impl FnOnce(&Provenance, &Path, &Bar) -> Result<()>,
+        execute: impl FnOnce(&Provenance, &str, &Path, &Bar) -> Result<()>,
     ) -> Result<Artifact> {
         let clock = Instant::now();
         let input_hashes: BTreeMap<String, String> = inputs
@@ -391,7 +395,9 @@ impl Graph<'_> {
                 let context = format!("variant `{}`, stage {name}", self.record.name);
                 let artifact = self
                     .cache
-                    .make(name, &key, outputs, |dir| execute(&provenance, dir, &bar))
+                    .make(name, &key, outputs, |dir| {
+                        execute(&provenance, &key, dir, &bar)
+                    })
                     .map_err(|e| e.context(&context))?;
                 self.made_now.insert(key.clone());
                 artifact
@@ -475,11 +481,6 @@ pub struct TrainInputs {
     pub provenance: Provenance,
 }
 
-/// The stage that runs in shards.
-fn train_stage() -> &'static Stage {
-    stages::find("train").expect("the table has a train stage")
-}
-
 /// Runs `variant` up to the stage before train through the cache (holding
 /// the output folder's lock while it does, as a run does) and returns what
 /// its train stage would be given.
@@ -488,7 +489,7 @@ pub fn up_to_train(
     options: &RunOptions,
     variant: &Variant,
 ) -> Result<TrainInputs> {
-    let train = train_stage();
+    let train = stages::sharded();
     let before = STAGES
         .iter()
         .take_while(|s| s.name != train.name)
@@ -531,7 +532,7 @@ pub fn train_shard(
     shard: Shard,
 ) -> Result<PathBuf> {
     let variant = manifest.variant(variant)?;
-    let train = train_stage();
+    let train = stages::sharded();
     let TrainInputs { inputs, provenance } = up_to_train(manifest, options, variant)?;
     let key = shard_key(&StageKey::of(&provenance, train.format_version), shard);
     let shards = shard_store(&options.out);

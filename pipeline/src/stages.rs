@@ -68,6 +68,17 @@ pub enum Archived {
     WithLevels,
 }
 
+impl Archived {
+    /// Whether a dataset, with levels or not, holds the stage's outputs.
+    pub fn holds(self, with_levels: bool) -> bool {
+        match self {
+            Archived::Never => false,
+            Archived::Always => true,
+            Archived::WithLevels => with_levels,
+        }
+    }
+}
+
 /// Resource hints per job: cores, memory (MB), run time (minutes), and
 /// whether the stage holds a whole forest in memory (its memory then grows
 /// with the forest).
@@ -343,6 +354,14 @@ pub const STAGES: &[Stage] = &[
 /// The stage called `name`.
 pub fn find(name: &str) -> Option<&'static Stage> {
     STAGES.iter().find(|s| s.name == name)
+}
+
+/// The stage that can run in shards (the one with a shard merge).
+pub fn sharded() -> &'static Stage {
+    STAGES
+        .iter()
+        .find(|s| s.merge_shards.is_some())
+        .expect("the table has a sharded stage")
 }
 
 /// The names of the stages, in order.
