@@ -222,4 +222,53 @@ impl Entry {
         });
         Codec::new(self.code, self.quantizer.levels, walk)
     }
+
+    /// For an angle that wraps — a roll (`roll.*`, in (−π, π]) whose range
+    /// covers the circle to within two level spacings — the circle in
+    /// levels: 2π over the spacing, rounded. `None` for every other variable.
+    pub fn period(&self) -> Option<u32> {
+        let q = &self.quantizer;
+        let spacing = (q.max - q.min) / (q.levels - 1) as f64;
+        let circle = std::f64::consts::TAU;
+        (group_of(&self.variable) == "R"
+            && self.variable.starts_with("roll.")
+            && spacing > 0.0
+            && q.max - q.min >= circle - 2.0 * spacing)
+            .then(|| (circle / spacing).round() as u32)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn entry(variable: &str, min: f64, max: f64, levels: usize) -> Entry {
+        Entry {
+            variable: variable.into(),
+            learned: true,
+            note: String::new(),
+            quantizer: Quantizer { min, max, levels },
+            code: Code::Gray,
+            width: 8,
+            walk_step: 0,
+            walk_span: 0,
+            seed: 0,
+            clamped: 0,
+        }
+    }
+
+    #[test]
+    fn only_rolls_over_the_whole_circle_wrap() {
+        // The paper data's roll.2: level 0 and level 213 are both ±π.
+        assert_eq!(
+            entry("roll.2", -3.141573, 3.141497, 214).period(),
+            Some(213)
+        );
+        let pi = std::f64::consts::PI;
+        // Observed extremes a little inside ±π still wrap.
+        assert_eq!(entry("roll.3", -pi + 1e-4, pi - 3e-4, 64).period(), Some(63));
+        assert_eq!(entry("roll.2", -pi / 2.0, pi / 2.0, 214).period(), None);
+        assert_eq!(entry("pitch.2", -pi, pi, 214).period(), None);
+        assert_eq!(entry("omega.1.x", -pi, pi, 214).period(), None);
+    }
 }

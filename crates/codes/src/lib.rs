@@ -6,6 +6,8 @@
 //!   defined on every bit pattern; [`Codec`] is one variable's code.
 //! - [`walk`]: the seeded random-walk code and its distance guarantee.
 //! - [`bits`]: level columns → packed bit matrices.
+//! - [`residual`]: a variable's change of level as a target of its own
+//!   (clamped to ±k, on the circle for angles that wrap).
 //! - [`codebook`]: `codebook.parquet` read and written, and the columns of
 //!   `levels.parquet`.
 
@@ -13,7 +15,9 @@ pub mod bits;
 pub mod codebook;
 pub mod codes;
 mod near;
+pub mod residual;
 pub mod walk;
 
 pub use codebook::{Codebook, Entry, GROUPS, Quantizer, group_of, level_column, split_rows};
 pub use codes::{Code, Codec};
+pub use residual::{DeltaSpec, Residual};
