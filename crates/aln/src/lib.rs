@@ -10,13 +10,17 @@
 //!   bit-sliced batches, parsimonious single samples).
 //! - [`threshold`]: the §6 predicate, answered by binary search.
 //! - [`model`]: the `model.aln` file and its [`model::ModelKind`].
+//! - [`output`]: what the trees learn per variable (its next level or its
+//!   change) and how their bits decode to the next level.
 //! - [`shard`]: which trees a partial model holds.
 
 mod compiled;
 pub mod forest;
 pub mod model;
+pub mod output;
 pub mod shard;
 pub mod threshold;
 pub mod tree;
 
 pub use model::{Model, ModelKind};
+pub use output::{Output, Target};

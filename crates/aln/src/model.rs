@@ -7,7 +7,8 @@
 //! The header says which model the trees make up (`bit-forest`: one tree
 //! per output bit and voter, over the input bits; `threshold`: one tree per
 //! output variable and voter, over the input bits and the candidate level's
-//! thermometer code).
+//! thermometer code) and what they learn (the [`Target`]: each variable's
+//! next level, or its change with each change's code).
 //!
 //! Layout (little endian): magic `ALNLAB-MODEL\0\0\0\0` (16 bytes), format
 //! version (u32), header length (u32), header (JSON), then per tree:
@@ -18,11 +19,12 @@
 use std::io::Write;
 use std::path::Path;
 
-use alnlab_codes::Codec;
+use alnlab_codes::Entry;
 use alnlab_common::{Error, Result, atomic};
 use serde::{Deserialize, Serialize};
 
 use crate::forest::TreeId;
+use crate::output::{Output, Target};
 use crate::shard::Shard;
 use crate::tree::{Function, Tree};
 
@@ -42,7 +44,7 @@ pub enum ModelKind {
 /// The file's magic bytes.
 pub const MAGIC: &[u8; 16] = b"ALNLAB-MODEL\0\0\0\0";
 /// The model file format version.
-pub const MODEL_FORMAT: u32 = 2;
+pub const MODEL_FORMAT: u32 = 3;
 
 /// The model's header.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -53,13 +55,19 @@ pub struct Header {
     pub params: serde_json::Value,
     /// Which model the trees make up.
     pub model: ModelKind,
+    /// What they learn: each variable's next level or its change.
+    pub target: Target,
     /// Input bits per sample (for the threshold model, before the
     /// candidate's bits).
     pub inputs: usize,
-    /// The learned output variables, in tree order, with their code widths
-    /// (for the threshold model, the width of the candidate's thermometer
-    /// code: levels − 1).
+    /// The learned output variables, in tree order, with the widths of
+    /// their targets' codes (for the threshold model, the width of the
+    /// candidate's thermometer code: levels − 1).
     pub outputs: Vec<(String, usize)>,
+    /// For each output, the input variables its trees read, when they do
+    /// not read every input (chosen by the train stage). Absent when they do.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub reads: Vec<Vec<String>>,
     /// Voters per bit.
     pub vote: u32,
     /// Counter bound the trees were trained with.
@@ -71,41 +79,46 @@ pub struct Header {
 }
 
 impl Header {
-    /// Checks that the model fits the learned variables and their codecs it
-    /// is to be evaluated with: the same variables in the same order, as
-    /// many input bits as the codes are wide together, and each output as
-    /// wide as its code (a bit-forest) or as its candidate's thermometer
-    /// code, levels − 1 (a threshold model). On a mismatch, what differs.
-    pub fn check_fits(&self, learned: &[(&str, &Codec)]) -> std::result::Result<(), String> {
-        let names: Vec<&str> = learned.iter().map(|(n, _)| *n).collect();
+    /// Checks that the model fits the learned variables it is to be
+    /// evaluated with (the codebook's learned entries, in order) and returns
+    /// their outputs, which decode the trees' bits: the same variables in
+    /// the same order, as many input bits as the codes are wide together,
+    /// and each output as wide as its target's code (a bit-forest) or as
+    /// that code's thermometer, levels − 1 (a threshold model's candidate).
+    /// On a mismatch, what differs.
+    pub fn outputs_for(&self, learned: &[&Entry]) -> std::result::Result<Vec<Output>, String> {
+        let names: Vec<&str> = learned.iter().map(|e| e.variable.as_str()).collect();
         let outputs: Vec<&str> = self.outputs.iter().map(|(n, _)| n.as_str()).collect();
         if names != outputs {
             return Err(format!(
                 "predicts {outputs:?}, but the codebook learns {names:?}"
             ));
         }
-        let inputs: usize = learned.iter().map(|(_, c)| c.width() as usize).sum();
+        let inputs: usize = learned.iter().map(|e| e.width as usize).sum();
         if self.inputs != inputs {
             return Err(format!(
                 "reads {} input bits, but the codebook's codes are {inputs} bits wide together",
                 self.inputs
             ));
         }
-        for ((name, codec), (_, width)) in learned.iter().zip(&self.outputs) {
+        let decoders = Output::for_entries(&self.target, learned)?;
+        for ((name, output), (_, width)) in names.iter().zip(&decoders).zip(&self.outputs) {
+            let codec = output.codec();
             let expected = match self.model {
                 ModelKind::BitForest => codec.width() as usize,
                 ModelKind::Threshold => codec.levels() - 1,
             };
             if *width != expected {
                 return Err(format!(
-                    "`{name}`: the model's output is {width} bits wide, but the codebook's \
+                    "`{name}`: the model's output is {width} bits wide, but its {} target's \
                      {} code of {} levels makes it {expected}",
+                    self.target.kind(),
                     codec.code(),
                     codec.levels()
                 ));
             }
         }
-        Ok(())
+        Ok(decoders)
     }
 }
 
@@ -357,8 +370,10 @@ mod tests {
                 codebook_sha256: "ab".into(),
                 params: serde_json::json!({"leaves": 64}),
                 model: ModelKind::BitForest,
+                target: Target::Level,
                 inputs: 10,
                 outputs: vec![("a.1.x".into(), 3), ("a.1.y".into(), 3)],
+                reads: Vec::new(),
                 vote: 1,
                 counter_bound: 3,
                 shard: None,
@@ -493,26 +508,40 @@ mod tests {
     }
 
     #[test]
-    fn a_model_fits_only_codecs_of_its_widths() {
-        use alnlab_codes::Code;
-        let gray = Codec::new(Code::Gray, 8, None).unwrap(); // 3 bits
-        let binary16 = Codec::new(Code::Binary, 16, None).unwrap(); // 4 bits
+    fn a_model_fits_only_codes_of_its_widths() {
+        use alnlab_codes::{Code, DeltaSpec, Quantizer};
+        let entry = |variable: &str, code, levels| {
+            let codec = alnlab_codes::Codec::new(code, levels, None).unwrap();
+            Entry {
+                variable: variable.into(),
+                learned: true,
+                note: String::new(),
+                quantizer: Quantizer {
+                    min: 0.0,
+                    max: 1.0,
+                    levels,
+                },
+                code,
+                width: codec.width(),
+                walk_step: 0,
+                walk_span: 0,
+                seed: 0,
+                clamped: 0,
+            }
+        };
+        let (a, b) = (entry("a", Code::Gray, 8), entry("b", Code::Gray, 8));
+        let (c, b16) = (entry("c", Code::Gray, 8), entry("b", Code::Binary, 16));
         let mut header = model().header;
         header.inputs = 6;
         header.outputs = vec![("a".into(), 3), ("b".into(), 3)];
-        assert_eq!(header.check_fits(&[("a", &gray), ("b", &gray)]), Ok(()));
-        let renamed = header
-            .check_fits(&[("a", &gray), ("c", &gray)])
-            .unwrap_err();
+        let outputs = header.outputs_for(&[&a, &b]).unwrap();
+        assert_eq!(outputs.len(), 2);
+        let renamed = header.outputs_for(&[&a, &c]).unwrap_err();
         assert!(renamed.contains("the codebook learns"), "{renamed}");
-        let wider = header
-            .check_fits(&[("a", &gray), ("b", &binary16)])
-            .unwrap_err();
+        let wider = header.outputs_for(&[&a, &b16]).unwrap_err();
         assert!(wider.contains("codes are 7 bits wide"), "{wider}");
         header.inputs = 7;
-        let output = header
-            .check_fits(&[("a", &gray), ("b", &binary16)])
-            .unwrap_err();
+        let output = header.outputs_for(&[&a, &b16]).unwrap_err();
         assert!(
             output.contains("`b`") && output.contains("binary code of 16 levels makes it 4"),
             "{output}"
@@ -521,6 +550,21 @@ mod tests {
         header.model = ModelKind::Threshold;
         header.inputs = 6;
         header.outputs = vec![("a".into(), 7), ("b".into(), 7)];
-        assert_eq!(header.check_fits(&[("a", &gray), ("b", &gray)]), Ok(()));
+        assert!(header.outputs_for(&[&a, &b]).is_ok());
+        // A delta model's outputs are its changes' codes: ±2 is 5 levels.
+        let spec = DeltaSpec {
+            k: 2,
+            period: None,
+            code: Code::Gray,
+        };
+        header.target = Target::Delta(vec![spec; 2]);
+        header.outputs = vec![("a".into(), 4), ("b".into(), 4)];
+        assert!(header.outputs_for(&[&a, &b]).is_ok());
+        header.model = ModelKind::BitForest;
+        let err = header.outputs_for(&[&a, &b]).unwrap_err();
+        assert!(
+            err.contains("delta target's gray code of 5 levels makes it 3"),
+            "{err}"
+        );
     }
 }

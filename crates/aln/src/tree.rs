@@ -94,19 +94,29 @@ impl Tree {
     /// leaves allow (all 2k literals at least once when there are ≥ 2k
     /// leaves), the rest at random, shuffled.
     pub fn new(spec: &TreeSpec, rng: &mut impl Rng) -> Tree {
+        let bits: Vec<u32> = (0..spec.inputs as u32).collect();
+        Tree::reading(spec, &bits, rng)
+    }
+
+    /// Like [`Tree::new`], but the leaves read only the input `bits` given
+    /// (indices into the whole input, so the tree evaluates on it).
+    pub fn reading(spec: &TreeSpec, bits: &[u32], rng: &mut impl Rng) -> Tree {
         assert!(
             spec.leaves >= 2 && spec.leaves.is_power_of_two(),
             "leaves: a power of two ≥ 2"
         );
         assert!(spec.inputs >= 1 && spec.counter_bound >= 1 && spec.initial_spread >= 1);
+        assert!(
+            !bits.is_empty() && bits.iter().all(|&b| (b as usize) < spec.inputs),
+            "leaves read some of the tree's inputs"
+        );
         let internal = spec.leaves - 1;
         let spread = spec.initial_spread.min(spec.counter_bound);
         let mut counter = || rng.random_range(-spread..spread);
         let c01: Vec<i8> = (0..internal).map(|_| counter()).collect();
         let c10: Vec<i8> = (0..internal).map(|_| counter()).collect();
-        let literals = (2 * spec.inputs) as u32;
         let mut leaves: Vec<Literal> = Vec::with_capacity(spec.leaves);
-        let mut all: Vec<Literal> = (0..literals).collect();
+        let mut all: Vec<Literal> = bits.iter().flat_map(|&b| [2 * b, 2 * b + 1]).collect();
         while leaves.len() + all.len() <= spec.leaves {
             leaves.extend_from_slice(&all);
         }
@@ -347,6 +357,21 @@ mod tests {
         assert!(seen.iter().all(|&n| n >= 1), "{seen:?}");
         let small = Tree::new(&spec(8, 20), &mut rng);
         assert_eq!(small.leaves(), 8);
+    }
+
+    #[test]
+    fn a_tree_over_some_bits_reads_each_of_them_and_nothing_else() {
+        let mut rng = ChaCha8Rng::seed_from_u64(3);
+        let bits = [3, 17, 40];
+        let tree = Tree::reading(&spec(64, 50), &bits, &mut rng);
+        let mut seen = vec![0; 100];
+        tree.literals().iter().for_each(|&l| seen[l as usize] += 1);
+        for (literal, &n) in seen.iter().enumerate() {
+            let read = bits.contains(&(literal as u32 / 2));
+            assert_eq!(n > 0, read, "literal {literal} seen {n} times");
+            // 64 leaves over 6 literals: each on 10 or 11 leaves.
+            assert!(!read || (10..=11).contains(&n), "literal {literal}: {n}");
+        }
     }
 
     #[test]

@@ -125,8 +125,7 @@ pub fn run(
     let learned: Vec<_> = codebook.learned().collect();
     let names: Vec<&str> = learned.iter().map(|e| e.variable.as_str()).collect();
     let codecs = codebook.learned_codecs(codebook_path)?;
-    let fitted: Vec<(&str, &Codec)> = names.iter().copied().zip(&codecs).collect();
-    model.header.check_fits(&fitted).map_err(|m| {
+    let outputs = model.header.outputs_for(&learned).map_err(|m| {
         Error::bad_file(
             model_path,
             format!("does not fit the codebook {}: {m}", codebook_path.display()),
@@ -157,7 +156,7 @@ pub fn run(
 
     progress.start("test", 4, "steps");
     let windows = params.windows(&codecs);
-    let predictor = predict::Aln::new(&model, &codecs);
+    let predictor = predict::Aln::new(&model, &codecs, &outputs);
     let (aln, mut timings) = predictor.timed(&test.x, windows.as_deref());
     progress.advance(1);
     let persistence = test.x.clone();

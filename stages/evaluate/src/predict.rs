@@ -2,14 +2,16 @@
 //!
 //! A bit-forest predicts bit-sliced in batches (all rows at once, on all
 //! threads — the levels come from this path) and one row at a time
-//! (parsimonious chains), which must agree; a threshold model predicts one
-//! row at a time by binary search. Times are for encoded inputs to decoded
+//! (parsimonious chains), which must agree; a threshold model's binary
+//! search runs for all rows at once, bit-sliced (`batched`), and one row at
+//! a time (`threshold-search`), which must agree too. Times are for encoded inputs to decoded
 //! levels: the trees, the votes and the decoding (with rate limiting, when
 //! on, as `decode_near` around the current level).
 
 use std::time::Instant;
 
 use alnlab_aln::ModelKind;
+use alnlab_aln::Output;
 use alnlab_aln::forest::Predictor;
 use alnlab_aln::model::Model;
 use alnlab_aln::threshold;
@@ -36,9 +38,12 @@ pub struct Timing {
 }
 
 /// A trained model made ready to predict: a bit-forest compiled once, or a
-/// threshold model's voters with the codes of its candidate levels.
+/// threshold model's voters with the codes of its candidate levels; and its
+/// outputs, which decode the trees' bits on every path.
 pub struct Aln<'a> {
+    /// The input variables' codes.
     codecs: &'a [Codec],
+    outputs: &'a [Output],
     compiled: Compiled<'a>,
 }
 
@@ -47,6 +52,7 @@ enum Compiled<'a> {
     Threshold {
         voters: Vec<Vec<&'a Tree>>,
         thermometers: Vec<Codec>,
+        batched: threshold::Batched,
     },
 }
 
@@ -79,27 +85,37 @@ fn timed<T>(
 }
 
 impl<'a> Aln<'a> {
-    /// Prepares `model`, whose outputs are decoded by `codecs`.
-    pub fn new(model: &'a Model, codecs: &'a [Codec]) -> Aln<'a> {
+    /// Prepares `model`, whose inputs are coded by `codecs` and whose
+    /// trees' bits `outputs` decode.
+    pub fn new(model: &'a Model, codecs: &'a [Codec], outputs: &'a [Output]) -> Aln<'a> {
         let compiled = match model.header.model {
             ModelKind::BitForest => {
                 let widths: Vec<usize> = model.header.outputs.iter().map(|(_, w)| *w).collect();
                 let trees = model.trees.iter().map(|(id, tree)| (*id, tree));
                 Compiled::BitForest(Predictor::new(trees, &widths, model.header.vote))
             }
-            ModelKind::Threshold => Compiled::Threshold {
-                voters: model
+            ModelKind::Threshold => {
+                let voters: Vec<Vec<&Tree>> = model
                     .trees
                     .chunks(model.header.vote as usize)
                     .map(|chunk| chunk.iter().map(|(_, tree)| tree).collect())
-                    .collect(),
-                thermometers: codecs
-                    .iter()
-                    .map(|c| Codec::new(Code::Thermometer, c.levels(), None).expect("levels ≥ 2"))
-                    .collect(),
-            },
+                    .collect();
+                let levels: Vec<usize> = outputs.iter().map(|o| o.codec().levels()).collect();
+                Compiled::Threshold {
+                    batched: threshold::Batched::new(&voters, &levels),
+                    thermometers: levels
+                        .iter()
+                        .map(|&l| Codec::new(Code::Thermometer, l, None).expect("levels ≥ 2"))
+                        .collect(),
+                    voters,
+                }
+            }
         };
-        Aln { codecs, compiled }
+        Aln {
+            codecs,
+            outputs,
+            compiled,
+        }
     }
 
     /// The predicted levels `[variable][row]` for the current levels `x`
@@ -109,10 +125,9 @@ impl<'a> Aln<'a> {
         let inputs = self.encode(x);
         match &self.compiled {
             Compiled::BitForest(predictor) => self.batched(predictor, x, &inputs, windows),
-            Compiled::Threshold {
-                voters,
-                thermometers,
-            } => self.search(voters, thermometers, x, &inputs, windows),
+            Compiled::Threshold { batched, .. } => {
+                self.batched_search(batched, x, &inputs, windows)
+            }
         }
     }
 
@@ -139,11 +154,20 @@ impl<'a> Aln<'a> {
             Compiled::Threshold {
                 voters,
                 thermometers,
+                batched,
             } => {
-                let (levels, timing) = timed("threshold-search", rows, 1, 1, || {
+                let threads = rayon::current_num_threads();
+                let (levels, batched) = timed("batched", rows, threads, 3, || {
+                    self.batched_search(batched, x, &inputs, windows)
+                });
+                let (single_levels, single) = timed("threshold-search", rows, 1, 1, || {
                     self.search(voters, thermometers, x, &inputs, windows)
                 });
-                (levels, vec![timing])
+                assert_eq!(
+                    single_levels, levels,
+                    "the one-row and batched threshold searches disagree"
+                );
+                (levels, vec![batched, single])
             }
         }
     }
@@ -166,12 +190,12 @@ impl<'a> Aln<'a> {
         let sliced = Columns::from_rows(inputs, &(0..rows).collect::<Vec<_>>());
         let out = predictor.predict(&sliced);
         out.par_iter()
-            .zip(self.codecs)
+            .zip(self.outputs)
             .enumerate()
-            .map(|(v, (columns, codec))| {
+            .map(|(v, (columns, output))| {
                 let mut levels = Vec::with_capacity(rows);
                 let window = windows.map(|w| w[v]);
-                columns.for_each_row(|s, code| levels.push(decode(codec, code, x[v][s], window)));
+                columns.for_each_row(|s, code| levels.push(output.decode(code, x[v][s], window)));
                 levels
             })
             .collect()
@@ -188,15 +212,39 @@ impl<'a> Aln<'a> {
         windows: Option<&[usize]>,
     ) -> Vec<Vec<u16>> {
         let mut votes = Vec::new();
-        let mut codes = vec![Vec::new(); self.codecs.len()];
-        let mut levels = vec![Vec::with_capacity(inputs.rows()); self.codecs.len()];
+        let mut codes = vec![Vec::new(); self.outputs.len()];
+        let mut levels = vec![Vec::with_capacity(inputs.rows()); self.outputs.len()];
         for r in 0..inputs.rows() {
             predictor.predict_one(inputs.row(r), &mut votes, &mut codes);
-            for (v, (codec, code)) in self.codecs.iter().zip(&codes).enumerate() {
-                levels[v].push(decode(codec, code, x[v][r], windows.map(|w| w[v])));
+            for (v, (output, code)) in self.outputs.iter().zip(&codes).enumerate() {
+                levels[v].push(output.decode(code, x[v][r], windows.map(|w| w[v])));
             }
         }
         levels
+    }
+
+    /// All rows at once, the binary search bit-sliced.
+    fn batched_search(
+        &self,
+        batched: &threshold::Batched,
+        x: &[Vec<u16>],
+        inputs: &BitMatrix,
+        windows: Option<&[usize]>,
+    ) -> Vec<Vec<u16>> {
+        let rows = inputs.rows();
+        let sliced = Columns::from_rows(inputs, &(0..rows).collect::<Vec<_>>());
+        batched
+            .predict(&sliced)
+            .iter()
+            .zip(self.outputs)
+            .enumerate()
+            .map(|(v, (found, output))| {
+                let window = windows.map(|w| w[v]);
+                (0..rows)
+                    .map(|r| output.settle(found[r], x[v][r], window))
+                    .collect()
+            })
+            .collect()
     }
 
     /// One row at a time, by binary search over each variable's levels.
@@ -209,7 +257,7 @@ impl<'a> Aln<'a> {
         inputs: &BitMatrix,
         windows: Option<&[usize]>,
     ) -> Vec<Vec<u16>> {
-        let mut levels = vec![Vec::with_capacity(inputs.rows()); self.codecs.len()];
+        let mut levels = vec![Vec::with_capacity(inputs.rows()); self.outputs.len()];
         let mut scratch = Vec::new();
         for r in 0..inputs.rows() {
             for (v, trees) in voters.iter().enumerate() {
@@ -220,27 +268,12 @@ impl<'a> Aln<'a> {
                     inputs.row(r),
                     &mut scratch,
                 );
-                let level = match windows {
-                    Some(w) => {
-                        let current = usize::from(x[v][r]);
-                        level.clamp(current.saturating_sub(w[v]), current + w[v])
-                    }
-                    None => level,
-                };
-                levels[v].push(level.min(self.codecs[v].levels() - 1) as u16);
+                let window = windows.map(|w| w[v]);
+                levels[v].push(self.outputs[v].settle(level, x[v][r], window));
             }
         }
         levels
     }
-}
-
-/// The level a code decodes to, rate limited around `current` if asked.
-fn decode(codec: &Codec, code: &[u64], current: u16, window: Option<usize>) -> u16 {
-    let level = match window {
-        Some(w) => codec.decode_near(code, usize::from(current), w),
-        None => codec.decode(code),
-    };
-    level as u16
 }
 
 /// The linear baseline's levels `[variable][row]`, timed one row at a time.
@@ -272,6 +305,7 @@ pub fn linear(model: &Linear, x: &[Vec<u16>], levels: &[usize]) -> (Vec<Vec<u16>
 #[cfg(test)]
 mod tests {
     use super::*;
+    use alnlab_aln::Target;
     use alnlab_aln::model::Header;
     use alnlab_aln::shard::Shard;
     use alnlab_aln::tree::TreeSpec;
@@ -300,13 +334,25 @@ mod tests {
             counter_bound: 3,
             initial_spread: 1,
         };
-        let trained = forest::train(&tree, 10, 3, 1, Shard::ALL, &inputs, &targets, &|| {});
+        let trained = forest::train(
+            &tree,
+            10,
+            3,
+            1,
+            Shard::ALL,
+            &inputs,
+            &targets,
+            &forest::every_bit(23, 1),
+            &|| {},
+        );
         let header = Header {
             codebook_sha256: String::new(),
             params: serde_json::Value::Null,
             model: ModelKind::BitForest,
+            target: Target::Level,
             inputs: 23,
             outputs: vec![("v".into(), 23)],
+            reads: Vec::new(),
             vote: 3,
             counter_bound: 3,
             shard: None,
@@ -321,7 +367,8 @@ mod tests {
         let x = vec![(0..63u16).rev().collect::<Vec<_>>()];
         // (The two paths' levels are compared inside.)
         let codecs = std::slice::from_ref(&codec);
-        let aln = Aln::new(&model, codecs);
+        let outputs = [Output::Level(codec.clone())];
+        let aln = Aln::new(&model, codecs, &outputs);
         let (levels, timings) = aln.timed(&x, None);
         let error: usize = levels[0]
             .iter()

@@ -120,6 +120,7 @@ fn paper_forest(inputs: &Columns, targets: &[Columns]) -> Vec<forest::Trained> {
         Shard::ALL,
         inputs,
         targets,
+        &forest::every_bit(inputs.bits, targets.len()),
         &|| {},
     )
 }

@@ -26,9 +26,15 @@ pub struct Trained {
     pub seconds: Vec<f64>,
 }
 
+/// `variables` lists of every one of `inputs` input bits: what each
+/// variable's trees read when they read everything.
+pub fn every_bit(inputs: usize, variables: usize) -> Vec<Vec<u32>> {
+    vec![(0..inputs as u32).collect(); variables]
+}
+
 /// Trains one tree per (variable, bit, voter) — those of `shard` —:
 /// `targets[v]` holds variable v's target bits as columns over the same
-/// samples as `inputs`.
+/// samples as `inputs`; variable v's trees read the input bits `reads[v]`.
 #[allow(clippy::too_many_arguments)]
 pub fn train(
     spec: &TreeSpec,
@@ -38,6 +44,7 @@ pub fn train(
     shard: Shard,
     inputs: &Columns,
     targets: &[Columns],
+    reads: &[Vec<u32>],
     on_tree_done: &(dyn Fn() + Sync),
 ) -> Vec<Trained> {
     let ids: Vec<TreeId> = targets
@@ -59,7 +66,7 @@ pub fn train(
     ids.par_iter()
         .map(|&id| {
             let mut rng = ChaCha8Rng::seed_from_u64(id.seed(seed));
-            let mut tree = Tree::new(spec, &mut rng);
+            let mut tree = Tree::reading(spec, &reads[id.variable as usize], &mut rng);
             let samples = Samples {
                 count: inputs.count,
                 words: inputs.words,
@@ -83,9 +90,11 @@ pub fn train(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use alnlab_aln::Output;
     use alnlab_aln::forest::Predictor;
     use alnlab_codes::bits::encode;
     use alnlab_codes::codes::{Code, Codec};
+    use alnlab_codes::residual::{DeltaSpec, Residual};
     use alnlab_codes::walk::WalkSpec;
     use rand::RngExt;
 
@@ -138,6 +147,7 @@ mod tests {
             Shard::ALL,
             &inputs,
             &targets,
+            &every_bit(23, 1),
             &|| {},
         );
         let predictor = Predictor::new(trained.iter().map(|t| (t.id, &t.tree)), &[23], vote);
@@ -152,6 +162,85 @@ mod tests {
             total += (level - f64::from(x[r] + 1)).abs();
         }
         total / test_rows.len() as f64
+    }
+
+    /// The mean test error (levels) of a forest learning `output`'s target
+    /// for y = x + drift (L = 64, walk-coded inputs): drift is +1, and with
+    /// probability 0.2 one of 0 or +2.
+    fn drift_error(output: &Output, seed: u64) -> f64 {
+        let input = Codec::new(
+            Code::Walk,
+            64,
+            Some(WalkSpec {
+                levels: 64,
+                width: 23,
+                step: 1,
+                span: 7,
+                seed: 3,
+            }),
+        )
+        .unwrap();
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        let x: Vec<u16> = (0..1200).map(|_| rng.random_range(0..62)).collect();
+        let y: Vec<u16> = x
+            .iter()
+            .map(|&v| match rng.random_range(0..10) {
+                0 => v,
+                1 => v + 2,
+                _ => v + 1,
+            })
+            .collect();
+        let targets: Vec<u16> = x
+            .iter()
+            .zip(&y)
+            .map(|(&a, &b)| output.target(a, b))
+            .collect();
+        let codec = output.codec();
+        let width = codec.width() as usize;
+        let (train_rows, test_rows): (Vec<usize>, Vec<usize>) = (0..1200).partition(|&r| r < 800);
+        let x_bits = encode(&[&input], &[&x]);
+        let inputs = Columns::from_rows(&x_bits, &train_rows);
+        let target = [Columns::from_rows(
+            &encode(&[codec], &[&targets]),
+            &train_rows,
+        )];
+        let trained = train(
+            &spec(512, 23),
+            10,
+            1,
+            seed,
+            Shard::ALL,
+            &inputs,
+            &target,
+            &every_bit(23, 1),
+            &|| {},
+        );
+        let predictor = Predictor::new(trained.iter().map(|t| (t.id, &t.tree)), &[width], 1);
+        let predicted = &predictor.predict(&Columns::from_rows(&x_bits, &test_rows))[0];
+        let mut total = 0usize;
+        predicted.for_each_row(|s, bits| {
+            let r = test_rows[s];
+            total += usize::from(output.decode(bits, x[r], None).abs_diff(y[r]));
+        });
+        total as f64 / test_rows.len() as f64
+    }
+
+    #[test]
+    fn a_residual_forest_learns_a_drift_better_than_a_level_forest() {
+        let level = Output::Level(Codec::new(Code::Gray, 64, None).unwrap());
+        let spec = DeltaSpec {
+            k: 2,
+            period: None,
+            code: Code::Gray,
+        };
+        let delta = Output::Delta(Residual::new(spec, 64, 0).unwrap());
+        for seed in [1, 2] {
+            let (level, delta) = (drift_error(&level, seed), drift_error(&delta, seed));
+            eprintln!("y = x + drift, seed {seed}: level {level:.3}, delta {delta:.3} levels");
+            // Predicting the mode (+1) everywhere errs by 0.2 levels.
+            assert!(delta <= 0.35, "delta forest: {delta}");
+            assert!(delta < level, "delta {delta} against level {level}");
+        }
     }
 
     #[test]
@@ -197,6 +286,7 @@ mod tests {
                     Shard::ALL,
                     &inputs,
                     &targets,
+                    &every_bit(30, 1),
                     &|| {},
                 )
             })
@@ -210,7 +300,17 @@ mod tests {
         let mut parts: Vec<_> = (1..=3)
             .flat_map(|index| {
                 let shard = Shard { index, count: 3 };
-                train(&spec(64, 30), 3, 3, 9, shard, &inputs, &targets, &|| {})
+                train(
+                    &spec(64, 30),
+                    3,
+                    3,
+                    9,
+                    shard,
+                    &inputs,
+                    &targets,
+                    &every_bit(30, 1),
+                    &|| {},
+                )
             })
             .map(|t| (t.id, t.tree, t.epochs))
             .collect();

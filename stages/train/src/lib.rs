@@ -12,6 +12,7 @@
 pub mod bench;
 pub mod forest;
 pub mod learn;
+pub mod select;
 pub mod shard;
 mod threshold;
 
@@ -19,23 +20,24 @@ use std::path::Path;
 use std::sync::Arc;
 
 use alnlab_codes::bits::encode;
-use alnlab_codes::codes::Codec;
+use alnlab_codes::codes::{Code, Codec};
+use alnlab_codes::residual::{DeltaSpec, change};
 use alnlab_codes::{Codebook, level_column, split_rows};
 use alnlab_common::hash::sha256_file;
-use alnlab_common::params::{self, Count, ParamError};
+use alnlab_common::params::{self, Count, Fraction, ParamError};
 use alnlab_common::table::{self, Table};
 use alnlab_common::{Error, Progress, Provenance, Result};
 use arrow_array::{Array, Float64Array, StringArray, UInt32Array, UInt64Array};
 use serde::{Deserialize, Serialize};
 
-use alnlab_aln::ModelKind;
 use alnlab_aln::model::{Header, Model};
 use alnlab_aln::shard::Shard;
 use alnlab_aln::tree::TreeSpec;
+use alnlab_aln::{ModelKind, Output, Target};
 use alnlab_codes::bits::Columns;
 
 /// Version of what this stage writes (part of every cache key).
-pub const FORMAT_VERSION: u32 = 3;
+pub const FORMAT_VERSION: u32 = 4;
 /// File name of the model.
 pub const MODEL_FILE: &str = "model.aln";
 /// File name of the training log table.
@@ -62,6 +64,29 @@ pub struct Params {
     pub threshold_near: u32,
     /// … and `threshold_far` random candidate levels.
     pub threshold_far: u32,
+    /// What the trees learn: each variable's next `level`, or its change
+    /// (`delta`, clamped to ±k with k from the training rows).
+    pub target: TargetKind,
+    /// The code of the change (with `target = "delta"`).
+    pub delta_code: Code,
+    /// k of each variable is this quantile of |Δ| over the training rows
+    /// (at least 1): changes beyond it are learned as ±k.
+    pub delta_quantile: Fraction,
+    /// Each output's trees read only this many input variables: those with
+    /// the highest mutual information with its target on the training rows
+    /// ([`select`]). Absent: every input.
+    pub informative_inputs: Option<Count>,
+}
+
+/// What the trees learn (the `target` key).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum TargetKind {
+    /// Each variable's next level, in its codebook code.
+    #[default]
+    Level,
+    /// Each variable's change of level, Δ = next − current.
+    Delta,
 }
 
 impl Default for Params {
@@ -75,6 +100,10 @@ impl Default for Params {
             initial_spread: Count(1),
             threshold_near: 2,
             threshold_far: 2,
+            target: TargetKind::Level,
+            delta_code: Code::Gray,
+            delta_quantile: Fraction(0.99),
+            informative_inputs: None,
         }
     }
 }
@@ -165,16 +194,61 @@ pub fn run(
     let x_bits = encode(&codec_refs, &x_columns);
     let inputs = x_bits.bits();
 
+    let target = match params.target {
+        TargetKind::Level => Target::Level,
+        TargetKind::Delta => Target::Delta(
+            learned
+                .iter()
+                .zip(x_columns.iter().zip(&y_columns))
+                .map(|(e, (x, y))| DeltaSpec {
+                    k: change_limit(x, y, &rows, e.period(), params.delta_quantile),
+                    period: e.period(),
+                    code: params.delta_code,
+                })
+                .collect(),
+        ),
+    };
+    let outputs = Output::for_entries(&target, &learned)
+        .map_err(|m| Error::bad_file(codebook_path, format!("{} target: {m}", target.kind())))?;
+    // What each variable's trees learn, on every row: its next level or its
+    // change, as a level of the output's code.
+    let y_targets: Vec<Vec<u16>> = outputs
+        .iter()
+        .zip(x_columns.iter().zip(&y_columns))
+        .map(|(o, (x, y))| x.iter().zip(*y).map(|(&x, &y)| o.target(x, y)).collect())
+        .collect();
+
+    // The input variables each output's trees read, and their bits.
+    let read_variables: Option<Vec<Vec<usize>>> = params.informative_inputs.map(|count| {
+        let targets: Vec<&[u16]> = y_targets.iter().map(Vec::as_slice).collect();
+        select::informative(&x_columns, &targets, &rows, count.get())
+    });
+    let mut offsets = vec![0u32];
+    codecs
+        .iter()
+        .for_each(|c| offsets.push(offsets.last().unwrap() + c.width()));
+    let reads: Vec<Vec<u32>> = match &read_variables {
+        Some(chosen) => chosen
+            .iter()
+            .map(|vars| {
+                vars.iter()
+                    .flat_map(|&u| offsets[u]..offsets[u + 1])
+                    .collect()
+            })
+            .collect(),
+        None => forest::every_bit(inputs, learned.len()),
+    };
+
     let vote = params.vote.0 as u32;
     let tick = || progress.advance(1);
     let spec = params.tree_spec(inputs);
     let (trained, output_widths) = match params.model {
         ModelKind::BitForest => {
             let inputs = Columns::from_rows(&x_bits, &rows);
-            let targets: Vec<Columns> = codecs
+            let targets: Vec<Columns> = outputs
                 .iter()
-                .zip(&y_columns)
-                .map(|(c, y)| Columns::from_rows(&encode(&[c], &[y]), &rows))
+                .zip(&y_targets)
+                .map(|(o, y)| Columns::from_rows(&encode(&[o.codec()], &[y]), &rows))
                 .collect();
             let widths: Vec<usize> = targets.iter().map(|t| t.bits).collect();
             let total_trees = widths.iter().sum::<usize>() * vote as usize;
@@ -188,12 +262,13 @@ pub fn run(
                 shard,
                 &inputs,
                 &targets,
+                &reads,
                 &tick,
             );
             (trained, widths)
         }
         ModelKind::Threshold => {
-            // The training rows alone, in order, with their true levels.
+            // The training rows alone, in order, with their targets.
             let x_train = encode(
                 &codec_refs,
                 &x_columns
@@ -204,14 +279,14 @@ pub fn run(
                     .map(Vec::as_slice)
                     .collect::<Vec<_>>(),
             );
-            let y_train: Vec<Vec<u16>> = y_columns
+            let y_train: Vec<Vec<u16>> = y_targets
                 .iter()
                 .map(|y| rows.iter().map(|&r| y[r]).collect())
                 .collect();
             let targets: Vec<(&[u16], usize)> = y_train
                 .iter()
-                .zip(&codecs)
-                .map(|(y, c)| (y.as_slice(), c.levels()))
+                .zip(&outputs)
+                .map(|(y, o)| (y.as_slice(), o.codec().levels()))
                 .collect();
             let total_trees = targets.len() * vote as usize;
             let own = (0..total_trees).filter(|&p| shard.owns(p)).count();
@@ -228,11 +303,13 @@ pub fn run(
                 shard,
                 candidates,
                 &x_train,
+                &reads,
                 &targets,
                 &tick,
             );
             // The candidate's thermometer code.
-            (trained, codecs.iter().map(|c| c.levels() - 1).collect())
+            let widths = outputs.iter().map(|o| o.codec().levels() - 1).collect();
+            (trained, widths)
         }
     };
 
@@ -241,7 +318,13 @@ pub fn run(
             codebook_sha256: sha256_file(codebook_path)?,
             params: serde_json::to_value(params).expect("parameters serialize"),
             model: params.model,
+            target,
             inputs,
+            reads: read_variables
+                .iter()
+                .flatten()
+                .map(|vars| vars.iter().map(|&u| learned[u].variable.clone()).collect())
+                .collect(),
             outputs: learned
                 .iter()
                 .zip(output_widths)
@@ -255,6 +338,24 @@ pub fn run(
     };
     model.write(&out_dir.join(MODEL_FILE))?;
     write_log(&out_dir.join(TRAINING_FILE), &trained, &learned, provenance)
+}
+
+/// The k of a variable's change: the `quantile` of |Δ| over the training
+/// `rows` (the ⌈q·n⌉-th smallest), at least 1.
+fn change_limit(
+    x: &[u16],
+    y: &[u16],
+    rows: &[usize],
+    period: Option<u32>,
+    quantile: Fraction,
+) -> u32 {
+    let mut sizes: Vec<u32> = rows
+        .iter()
+        .map(|&r| change(x[r], y[r], period).unsigned_abs())
+        .collect();
+    let rank = ((quantile.get() * sizes.len() as f64).ceil() as usize).clamp(1, sizes.len());
+    let (_, kth, _) = sizes.select_nth_unstable(rank - 1);
+    (*kth).max(1)
 }
 
 /// `training.parquet`: one row per tree per epoch.

@@ -21,13 +21,15 @@ use crate::learn::{EpochLog, Samples, train_epochs};
 /// the rows of `x` with true levels `y`: the tree reads the row's bits
 /// followed by a candidate level in thermometer code, and each row is
 /// presented with candidate levels around its true level (±`near`) and
-/// `far` random ones, labelled [candidate < y].
+/// `far` random ones, labelled [candidate < y]. Of the row's bits, the tree
+/// reads those in `reads` (and every candidate bit).
 #[allow(clippy::too_many_arguments)]
 pub fn train_tree(
     spec: &TreeSpec,
     epochs: usize,
     seed: u64,
     x: &BitMatrix,
+    reads: &[u32],
     y: &[u16],
     levels: usize,
     near: usize,
@@ -57,7 +59,9 @@ pub fn train_tree(
         inputs: inputs.bits,
         ..*spec
     };
-    let mut tree = Tree::new(&spec, &mut rng);
+    let candidate_bits = x.bits() as u32..inputs.bits as u32;
+    let bits: Vec<u32> = reads.iter().copied().chain(candidate_bits).collect();
+    let mut tree = Tree::reading(&spec, &bits, &mut rng);
     let samples = Samples {
         count: inputs.count,
         words: inputs.words,
@@ -78,7 +82,7 @@ pub struct Candidates {
 
 /// Trains `vote` threshold trees for each output variable, in parallel:
 /// `targets[v]` holds variable v's true levels for the rows of `x` and its
-/// number of levels. Tree (v, voter) is [`TreeId`] { variable: v, bit: 0,
+/// number of levels; its trees read the bits `reads[v]` of `x`. Tree (v, voter) is [`TreeId`] { variable: v, bit: 0,
 /// vote: voter }, seeded from `seed` and that identity alone.
 #[allow(clippy::too_many_arguments)]
 pub fn train_forest(
@@ -89,6 +93,7 @@ pub fn train_forest(
     shard: Shard,
     candidates: Candidates,
     x: &BitMatrix,
+    reads: &[Vec<u32>],
     targets: &[(&[u16], usize)],
     on_tree_done: &(dyn Fn() + Sync),
 ) -> Vec<Trained> {
@@ -113,6 +118,7 @@ pub fn train_forest(
                 epochs,
                 id.seed(seed),
                 x,
+                &reads[id.variable as usize],
                 y,
                 levels,
                 candidates.near,
@@ -175,7 +181,8 @@ mod tests {
             initial_spread: 1,
         };
         // Rows 0..400 train (y has 400 entries), rows 400..600 test.
-        let (tree, log) = train_tree(&spec, 20, 5, &x_bits, &y[..400], levels, 2, 2);
+        let reads: Vec<u32> = (0..x_bits.bits() as u32).collect();
+        let (tree, log) = train_tree(&spec, 20, 5, &x_bits, &reads, &y[..400], levels, 2, 2);
         let mut input = Vec::new();
         let errors: Vec<usize> = (400..600)
             .map(|r| {
