@@ -7,7 +7,7 @@ use alnlab_codes::bits::Columns;
 use rayon::prelude::*;
 
 use crate::compiled::{BLOCK, Block, Chains, Programs};
-use crate::tree::{Pruned, Tree};
+use crate::tree::{Gate, Pruned, Tree};
 
 /// Which tree: the output variable (index among the learned ones), the bit of
 /// its code, and the voter.
@@ -33,6 +33,9 @@ pub struct Predictor {
     widths: Vec<usize>,
     /// Voters per bit.
     vote: usize,
+    /// The input bits some tree reads, ascending: the bit-sliced programs
+    /// read them by their position here.
+    reads: Vec<u32>,
     programs: Programs,
     chains: Chains,
 }
@@ -62,28 +65,78 @@ impl Predictor {
             })
             .collect();
         assert_eq!(expected.next(), None, "a tree for every bit and voter");
+        let mut reads: Vec<u32> = pruned
+            .iter()
+            .flat_map(|tree| tree.nodes.iter())
+            .filter_map(|gate| match *gate {
+                Gate::Leaf(literal) => Some(literal / 2),
+                _ => None,
+            })
+            .collect();
+        reads.sort_unstable();
+        reads.dedup();
+        // Batches carry only the bits some tree reads; their programs address
+        // them by position.
+        let position = |literal: u32| {
+            let at = reads.binary_search(&(literal / 2)).expect("a read bit");
+            (2 * at as u32) | (literal & 1)
+        };
+        let compact: Vec<Pruned> = pruned
+            .iter()
+            .map(|tree| Pruned {
+                nodes: tree
+                    .nodes
+                    .iter()
+                    .map(|&gate| match gate {
+                        Gate::Leaf(literal) => Gate::Leaf(position(literal)),
+                        other => other,
+                    })
+                    .collect(),
+            })
+            .collect();
         Predictor {
             widths: widths.to_vec(),
             vote: vote as usize,
-            programs: Programs::new(&pruned),
+            programs: Programs::new(&compact),
             chains: Chains::new(&pruned),
+            reads,
         }
     }
 
+    /// The input bits some tree reads, ascending: what [`Predictor::predict_read`]
+    /// takes.
+    pub fn reads(&self) -> &[u32] {
+        &self.reads
+    }
+
     /// The predicted bits of every output variable over all samples of
-    /// `inputs`: `out[v]` holds variable v's bits as columns. Blocks of
-    /// samples run in parallel; the result does not depend on the threads.
+    /// `inputs` (every input bit): `out[v]` holds variable v's bits as
+    /// columns. Blocks of samples run in parallel; the result does not
+    /// depend on the threads.
     pub fn predict(&self, inputs: &Columns) -> Vec<Columns> {
+        self.predict_columns(inputs, |i| inputs.column(self.reads[i] as usize))
+    }
+
+    /// The same for inputs holding only the bits of [`Predictor::reads`], in
+    /// that order — what a caller that builds the columns itself need make.
+    pub fn predict_read(&self, read: &Columns) -> Vec<Columns> {
+        assert_eq!(read.bits, self.reads.len(), "a column per read bit");
+        self.predict_columns(read, |i| read.column(i))
+    }
+
+    fn predict_columns<'a>(
+        &self,
+        inputs: &Columns,
+        column: impl Fn(usize) -> &'a [u64] + Sync,
+    ) -> Vec<Columns> {
         let blocks = inputs.words.div_ceil(BLOCK);
         let per_block: Vec<Vec<Block>> = (0..blocks)
             .into_par_iter()
             .map(|k| {
-                let mut block_inputs = vec![[0u64; BLOCK]; inputs.bits];
-                let words = (k * BLOCK..inputs.words.min((k + 1) * BLOCK)).enumerate();
-                for (b, block) in block_inputs.iter_mut().enumerate() {
-                    for (j, w) in words.clone() {
-                        block[j] = inputs.data[b * inputs.words + w];
-                    }
+                let mut block_inputs = vec![[0u64; BLOCK]; self.reads.len()];
+                let words = k * BLOCK..inputs.words.min((k + 1) * BLOCK);
+                for (i, block) in block_inputs.iter_mut().enumerate() {
+                    block[..words.len()].copy_from_slice(&column(i)[words.clone()]);
                 }
                 let mut trees = vec![[0u64; BLOCK]; self.programs.trees()];
                 self.programs.evaluate_block(&block_inputs, &mut trees);
@@ -150,7 +203,7 @@ fn majority_of(voters: &[Block], j: usize) -> u64 {
     match voters {
         [a] => a[j],
         [a, b, c] => a[j] & b[j] | a[j] & c[j] | b[j] & c[j],
-        _ => majority(&voters.iter().map(|v| v[j]).collect::<Vec<_>>()),
+        _ => majority_over(voters.iter().map(|v| v[j]), voters.len()),
     }
 }
 
@@ -159,11 +212,32 @@ pub fn majority(words: &[u64]) -> u64 {
     match words {
         [a] => *a,
         [a, b, c] => a & b | a & c | b & c,
-        _ => (0..64).fold(0, |acc, bit| {
-            let ones = words.iter().filter(|w| *w >> bit & 1 == 1).count();
-            acc | u64::from(2 * ones > words.len()) << bit
-        }),
+        _ => majority_over(words.iter().copied(), words.len()),
     }
+}
+
+/// Bitwise majority of `n` (< 256) words: each bit's count of ones kept
+/// bit-sliced in eight counter words, then compared with n/2 + 1.
+fn majority_over(words: impl Iterator<Item = u64>, n: usize) -> u64 {
+    assert!(n < 256, "fewer than 256 voters");
+    let mut count = [0u64; 8];
+    for word in words {
+        let mut carry = word;
+        for c in count.iter_mut() {
+            let next = *c & carry;
+            *c ^= carry;
+            carry = next;
+        }
+    }
+    let need = n / 2 + 1;
+    // count ≥ need, compared from the most significant counter bit down.
+    let (mut greater, mut equal) = (0u64, !0u64);
+    for (i, &c) in count.iter().enumerate().rev() {
+        let t = 0u64.wrapping_sub((need >> i & 1) as u64);
+        greater |= equal & c & !t;
+        equal &= !(c ^ t);
+    }
+    greater | equal
 }
 
 #[cfg(test)]
@@ -174,5 +248,20 @@ mod tests {
     fn majority_of_words() {
         assert_eq!(majority(&[0b1100, 0b1010, 0b1001]), 0b1000);
         assert_eq!(majority(&[0b11000, 0b10100, 0b10010, 0b10001, 0]), 0b10000);
+        // Every pattern of 5 voters and 64 of 7, one pattern per bit.
+        for n in [5usize, 7] {
+            let patterns = (1u64 << n).min(64);
+            let words: Vec<u64> = (0..n)
+                .map(|voter| (0..patterns).fold(0, |w, p| w | (p >> voter & 1) << p))
+                .collect();
+            for p in 0..patterns {
+                let ones = p.count_ones() as usize;
+                assert_eq!(
+                    majority(&words) >> p & 1 == 1,
+                    2 * ones > n,
+                    "{n} voters, {p:b}"
+                );
+            }
+        }
     }
 }

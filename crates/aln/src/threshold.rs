@@ -6,7 +6,7 @@
 //! ([`Batched`], bit-sliced).
 
 use alnlab_codes::Codec;
-use alnlab_codes::bits::Columns;
+use alnlab_codes::bits::encode_columns;
 
 use crate::forest::{Predictor, TreeId};
 use crate::tree::Tree;
@@ -89,31 +89,41 @@ impl Batched {
     }
 
     /// The level each variable's search ends at, `[variable][row]`, for the
-    /// rows of `x` (bit-sliced input bits): the binary search of
-    /// [`transition`] run for every row at once, one bit-sliced evaluation
-    /// of the voters per step — the same levels as [`predict`] row by row.
-    pub fn predict(&self, x: &Columns) -> Vec<Vec<usize>> {
-        let rows = x.count;
-        let mut joined = x.clone();
+    /// rows of the input levels `x` (`[variable][row]`, coded with
+    /// `codecs`): the binary search of [`transition`] run for every row at
+    /// once, one bit-sliced evaluation of the voters per step — the same
+    /// levels as [`predict`] row by row. Only the input bits a variable's
+    /// trees read are coded.
+    pub fn predict(&self, codecs: &[&Codec], x: &[&[u16]]) -> Vec<Vec<usize>> {
+        let rows = x.first().map_or(0, |column| column.len());
+        let x_bits: usize = codecs.iter().map(|c| c.width() as usize).sum();
         self.variables
             .iter()
             .map(|(predictor, levels)| {
-                let width = levels - 1;
-                joined.bits = x.bits + width;
-                joined.data.resize(joined.bits * x.words, 0);
+                let reads = predictor.reads();
+                let inputs = reads.partition_point(|&bit| (bit as usize) < x_bits);
+                let mut joined = encode_columns(codecs, x, &reads[..inputs]);
+                // The candidate's thermometer bits the trees read, after the inputs.
+                let candidate_bits: Vec<usize> = reads[inputs..]
+                    .iter()
+                    .map(|&b| b as usize - x_bits)
+                    .collect();
+                let words = joined.words;
+                joined.bits = reads.len();
+                joined.data.resize(joined.bits * words, 0);
                 let (mut lo, mut hi) = (vec![0usize; rows], vec![*levels; rows]);
                 while lo.iter().zip(&hi).any(|(l, h)| l < h) {
                     // Each row's candidate: the middle of its interval, in
-                    // thermometer code (its first `mid` bits set).
-                    let candidates = &mut joined.data[x.bits * x.words..];
+                    // thermometer code (bit j set when j < mid).
+                    let candidates = &mut joined.data[inputs * words..];
                     candidates.fill(0);
                     for r in 0..rows {
                         let mid = lo[r] + (hi[r] - lo[r]) / 2;
-                        for bit in 0..mid.min(width) {
-                            candidates[bit * x.words + r / 64] |= 1 << (r % 64);
+                        for (column, &bit) in candidate_bits.iter().enumerate() {
+                            candidates[column * words + r / 64] |= u64::from(bit < mid) << (r % 64);
                         }
                     }
-                    let below = &predictor.predict(&joined)[0];
+                    let below = &predictor.predict_read(&joined)[0];
                     let below = below.column(0);
                     for r in 0..rows {
                         if lo[r] < hi[r] {
@@ -165,8 +175,8 @@ mod tests {
             .map(|_| (0..300).map(|_| rng.random_range(0..1024)).collect())
             .collect();
         let x = encode(&[&binary, &binary], &[&columns[0], &columns[1]]);
-        let all: Vec<usize> = (0..300).collect();
-        let batched = Batched::new(&refs, &levels).predict(&Columns::from_rows(&x, &all));
+        let batched =
+            Batched::new(&refs, &levels).predict(&[&binary, &binary], &[&columns[0], &columns[1]]);
         let mut scratch = Vec::new();
         for (v, &l) in levels.iter().enumerate() {
             let thermometer = Codec::new(Code::Thermometer, l, None).unwrap();

@@ -2,7 +2,7 @@
 //! (bit i of a row is bit i % 64 of word i / 64). The train and test stages
 //! read their inputs and targets in this form.
 
-use crate::codes::Codec;
+use crate::codes::{Code, Codec};
 
 /// A rows × bits matrix of packed bits.
 #[derive(Clone, Debug, PartialEq)]
@@ -99,6 +99,73 @@ pub fn encode(codecs: &[&Codec], columns: &[&[u16]]) -> BitMatrix {
     matrix
 }
 
+/// The bit-sliced columns of the bits `bits` (ascending indices into the
+/// variables' codes side by side, as [`encode`] lays them out) of level
+/// columns coded with `codecs`: each column made straight from the levels,
+/// without coding whole rows — a model that reads a few bits of long codes
+/// pays for those bits only, and thermometer bits (level > j) cost a few
+/// operations per 64 rows each.
+pub fn encode_columns(codecs: &[&Codec], columns: &[&[u16]], bits: &[u32]) -> Columns {
+    assert_eq!(codecs.len(), columns.len(), "one codec per column");
+    debug_assert!(bits.is_sorted(), "ascending bits");
+    let count = columns.first().map_or(0, |c| c.len());
+    let words = count.div_ceil(64).max(1);
+    let mut data = vec![0u64; bits.len() * words];
+    let (mut first, mut offset) = (0, 0);
+    // Each variable's share of `bits`, and where its code starts.
+    for (codec, levels) in codecs.iter().zip(columns) {
+        let width = codec.width() as usize;
+        let last = first + bits[first..].partition_point(|&b| (b as usize) < offset + width);
+        let mine = &bits[first..last];
+        let out = &mut data[first * words..last * words];
+        if codec.code() == Code::Thermometer {
+            thermometer_columns(levels, mine, offset, words, out);
+        } else {
+            for (column, &bit) in out.chunks_exact_mut(words).zip(mine) {
+                let j = bit as usize - offset;
+                for (word, chunk) in column.iter_mut().zip(levels.chunks(64)) {
+                    for (i, &level) in chunk.iter().enumerate() {
+                        *word |= (codec.codeword(usize::from(level))[j / 64] >> (j % 64) & 1) << i;
+                    }
+                }
+            }
+        }
+        (first, offset) = (last, offset + width);
+    }
+    Columns {
+        count,
+        bits: bits.len(),
+        words,
+        data,
+    }
+}
+
+/// Thermometer bits `bits` (code bit j = `bits[i]` − `offset`, set when
+/// level > j) of `levels`: per word of 64 rows, the rows at each level as a
+/// mask, then the rows above each j by removing those at j, j − 1, ….
+fn thermometer_columns(levels: &[u16], bits: &[u32], offset: usize, words: usize, out: &mut [u64]) {
+    let Some(&top) = bits.last() else { return };
+    let widest = top as usize - offset + 1;
+    let mut at = vec![0u64; widest];
+    for (w, chunk) in levels.chunks(64).enumerate() {
+        at.fill(0);
+        let mut above = 0u64;
+        for (i, &level) in chunk.iter().enumerate() {
+            above |= 1 << i;
+            if let Some(mask) = at.get_mut(usize::from(level)) {
+                *mask |= 1 << i;
+            }
+        }
+        let mut next = bits.iter().enumerate().peekable();
+        for (j, &mask) in at.iter().enumerate() {
+            above &= !mask;
+            if let Some((column, _)) = next.next_if(|&(_, &b)| b as usize - offset == j) {
+                out[column * words + w] = above;
+            }
+        }
+    }
+}
+
 /// Bit-sliced columns: bit `b` of sample `s` is bit `s % 64` of
 /// `data[b * words + s / 64]`.
 #[derive(Clone, Debug, PartialEq)]
@@ -138,39 +205,27 @@ impl Columns {
         &self.data[b * self.words..(b + 1) * self.words]
     }
 
-    /// The rows of the 64 samples of word `w`, for at most 64 bits:
-    /// `rows[i]` gets the bits of sample 64·w + i.
-    pub fn transpose_word(&self, w: usize, rows: &mut [u64; 64]) {
-        assert!(self.bits <= 64, "rows of at most 64 bits");
-        rows.fill(0);
-        for (b, row) in rows.iter_mut().enumerate().take(self.bits) {
-            *row = self.data[b * self.words + w];
-        }
-        transpose(rows);
-    }
-
     /// Hands each sample's bits to `f`, in sample order, as ⌈bits/64⌉ words:
-    /// a 64×64 transpose per word of samples when the rows fit one word.
+    /// a 64×64 transpose per word of samples and 64 bits.
     pub fn for_each_row(&self, mut f: impl FnMut(usize, &[u64])) {
-        let samples = |w: usize| (self.count - 64 * w).min(64);
-        if self.bits <= 64 {
-            let mut rows = [0u64; 64];
-            for w in 0..self.words {
-                self.transpose_word(w, &mut rows);
-                for (i, row) in rows[..samples(w)].iter().enumerate() {
-                    f(64 * w + i, std::slice::from_ref(row));
+        let groups = self.bits.div_ceil(64).max(1);
+        let mut rows = vec![0u64; 64 * groups];
+        let mut square = [0u64; 64];
+        for w in 0..self.words {
+            for g in 0..groups {
+                square.fill(0);
+                let bits = 64 * g..self.bits.min(64 * (g + 1));
+                for (row, b) in square.iter_mut().zip(bits) {
+                    *row = self.data[b * self.words + w];
+                }
+                transpose(&mut square);
+                for (i, &word) in square.iter().enumerate() {
+                    rows[i * groups + g] = word;
                 }
             }
-            return;
-        }
-        let mut row = vec![0u64; self.bits.div_ceil(64)];
-        for w in 0..self.words {
-            for i in 0..samples(w) {
-                row.fill(0);
-                for b in 0..self.bits {
-                    row[b / 64] |= (self.data[b * self.words + w] >> i & 1) << (b % 64);
-                }
-                f(64 * w + i, &row);
+            let samples = (self.count - 64 * w).min(64);
+            for (i, row) in rows.chunks_exact(groups).take(samples).enumerate() {
+                f(64 * w + i, row);
             }
         }
     }
@@ -234,39 +289,22 @@ mod tests {
             }
         }
         assert!(m.get(0, 0) == (walk.codeword(0)[0] & 1 == 1));
-    }
 
-    #[test]
-    fn transposing_a_word_gives_each_sample_its_bits() {
-        let mut rng = ChaCha8Rng::seed_from_u64(12);
-        for bits in [1, 23, 64] {
-            let columns = Columns {
-                count: 130,
-                bits,
-                words: 3,
-                data: (0..3 * bits).map(|_| rng.random()).collect(),
-            };
-            let mut rows = [0u64; 64];
-            for w in 0..3 {
-                columns.transpose_word(w, &mut rows);
-                for (i, row) in rows.iter().enumerate() {
-                    for b in 0..64 {
-                        let expected = b < bits && columns.column(b)[w] >> i & 1 == 1;
-                        assert_eq!(
-                            row >> b & 1 == 1,
-                            expected,
-                            "bits {bits}, word {w}, sample {i}, bit {b}"
-                        );
-                    }
-                }
-            }
+        // Columns of some bits straight from the levels: the same as the
+        // encoded rows' columns.
+        let all = Columns::from_rows(&m, &(0..500).collect::<Vec<_>>());
+        let bits: Vec<u32> = vec![0, 5, 22, 23, 24, 90, 121, 122, 129, 130, 152];
+        let some = encode_columns(&codecs, &[&a, &b, &c, &c], &bits);
+        assert_eq!((some.count, some.bits, some.words), (500, bits.len(), 8));
+        for (i, &bit) in bits.iter().enumerate() {
+            assert_eq!(some.column(i), all.column(bit as usize), "bit {bit}");
         }
     }
 
     #[test]
     fn every_row_comes_out_whole_however_wide() {
         let mut rng = ChaCha8Rng::seed_from_u64(13);
-        for bits in [5, 64, 130] {
+        for bits in [1, 5, 23, 64, 130] {
             let columns = Columns {
                 count: 100,
                 bits,
@@ -276,8 +314,13 @@ mod tests {
             let mut seen = 0;
             columns.for_each_row(|s, row| {
                 assert_eq!(s, seen);
-                for b in 0..bits {
-                    let expected = columns.column(b)[s / 64] >> (s % 64) & 1;
+                assert_eq!(row.len(), bits.div_ceil(64));
+                for b in 0..64 * row.len() {
+                    let expected = if b < bits {
+                        columns.column(b)[s / 64] >> (s % 64) & 1
+                    } else {
+                        0
+                    };
                     assert_eq!(
                         row[b / 64] >> (b % 64) & 1,
                         expected,

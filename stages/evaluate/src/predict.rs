@@ -16,8 +16,7 @@ use alnlab_aln::forest::Predictor;
 use alnlab_aln::model::Model;
 use alnlab_aln::threshold;
 use alnlab_aln::tree::Tree;
-use alnlab_codes::bits::Columns;
-use alnlab_codes::bits::{BitMatrix, encode};
+use alnlab_codes::bits::{BitMatrix, encode, encode_columns};
 use alnlab_codes::codes::{Code, Codec};
 use rayon::prelude::*;
 
@@ -43,7 +42,7 @@ pub struct Timing {
 pub struct Aln<'a> {
     /// The input variables' codes.
     codecs: &'a [Codec],
-    outputs: &'a [Output],
+    pub(crate) outputs: &'a [Output],
     compiled: Compiled<'a>,
 }
 
@@ -122,12 +121,9 @@ impl<'a> Aln<'a> {
     /// (`[variable][row]`) by the fastest path; `windows` rate-limits each
     /// variable to within that many levels of its current one.
     pub fn levels(&self, x: &[Vec<u16>], windows: Option<&[usize]>) -> Vec<Vec<u16>> {
-        let inputs = self.encode(x);
         match &self.compiled {
-            Compiled::BitForest(predictor) => self.batched(predictor, x, &inputs, windows),
-            Compiled::Threshold { batched, .. } => {
-                self.batched_search(batched, x, &inputs, windows)
-            }
+            Compiled::BitForest(predictor) => self.batched(predictor, x, windows),
+            Compiled::Threshold { batched, .. } => self.batched_search(batched, x, windows),
         }
     }
 
@@ -140,7 +136,7 @@ impl<'a> Aln<'a> {
             Compiled::BitForest(predictor) => {
                 let threads = rayon::current_num_threads();
                 let (levels, batched) = timed("batched", rows, threads, 3, || {
-                    self.batched(predictor, x, &inputs, windows)
+                    self.batched(predictor, x, windows)
                 });
                 let (single_levels, single) = timed("single", rows, 1, 1, || {
                     self.single(predictor, x, &inputs, windows)
@@ -158,7 +154,7 @@ impl<'a> Aln<'a> {
             } => {
                 let threads = rayon::current_num_threads();
                 let (levels, batched) = timed("batched", rows, threads, 3, || {
-                    self.batched_search(batched, x, &inputs, windows)
+                    self.batched_search(batched, x, windows)
                 });
                 let (single_levels, single) = timed("threshold-search", rows, 1, 1, || {
                     self.search(voters, thermometers, x, &inputs, windows)
@@ -173,22 +169,37 @@ impl<'a> Aln<'a> {
     }
 
     fn encode(&self, x: &[Vec<u16>]) -> BitMatrix {
-        let refs: Vec<&Codec> = self.codecs.iter().collect();
-        let columns: Vec<&[u16]> = x.iter().map(Vec::as_slice).collect();
-        encode(&refs, &columns)
+        let (codecs, columns) = self.inputs(x);
+        encode(&codecs, &columns)
     }
 
-    /// All rows bit-sliced, decoded in parallel by variable.
+    /// A bit-forest's compiled trees (none for a threshold model).
+    pub(crate) fn bit_forest(&self) -> Option<&Predictor> {
+        match &self.compiled {
+            Compiled::BitForest(predictor) => Some(predictor),
+            Compiled::Threshold { .. } => None,
+        }
+    }
+
+    /// The input codecs and level columns, as the coders take them.
+    pub(crate) fn inputs<'x>(&self, x: &'x [Vec<u16>]) -> (Vec<&'a Codec>, Vec<&'x [u16]>) {
+        (
+            self.codecs.iter().collect(),
+            x.iter().map(Vec::as_slice).collect(),
+        )
+    }
+
+    /// All rows bit-sliced, decoded in parallel by variable: from the
+    /// levels to the levels, coding only the input bits the trees read.
     fn batched(
         &self,
         predictor: &Predictor,
         x: &[Vec<u16>],
-        inputs: &BitMatrix,
         windows: Option<&[usize]>,
     ) -> Vec<Vec<u16>> {
-        let rows = inputs.rows();
-        let sliced = Columns::from_rows(inputs, &(0..rows).collect::<Vec<_>>());
-        let out = predictor.predict(&sliced);
+        let rows = x.first().map_or(0, Vec::len);
+        let (codecs, columns) = self.inputs(x);
+        let out = predictor.predict_read(&encode_columns(&codecs, &columns, predictor.reads()));
         out.par_iter()
             .zip(self.outputs)
             .enumerate()
@@ -228,13 +239,12 @@ impl<'a> Aln<'a> {
         &self,
         batched: &threshold::Batched,
         x: &[Vec<u16>],
-        inputs: &BitMatrix,
         windows: Option<&[usize]>,
     ) -> Vec<Vec<u16>> {
-        let rows = inputs.rows();
-        let sliced = Columns::from_rows(inputs, &(0..rows).collect::<Vec<_>>());
+        let rows = x.first().map_or(0, Vec::len);
+        let (codecs, columns) = self.inputs(x);
         batched
-            .predict(&sliced)
+            .predict(&codecs, &columns)
             .iter()
             .zip(self.outputs)
             .enumerate()
@@ -309,6 +319,7 @@ mod tests {
     use alnlab_aln::model::Header;
     use alnlab_aln::shard::Shard;
     use alnlab_aln::tree::TreeSpec;
+    use alnlab_codes::bits::Columns;
     use alnlab_codes::walk::WalkSpec;
     use alnlab_train::forest;
 

@@ -107,10 +107,9 @@ mod tests {
         }
     }
 
-    /// y = x + 1 on one variable (walk code, L = 64): train on some levels'
-    /// samples, test on unseen ones; returns the mean test error in levels.
-    fn successor_error(vote: u32, noise: f64, seed: u64) -> f64 {
-        let codec = Codec::new(
+    /// The 23-bit walk code of 64 levels the small forests here learn.
+    fn walk64() -> Codec {
+        Codec::new(
             Code::Walk,
             64,
             Some(WalkSpec {
@@ -121,7 +120,13 @@ mod tests {
                 seed: 3,
             }),
         )
-        .unwrap();
+        .unwrap()
+    }
+
+    /// y = x + 1 on one variable (walk code, L = 64): train on some levels'
+    /// samples, test on unseen ones; returns the mean test error in levels.
+    fn successor_error(vote: u32, noise: f64, seed: u64) -> f64 {
+        let codec = walk64();
         let mut rng = ChaCha8Rng::seed_from_u64(seed);
         let x: Vec<u16> = (0..1200).map(|_| rng.random_range(0..63)).collect();
         let y: Vec<u16> = x
@@ -168,18 +173,7 @@ mod tests {
     /// for y = x + drift (L = 64, walk-coded inputs): drift is +1, and with
     /// probability 0.2 one of 0 or +2.
     fn drift_error(output: &Output, seed: u64) -> f64 {
-        let input = Codec::new(
-            Code::Walk,
-            64,
-            Some(WalkSpec {
-                levels: 64,
-                width: 23,
-                step: 1,
-                span: 7,
-                seed: 3,
-            }),
-        )
-        .unwrap();
+        let input = walk64();
         let mut rng = ChaCha8Rng::seed_from_u64(seed);
         let x: Vec<u16> = (0..1200).map(|_| rng.random_range(0..62)).collect();
         let y: Vec<u16> = x
