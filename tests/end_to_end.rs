@@ -673,3 +673,53 @@ fn every_committed_experiment_runs_when_cut_down() {
         }
     }
 }
+
+#[test]
+fn bench_predict_times_a_runs_own_model_on_its_test_rows() {
+    let dir = tempfile::tempdir().unwrap();
+    let residual = MANIFEST.replace(
+        "[train]\n",
+        "[quantize]\ncode = \"thermometer\"\nlevels = 32\n\n[train]\ntarget = \"delta\"\ninformative_inputs = 2\n",
+    );
+    write_manifest(dir.path(), "m.toml", &residual);
+    let record = run_ok(dir.path(), &["m.toml"]);
+    let out = alnlab(
+        dir.path(),
+        &[
+            "bench", "predict", "--run", "runs/e2e", "--repeat", "3", "--json",
+        ],
+    );
+    assert!(out.status.success(), "{}", stderr(&out));
+    let figures: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(figures["target"], "delta");
+    assert_eq!(figures["repeats"], 3);
+    let states = figures["states"].as_u64().unwrap();
+    assert!(states > 0);
+    for key in [
+        "aln_batched_one_thread_ns",
+        "aln_batched_all_threads_ns",
+        "simulator_one_step_one_thread_ns",
+    ] {
+        let s = &figures[key];
+        let (min, median, max) = (
+            s["min"].as_f64().unwrap(),
+            s["median"].as_f64().unwrap(),
+            s["max"].as_f64().unwrap(),
+        );
+        assert!(0.0 < min && min <= median && median <= max, "{key}: {s}");
+    }
+    assert!(figures["input_bits_read"].as_u64().unwrap() > 0);
+    assert_eq!(record.variants.len(), 1);
+
+    // A variant the run does not have is a user error.
+    let out = alnlab(
+        dir.path(),
+        &["bench", "predict", "--run", "runs/e2e", "--variant", "nope"],
+    );
+    assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
+    assert!(
+        stderr(&out).contains("no variant `nope`"),
+        "{}",
+        stderr(&out)
+    );
+}

@@ -61,12 +61,25 @@ pub enum Bench {
         #[arg(long)]
         json: bool,
     },
-    /// Time full-state prediction at the paper's scale: all 1472 trees and
-    /// the decoding, bit-sliced in batches and one sample at a time
-    /// (parsimonious), with the fraction of nodes evaluated.
-    #[command(after_help = "Example:
+    /// Time full-state prediction. With --run: a run's own model on its
+    /// test rows — the batched path on one thread and on all threads, where
+    /// its time goes, and the simulator re-stepping each row's frame once on
+    /// one thread — each as min/median/max of REPEAT runs. Without: a
+    /// synthetic paper-scale forest (1472 trees), bit-sliced and one sample
+    /// at a time, with the fraction of nodes evaluated.
+    #[command(after_help = "Examples:
+  alnlab bench predict --run runs/strongest --variant strongest --json
   alnlab bench predict --json")]
     Predict {
+        /// A run's folder (holding run.json) whose model and data to time.
+        #[arg(long)]
+        run: Option<PathBuf>,
+        /// The run's variant (default: the only one).
+        #[arg(long, requires = "run")]
+        variant: Option<String>,
+        /// How many timed runs per figure (with --run).
+        #[arg(long, default_value_t = 5, value_parser = clap::value_parser!(u32).range(1..=1000))]
+        repeat: u32,
         /// Print one JSON object.
         #[arg(long)]
         json: bool,
@@ -185,7 +198,79 @@ pub fn execute(bench: Bench, quiet: bool) -> Result<()> {
             }
             Ok(())
         }
-        Bench::Predict { json } => {
+        Bench::Predict {
+            run: Some(run_dir),
+            variant,
+            repeat,
+            json,
+        } => {
+            let roles = ["model", "codebook", "levels", "trajectory"];
+            let record = crate::report::read_record(&run_dir)?;
+            let chosen = super::dataset::pick_variant(
+                &record.variants,
+                variant.as_deref(),
+                &roles,
+                &run_dir,
+            )?;
+            let artifact = |role: &str| {
+                chosen
+                    .artifacts
+                    .get(role)
+                    .map(|a| PathBuf::from(&a.path))
+                    .ok_or_else(|| {
+                        Error::bad_file(
+                            &run_dir.join("run.json"),
+                            format!("variant `{}` has no `{role}` artifact", chosen.name),
+                        )
+                    })
+            };
+            let figures = alnlab_evaluate::bench::on_data(
+                &artifact("model")?,
+                &artifact("codebook")?,
+                &artifact("levels")?,
+                &artifact("trajectory")?,
+                repeat as usize,
+            )?;
+            print_figures(&figures, json, |f| {
+                let spread = |s: &alnlab_evaluate::bench::Spread| {
+                    format!("{:8.0} ns  (min {:.0}, max {:.0})", s.median, s.min, s.max)
+                };
+                println!(
+                    "{} ({}, {} target, {} trees) on {} test states, medians of {} runs:",
+                    chosen.name, f.model, f.target, f.trees, f.states, f.repeats
+                );
+                println!(
+                    "ALN batched, 1 thread:        {}",
+                    spread(&f.aln_batched_one_thread_ns)
+                );
+                println!(
+                    "ALN batched, {} threads:      {}",
+                    f.threads,
+                    spread(&f.aln_batched_all_threads_ns)
+                );
+                if let Some(p) = &f.aln_phases_one_thread_ns {
+                    println!(
+                        "  of which (1 thread): coding inputs {:.0} ns, trees {:.0} ns, decoding {:.0} ns",
+                        p.code_inputs, p.trees, p.decode
+                    );
+                }
+                println!(
+                    "simulator@1/frame, 1 thread:  {}",
+                    spread(&f.simulator_one_step_one_thread_ns)
+                );
+                let ratio = f.aln_speedup_one_thread;
+                if ratio >= 1.0 {
+                    println!("ALN against simulator, 1 thread: {ratio:.2}× faster");
+                } else {
+                    println!(
+                        "ALN against simulator, 1 thread: {:.2}× slower",
+                        1.0 / ratio
+                    );
+                }
+            });
+            Ok(())
+        }
+        Bench::Predict { json, .. } => {
             let figures = alnlab_train::bench::predict();
             print_figures(&figures, json, |figures| {
                 println!(

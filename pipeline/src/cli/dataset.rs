@@ -222,7 +222,7 @@ fn archive_run(
 
 /// The variant to archive: the one named, the only one, or any when all
 /// variants share the same data files.
-fn pick_variant<'a>(
+pub(crate) fn pick_variant<'a>(
     variants: &'a [VariantRecord],
     name: Option<&str>,
     roles: &[&str],

@@ -13,6 +13,7 @@
 //!   variable, horizon and start row.
 
 mod baseline;
+pub mod bench;
 mod predict;
 mod resimulate;
 mod rollout;
@@ -20,9 +21,10 @@ mod rollout;
 use std::path::Path;
 use std::sync::Arc;
 
+use alnlab_aln::Output;
 use alnlab_aln::model::Model;
 use alnlab_codes::codes::Codec;
-use alnlab_codes::{Codebook, level_column, split_rows};
+use alnlab_codes::{Codebook, Entry, level_column, split_rows};
 use alnlab_common::hash::sha256_file;
 use alnlab_common::params::{self, Count, Fraction, ParamError};
 use alnlab_common::state_log::StateLog;
@@ -98,6 +100,95 @@ pub struct TestRows {
     pub y: Vec<Vec<u16>>,
 }
 
+/// A model with what it was trained on: the codebook and its codecs, the
+/// model's outputs, and the levels table whose test rows it predicts.
+pub(crate) struct Data {
+    pub model: Model,
+    pub codebook: Codebook,
+    pub codecs: Vec<Codec>,
+    pub outputs: Vec<Output>,
+    pub levels: Table,
+    levels_path: std::path::PathBuf,
+}
+
+impl Data {
+    /// Reads the three files, checking that they belong together.
+    pub fn read(model_path: &Path, codebook_path: &Path, levels_path: &Path) -> Result<Data> {
+        let model = Model::read(model_path)?;
+        if model.header.codebook_sha256 != sha256_file(codebook_path)? {
+            return Err(Error::bad_file(
+                model_path,
+                format!(
+                    "was trained with another codebook than {}",
+                    codebook_path.display()
+                ),
+            ));
+        }
+        let codebook = Codebook::read(codebook_path)?;
+        let codecs = codebook.learned_codecs(codebook_path)?;
+        let learned: Vec<_> = codebook.learned().collect();
+        let outputs = model.header.outputs_for(&learned).map_err(|m| {
+            Error::bad_file(
+                model_path,
+                format!("does not fit the codebook {}: {m}", codebook_path.display()),
+            )
+        })?;
+        Ok(Data {
+            model,
+            codecs,
+            outputs,
+            levels: Table::read(levels_path)?,
+            levels_path: levels_path.to_path_buf(),
+            codebook,
+        })
+    }
+
+    /// The learned variables' codebook entries.
+    pub fn learned(&self) -> Vec<&Entry> {
+        self.codebook.learned().collect()
+    }
+
+    /// The levels of side `x` or `y` of `rows`, `[variable][row]`.
+    pub fn select(&self, side: &str, rows: &[usize]) -> Result<Vec<Vec<u16>>> {
+        self.learned()
+            .iter()
+            .map(|e| {
+                let levels = level_column(&self.levels, side, &e.variable)?;
+                Ok(rows.iter().map(|&r| levels[r]).collect())
+            })
+            .collect()
+    }
+
+    /// The test rows (at least one).
+    pub fn test_rows(&self) -> Result<TestRows> {
+        let rows = split_rows(&self.levels, "test")?;
+        if rows.is_empty() {
+            return Err(Error::bad_file(&self.levels_path, "has no test rows"));
+        }
+        Ok(TestRows {
+            x: self.select("x", &rows)?,
+            y: self.select("y", &rows)?,
+            rows,
+        })
+    }
+
+    /// Where each test row's frame is in the trajectory log.
+    pub fn starts(&self, test: &TestRows) -> Result<Vec<rollout::Start<'_>>> {
+        let scenes = self.levels.column::<StringArray>("scene")?;
+        let runs = self.levels.column::<UInt32Array>("run")?.values();
+        let steps = self.levels.column::<UInt32Array>("step")?.values();
+        Ok(test
+            .rows
+            .iter()
+            .map(|&r| rollout::Start {
+                scene: scenes.value(r),
+                run: runs[r],
+                frame: steps[r],
+            })
+            .collect())
+    }
+}
+
 /// Reads the model, codebook and levels, predicts, writes both tables.
 #[allow(clippy::too_many_arguments)]
 pub fn run(
@@ -111,52 +202,17 @@ pub fn run(
     progress: &dyn Progress,
 ) -> Result<()> {
     params.validate().map_err(|e| params::invalid("test", e))?;
-    let model = Model::read(model_path)?;
-    if model.header.codebook_sha256 != sha256_file(codebook_path)? {
-        return Err(Error::bad_file(
-            model_path,
-            format!(
-                "was trained with another codebook than {}",
-                codebook_path.display()
-            ),
-        ));
-    }
-    let codebook = Codebook::read(codebook_path)?;
-    let learned: Vec<_> = codebook.learned().collect();
+    let data = Data::read(model_path, codebook_path, levels_path)?;
+    let codecs = &data.codecs;
+    let learned = data.learned();
     let names: Vec<&str> = learned.iter().map(|e| e.variable.as_str()).collect();
-    let codecs = codebook.learned_codecs(codebook_path)?;
-    let outputs = model.header.outputs_for(&learned).map_err(|m| {
-        Error::bad_file(
-            model_path,
-            format!("does not fit the codebook {}: {m}", codebook_path.display()),
-        )
-    })?;
-    let levels = Table::read(levels_path)?;
-    let rows_of = |split: &str| split_rows(&levels, split);
-    let column = |side: &str, variable: &str| level_column(&levels, side, variable);
-    let select = |side: &str, rows: &[usize]| -> Result<Vec<Vec<u16>>> {
-        names
-            .iter()
-            .map(|v| {
-                let levels = column(side, v)?;
-                Ok(rows.iter().map(|&r| levels[r]).collect())
-            })
-            .collect()
-    };
-    let test_rows = rows_of("test")?;
-    if test_rows.is_empty() {
-        return Err(Error::bad_file(levels_path, "has no test rows"));
-    }
-    let train_rows = rows_of("train")?;
-    let test = TestRows {
-        x: select("x", &test_rows)?,
-        y: select("y", &test_rows)?,
-        rows: test_rows,
-    };
+    let test = data.test_rows()?;
+    let train_rows = split_rows(&data.levels, "train")?;
+    let select = |side: &str, rows: &[usize]| data.select(side, rows);
 
     progress.start("test", 4, "steps");
-    let windows = params.windows(&codecs);
-    let predictor = predict::Aln::new(&model, &codecs, &outputs);
+    let windows = params.windows(codecs);
+    let predictor = predict::Aln::new(&data.model, codecs, &data.outputs);
     let (aln, mut timings) = predictor.timed(&test.x, windows.as_deref());
     progress.advance(1);
     let persistence = test.x.clone();
@@ -169,18 +225,7 @@ pub fn run(
 
     // The simulator re-stepping each test row's logged frame.
     let log = StateLog::read(trajectory_path)?;
-    let scenes = levels.column::<StringArray>("scene")?;
-    let runs = levels.column::<UInt32Array>("run")?.values();
-    let steps = levels.column::<UInt32Array>("step")?.values();
-    let starts: Vec<rollout::Start> = test
-        .rows
-        .iter()
-        .map(|&r| rollout::Start {
-            scene: scenes.value(r),
-            run: runs[r],
-            frame: steps[r],
-        })
-        .collect();
+    let starts = data.starts(&test)?;
     let frames = rollout::LoggedFrames::new(&log, &learned);
     let replays = alnlab_physics::replay::SceneReplay::from_log(&log)
         .map_err(|m| Error::bad_file(trajectory_path, m))?;
