@@ -15,8 +15,8 @@ mod findings;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
-use alnlab_aln::ModelKind;
-use alnlab_aln::model::Model;
+use alnlab_aln::model::{Header, Model};
+use alnlab_aln::{ModelKind, Target};
 use alnlab_codes::Codebook;
 use alnlab_common::table::Table;
 use alnlab_common::{Result, atomic};
@@ -101,6 +101,8 @@ struct Loaded<'a> {
     tree_bytes: usize,
     /// The variables not learned, with the codebook's reason.
     not_learned: Vec<(String, String)>,
+    /// What the model is and learns, in words.
+    description: String,
 }
 
 impl Loaded<'_> {
@@ -251,23 +253,40 @@ fn load(info: &VariantInfo) -> Result<Loaded<'_>> {
         // A thermometer of w bits has w + 1 levels: ⌈log₂(w + 1)⌉ steps.
         levels_steps: (max_width + 1).next_power_of_two().trailing_zeros(),
     };
-    let literals = 2 * match model.header.model {
-        ModelKind::BitForest => model.header.inputs,
-        ModelKind::Threshold => model.header.inputs + max_width,
+    let codebook = Codebook::read(&info.codebook)?;
+    let width_of = |name: &str| {
+        codebook
+            .entries
+            .iter()
+            .find(|e| e.variable == name)
+            .map_or(0, |e| e.width as usize)
+    };
+    // The literals a tree may be wired to: its output's inputs (every input
+    // bit, or those of the variables it reads), and a threshold tree's
+    // candidate.
+    let candidate = match model.header.model {
+        ModelKind::BitForest => 0,
+        ModelKind::Threshold => max_width,
+    };
+    let literals_of = |variable: usize| {
+        let inputs = match model.header.reads.get(variable) {
+            Some(reads) => reads.iter().map(|r| width_of(r)).sum(),
+            None => model.header.inputs,
+        };
+        2 * (inputs + candidate)
     };
     let mut seen = Vec::new();
-    let read = model
-        .trees
-        .iter()
-        .map(|(_, tree)| {
-            seen.clear();
-            seen.extend_from_slice(tree.literals());
-            seen.sort_unstable();
-            seen.dedup();
-            seen.len() as f64 / literals as f64
-        })
-        .sum::<f64>()
-        / model.trees.len().max(1) as f64;
+    let (mut read, mut literals) = (0.0, 0);
+    for (id, tree) in &model.trees {
+        seen.clear();
+        seen.extend_from_slice(tree.literals());
+        seen.sort_unstable();
+        seen.dedup();
+        let of = literals_of(id.variable as usize);
+        read += seen.len() as f64 / of as f64;
+        literals = literals.max(of);
+    }
+    let read = read / model.trees.len().max(1) as f64;
     let coverage = Coverage {
         leaves: model.trees.first().map_or(0, |(_, t)| t.leaves()),
         literals,
@@ -278,13 +297,15 @@ fn load(info: &VariantInfo) -> Result<Loaded<'_>> {
         .iter()
         .map(|(_, t)| 2 * (t.leaves() - 1) + std::mem::size_of_val(t.literals()))
         .sum();
-    let not_learned = Codebook::read(&info.codebook)?
+    let description = describe(&model.header, model.trees.len(), coverage.leaves);
+    let not_learned = codebook
         .entries
         .into_iter()
         .filter(|e| !e.learned)
         .map(|e| (e.variable, e.note))
         .collect();
     Ok(Loaded {
+        description,
         not_learned,
         info,
         summary,
@@ -295,6 +316,44 @@ fn load(info: &VariantInfo) -> Result<Loaded<'_>> {
         coverage,
         tree_bytes,
     })
+}
+
+/// What a model is and learns, in a sentence: its kind and trees, its
+/// target (with the range of k and the code of a residual target), and
+/// which inputs its outputs read.
+fn describe(header: &Header, trees: usize, leaves: usize) -> String {
+    let kind = match header.model {
+        ModelKind::BitForest => "a bit-forest",
+        ModelKind::Threshold => "a threshold-predicate model (§6)",
+    };
+    let mut text = format!("{kind} of {trees} trees of {leaves} leaves");
+    if header.vote > 1 {
+        let _ = write!(text, ", {} voting per output", header.vote);
+    }
+    match &header.target {
+        Target::Level => text.push_str("; it learns each variable's next level"),
+        Target::Delta(specs) => {
+            let ks = specs.iter().map(|s| s.k);
+            let (lo, hi) = (ks.clone().min().unwrap_or(0), ks.max().unwrap_or(0));
+            let _ = write!(
+                text,
+                "; it learns each variable's change of level Δ, clamped to ±k (k from {lo} to \
+                 {hi}, from the training rows)"
+            );
+            // A threshold model searches Δ's levels; a bit-forest learns its code.
+            if let (ModelKind::BitForest, Some(spec)) = (header.model, specs.first()) {
+                let _ = write!(text, " in {} code", spec.code);
+            }
+        }
+    }
+    if let Some(most) = header.reads.iter().map(Vec::len).max() {
+        let _ = write!(
+            text,
+            "; each output reads only its {most} most informative inputs (mutual information \
+             with its target on the training rows)"
+        );
+    }
+    text
 }
 
 /// (mean, 95th percentile) of a model's errors, averaged over the variables.

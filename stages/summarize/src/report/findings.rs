@@ -111,6 +111,7 @@ fn variant_findings(md: &mut String, v: &Loaded) {
         ".\n"
     });
     md.push_str(&sentence);
+    let _ = writeln!(md, "  - Model: {}.", v.description);
 
     let batched = v.ns("aln", "batched");
     let single = v.aln_single_ns();
