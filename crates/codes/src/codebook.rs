@@ -266,7 +266,10 @@ mod tests {
         );
         let pi = std::f64::consts::PI;
         // Observed extremes a little inside ±π still wrap.
-        assert_eq!(entry("roll.3", -pi + 1e-4, pi - 3e-4, 64).period(), Some(63));
+        assert_eq!(
+            entry("roll.3", -pi + 1e-4, pi - 3e-4, 64).period(),
+            Some(63)
+        );
         assert_eq!(entry("roll.2", -pi / 2.0, pi / 2.0, 214).period(), None);
         assert_eq!(entry("pitch.2", -pi, pi, 214).period(), None);
         assert_eq!(entry("omega.1.x", -pi, pi, 214).period(), None);
