@@ -10,7 +10,6 @@ use std::time::Instant;
 use alnlab_aln::ModelKind;
 use alnlab_codes::bits::encode_columns;
 use alnlab_common::{Error, Result};
-use rayon::prelude::*;
 use serde::Serialize;
 
 use crate::predict::Aln;
@@ -93,19 +92,7 @@ pub fn on_data(
             });
             let bits = predictor.predict_read(&read);
             let decode = spread(repeat, states, || {
-                let levels: Vec<Vec<u16>> = bits
-                    .par_iter()
-                    .zip(aln.outputs)
-                    .enumerate()
-                    .map(|(v, (columns, output))| {
-                        let mut levels = Vec::with_capacity(states);
-                        columns.for_each_row(|s, code| {
-                            levels.push(output.decode(code, test.x[v][s], None))
-                        });
-                        levels
-                    })
-                    .collect();
-                std::hint::black_box(levels);
+                std::hint::black_box(aln.decode(&bits, &test.x, None));
             });
             Phases {
                 code_inputs: code_inputs.median,

@@ -16,7 +16,7 @@ use alnlab_aln::forest::Predictor;
 use alnlab_aln::model::Model;
 use alnlab_aln::threshold;
 use alnlab_aln::tree::Tree;
-use alnlab_codes::bits::{BitMatrix, encode, encode_columns};
+use alnlab_codes::bits::{BitMatrix, Columns, encode, encode_columns};
 use alnlab_codes::codes::{Code, Codec};
 use rayon::prelude::*;
 
@@ -42,7 +42,7 @@ pub struct Timing {
 pub struct Aln<'a> {
     /// The input variables' codes.
     codecs: &'a [Codec],
-    pub(crate) outputs: &'a [Output],
+    outputs: &'a [Output],
     compiled: Compiled<'a>,
 }
 
@@ -197,14 +197,24 @@ impl<'a> Aln<'a> {
         x: &[Vec<u16>],
         windows: Option<&[usize]>,
     ) -> Vec<Vec<u16>> {
-        let rows = x.first().map_or(0, Vec::len);
         let (codecs, columns) = self.inputs(x);
         let out = predictor.predict_read(&encode_columns(&codecs, &columns, predictor.reads()));
+        self.decode(&out, x, windows)
+    }
+
+    /// The levels the outputs' bits `out[v]` (bit-sliced) stand for, from
+    /// the current levels `x`; in parallel by variable.
+    pub(crate) fn decode(
+        &self,
+        out: &[Columns],
+        x: &[Vec<u16>],
+        windows: Option<&[usize]>,
+    ) -> Vec<Vec<u16>> {
         out.par_iter()
             .zip(self.outputs)
             .enumerate()
             .map(|(v, (columns, output))| {
-                let mut levels = Vec::with_capacity(rows);
+                let mut levels = Vec::with_capacity(columns.count);
                 let window = windows.map(|w| w[v]);
                 columns.for_each_row(|s, code| levels.push(output.decode(code, x[v][s], window)));
                 levels
@@ -319,7 +329,6 @@ mod tests {
     use alnlab_aln::model::Header;
     use alnlab_aln::shard::Shard;
     use alnlab_aln::tree::TreeSpec;
-    use alnlab_codes::bits::Columns;
     use alnlab_codes::walk::WalkSpec;
     use alnlab_train::forest;
 
