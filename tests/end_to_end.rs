@@ -115,6 +115,7 @@ fn cache_reuses_and_reruns_only_what_changed() {
     assert_eq!(cached(&first), [false, false, false, false, false, false]);
     assert!(first.variants[0].artifacts.keys().eq([
         "codebook",
+        "comparisons",
         "horizons",
         "levels",
         "model",
@@ -509,6 +510,15 @@ fn the_report_renders_with_its_charts_and_renders_again_the_same() {
             .join(&record.variants[0].artifacts["summary"].path),
     )
     .unwrap();
+    // The box's test rows are all held out: both sets of rows are summarized.
+    let held_out = summary
+        .iter()
+        .filter(|r| r.rows == alnlab_summarize::Rows::HeldOut);
+    assert_eq!(held_out.count() * 2, summary.len());
+    let summary: Vec<_> = summary
+        .into_iter()
+        .filter(|r| r.rows == alnlab_summarize::Rows::All)
+        .collect();
     let models: std::collections::BTreeSet<&str> =
         summary.iter().map(|r| r.model.as_str()).collect();
     assert!(models.into_iter().eq([
@@ -528,7 +538,8 @@ fn the_report_renders_with_its_charts_and_renders_again_the_same() {
     let report = std::fs::read_to_string(&report_path).unwrap();
     for heading in [
         "## Findings",
-        "- **`base`**: the ALN's mean error is ",
+        "- **`base`** on the ",
+        "test rows, all held out of training: the ALN's mean error is ",
         "## Notes from the experimenter\n\nThe box tumbles; *nothing* to learn.",
         "## Reproducibility",
         "Error by group (paper §4.6)",
@@ -536,7 +547,7 @@ fn the_report_renders_with_its_charts_and_renders_again_the_same() {
     ] {
         assert!(report.contains(heading), "{heading} missing:\n{report}");
     }
-    // The findings' verdict follows the numbers.
+    // The findings' verdict follows the paired comparison's interval.
     let mean = |model: &str| {
         let rows: Vec<f64> = summary
             .iter()
@@ -545,12 +556,32 @@ fn the_report_renders_with_its_charts_and_renders_again_the_same() {
             .collect();
         rows.iter().sum::<f64>() / rows.len() as f64
     };
-    let verdict = if mean("aln") < mean("persistence") {
-        "better"
+    let comparisons = alnlab_summarize::read_comparisons(
+        &dir.path()
+            .join(&record.variants[0].artifacts["comparisons"].path),
+    )
+    .unwrap();
+    let d = comparisons
+        .iter()
+        .find(|c| {
+            c.rows == alnlab_summarize::Rows::HeldOut
+                && c.against == "persistence"
+                && c.variable.is_none()
+        })
+        .unwrap()
+        .difference;
+    assert!((d.mean - (mean("aln") - mean("persistence"))).abs() < 1e-9);
+    let verdict = if d.high < 0.0 {
+        "better than"
+    } else if d.low > 0.0 {
+        "worse than"
     } else {
-        "worse"
+        "indistinguishable from"
     };
-    let expected = format!("{verdict} than persistence ({:.3})", mean("persistence"));
+    let expected = format!(
+        "{verdict} persistence ({:.3}; difference",
+        mean("persistence")
+    );
     assert!(report.contains(&expected), "{expected}\n{report}");
     // Every chart the report shows exists and is an SVG document.
     let charts: Vec<&str> = report

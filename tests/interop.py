@@ -8,10 +8,14 @@ decoder from the schema stored in the file, and checks the decoded values
 against the stride stage's pairs table; checks that /tf and /scene use
 Foxglove's well-known schema names and that every scene's model is in an
 `alnlab.model` metadata record; recomputes every statistic of
-summary.parquet from predictions.parquet in plain Python; parses every SVG
-the report shows as XML. Exits non-zero on any mismatch.
+summary.parquet from predictions.parquet in plain Python, and every paired
+comparison of comparisons.parquet (mean difference, standard deviation and
+95% t-interval) with numpy and scipy, and, for an experiment with
+replicates, every figure of replicates.csv across replicates; parses every
+SVG the report shows as XML. Exits non-zero on any mismatch.
 """
 
+import csv
 import json
 import math
 import re
@@ -20,7 +24,9 @@ import xml.etree.ElementTree as ET
 from collections import defaultdict
 from pathlib import Path
 
+import numpy as np
 import pyarrow.parquet as pq
+from scipy import stats
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 
@@ -34,14 +40,21 @@ def quantile(xs, q):
 
 
 def check_summary(predictions_path, summary_path):
-    """Every statistic of summary.parquet, recomputed from the predictions."""
+    """Every statistic of summary.parquet, recomputed from the predictions,
+    over all test rows and over the held-out ones."""
     errors = defaultdict(list)
-    for row in pq.read_table(predictions_path, columns=["model", "variable", "error"]).to_pylist():
-        errors[(row["model"], row["variable"])].append(row["error"])
+    truth = defaultdict(list)
+    columns = ["model", "variable", "held_out", "true_level", "error"]
+    for row in pq.read_table(predictions_path, columns=columns).to_pylist():
+        for rows in ["all"] + (["held-out"] if row["held_out"] else []):
+            errors[(rows, row["model"], row["variable"])].append(row["error"])
+            truth[(rows, row["model"], row["variable"])].append(row["true_level"])
     summary = pq.read_table(summary_path).to_pylist()
     assert len(summary) == len(errors), (len(summary), len(errors))
     for row in summary:
-        xs = sorted(errors[(row["model"], row["variable"])])
+        key = (row["rows"], row["model"], row["variable"])
+        assert math.isclose(row["true_std_dev"], float(np.std(truth[key], ddof=1)), rel_tol=1e-9, abs_tol=1e-12), key
+        xs = sorted(errors[key])
         n = len(xs)
         mean = sum(xs) / n
         std = math.sqrt(sum((x - mean) ** 2 for x in xs) / (n - 1)) if n > 1 else float("nan")
@@ -59,6 +72,55 @@ def check_summary(predictions_path, summary_path):
     return len(summary)
 
 
+def check_comparisons(predictions_path, comparisons_path):
+    """Every paired comparison, recomputed with numpy and scipy: the ALN's
+    errors minus the other model's on the same rows, per variable and
+    averaged over the variables per row; mean, sample standard deviation
+    and the 95% t-interval agree to 1e-9."""
+    table = pq.read_table(predictions_path, columns=["model", "variable", "row", "held_out", "error"])
+    cols = {name: table.column(name).to_pylist() for name in table.column_names}
+    errors = defaultdict(list)
+    held = {}
+    for m, v, r, h, e in zip(cols["model"], cols["variable"], cols["row"], cols["held_out"], cols["error"]):
+        errors[(m, v)].append((r, e))
+        held[r] = h
+    variables = sorted({v for _, v in errors}, key=cols["variable"].index)
+    models = sorted({m for m, _ in errors}, key=cols["model"].index)
+    rows = [r for r, _ in errors[(models[0], variables[0])]]
+    err = {k: np.array([e for _, e in pairs], dtype=float) for k, pairs in errors.items()}
+    sets = {"all": np.ones(len(rows), bool), "held-out": np.array([held[r] for r in rows])}
+
+    def interval(d):
+        n = len(d)
+        mean = float(np.mean(d))
+        sd = float(np.std(d, ddof=1))
+        half = float(stats.t.ppf(0.975, n - 1)) * sd / math.sqrt(n)
+        return n, mean, sd, mean - half, mean + half
+
+    expected = {}
+    for name, mask in sets.items():
+        if not mask.any():
+            continue
+        for other in models:
+            if other == "aln":
+                continue
+            per_variable = [err[("aln", v)][mask] - err[(other, v)][mask] for v in variables]
+            for v, d in zip(variables, per_variable):
+                expected[(name, other, v)] = interval(d)
+            expected[(name, other, None)] = interval(np.mean(per_variable, axis=0))
+    got = pq.read_table(comparisons_path).to_pylist()
+    assert len(got) == len(expected), (len(got), len(expected))
+    for row in got:
+        n, mean, sd, low, high = expected[(row["rows"], row["against"], row["variable"])]
+        assert row["n"] == n, row
+        for key, value in [("mean_difference", mean), ("std_dev", sd), ("ci_low", low), ("ci_high", high)]:
+            assert math.isclose(row[key], value, rel_tol=1e-9, abs_tol=1e-9), (row, key, value)
+        verdict = ("tied" if mean == 0 and sd == 0 else "lower" if high < 0
+                   else "higher" if low > 0 else "indistinguishable")
+        assert row["verdict"] == verdict, (row, verdict)
+    return len(got)
+
+
 def check_rollout(predictions_path, rollout_path):
     """One step of the closed loop is the open-loop prediction: the rollout's
     first-step errors equal the predictions' for the same rows, for every
@@ -71,6 +133,53 @@ def check_rollout(predictions_path, rollout_path):
     for r in first:
         assert one_step[key(r, r["start"])] == r["error"], r
     return len(first)
+
+
+def judged_figures(summary_path, comparisons_path):
+    """One replicate's headline figures on its held-out rows (all rows when
+    none is held out): mean errors over the variables of the ALN,
+    persistence and linear, and the ALN's mean paired difference against
+    the two baselines."""
+    summary = pq.read_table(summary_path).to_pylist()
+    rows = "held-out" if any(r["rows"] == "held-out" for r in summary) else "all"
+    figures = {}
+    for model in ["aln", "persistence", "linear"]:
+        means = [r["mean"] for r in summary if r["rows"] == rows and r["model"] == model]
+        figures[f"{model} mean"] = float(np.mean(means))
+    for row in pq.read_table(comparisons_path).to_pylist():
+        if row["rows"] == rows and row["model"] == "aln" and row["variable"] is None \
+                and row["against"] in ("persistence", "linear"):
+            figures[f"aln - {row['against']}"] = row["mean_difference"]
+    return figures
+
+
+def check_replicates(record, report_dir):
+    """replicates.csv: every figure's per-replicate values recomputed from
+    each replicate's summary and comparisons, and their mean, standard
+    deviation and 95% t-interval across replicates with numpy and scipy."""
+    by_variant = defaultdict(list)
+    for variant in record["variants"]:
+        by_variant[variant["name"]].append(variant)
+    if all(len(v) < 2 for v in by_variant.values()):
+        return 0
+    rows = list(csv.DictReader(open(Path(report_dir) / "replicates.csv")))
+    checked = 0
+    for name, replicates in by_variant.items():
+        per = [judged_figures(r["artifacts"]["summary"]["path"], r["artifacts"]["comparisons"]["path"])
+               for r in sorted(replicates, key=lambda r: r["replicate"])]
+        for row in (r for r in rows if r["variant"] == name):
+            values = np.array([p[row["figure"]] for p in per])
+            listed = [float(x) for x in row["values"].split(";")]
+            assert np.allclose(listed, values, rtol=1e-12, atol=1e-12), (row, values)
+            n = len(values)
+            mean, sd = float(np.mean(values)), float(np.std(values, ddof=1))
+            half = float(stats.t.ppf(0.975, n - 1)) * sd / math.sqrt(n)
+            assert int(row["replicates"]) == n, row
+            for key, value in [("mean", mean), ("std_dev", sd), ("ci_low", mean - half), ("ci_high", mean + half)]:
+                assert math.isclose(float(row[key]), value, rel_tol=1e-9, abs_tol=1e-9), (row, key, value)
+            checked += 1
+        assert checked, f"{name}: no figure in replicates.csv"
+    return checked
 
 
 def check_report(report_dir):
@@ -97,7 +206,7 @@ def main(run_json: str, report_dir: str) -> int:
                 meta = pq.read_metadata(path).metadata
                 assert table.num_rows > 0, f"{path}: no rows"
                 assert meta[b"alnlab.stage"], f"{path}: no provenance"
-                assert json.loads(meta[b"alnlab.params"])["seed"] == record["seed"], path
+                assert json.loads(meta[b"alnlab.params"])["seed"] == variant.get("seed", record["seed"]), path
                 checked += 1
 
         # Decode every /state message with the schema stored in the file.
@@ -138,11 +247,14 @@ def main(run_json: str, report_dir: str) -> int:
                 assert row["x." + name] == x[name], (row["step"], name)
                 assert row["y." + name] == y[name], (row["step"], name)
         summaries = check_summary(artifacts["predictions"]["path"], artifacts["summary"]["path"])
+        compared = check_comparisons(artifacts["predictions"]["path"], artifacts["comparisons"]["path"])
         rolled = check_rollout(artifacts["predictions"]["path"], artifacts["rollout"]["path"])
         print(f"{variant['name']}: {len(frames)} /state messages decoded, "
               f"{len(pairs)} pair rows match, {checked} Parquet files read, "
-              f"{summaries} summary rows recomputed, {rolled} first rollout steps match")
-    print(f"report: {check_report(report_dir)} SVG charts parse")
+              f"{summaries} summary rows recomputed, {compared} paired comparisons recomputed, "
+              f"{rolled} first rollout steps match")
+    print(f"report: {check_report(report_dir)} SVG charts parse, "
+          f"{check_replicates(record, report_dir)} figures across replicates recomputed")
     return 0
 
 

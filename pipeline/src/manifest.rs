@@ -13,6 +13,7 @@ use std::fmt;
 use std::path::{Path, PathBuf};
 
 use alnlab_common::hash::sha256_hex;
+use alnlab_common::params::Count;
 use serde::{Deserialize, Serialize};
 use serde_spanned::Spanned;
 use toml::de::{DeTable, DeValue};
@@ -57,6 +58,31 @@ pub struct Experiment {
     /// report under the computed findings.
     #[serde(default)]
     pub notes: String,
+    /// Every variant runs this many times, each replicate with its own seed
+    /// ([`replicate_seed`]): simulation, split and trees all re-drawn (with
+    /// an archived dataset, what comes after the data). The report gives
+    /// each headline figure as the mean across replicates with its 95%
+    /// confidence interval.
+    #[serde(default = "one_replicate")]
+    pub replicates: Count,
+}
+
+fn one_replicate() -> Count {
+    Count(1)
+}
+
+/// The seed of replicate `r` (0-based) of an experiment seeded `seed`: the
+/// seed itself for the first, so that one replicate is the plain run; then
+/// the SplitMix64 mix of seed + r·γ (γ = 0x9E3779B97F4A7C15), well apart
+/// for neighbouring seeds and replicates.
+pub fn replicate_seed(seed: u64, r: u32) -> u64 {
+    if r == 0 {
+        return seed;
+    }
+    let mut z = seed.wrapping_add(u64::from(r).wrapping_mul(0x9E37_79B9_7F4A_7C15));
+    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+    z ^ (z >> 31)
 }
 
 /// The `[data]` table: where the data come from instead of simulate and
@@ -550,6 +576,24 @@ simulate.scene = [{ name = "box", duration = 2.0, integrator = "rk4" }]
         let m = parse("[experiment]\nname = \"x\"\nseed = 1\n").unwrap();
         assert_eq!(m.variant_names(), ["base"]);
         assert_eq!(m.variants[0].stages, Stages::default());
+    }
+
+    #[test]
+    fn replicates_default_to_one_and_draw_their_own_seeds() {
+        let m = parse("[experiment]\nname = \"x\"\nseed = 1\n").unwrap();
+        assert_eq!(m.experiment.replicates, Count(1));
+        let m = parse("[experiment]\nname = \"x\"\nseed = 1\nreplicates = 5\n").unwrap();
+        assert_eq!(m.experiment.replicates, Count(5));
+        let e = parse("[experiment]\nname = \"x\"\nseed = 1\nreplicates = 0\n").unwrap_err();
+        assert_eq!(e.key, "experiment.replicates");
+        assert!(e.message.contains("≥ 1"), "{}", e.message);
+        // The first replicate is the plain run; the others differ from it,
+        // from each other and from the neighbouring seed's.
+        assert_eq!(replicate_seed(7, 0), 7);
+        let seeds: BTreeSet<u64> = (0..5)
+            .flat_map(|r| [replicate_seed(7, r), replicate_seed(8, r)])
+            .collect();
+        assert_eq!(seeds.len(), 10);
     }
 
     #[test]

@@ -4,28 +4,44 @@
 use std::path::{Path, PathBuf};
 
 use alnlab_common::{Error, Result};
-use alnlab_summarize::report::{self, RunInfo, StageTime, VariantInfo};
+use alnlab_summarize::report::{self, Replicate, RunInfo, StageTime, VariantInfo};
 
-use crate::run::RunRecord;
+use crate::run::{RunRecord, VariantRecord};
 
 /// Renders the report of `record` into `<reports>/<experiment>/`; returns
 /// the path of `report.md`.
 pub fn render(record: &RunRecord, reports: &Path) -> Result<PathBuf> {
+    let artifact = |v: &VariantRecord, role: &str| -> Result<PathBuf> {
+        v.artifacts
+            .get(role)
+            .map(|a| PathBuf::from(&a.path))
+            .ok_or_else(|| {
+                Error::Invalid(format!(
+                    "variant `{}` (replicate {}) of the run record has no `{role}` artifact",
+                    v.name,
+                    v.replicate + 1
+                ))
+            })
+    };
+    // A variant's first replicate stands for it; the others add their figures.
     let variants = record
         .variants
         .iter()
+        .filter(|v| v.replicate == 0)
         .map(|v| {
-            let artifact = |role: &str| -> Result<PathBuf> {
-                v.artifacts
-                    .get(role)
-                    .map(|a| PathBuf::from(&a.path))
-                    .ok_or_else(|| {
-                        Error::Invalid(format!(
-                            "variant `{}` of the run record has no `{role}` artifact",
-                            v.name
-                        ))
+            let replicates = record
+                .variants
+                .iter()
+                .filter(|r| r.name == v.name)
+                .map(|r| {
+                    Ok(Replicate {
+                        seed: r.seed,
+                        summary: artifact(r, "summary")?,
+                        comparisons: artifact(r, "comparisons")?,
                     })
-            };
+                })
+                .collect::<Result<_>>()?;
+            let artifact = |role: &str| artifact(v, role);
             Ok(VariantInfo {
                 name: v.name.clone(),
                 description: v.description.clone(),
@@ -40,11 +56,13 @@ pub fn render(record: &RunRecord, reports: &Path) -> Result<PathBuf> {
                     })
                     .collect(),
                 summary: artifact("summary")?,
+                comparisons: artifact("comparisons")?,
                 horizons: artifact("horizons")?,
                 timings: artifact("timings")?,
                 training: artifact("training")?,
                 model: artifact("model")?,
                 codebook: artifact("codebook")?,
+                replicates,
             })
         })
         .collect::<Result<_>>()?;

@@ -22,7 +22,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::cache::{Artifact, Cache, StageKey};
 use crate::dataset::{Archive, Entry};
-use crate::manifest::{Manifest, Variant};
+use crate::manifest::{Manifest, Variant, replicate_seed};
 use crate::progress::Bar;
 use crate::stages::{self, Archived, Call, STAGES, Stage, stage_params};
 use alnlab_aln::shard::Shard;
@@ -90,6 +90,13 @@ pub struct DatasetRef {
 pub struct VariantRecord {
     pub name: String,
     pub description: String,
+    /// Which replicate of the variant this is (0-based; the experiment's
+    /// `replicates` runs each variant that many times).
+    #[serde(default)]
+    pub replicate: u32,
+    /// The replicate's seed ([`crate::manifest::replicate_seed`]).
+    #[serde(default)]
+    pub seed: u64,
     /// Every artifact file by role (`trajectory`, `stats`, `pairs`, …).
     pub artifacts: BTreeMap<String, ArtifactRef>,
     /// The stages in execution order.
@@ -195,22 +202,34 @@ pub fn run(manifest: &Manifest, options: &RunOptions) -> Result<RunRecord> {
     cache.sweep_unfinished()?;
     let mut made_now = BTreeSet::new();
     let mut records = Vec::new();
+    let replicates = manifest.experiment.replicates.0 as u32;
     for variant in variants {
-        let mut graph = Graph {
-            manifest,
-            options,
-            cache: &cache,
-            dataset: dataset.as_ref().map(|entry| (&archive, entry)),
-            made_now: &mut made_now,
-            record: VariantRecord {
-                name: variant.name.clone(),
-                description: variant.description.clone(),
-                artifacts: BTreeMap::new(),
-                stages: Vec::new(),
-            },
-        };
-        graph.run_variant(variant)?;
-        records.push(graph.record);
+        for replicate in 0..replicates {
+            let seed = replicate_seed(manifest.experiment.seed, replicate);
+            let mut graph = Graph {
+                manifest,
+                options,
+                cache: &cache,
+                dataset: dataset.as_ref().map(|entry| (&archive, entry)),
+                made_now: &mut made_now,
+                seed,
+                label: if replicates > 1 {
+                    format!("{} #{}", variant.name, replicate + 1)
+                } else {
+                    variant.name.clone()
+                },
+                record: VariantRecord {
+                    name: variant.name.clone(),
+                    description: variant.description.clone(),
+                    replicate,
+                    seed,
+                    artifacts: BTreeMap::new(),
+                    stages: Vec::new(),
+                },
+            };
+            graph.run_variant(variant)?;
+            records.push(graph.record);
+        }
     }
     let record = RunRecord {
         experiment: manifest.experiment.name.clone(),
@@ -248,6 +267,10 @@ struct Graph<'a> {
     dataset: Option<(&'a Archive, &'a Entry)>,
     /// Keys made by this run, so `--force` makes shared artifacts only once.
     made_now: &'a mut BTreeSet<String>,
+    /// The replicate's seed, which every stage's parameters carry.
+    seed: u64,
+    /// The variant (and replicate) as progress and errors name it.
+    label: String,
     record: VariantRecord,
 }
 
@@ -256,7 +279,7 @@ impl Graph<'_> {
     /// artifact from the artifacts of the stages it reads; an archived
     /// dataset stands for the stages it holds.
     fn run_variant(&mut self, variant: &Variant) -> Result<()> {
-        let seed = self.manifest.experiment.seed;
+        let seed = self.seed;
         let archived = match self.dataset {
             Some((archive, entry)) => Some((self.dataset_stage(archive, entry)?, entry)),
             None => None,
@@ -321,7 +344,7 @@ impl Graph<'_> {
         variant: &Variant,
     ) -> Result<Artifact> {
         let shards = shard_store(&self.options.out);
-        let seed = self.manifest.experiment.seed;
+        let seed = self.seed;
         let artifact = self.find_or_make(
             stage.name,
             stage.format_version,
@@ -390,9 +413,9 @@ impl Graph<'_> {
         let artifact = match found {
             Some(artifact) => artifact,
             None => {
-                let label = format!("{}/{}", self.manifest.experiment.name, self.record.name);
+                let label = format!("{}/{}", self.manifest.experiment.name, self.label);
                 let bar = Bar::new(&label, self.options.quiet);
-                let context = format!("variant `{}`, stage {name}", self.record.name);
+                let context = format!("variant `{}`, stage {name}", self.label);
                 let artifact = self
                     .cache
                     .make(name, &key, outputs, |dir| {

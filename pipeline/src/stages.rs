@@ -311,7 +311,8 @@ pub const STAGES: &[Stage] = &[
     },
     Stage {
         name: "summarize",
-        about: "Run the summarize stage alone: error statistics per model and variable, and \
+        about: "Run the summarize stage alone: error statistics per model and variable (all \
+                test rows and the held-out ones), the ALN paired against each baseline, and \
                 closed-loop error per horizon",
         format_version: alnlab_summarize::FORMAT_VERSION,
         inputs: &[
@@ -326,6 +327,7 @@ pub const STAGES: &[Stage] = &[
         ],
         outputs: &[
             ("summary", alnlab_summarize::SUMMARY_FILE),
+            ("comparisons", alnlab_summarize::COMPARISONS_FILE),
             ("horizons", alnlab_summarize::HORIZONS_FILE),
         ],
         archived: Archived::Never,

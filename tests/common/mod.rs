@@ -66,9 +66,9 @@ pub fn run_ok(dir: &Path, args: &[&str]) -> RunRecord {
 }
 
 /// Bytes of every artifact file of the first variant, by role; the training
-/// log as its columns less `seconds` and the timings less `ns_per_state`
-/// (measurements, the only values in artifacts that differ between equal
-/// runs).
+/// log as its columns less `seconds` and the timings less `ns_per_state`,
+/// `ns_min`, `ns_max` and `ns_runs` (measurements, the only values in artifacts that
+/// differ between equal runs).
 pub fn artifact_bytes(dir: &Path, record: &RunRecord) -> Vec<(String, Vec<u8>)> {
     record.variants[0]
         .artifacts
@@ -76,8 +76,8 @@ pub fn artifact_bytes(dir: &Path, record: &RunRecord) -> Vec<(String, Vec<u8>)> 
         .map(|(role, a)| {
             let path = dir.join(&a.path);
             let bytes = match role.as_str() {
-                "training" => table_without(&path, "seconds"),
-                "timings" => table_without(&path, "ns_per_state"),
+                "training" => table_without(&path, &["seconds"]),
+                "timings" => table_without(&path, &["ns_per_state", "ns_min", "ns_max", "ns_runs"]),
                 _ => std::fs::read(&path).unwrap(),
             };
             (role.clone(), bytes)
@@ -85,19 +85,18 @@ pub fn artifact_bytes(dir: &Path, record: &RunRecord) -> Vec<(String, Vec<u8>)> 
         .collect()
 }
 
-/// A table's columns but one, as text.
-pub fn table_without(path: &Path, measured: &str) -> Vec<u8> {
+/// A table's columns but the `measured` ones, as text.
+pub fn table_without(path: &Path, measured: &[&str]) -> Vec<u8> {
     let table = alnlab_common::table::Table::read(path).unwrap();
     let schema = table.batch.schema();
     let mut text = String::new();
     for (field, column) in schema.fields().iter().zip(table.batch.columns()) {
-        if field.name() != measured {
+        if !measured.contains(&field.name().as_str()) {
             text.push_str(&format!("{}: {:?}\n", field.name(), column));
         }
     }
-    assert!(
-        schema.field_with_name(measured).is_ok(),
-        "{measured} is a column"
-    );
+    for name in measured {
+        assert!(schema.field_with_name(name).is_ok(), "{name} is a column");
+    }
     text.into_bytes()
 }

@@ -27,6 +27,21 @@ pub fn group_of(variable: &str) -> &str {
     }
 }
 
+/// The SI unit of a variable of the paper's groups (§4.1), by its name's
+/// quantity; empty for a name of no known quantity.
+pub fn unit_of(variable: &str) -> &'static str {
+    match variable.split('.').next().unwrap_or("") {
+        "v" => "m/s",
+        "a" => "m/s²",
+        "omega" => "rad/s",
+        "omega_dot" => "rad/s²",
+        "g" | "g_E" => "N·m",
+        "f_E" => "N",
+        "roll" | "pitch" => "rad",
+        _ => "",
+    }
+}
+
 /// The rows of `levels.parquet` in the `split` given (`train` or `test`):
 /// those marked so or `both`.
 pub fn split_rows(levels: &Table, split: &str) -> Result<Vec<usize>> {

@@ -18,6 +18,8 @@ mod near;
 pub mod residual;
 pub mod walk;
 
-pub use codebook::{Codebook, Entry, GROUPS, Quantizer, group_of, level_column, split_rows};
+pub use codebook::{
+    Codebook, Entry, GROUPS, Quantizer, group_of, level_column, split_rows, unit_of,
+};
 pub use codes::{Code, Codec};
 pub use residual::{DeltaSpec, Residual};

@@ -154,11 +154,14 @@ impl Table {
     }
 }
 
-/// Builds a record batch from named, equally long columns.
+/// Builds a record batch from named, equally long columns; a column is
+/// nullable when it holds a null.
 pub fn batch(columns: Vec<(&str, Arc<dyn Array>)>) -> RecordBatch {
     let fields: Vec<arrow_schema::Field> = columns
         .iter()
-        .map(|(name, array)| arrow_schema::Field::new(*name, array.data_type().clone(), false))
+        .map(|(name, array)| {
+            arrow_schema::Field::new(*name, array.data_type().clone(), array.null_count() > 0)
+        })
         .collect();
     let schema = Arc::new(arrow_schema::Schema::new(fields));
     RecordBatch::try_new(schema, columns.into_iter().map(|(_, a)| a).collect())

@@ -5,7 +5,6 @@
 //! `repeat` timed runs.
 
 use std::path::Path;
-use std::time::Instant;
 
 use alnlab_aln::ModelKind;
 use alnlab_codes::bits::encode_columns;
@@ -13,15 +12,9 @@ use alnlab_common::{Error, Result};
 use serde::Serialize;
 
 use crate::predict::Aln;
+pub use crate::timing::Spread;
+use crate::timing::{measure, one_thread};
 use crate::{Data, resimulate, rollout};
-
-/// Nanoseconds per state over the timed runs.
-#[derive(Clone, Copy, Debug, Serialize)]
-pub struct Spread {
-    pub min: f64,
-    pub median: f64,
-    pub max: f64,
-}
 
 /// Where a bit-forest's batched time goes, on one thread (medians, ns per
 /// state): coding the input bits the trees read from the levels, the trees
@@ -70,30 +63,30 @@ pub fn on_data(
     let test = data.test_rows()?;
     let states = test.rows.len();
     let aln = Aln::new(&data.model, &data.codecs, &data.outputs);
-    let one_thread = rayon::ThreadPoolBuilder::new()
-        .num_threads(1)
-        .build()
-        .expect("a thread pool of one thread");
+    let one_thread = one_thread();
     let predict = || {
         std::hint::black_box(aln.levels(&test.x, None));
     };
-    let aln_batched_one_thread_ns = one_thread.install(|| spread(repeat, states, predict));
-    let aln_batched_all_threads_ns = spread(repeat, states, predict);
+    let aln_batched_one_thread_ns = one_thread.install(|| measure(repeat, states, predict).1);
+    let aln_batched_all_threads_ns = measure(repeat, states, predict).1;
     let aln_phases_one_thread_ns = aln.bit_forest().map(|predictor| {
         one_thread.install(|| {
             let (codecs, columns) = aln.inputs(&test.x);
             let code = || encode_columns(&codecs, &columns, predictor.reads());
-            let code_inputs = spread(repeat, states, || {
+            let code_inputs = measure(repeat, states, || {
                 std::hint::black_box(code());
-            });
+            })
+            .1;
             let read = code();
-            let trees = spread(repeat, states, || {
+            let trees = measure(repeat, states, || {
                 std::hint::black_box(predictor.predict_read(&read));
-            });
+            })
+            .1;
             let bits = predictor.predict_read(&read);
-            let decode = spread(repeat, states, || {
+            let decode = measure(repeat, states, || {
                 std::hint::black_box(aln.decode(&bits, &test.x, None));
-            });
+            })
+            .1;
             Phases {
                 code_inputs: code_inputs.median,
                 trees: trees.median,
@@ -109,11 +102,12 @@ pub fn on_data(
         .map_err(|m| Error::bad_file(trajectory_path, m))?;
     let starts = data.starts(&test)?;
     let mut failed = Ok(());
-    let simulator_one_step_one_thread_ns = spread(repeat, states, || {
-        if let Err(e) = resimulate::baseline(&frames, &replays, &learned, &starts, &test.y, 1) {
+    let simulator_one_step_one_thread_ns = measure(repeat, states, || {
+        if let Err(e) = resimulate::one_frame(&frames, &replays, &learned, &starts, &test.y, 1) {
             failed = Err(e);
         }
-    });
+    })
+    .1;
     failed?;
     Ok(OnData {
         model: match data.model.header.model {
@@ -133,21 +127,4 @@ pub fn on_data(
         aln_speedup_one_thread: simulator_one_step_one_thread_ns.median
             / aln_batched_one_thread_ns.median,
     })
-}
-
-/// The spread of `repeat` timed runs of `f`, in ns per each of `states`.
-fn spread(repeat: usize, states: usize, mut f: impl FnMut()) -> Spread {
-    let mut ns: Vec<f64> = (0..repeat)
-        .map(|_| {
-            let clock = Instant::now();
-            f();
-            clock.elapsed().as_nanos() as f64 / states.max(1) as f64
-        })
-        .collect();
-    ns.sort_by(f64::total_cmp);
-    Spread {
-        min: ns[0],
-        median: ns[ns.len() / 2],
-        max: ns[ns.len() - 1],
-    }
 }

@@ -5,10 +5,15 @@
 //! - `predictions.parquet`: per model (`aln`, `persistence`, `linear`, and
 //!   `simulator@<steps>/frame` for each re-simulation step of
 //!   [`resimulate`]), variable and test row: the true level, the predicted
-//!   level and the absolute error in levels;
-//! - `timings.parquet`: ns per predicted state for each model and evaluation
-//!   path, with the threads used and the machine's cores — a measurement,
-//!   the one artifact that differs between equal runs;
+//!   level and the absolute error in levels, and whether the row was held
+//!   out of training (with the paper's split, test rows include training
+//!   rows);
+//! - `timings.parquet`: ns per predicted state for each model, evaluation
+//!   path and thread count — every model on one thread, the ALN's batches
+//!   also on all threads — as the median of 5 runs interleaved across the
+//!   models ([`timing`]) with their range and the runs themselves, with the
+//!   machine's cores and CPU model: a measurement, the one artifact that
+//!   differs between equal runs;
 //! - `rollout.parquet`: the closed-loop errors ([`rollout`]) per model,
 //!   variable, horizon and start row.
 
@@ -17,6 +22,7 @@ pub mod bench;
 mod predict;
 mod resimulate;
 mod rollout;
+pub mod timing;
 
 use std::path::Path;
 use std::sync::Arc;
@@ -30,14 +36,17 @@ use alnlab_common::params::{self, Count, Fraction, ParamError};
 use alnlab_common::state_log::StateLog;
 use alnlab_common::table::{self, Table};
 use alnlab_common::{Error, Progress, Provenance, Result};
-use arrow_array::types::UInt16Type;
-use arrow_array::{Array, DictionaryArray, Float64Array, StringArray, UInt16Array, UInt32Array};
+use arrow_array::types::{Float64Type, UInt16Type};
+use arrow_array::{
+    Array, BooleanArray, DictionaryArray, Float64Array, ListArray, StringArray, UInt16Array,
+    UInt32Array,
+};
 use serde::{Deserialize, Serialize};
 
-use crate::predict::Timing;
+use crate::timing::Timing;
 
 /// Version of what this stage writes (part of every cache key).
-pub const FORMAT_VERSION: u32 = 2;
+pub const FORMAT_VERSION: u32 = 4;
 
 /// File name of the predictions table.
 pub const PREDICTIONS_FILE: &str = "predictions.parquet";
@@ -96,6 +105,9 @@ impl Params {
 pub struct TestRows {
     /// Row indices in `levels.parquet`.
     pub rows: Vec<usize>,
+    /// Per row, whether it was held out of training (`split` is `test`,
+    /// not `both`).
+    pub held_out: Vec<bool>,
     pub x: Vec<Vec<u16>>,
     pub y: Vec<Vec<u16>>,
 }
@@ -165,7 +177,9 @@ impl Data {
         if rows.is_empty() {
             return Err(Error::bad_file(&self.levels_path, "has no test rows"));
         }
+        let split = self.levels.column::<StringArray>("split")?;
         Ok(TestRows {
+            held_out: rows.iter().map(|&r| split.value(r) == "test").collect(),
             x: self.select("x", &rows)?,
             y: self.select("y", &rows)?,
             rows,
@@ -213,14 +227,14 @@ pub fn run(
     progress.start("test", 4, "steps");
     let windows = params.windows(codecs);
     let predictor = predict::Aln::new(&data.model, codecs, &data.outputs);
-    let (aln, mut timings) = predictor.timed(&test.x, windows.as_deref());
+    let pool = timing::one_thread();
+    let (aln, aln_paths) = predictor.paths(&test.x, windows.as_deref(), &pool);
     progress.advance(1);
     let persistence = test.x.clone();
     progress.advance(1);
     let levels_of: Vec<usize> = codecs.iter().map(Codec::levels).collect();
     let linear = baseline::Linear::fit(&select("x", &train_rows)?, &select("y", &train_rows)?);
-    let (linear_levels, linear_timing) = predict::linear(&linear, &test.x, &levels_of);
-    timings.push(linear_timing);
+    let (linear_levels, linear_path) = predict::linear(&linear, &test.x, &levels_of);
     progress.advance(1);
 
     // The simulator re-stepping each test row's logged frame.
@@ -237,7 +251,16 @@ pub fn run(
                 .map_err(|e| e.context(&format!("re-simulating with {} steps per frame", steps.0)))
         })
         .collect::<Result<_>>()?;
-    timings.extend(resimulated.iter().map(|r| r.timing.clone()));
+    let timings = {
+        let mut paths = aln_paths;
+        paths.push(linear_path);
+        paths.extend(
+            resimulated
+                .iter()
+                .map(|r| resimulate::path(r, &frames, &replays, &learned, &starts, &test.y)),
+        );
+        timing::in_rounds(paths, timing::REPEATS)
+    };
 
     // Closed loop, from the true levels of spread-out test rows.
     let horizon = params.horizon.get();
@@ -266,7 +289,9 @@ pub fn run(
         ),
         (
             "linear".to_string(),
-            rollout::roll(from, horizon, |x| predict::linear(&linear, x, &levels_of).0),
+            rollout::roll(from, horizon, |x| {
+                predict::linear_levels(&linear, x, &levels_of)
+            }),
         ),
     ];
     let start_rows: Vec<rollout::Start> = truth.starts.iter().map(|&k| starts[k]).collect();
@@ -368,6 +393,7 @@ fn write_predictions(
 ) -> Result<()> {
     let (mut model, mut variable, mut row) = (Vec::new(), Vec::new(), Vec::new());
     let (mut truth, mut guess, mut error) = (Vec::new(), Vec::new(), Vec::new());
+    let mut held_out = Vec::new();
     for (m, (_, levels)) in predicted.iter().enumerate() {
         for v in 0..names.len() {
             for (k, &r) in test.rows.iter().enumerate() {
@@ -375,6 +401,7 @@ fn write_predictions(
                 model.push(m as u16);
                 variable.push(v as u16);
                 row.push(r as u32);
+                held_out.push(test.held_out[k]);
                 truth.push(t);
                 guess.push(p);
                 error.push(t.abs_diff(p));
@@ -389,6 +416,7 @@ fn write_predictions(
         ),
         ("variable", Arc::new(dictionary(variable, names))),
         ("row", Arc::new(UInt32Array::from(row))),
+        ("held_out", Arc::new(BooleanArray::from(held_out))),
         ("true_level", Arc::new(UInt16Array::from(truth))),
         ("predicted_level", Arc::new(UInt16Array::from(guess))),
         ("error", Arc::new(UInt16Array::from(error))),
@@ -396,12 +424,18 @@ fn write_predictions(
     table::write_parquet(path, &batch, provenance)
 }
 
-/// `timings.parquet`: one row per model and evaluation path (with the states
-/// it failed to predict).
+/// `timings.parquet`: one row per model, evaluation path and thread count:
+/// the median ns per state of [`timing::REPEATS`] interleaved runs, their
+/// range and every run in round order (`ns_runs`), with the states it
+/// failed to predict and the machine (cores, CPU model).
 fn write_timings(path: &Path, timings: &[Timing], provenance: &Provenance) -> Result<()> {
     let cores = std::thread::available_parallelism().map_or(1, |n| n.get()) as u32;
+    let cpu = cpu_model();
     let column =
         |f: fn(&Timing) -> u32| UInt32Array::from(timings.iter().map(f).collect::<Vec<_>>());
+    let ns = |f: fn(&Timing) -> f64| -> Arc<dyn Array> {
+        Arc::new(Float64Array::from_iter_values(timings.iter().map(f)))
+    };
     let batch = table::batch(vec![
         (
             "model",
@@ -415,10 +449,15 @@ fn write_timings(path: &Path, timings: &[Timing], provenance: &Provenance) -> Re
                 timings.iter().map(|t| t.path),
             )),
         ),
+        ("ns_per_state", ns(|t| t.spread().median)),
+        ("ns_min", ns(|t| t.spread().min)),
+        ("ns_max", ns(|t| t.spread().max)),
         (
-            "ns_per_state",
-            Arc::new(Float64Array::from_iter_values(
-                timings.iter().map(|t| t.ns_per_state),
+            "ns_runs",
+            Arc::new(ListArray::from_iter_primitive::<Float64Type, _, _>(
+                timings
+                    .iter()
+                    .map(|t| Some(t.runs.iter().map(|&x| Some(x)).collect::<Vec<_>>())),
             )),
         ),
         ("states", Arc::new(column(|t| t.states as u32))),
@@ -428,6 +467,22 @@ fn write_timings(path: &Path, timings: &[Timing], provenance: &Provenance) -> Re
             "cores",
             Arc::new(UInt32Array::from(vec![cores; timings.len()])),
         ),
+        (
+            "cpu",
+            Arc::new(StringArray::from(vec![cpu.as_str(); timings.len()])),
+        ),
     ]);
     table::write_parquet(path, &batch, provenance)
+}
+
+/// The CPU's model name (Linux's `/proc/cpuinfo`), or "unknown CPU".
+fn cpu_model() -> String {
+    std::fs::read_to_string("/proc/cpuinfo")
+        .ok()
+        .and_then(|info| {
+            info.lines()
+                .find_map(|l| l.strip_prefix("model name")?.split_once(':'))
+                .map(|(_, name)| name.trim().to_string())
+        })
+        .unwrap_or_else(|| "unknown CPU".into())
 }

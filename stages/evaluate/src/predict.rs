@@ -8,8 +8,6 @@
 //! levels: the trees, the votes and the decoding (with rate limiting, when
 //! on, as `decode_near` around the current level).
 
-use std::time::Instant;
-
 use alnlab_aln::ModelKind;
 use alnlab_aln::Output;
 use alnlab_aln::forest::Predictor;
@@ -21,20 +19,10 @@ use alnlab_codes::codes::{Code, Codec};
 use rayon::prelude::*;
 
 use crate::baseline::Linear;
+use crate::timing::Path;
 
-/// One measured evaluation path.
-#[derive(Clone, Debug, PartialEq)]
-pub struct Timing {
-    pub model: String,
-    /// `batched`, `single` or `threshold-search`.
-    pub path: &'static str,
-    pub ns_per_state: f64,
-    /// States timed.
-    pub states: usize,
-    pub threads: usize,
-    /// States the model could not predict (a re-simulation that blew up).
-    pub failed: usize,
-}
+/// A one-row evaluation path: the levels of every row, one row at a time.
+type OneRow<'s> = dyn Fn() -> Vec<Vec<u16>> + 's;
 
 /// A trained model made ready to predict: a bit-forest compiled once, or a
 /// threshold model's voters with the codes of its candidate levels; and its
@@ -53,34 +41,6 @@ enum Compiled<'a> {
         thermometers: Vec<Codec>,
         batched: threshold::Batched,
     },
-}
-
-/// How long `f` takes per state, as the timing of `path`: the fastest of
-/// `repeats` runs, so that a short path is not timed cold (first touch of
-/// the compiled trees, thread pool start).
-fn timed<T>(
-    path: &'static str,
-    states: usize,
-    threads: usize,
-    repeats: usize,
-    f: impl Fn() -> T,
-) -> (T, Timing) {
-    let mut fastest = f64::INFINITY;
-    let mut out = None;
-    for _ in 0..repeats.max(1) {
-        let clock = Instant::now();
-        out = Some(f());
-        fastest = fastest.min(clock.elapsed().as_nanos() as f64);
-    }
-    let timing = Timing {
-        model: "aln".into(),
-        path,
-        ns_per_state: fastest / states.max(1) as f64,
-        states,
-        threads,
-        failed: 0,
-    };
-    (out.expect("at least one run"), timing)
 }
 
 impl<'a> Aln<'a> {
@@ -127,45 +87,73 @@ impl<'a> Aln<'a> {
         }
     }
 
-    /// The same levels, with the timing of every evaluation path (a
-    /// bit-forest's batched and single-row paths must agree).
-    pub fn timed(&self, x: &[Vec<u16>], windows: Option<&[usize]>) -> (Vec<Vec<u16>>, Vec<Timing>) {
+    /// The same levels, and every evaluation path to time: the batched
+    /// path on one thread (in `pool`) and, labelled, on all threads when
+    /// there are more; the one-row path. Every path must give the same
+    /// levels (a bit-forest's bit-sliced and parsimonious evaluation, a
+    /// threshold model's batched and one-row searches).
+    pub fn paths<'s>(
+        &'s self,
+        x: &'s [Vec<u16>],
+        windows: Option<&'s [usize]>,
+        pool: &'s rayon::ThreadPool,
+    ) -> (Vec<Vec<u16>>, Vec<Path<'s>>) {
         let inputs = self.encode(x);
         let rows = inputs.rows();
-        match &self.compiled {
-            Compiled::BitForest(predictor) => {
-                let threads = rayon::current_num_threads();
-                let (levels, batched) = timed("batched", rows, threads, 3, || {
-                    self.batched(predictor, x, windows)
-                });
-                let (single_levels, single) = timed("single", rows, 1, 1, || {
-                    self.single(predictor, x, &inputs, windows)
-                });
-                assert_eq!(
-                    single_levels, levels,
-                    "parsimonious and bit-sliced evaluation disagree"
-                );
-                (levels, vec![batched, single])
-            }
+        let levels = self.levels(x, windows);
+        assert_eq!(
+            pool.install(|| self.levels(x, windows)),
+            levels,
+            "batches on one and on all threads disagree"
+        );
+        let path = |path, threads, run: Box<dyn FnMut() + 's>| Path {
+            model: "aln".into(),
+            path,
+            threads,
+            states: rows,
+            failed: 0,
+            run,
+        };
+        let mut paths = vec![path(
+            "batched",
+            1,
+            Box::new(move || {
+                std::hint::black_box(pool.install(|| self.levels(x, windows)));
+            }),
+        )];
+        let threads = rayon::current_num_threads();
+        if threads > 1 {
+            paths.push(path(
+                "batched",
+                threads,
+                Box::new(move || {
+                    std::hint::black_box(self.levels(x, windows));
+                }),
+            ));
+        }
+        let (name, single): (&'static str, Box<OneRow<'s>>) = match &self.compiled {
+            Compiled::BitForest(predictor) => (
+                "single",
+                Box::new(move || self.single(predictor, x, &inputs, windows)),
+            ),
             Compiled::Threshold {
                 voters,
                 thermometers,
-                batched,
-            } => {
-                let threads = rayon::current_num_threads();
-                let (levels, batched) = timed("batched", rows, threads, 3, || {
-                    self.batched_search(batched, x, windows)
-                });
-                let (single_levels, single) = timed("threshold-search", rows, 1, 1, || {
-                    self.search(voters, thermometers, x, &inputs, windows)
-                });
-                assert_eq!(
-                    single_levels, levels,
-                    "the one-row and batched threshold searches disagree"
-                );
-                (levels, vec![batched, single])
-            }
-        }
+                ..
+            } => (
+                "threshold-search",
+                Box::new(move || self.search(voters, thermometers, x, &inputs, windows)),
+            ),
+        };
+        assert_eq!(single(), levels, "the one-row and batched paths disagree");
+        paths.push(path(
+            name,
+            1,
+            Box::new(move || {
+                std::hint::black_box(single());
+            }),
+        ));
+        (levels, paths)
     }
 
     fn encode(&self, x: &[Vec<u16>]) -> BitMatrix {
@@ -296,12 +284,31 @@ impl<'a> Aln<'a> {
     }
 }
 
-/// The linear baseline's levels `[variable][row]`, timed one row at a time.
-pub fn linear(model: &Linear, x: &[Vec<u16>], levels: &[usize]) -> (Vec<Vec<u16>>, Timing) {
+/// The linear baseline's levels `[variable][row]`, and its one-row path
+/// to time.
+pub fn linear<'s>(
+    model: &'s Linear,
+    x: &'s [Vec<u16>],
+    levels: &'s [usize],
+) -> (Vec<Vec<u16>>, Path<'s>) {
+    let path = Path {
+        model: "linear".into(),
+        path: "single",
+        threads: 1,
+        states: x.first().map_or(0, Vec::len),
+        failed: 0,
+        run: Box::new(move || {
+            std::hint::black_box(linear_levels(model, x, levels));
+        }),
+    };
+    (linear_levels(model, x, levels), path)
+}
+
+/// The linear baseline's levels `[variable][row]`, one row at a time.
+pub fn linear_levels(model: &Linear, x: &[Vec<u16>], levels: &[usize]) -> Vec<Vec<u16>> {
     let rows = x.first().map_or(0, Vec::len);
     let mut out = vec![Vec::with_capacity(rows); x.len()];
     let (mut row, mut predicted) = (vec![0u16; x.len()], vec![0u16; x.len()]);
-    let clock = Instant::now();
     for r in 0..rows {
         for (v, column) in x.iter().enumerate() {
             row[v] = column[r];
@@ -311,15 +318,7 @@ pub fn linear(model: &Linear, x: &[Vec<u16>], levels: &[usize]) -> (Vec<Vec<u16>
             out[v].push(p);
         }
     }
-    let timing = Timing {
-        model: "linear".into(),
-        path: "single",
-        ns_per_state: clock.elapsed().as_nanos() as f64 / rows.max(1) as f64,
-        states: rows,
-        threads: 1,
-        failed: 0,
-    };
-    (out, timing)
+    out
 }
 
 #[cfg(test)]
@@ -389,7 +388,9 @@ mod tests {
         let codecs = std::slice::from_ref(&codec);
         let outputs = [Output::Level(codec.clone())];
         let aln = Aln::new(&model, codecs, &outputs);
-        let (levels, timings) = aln.timed(&x, None);
+        let pool = crate::timing::one_thread();
+        let (levels, paths) = aln.paths(&x, None, &pool);
+        let timings = crate::timing::in_rounds(paths, 2);
         let error: usize = levels[0]
             .iter()
             .zip(&x[0])
@@ -400,16 +401,23 @@ mod tests {
             "mean error {}",
             error as f64 / 63.0
         );
-        let paths: Vec<&str> = timings.iter().map(|t| t.path).collect();
-        assert_eq!(paths, ["batched", "single"]);
+        // Every path on one thread; the batches on all threads too, labelled.
+        let paths: Vec<(&str, usize)> = timings.iter().map(|t| (t.path, t.threads)).collect();
+        let threads = rayon::current_num_threads();
+        let mut expected = vec![("batched", 1)];
+        if threads > 1 {
+            expected.push(("batched", threads));
+        }
+        expected.push(("single", 1));
+        assert_eq!(paths, expected);
         assert!(
             timings
                 .iter()
-                .all(|t| t.ns_per_state > 0.0 && t.states == 63)
+                .all(|t| t.runs.len() == 2 && t.runs.iter().all(|&ns| ns > 0.0) && t.states == 63)
         );
 
         // Rate limited to 0 levels: nothing moves.
-        let (still, _) = aln.timed(&x, Some(&[0]));
+        let (still, _) = aln.paths(&x, Some(&[0]), &pool);
         assert_eq!(
             aln.levels(&x, None),
             levels,

@@ -7,15 +7,14 @@
 //! prediction there is: the level farthest from the truth.
 
 use std::collections::{BTreeMap, HashMap};
-use std::time::Instant;
 
 use alnlab_codes::Entry;
 use alnlab_common::state_log::StateFrame;
 use alnlab_common::{Error, Result};
 use alnlab_physics::replay::{Replayer, SceneReplay};
 
-use crate::predict::Timing;
 use crate::rollout::{LoggedFrames, Start};
+use crate::timing::Path;
 
 /// One re-simulation baseline's predictions.
 pub struct Resimulated {
@@ -23,8 +22,10 @@ pub struct Resimulated {
     pub name: String,
     /// Predicted levels `[variable][test row]`.
     pub levels: Vec<Vec<u16>>,
-    /// Its time per frame, and the frames that blew up.
-    pub timing: Timing,
+    /// Integration steps per frame.
+    pub steps: u64,
+    /// Frames that blew up.
+    pub failed: usize,
 }
 
 /// Re-simulates every test row's frame with `steps` steps per frame. `y` are
@@ -37,23 +38,52 @@ pub fn baseline(
     y: &[Vec<u16>],
     steps: u64,
 ) -> Result<Resimulated> {
-    let clock = Instant::now();
-    let (levels, failed) = simulate(frames, replays, learned, rows, 1, steps, |v, k, _| y[v][k])?;
-    let name = format!("simulator@{steps}/frame");
-    let timing = Timing {
-        model: name.clone(),
-        path: "single",
-        ns_per_state: clock.elapsed().as_nanos() as f64 / rows.len().max(1) as f64,
-        states: rows.len(),
-        threads: 1,
-        failed,
-    };
-    let levels = levels.into_iter().next().expect("one frame ahead");
+    let (levels, failed) = one_frame(frames, replays, learned, rows, y, steps)?;
     Ok(Resimulated {
-        name,
+        name: format!("simulator@{steps}/frame"),
         levels,
-        timing,
+        steps,
+        failed,
     })
+}
+
+/// The path to time of a re-simulation baseline: every frame re-stepped
+/// once, on one thread.
+pub fn path<'a>(
+    baseline: &Resimulated,
+    frames: &'a LoggedFrames,
+    replays: &'a BTreeMap<String, SceneReplay>,
+    learned: &'a [&'a Entry],
+    rows: &'a [Start],
+    y: &'a [Vec<u16>],
+) -> Path<'a> {
+    let steps = baseline.steps;
+    Path {
+        model: baseline.name.clone(),
+        path: "single",
+        threads: 1,
+        states: rows.len(),
+        failed: baseline.failed,
+        // The levels were checked when the baseline was made; a run that
+        // failed now would have failed then.
+        run: Box::new(move || {
+            let _ = std::hint::black_box(one_frame(frames, replays, learned, rows, y, steps));
+        }),
+    }
+}
+
+/// Re-simulates every test row's frame once with `steps` steps per frame:
+/// the levels `[variable][test row]` and how many frames blew up.
+pub fn one_frame(
+    frames: &LoggedFrames,
+    replays: &BTreeMap<String, SceneReplay>,
+    learned: &[&Entry],
+    rows: &[Start],
+    y: &[Vec<u16>],
+    steps: u64,
+) -> Result<(Vec<Vec<u16>>, usize)> {
+    let (levels, failed) = simulate(frames, replays, learned, rows, 1, steps, |v, k, _| y[v][k])?;
+    Ok((levels.into_iter().next().expect("one frame ahead"), failed))
 }
 
 /// The simulator fed its own frames for `horizon` frames from each start

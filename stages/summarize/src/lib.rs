@@ -1,13 +1,23 @@
 //! The summarize stage (paper §4.5–4.6; DESIGN.md §6–7): reads
-//! `predictions.parquet` and `rollout.parquet` and writes `summary.parquet` —
-//! per model (the ALN and each baseline) and variable, the error statistics
-//! of [`stats`], and which variables are the best and the worst of their
-//! group — and `horizons.parquet`, the closed-loop errors per model and
-//! horizon, over all variables and starts. [`report`]
-//! renders a run's summaries, timings and training logs as Markdown and SVG.
+//! `predictions.parquet` and `rollout.parquet` and writes
+//! - `summary.parquet` — per set of rows (all test rows, and the held-out
+//!   ones alone: with the paper's split the test rows include training
+//!   rows), model (the ALN and each baseline) and variable, the error
+//!   statistics of [`stats`], and which variables are the best and the
+//!   worst of their group;
+//! - `comparisons.parquet` — per set of rows, the ALN against each other
+//!   model on the same rows: the mean paired difference of their errors,
+//!   per variable and averaged over the variables, with its confidence
+//!   interval and verdict ([`paired`]);
+//! - `horizons.parquet`, the closed-loop errors per model and horizon, over
+//!   all variables and starts.
+//!
+//! [`report`] renders a run's summaries, timings and training logs as
+//! Markdown and SVG.
 
 pub mod bench;
 mod charts;
+pub mod paired;
 pub mod report;
 mod stats;
 
@@ -24,24 +34,58 @@ use arrow_array::{
     UInt64Array,
 };
 
+use crate::paired::Interval;
 use crate::stats::{ErrorCounts, ErrorStats, HISTOGRAM_BINS};
 
 /// Version of what this stage writes (part of every cache key).
-pub const FORMAT_VERSION: u32 = 2;
+pub const FORMAT_VERSION: u32 = 3;
 /// File name of the summary table.
 pub const SUMMARY_FILE: &str = "summary.parquet";
+/// File name of the paired-comparisons table.
+pub const COMPARISONS_FILE: &str = "comparisons.parquet";
 /// File name of the closed-loop table.
 pub const HORIZONS_FILE: &str = "horizons.parquet";
 /// File name of the report.
 pub const REPORT_FILE: &str = "report.md";
 
+/// Which test rows a figure is over.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Rows {
+    /// Every test row.
+    All,
+    /// The test rows held out of training (all of them, unless the split
+    /// lets test rows be training rows too, as the paper's does).
+    HeldOut,
+}
+
+impl Rows {
+    /// The name in the tables' `rows` column.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Rows::All => "all",
+            Rows::HeldOut => "held-out",
+        }
+    }
+
+    fn parse(name: &str) -> Option<Rows> {
+        [Rows::All, Rows::HeldOut]
+            .into_iter()
+            .find(|r| r.as_str() == name)
+    }
+}
+
 /// One row of `summary.parquet`.
 #[derive(Clone, Debug, PartialEq)]
 pub struct SummaryRow {
+    pub rows: Rows,
     pub model: String,
     pub variable: String,
     pub group: String,
     pub stats: ErrorStats,
+    /// The standard deviation (n − 1) of the variable's true levels over the
+    /// rows: the scale of a normalized error (mean error / this), which
+    /// compares across ranges, level counts and codes.
+    pub true_std_dev: f64,
     /// The lowest mean error of its group, for its model.
     pub best_in_group: bool,
     /// The highest mean error of its group, for its model.
@@ -57,8 +101,23 @@ pub struct HorizonRow {
     pub stats: ErrorStats,
 }
 
+/// One row of `comparisons.parquet`: the ALN (`model`) against another
+/// model on the same rows, the interval of the mean of their paired
+/// differences in error (model − against; below zero, the ALN's errors are
+/// lower).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Comparison {
+    pub rows: Rows,
+    pub model: String,
+    pub against: String,
+    /// The variable, or `None` for the errors averaged over the variables
+    /// (one difference per row: the mean over the variables of that row).
+    pub variable: Option<String>,
+    pub difference: Interval,
+}
+
 /// Reads the predictions and rollouts, summarizes them, writes
-/// `summary.parquet` and `horizons.parquet`.
+/// `summary.parquet`, `comparisons.parquet` and `horizons.parquet`.
 pub fn run(
     predictions_path: &Path,
     rollout_path: &Path,
@@ -66,9 +125,19 @@ pub fn run(
     out_dir: &Path,
     progress: &dyn Progress,
 ) -> Result<()> {
-    progress.start("summarize", 2, "tables");
-    let rows = summarize(predictions_path)?;
-    write(&out_dir.join(SUMMARY_FILE), &rows, provenance)?;
+    progress.start("summarize", 3, "tables");
+    let predictions = Predictions::read(predictions_path)?;
+    write(
+        &out_dir.join(SUMMARY_FILE),
+        &predictions.summarize(),
+        provenance,
+    )?;
+    progress.advance(1);
+    write_comparisons(
+        &out_dir.join(COMPARISONS_FILE),
+        &predictions.compare("aln"),
+        provenance,
+    )?;
     progress.advance(1);
     let horizons = summarize_horizons(rollout_path)?;
     write_horizons(&out_dir.join(HORIZONS_FILE), &horizons, provenance)?;
@@ -168,50 +237,185 @@ pub fn read_horizons(path: &Path) -> Result<Vec<(String, u16, f64, f64)>> {
         .collect())
 }
 
-/// The summary rows of a predictions table, by model and variable in the
-/// order of their dictionaries.
-pub fn summarize(predictions_path: &Path) -> Result<Vec<SummaryRow>> {
-    let table = Table::read_columns(predictions_path, &["model", "variable", "error"])?;
-    let models = table.column::<DictionaryArray<UInt16Type>>("model")?;
-    let variables = table.column::<DictionaryArray<UInt16Type>>("variable")?;
-    let errors = table.column::<UInt16Array>("error")?.values();
-    let names = |d: &DictionaryArray<UInt16Type>| -> Result<Vec<String>> {
-        let values = d.values().as_string_opt::<i32>().ok_or_else(|| {
-            Error::bad_file(
-                predictions_path,
-                "model and variable must be string dictionaries",
-            )
-        })?;
-        Ok(values
-            .iter()
-            .map(|v| v.unwrap_or_default().to_string())
-            .collect())
-    };
-    let (model_names, variable_names) = (names(models)?, names(variables)?);
-    let per_model = variable_names.len();
-    let mut counts = vec![ErrorCounts::default(); model_names.len() * per_model];
-    let (model_keys, variable_keys) = (models.keys().values(), variables.keys().values());
-    for ((&m, &v), &e) in model_keys.iter().zip(variable_keys).zip(errors) {
-        counts[usize::from(m) * per_model + usize::from(v)].add(u32::from(e), 1);
+/// The errors of a predictions table, by model and variable.
+pub struct Predictions {
+    models: Vec<String>,
+    variables: Vec<String>,
+    /// `errors[m * variables + v]`: model m's errors on variable v, one
+    /// per test row, in the same row order for every model and variable.
+    errors: Vec<Vec<u16>>,
+    /// Per test row, whether it was held out of training.
+    held_out: Vec<bool>,
+    /// `truth[v]`: variable v's true levels, per test row.
+    truth: Vec<Vec<u16>>,
+}
+
+impl Predictions {
+    /// Reads `predictions.parquet`; every model and variable must have an
+    /// error for the same rows.
+    pub fn read(path: &Path) -> Result<Predictions> {
+        let table = Table::read_columns(
+            path,
+            &[
+                "model",
+                "variable",
+                "row",
+                "held_out",
+                "true_level",
+                "error",
+            ],
+        )?;
+        let models = table.column::<DictionaryArray<UInt16Type>>("model")?;
+        let variables = table.column::<DictionaryArray<UInt16Type>>("variable")?;
+        let rows = table.column::<UInt32Array>("row")?.values();
+        let held_out = table.column::<BooleanArray>("held_out")?;
+        let errors = table.column::<UInt16Array>("error")?.values();
+        let true_levels = table.column::<UInt16Array>("true_level")?.values();
+        let (models_names, variable_names) = (
+            dictionary_names(models, path)?,
+            dictionary_names(variables, path)?,
+        );
+        let per_model = variable_names.len();
+        let mut grouped = vec![Vec::new(); models_names.len() * per_model];
+        let mut row_of = vec![Vec::new(); grouped.len()];
+        let (model_keys, variable_keys) = (models.keys().values(), variables.keys().values());
+        let mut held = Vec::new();
+        let mut truth = vec![Vec::new(); per_model];
+        for i in 0..table.num_rows() {
+            let k = usize::from(model_keys[i]) * per_model + usize::from(variable_keys[i]);
+            if k == 0 {
+                held.push(held_out.value(i));
+            }
+            if k < per_model {
+                truth[k].push(true_levels[i]);
+            }
+            grouped[k].push(errors[i]);
+            row_of[k].push(rows[i]);
+        }
+        if let Some(k) = (1..grouped.len()).find(|&k| row_of[k] != row_of[0]) {
+            return Err(Error::bad_file(
+                path,
+                format!(
+                    "model `{}` has errors for other test rows on `{}` than model `{}` on `{}`: \
+                     every model must predict the same rows",
+                    models_names[k / per_model],
+                    variable_names[k % per_model],
+                    models_names[0],
+                    variable_names[0],
+                ),
+            ));
+        }
+        Ok(Predictions {
+            models: models_names,
+            variables: variable_names,
+            errors: grouped,
+            held_out: held,
+            truth,
+        })
     }
-    let mut rows = Vec::new();
-    for (m, model) in model_names.iter().enumerate() {
-        let first = rows.len();
-        for (v, variable) in variable_names.iter().enumerate() {
-            if let Some(stats) = counts[m * per_model + v].stats() {
-                rows.push(SummaryRow {
-                    model: model.clone(),
-                    variable: variable.clone(),
-                    group: group_of(variable).to_string(),
-                    stats,
-                    best_in_group: false,
-                    worst_in_group: false,
-                });
+
+    /// The sets of rows there are: all, and the held-out ones if any.
+    fn row_sets(&self) -> Vec<(Rows, Vec<usize>)> {
+        let all: Vec<usize> = (0..self.held_out.len()).collect();
+        let held: Vec<usize> = all.iter().copied().filter(|&r| self.held_out[r]).collect();
+        let mut sets = vec![(Rows::All, all)];
+        if !held.is_empty() {
+            sets.push((Rows::HeldOut, held));
+        }
+        sets
+    }
+
+    fn errors(&self, model: usize, variable: usize) -> &[u16] {
+        &self.errors[model * self.variables.len() + variable]
+    }
+
+    /// The summary rows: per set of rows, model and variable, in the order
+    /// of the table's dictionaries.
+    pub fn summarize(&self) -> Vec<SummaryRow> {
+        let mut out = Vec::new();
+        for (rows, set) in self.row_sets() {
+            for (m, model) in self.models.iter().enumerate() {
+                let first = out.len();
+                for (v, variable) in self.variables.iter().enumerate() {
+                    let errors = self.errors(m, v);
+                    let mut counts = ErrorCounts::default();
+                    for &r in &set {
+                        counts.add(u32::from(errors[r]), 1);
+                    }
+                    if let Some(stats) = counts.stats() {
+                        let mut truth = ErrorCounts::default();
+                        for &r in &set {
+                            truth.add(u32::from(self.truth[v][r]), 1);
+                        }
+                        out.push(SummaryRow {
+                            rows,
+                            model: model.clone(),
+                            variable: variable.clone(),
+                            group: group_of(variable).to_string(),
+                            true_std_dev: truth.stats().map_or(f64::NAN, |t| t.std_dev),
+                            stats,
+                            best_in_group: false,
+                            worst_in_group: false,
+                        });
+                    }
+                }
+                mark_best_and_worst(&mut out[first..]);
             }
         }
-        mark_best_and_worst(&mut rows[first..]);
+        out
     }
-    Ok(rows)
+
+    /// `model` against every other model, per set of rows: per variable,
+    /// then averaged over the variables.
+    pub fn compare(&self, model: &str) -> Vec<Comparison> {
+        let Some(a) = self.models.iter().position(|m| m == model) else {
+            return Vec::new();
+        };
+        let mut out = Vec::new();
+        for (rows, set) in self.row_sets() {
+            for (b, against) in self.models.iter().enumerate().filter(|&(b, _)| b != a) {
+                let mut per_row = vec![0.0; set.len()];
+                for v in 0..self.variables.len() {
+                    let (ea, eb) = (self.errors(a, v), self.errors(b, v));
+                    let differences: Vec<f64> = set
+                        .iter()
+                        .map(|&r| f64::from(ea[r]) - f64::from(eb[r]))
+                        .collect();
+                    for (sum, d) in per_row.iter_mut().zip(&differences) {
+                        *sum += d;
+                    }
+                    if let Some(difference) = Interval::of(&differences) {
+                        out.push(Comparison {
+                            rows,
+                            model: model.to_string(),
+                            against: against.clone(),
+                            variable: Some(self.variables[v].clone()),
+                            difference,
+                        });
+                    }
+                }
+                let variables = self.variables.len() as f64;
+                for d in &mut per_row {
+                    *d /= variables;
+                }
+                if let Some(difference) = Interval::of(&per_row) {
+                    out.push(Comparison {
+                        rows,
+                        model: model.to_string(),
+                        against: against.clone(),
+                        variable: None,
+                        difference,
+                    });
+                }
+            }
+        }
+        out
+    }
+}
+
+/// The summary rows of a predictions table (see [`Predictions::summarize`]).
+pub fn summarize(predictions_path: &Path) -> Result<Vec<SummaryRow>> {
+    Ok(Predictions::read(predictions_path)?.summarize())
 }
 
 /// Marks, per group, the variable of lowest and of highest mean error (the
@@ -251,6 +455,7 @@ fn write(path: &Path, rows: &[SummaryRow], provenance: &Provenance) -> Result<()
         Arc::new(BooleanArray::from(rows.iter().map(f).collect::<Vec<_>>()))
     };
     let mut columns: Vec<(String, Arc<dyn Array>)> = vec![
+        ("rows".into(), text(|r| r.rows.as_str())),
         ("model".into(), text(|r| &r.model)),
         ("variable".into(), text(|r| &r.variable)),
         ("group".into(), text(|r| &r.group)),
@@ -266,6 +471,12 @@ fn write(path: &Path, rows: &[SummaryRow], provenance: &Provenance) -> Result<()
         ("trimmed_mean".into(), number(|s| s.trimmed_mean)),
         ("median".into(), number(|s| s.median)),
         ("iqr".into(), number(|s| s.iqr)),
+        (
+            "true_std_dev".into(),
+            Arc::new(Float64Array::from_iter_values(
+                rows.iter().map(|r| r.true_std_dev),
+            )),
+        ),
         ("p95".into(), number(|s| s.p95)),
         (
             "max".into(),
@@ -300,6 +511,17 @@ pub fn read(path: &Path) -> Result<Vec<SummaryRow>> {
     let text = |name: &str| table.strings(name);
     let number = |name: &str| -> Result<&[f64]> { Ok(table.f64_column(name)?.values()) };
     let (models, variables, groups) = (text("model")?, text("variable")?, text("group")?);
+    let sets = text("rows")?
+        .iter()
+        .map(|name| {
+            Rows::parse(name).ok_or_else(|| {
+                Error::bad_file(
+                    path,
+                    format!("rows: `{name}` is neither `all` nor `held-out`"),
+                )
+            })
+        })
+        .collect::<Result<Vec<Rows>>>()?;
     let n = table.column::<UInt64Array>("n")?.values();
     let max = table.column::<UInt32Array>("max")?.values();
     let (mean, std_dev, std_err) = (number("mean")?, number("std_dev")?, number("std_err")?);
@@ -319,10 +541,12 @@ pub fn read(path: &Path) -> Result<Vec<SummaryRow>> {
             Ok(table.column::<UInt64Array>(&name)?.values().as_ref())
         })
         .collect::<Result<_>>()?;
+    let true_std_dev = number("true_std_dev")?;
     let best = table.column::<BooleanArray>("best_in_group")?;
     let worst = table.column::<BooleanArray>("worst_in_group")?;
     Ok((0..table.num_rows())
         .map(|i| SummaryRow {
+            rows: sets[i],
             model: models[i].clone(),
             variable: variables[i].clone(),
             group: groups[i].clone(),
@@ -338,10 +562,90 @@ pub fn read(path: &Path) -> Result<Vec<SummaryRow>> {
                 max: max[i],
                 histogram: std::array::from_fn(|bin| bins[bin][i]),
             },
+            true_std_dev: true_std_dev[i],
             best_in_group: best.value(i),
             worst_in_group: worst.value(i),
         })
         .collect())
+}
+
+fn write_comparisons(path: &Path, rows: &[Comparison], provenance: &Provenance) -> Result<()> {
+    let text = |f: fn(&Comparison) -> &str| -> Arc<dyn Array> {
+        Arc::new(StringArray::from_iter_values(rows.iter().map(f)))
+    };
+    let number = |f: fn(&Interval) -> f64| -> Arc<dyn Array> {
+        Arc::new(Float64Array::from_iter_values(
+            rows.iter().map(|r| f(&r.difference)),
+        ))
+    };
+    let batch = table::batch(vec![
+        ("rows", text(|r| r.rows.as_str())),
+        ("model", text(|r| &r.model)),
+        ("against", text(|r| &r.against)),
+        (
+            "variable",
+            Arc::new(StringArray::from(
+                rows.iter()
+                    .map(|r| r.variable.as_deref())
+                    .collect::<Vec<_>>(),
+            )),
+        ),
+        (
+            "n",
+            Arc::new(UInt64Array::from_iter_values(
+                rows.iter().map(|r| r.difference.n),
+            )),
+        ),
+        ("mean_difference", number(|i| i.mean)),
+        ("std_dev", number(|i| i.std_dev)),
+        ("ci_low", number(|i| i.low)),
+        ("ci_high", number(|i| i.high)),
+        ("verdict", text(|r| r.difference.verdict().as_str())),
+    ]);
+    table::write_parquet(path, &batch, provenance)
+}
+
+/// Reads `comparisons.parquet` back.
+pub fn read_comparisons(path: &Path) -> Result<Vec<Comparison>> {
+    let table = Table::read(path)?;
+    let text = |name: &str| table.strings(name);
+    let number = |name: &str| -> Result<&[f64]> { Ok(table.f64_column(name)?.values()) };
+    let (sets, models, against) = (text("rows")?, text("model")?, text("against")?);
+    let variables = table.column::<StringArray>("variable")?;
+    let n = table.column::<UInt64Array>("n")?.values();
+    let (mean, std_dev, low, high) = (
+        number("mean_difference")?,
+        number("std_dev")?,
+        number("ci_low")?,
+        number("ci_high")?,
+    );
+    (0..table.num_rows())
+        .map(|i| {
+            Ok(Comparison {
+                rows: Rows::parse(&sets[i]).ok_or_else(|| {
+                    Error::bad_file(
+                        path,
+                        format!(
+                            "row {i}: rows `{}` is neither `all` nor `held-out`",
+                            sets[i]
+                        ),
+                    )
+                })?,
+                model: models[i].clone(),
+                against: against[i].clone(),
+                variable: variables
+                    .is_valid(i)
+                    .then(|| variables.value(i).to_string()),
+                difference: Interval {
+                    n: n[i],
+                    mean: mean[i],
+                    std_dev: std_dev[i],
+                    low: low[i],
+                    high: high[i],
+                },
+            })
+        })
+        .collect()
 }
 
 #[cfg(test)]
@@ -357,22 +661,27 @@ mod tests {
             params: serde_json::Value::Null,
             inputs: BTreeMap::new(),
         };
-        // Two models × three variables (two in group a, one in v), errors
-        // (model, variable) → list.
-        let errors: [(u16, u16, &[u16]); 6] = [
-            (0, 0, &[0, 1, 2]),
-            (0, 1, &[4, 4]),
-            (0, 2, &[7]),
-            (1, 0, &[3, 3, 3]),
-            (1, 1, &[0, 0]),
-            (1, 2, &[1]),
+        // Two models × three variables (two in group a, one in v) × three
+        // test rows, the first a training row too: errors (model, variable)
+        // → per row.
+        let errors: [(u16, u16, [u16; 3]); 6] = [
+            (0, 0, [0, 1, 2]),
+            (0, 1, [4, 4, 4]),
+            (0, 2, [7, 7, 7]),
+            (1, 0, [3, 3, 3]),
+            (1, 1, [0, 0, 0]),
+            (1, 2, [1, 1, 1]),
         ];
         let (mut m, mut v, mut e) = (Vec::new(), Vec::new(), Vec::new());
+        let (mut row, mut held_out, mut truth) = (Vec::new(), Vec::new(), Vec::new());
         for (model, variable, list) in errors {
-            for &x in list {
+            for (r, x) in list.into_iter().enumerate() {
                 m.push(model);
                 v.push(variable);
                 e.push(x);
+                row.push(10 + r as u32);
+                held_out.push(r > 0);
+                truth.push(20 + 2 * r as u16);
             }
         }
         let dictionary = |keys: Vec<u16>, values: Vec<&str>| {
@@ -387,6 +696,9 @@ mod tests {
                 "variable",
                 Arc::new(dictionary(v, vec!["a.1.x", "a.2.x", "v.1.x"])),
             ),
+            ("row", Arc::new(UInt32Array::from(row))),
+            ("held_out", Arc::new(BooleanArray::from(held_out))),
+            ("true_level", Arc::new(UInt16Array::from(truth))),
             ("error", Arc::new(UInt16Array::from(e))),
         ]);
         let predictions = dir.path().join("predictions.parquet");
@@ -438,7 +750,7 @@ mod tests {
         );
         let row = |model: &str, variable: &str| {
             rows.iter()
-                .find(|r| r.model == model && r.variable == variable)
+                .find(|r| r.rows == Rows::All && r.model == model && r.variable == variable)
                 .unwrap()
         };
         let first = row("aln", "a.1.x");
@@ -451,6 +763,50 @@ mod tests {
             alone.best_in_group && alone.worst_in_group,
             "alone in its group"
         );
+        // The held-out rows alone: the last two.
+        let held = rows
+            .iter()
+            .find(|r| r.rows == Rows::HeldOut && r.model == "aln" && r.variable == "a.1.x")
+            .unwrap();
+        assert_eq!(held.stats, ErrorCounts::of([1, 2]).stats().unwrap());
+        // True levels 20, 22, 24: std dev 2; held out, 22 and 24: √2.
+        assert_eq!(first.true_std_dev, 2.0);
+        assert_eq!(held.true_std_dev, 2f64.sqrt());
+        assert_eq!(
+            rows.len(),
+            2 * 2 * 3,
+            "two sets of rows × two models × three variables"
+        );
+
+        // The ALN against persistence, paired on the same rows.
+        let comparisons = read_comparisons(&dir.path().join(COMPARISONS_FILE)).unwrap();
+        let find = |set: Rows, variable: Option<&str>| {
+            comparisons
+                .iter()
+                .find(|c| c.rows == set && c.variable.as_deref() == variable)
+                .unwrap()
+                .difference
+        };
+        // a.1.x: −3, −2, −1: mean −2, s = 1, t(0.975, 2) = 4.3027.
+        let a1 = find(Rows::All, Some("a.1.x"));
+        assert_eq!((a1.n, a1.mean, a1.std_dev), (3, -2.0, 1.0));
+        assert!((a1.high - (-2.0 + 4.302652729749464 / 3f64.sqrt())).abs() < 1e-9);
+        assert_eq!(a1.verdict(), crate::paired::Verdict::Indistinguishable);
+        // a.2.x: always 4 higher.
+        assert_eq!(
+            find(Rows::All, Some("a.2.x")).verdict(),
+            crate::paired::Verdict::Higher
+        );
+        // Averaged over the variables, per row: 7/3, 8/3, 3; held out: 8/3, 3.
+        let mean = find(Rows::All, None);
+        assert!((mean.mean - 8.0 / 3.0).abs() < 1e-12 && (mean.std_dev - 1.0 / 3.0).abs() < 1e-12);
+        assert_eq!(find(Rows::HeldOut, None).n, 2);
+        assert!(
+            comparisons
+                .iter()
+                .all(|c| c.model == "aln" && c.against == "persistence")
+        );
+        assert_eq!(comparisons.len(), 2 * (3 + 1));
         // Per model: for persistence a.2.x is the best of group a.
         assert!(row("persistence", "a.2.x").best_in_group);
         assert!(row("persistence", "a.1.x").worst_in_group);

@@ -11,19 +11,23 @@
 //! a reproducibility block.
 
 mod findings;
+mod replicates;
 
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
 use alnlab_aln::model::{Header, Model};
 use alnlab_aln::{ModelKind, Target};
-use alnlab_codes::Codebook;
+use alnlab_codes::{Codebook, unit_of};
 use alnlab_common::table::Table;
 use alnlab_common::{Result, atomic};
-use arrow_array::{Float64Array, UInt32Array, UInt64Array};
+use arrow_array::cast::AsArray;
+use arrow_array::types::Float64Type;
+use arrow_array::{Float64Array, ListArray, UInt32Array, UInt64Array};
 
 use crate::charts::{self, SpeedPoint};
-use crate::{REPORT_FILE, SummaryRow};
+use crate::paired::{Interval, Verdict};
+use crate::{Comparison, REPORT_FILE, Rows, SummaryRow};
 
 /// What the report needs of a run.
 pub struct RunInfo {
@@ -59,12 +63,23 @@ pub struct VariantInfo {
     pub description: String,
     pub stages: Vec<StageTime>,
     pub summary: PathBuf,
+    pub comparisons: PathBuf,
     pub horizons: PathBuf,
     pub timings: PathBuf,
     pub training: PathBuf,
     pub model: PathBuf,
     /// The codebook: which variables were learned, and why not the others.
     pub codebook: PathBuf,
+    /// Every replicate of the variant (the first is the one above), when
+    /// the experiment runs more than one.
+    pub replicates: Vec<Replicate>,
+}
+
+/// One replicate of a variant: its seed and its summaries.
+pub struct Replicate {
+    pub seed: u64,
+    pub summary: PathBuf,
+    pub comparisons: PathBuf,
 }
 
 /// One stage of a variant in the run.
@@ -79,16 +94,44 @@ pub struct StageTime {
 struct Timing {
     model: String,
     path: String,
+    /// ns per state: the median of the timed runs, and their range.
     ns_per_state: f64,
+    ns_min: f64,
+    ns_max: f64,
+    /// ns per state of every run, in round order: run k of every model was
+    /// timed in the same round.
+    runs: Vec<f64>,
     threads: u32,
     cores: u32,
+    cpu: String,
     failed: u32,
+}
+
+impl Timing {
+    /// "3.8 µs (3.6–4.1)": median and range.
+    fn spread(&self) -> String {
+        format!(
+            "{:.1} µs ({:.1}–{:.1})",
+            self.ns_per_state / 1000.0,
+            self.ns_min / 1000.0,
+            self.ns_max / 1000.0
+        )
+    }
 }
 
 /// A variant's artifacts, read.
 struct Loaded<'a> {
     info: &'a VariantInfo,
+    /// Summaries over all test rows.
     summary: Vec<SummaryRow>,
+    /// Summaries over the held-out test rows alone (empty when none is).
+    held_out: Vec<SummaryRow>,
+    /// Test rows in all, and held out of training.
+    rows: (u64, u64),
+    /// The ALN against each other model, paired.
+    comparisons: Vec<Comparison>,
+    /// Per learned variable, the SI size of one level and its unit.
+    level_si: Vec<(String, f64, &'static str)>,
     /// (model, horizon, mean, 95th percentile) of the closed-loop errors.
     horizons: Vec<(String, u16, f64, f64)>,
     timings: Vec<Timing>,
@@ -103,22 +146,86 @@ struct Loaded<'a> {
     not_learned: Vec<(String, String)>,
     /// What the model is and learns, in words.
     description: String,
+    /// The replicates' headline figures, when there are several.
+    replicates: Vec<replicates::Figures>,
 }
 
 impl Loaded<'_> {
-    /// ns per state of `model` on evaluation `path`.
-    fn ns(&self, model: &str, path: &str) -> Option<f64> {
+    /// The timing of `model` on evaluation `path` on one thread.
+    fn timing(&self, model: &str, path: &str) -> Option<&Timing> {
         self.timings
             .iter()
-            .find(|t| t.model == model && t.path == path)
-            .map(|t| t.ns_per_state)
+            .find(|t| t.model == model && t.path == path && t.threads == 1)
     }
 
-    /// ns per state of the ALN one state at a time: the parsimonious path of
-    /// a bit-forest, the binary search of a threshold model.
-    fn aln_single_ns(&self) -> Option<f64> {
-        self.ns("aln", "single")
-            .or_else(|| self.ns("aln", "threshold-search"))
+    /// Median ns per state of `model` on evaluation `path`, one thread.
+    fn ns(&self, model: &str, path: &str) -> Option<f64> {
+        self.timing(model, path).map(|t| t.ns_per_state)
+    }
+
+    /// The ALN one state at a time: the parsimonious path of a bit-forest,
+    /// the binary search of a threshold model.
+    fn aln_single(&self) -> Option<&Timing> {
+        self.timing("aln", "single")
+            .or_else(|| self.timing("aln", "threshold-search"))
+    }
+
+    /// The ALN's batches on all threads, when there are more than one.
+    fn aln_all_threads(&self) -> Option<&Timing> {
+        self.timings
+            .iter()
+            .find(|t| t.model == "aln" && t.path == "batched" && t.threads > 1)
+    }
+
+    /// The rows findings are about: the held-out ones, or all when the run
+    /// has none held out.
+    fn judged(&self) -> (&[SummaryRow], Rows) {
+        if self.held_out.is_empty() {
+            (&self.summary, Rows::All)
+        } else {
+            (&self.held_out, Rows::HeldOut)
+        }
+    }
+
+    /// The ALN against `against` on the judged rows: for `variable`, or
+    /// averaged over the variables.
+    fn compared(&self, against: &str, variable: Option<&str>) -> Option<&Interval> {
+        let (_, rows) = self.judged();
+        self.comparisons
+            .iter()
+            .find(|c| {
+                c.rows == rows
+                    && c.model == "aln"
+                    && c.against == against
+                    && c.variable.as_deref() == variable
+            })
+            .map(|c| &c.difference)
+    }
+
+    /// How the ALN compares with `against` variable by variable on the
+    /// judged rows: (lower, higher, indistinguishable, tied) error.
+    fn verdict_counts(&self, against: &str) -> [usize; 4] {
+        let (_, rows) = self.judged();
+        let mut counts = [0; 4];
+        for c in self.comparisons.iter().filter(|c| {
+            c.rows == rows && c.model == "aln" && c.against == against && c.variable.is_some()
+        }) {
+            counts[match c.difference.verdict() {
+                Verdict::Lower => 0,
+                Verdict::Higher => 1,
+                Verdict::Indistinguishable => 2,
+                Verdict::Tied => 3,
+            }] += 1;
+        }
+        counts
+    }
+
+    /// The SI size of one level of `variable`, and its unit.
+    fn si(&self, variable: &str) -> Option<(f64, &'static str)> {
+        self.level_si
+            .iter()
+            .find(|(v, _, _)| v == variable)
+            .map(|(_, step, unit)| (*step, *unit))
     }
 }
 
@@ -163,6 +270,7 @@ pub fn render(run: &RunInfo, dir: &Path) -> Result<PathBuf> {
     let _ = writeln!(md, "# {} — report\n", run.experiment);
     findings::findings(&mut md, run, &variants);
     reproducibility(&mut md, run, &variants);
+    replicates::section(&mut md, &variants, dir)?;
     side_by_side(&mut md, &variants);
 
     let mut points = Vec::new();
@@ -197,22 +305,39 @@ pub fn render(run: &RunInfo, dir: &Path) -> Result<PathBuf> {
 }
 
 fn load(info: &VariantInfo) -> Result<Loaded<'_>> {
-    let summary = crate::read(&info.summary)?;
+    let (summary, held_out): (Vec<SummaryRow>, Vec<SummaryRow>) = crate::read(&info.summary)?
+        .into_iter()
+        .partition(|r| r.rows == Rows::All);
+    let count = |rows: &[SummaryRow]| rows.first().map_or(0, |r| r.stats.n);
+    let rows = (count(&summary), count(&held_out));
+    let comparisons = crate::read_comparisons(&info.comparisons)?;
     let horizons = crate::read_horizons(&info.horizons)?;
     let table = Table::read(&info.timings)?;
     let text = |name: &str| table.strings(name);
     let (models, paths) = (text("model")?, text("path")?);
     let ns = table.column::<Float64Array>("ns_per_state")?.values();
+    let ns_min = table.column::<Float64Array>("ns_min")?.values();
+    let ns_max = table.column::<Float64Array>("ns_max")?.values();
+    let runs = table.column::<ListArray>("ns_runs")?;
     let threads = table.column::<UInt32Array>("threads")?.values();
     let cores = table.column::<UInt32Array>("cores")?.values();
+    let cpu = text("cpu")?;
     let failed = table.column::<UInt32Array>("failed")?.values();
     let timings = (0..table.num_rows())
         .map(|i| Timing {
             model: models[i].clone(),
             path: paths[i].clone(),
             ns_per_state: ns[i],
+            ns_min: ns_min[i],
+            ns_max: ns_max[i],
+            runs: runs
+                .value(i)
+                .as_primitive_opt::<Float64Type>()
+                .map(|r| r.values().to_vec())
+                .unwrap_or_default(),
             threads: threads[i],
             cores: cores[i],
+            cpu: cpu[i].clone(),
             failed: failed[i],
         })
         .collect();
@@ -298,17 +423,38 @@ fn load(info: &VariantInfo) -> Result<Loaded<'_>> {
         .map(|(_, t)| 2 * (t.leaves() - 1) + std::mem::size_of_val(t.literals()))
         .sum();
     let description = describe(&model.header, model.trees.len(), coverage.leaves);
+    let level_si = codebook
+        .learned()
+        .map(|e| {
+            let q = &e.quantizer;
+            let step = (q.max - q.min) / (q.levels.max(2) - 1) as f64;
+            (e.variable.clone(), step, unit_of(&e.variable))
+        })
+        .collect();
     let not_learned = codebook
         .entries
         .into_iter()
         .filter(|e| !e.learned)
         .map(|e| (e.variable, e.note))
         .collect();
+    let replicates = if info.replicates.len() > 1 {
+        info.replicates
+            .iter()
+            .map(replicates::Figures::read)
+            .collect::<Result<_>>()?
+    } else {
+        Vec::new()
+    };
     Ok(Loaded {
+        replicates,
         description,
         not_learned,
         info,
         summary,
+        held_out,
+        rows,
+        comparisons,
+        level_si,
         horizons,
         timings,
         training,
@@ -387,26 +533,46 @@ fn mean_of(summary: &[SummaryRow], model: &str, variable: &str) -> Option<f64> {
         .map(|r| r.stats.mean)
 }
 
-/// The variables the ALN predicts worse (higher mean error) than
-/// persistence: (variable, ALN mean, persistence mean).
-fn worse_than_persistence(summary: &[SummaryRow]) -> Vec<(&str, f64, f64)> {
-    summary
+/// A model's normalized error averaged over the variables: each
+/// variable's mean error over the standard deviation of its true levels
+/// (variables whose truth does not vary are left out).
+fn normalized(summary: &[SummaryRow], model: &str) -> Option<f64> {
+    let ratios: Vec<f64> = summary
+        .iter()
+        .filter(|r| r.model == model && r.true_std_dev > 0.0)
+        .map(|r| r.stats.mean / r.true_std_dev)
+        .collect();
+    (!ratios.is_empty()).then(|| ratios.iter().sum::<f64>() / ratios.len() as f64)
+}
+
+/// The variables the ALN predicts worse than persistence on the judged
+/// rows — the interval of the paired difference above zero: (variable,
+/// ALN mean, persistence mean, difference).
+fn worse_than_persistence<'a>(v: &'a Loaded) -> Vec<(&'a str, f64, f64, &'a Interval)> {
+    let (judged, _) = v.judged();
+    judged
         .iter()
         .filter(|r| r.model == "aln")
         .filter_map(|r| {
-            let persistence = mean_of(summary, "persistence", &r.variable)?;
-            (r.stats.mean > persistence).then_some((r.variable.as_str(), r.stats.mean, persistence))
+            let persistence = mean_of(judged, "persistence", &r.variable)?;
+            let d = v.compared("persistence", Some(&r.variable))?;
+            (d.verdict() == Verdict::Higher).then_some((
+                r.variable.as_str(),
+                r.stats.mean,
+                persistence,
+                d,
+            ))
         })
         .collect()
 }
 
 fn reproducibility(md: &mut String, run: &RunInfo, variants: &[Loaded]) {
-    let cores = variants
+    let machine = variants
         .iter()
         .flat_map(|v| v.timings.first())
-        .map(|t| t.cores)
+        .map(|t| format!("{}, {} cores", t.cpu, t.cores))
         .next()
-        .unwrap_or(0);
+        .unwrap_or_else(|| "—".into());
     let _ = writeln!(md, "## Reproducibility\n");
     let _ = writeln!(md, "| | |\n|---|---|");
     let _ = writeln!(md, "| manifest | `{}` |", run.manifest_path);
@@ -415,13 +581,27 @@ fn reproducibility(md: &mut String, run: &RunInfo, variants: &[Loaded]) {
         let _ = writeln!(md, "| dataset | {dataset} (sha256 `{sha256}`) |");
     }
     let _ = writeln!(md, "| seed | {} |", run.seed);
+    if let Some(v) = variants.first().filter(|v| v.info.replicates.len() > 1) {
+        let seeds: Vec<String> = v
+            .info
+            .replicates
+            .iter()
+            .map(|r| r.seed.to_string())
+            .collect();
+        let _ = writeln!(
+            md,
+            "| replicates | {} (seeds {}) |",
+            seeds.len(),
+            seeds.join(", ")
+        );
+    }
     let _ = writeln!(md, "| alnlab | {} |", run.alnlab_version);
     let commit = run
         .git_commit
         .as_deref()
         .unwrap_or("(not in a git checkout)");
     let _ = writeln!(md, "| git commit | `{commit}` |");
-    let _ = writeln!(md, "| machine | {cores} cores |");
+    let _ = writeln!(md, "| machine | {machine} |");
     let _ = writeln!(md, "| started | {} |", run.started);
     let _ = writeln!(md, "| wall time | {:.2} s |\n", run.wall_seconds);
     let _ = writeln!(
@@ -457,9 +637,12 @@ fn side_by_side(md: &mut String, variants: &[Loaded]) {
     }
     let _ = write!(
         md,
-        "Errors in quantization levels, averaged over the variables; training time as computed \
-         (also when the stage was cached); the trees' memory while training.\n\n\
-         | variant | ALN mean | ALN p95 |"
+        "Errors in quantization levels averaged over the variables, on each variant's held-out \
+         test rows (all test rows when none is held out), and the ALN's also over all test rows; \
+         times on one thread (median of the timed runs); training time as computed (also when \
+         the stage was cached); the trees' memory while training. \"Worse than persistence\" \
+         counts the variables whose paired difference's interval lies above zero.\n\n\
+         | variant | rows | ALN mean | ALN normalized | ALN p95 | ALN mean, all test rows |"
     );
     for b in &baselines {
         let _ = write!(md, " {b} mean |");
@@ -468,29 +651,32 @@ fn side_by_side(md: &mut String, variants: &[Loaded]) {
         md,
         " ALN batched ns/state | ALN single ns/state | hardware estimate (gate delays) | \
          training (s) | trees (MiB) | variables worse than persistence |\n\
-         |---|---:|---:|{}---:|---:|---:|---:|---:|---:|",
+         |---|---|---:|---:|---:|---:|{}---:|---:|---:|---:|---:|---:|",
         "---:|".repeat(baselines.len())
     );
     for v in variants {
-        let mean = |model: &str| {
-            overall(&v.summary, model).map_or("—".into(), |(m, _)| format!("{m:.4}"))
-        };
-        let p95 = overall(&v.summary, "aln").map_or("—".into(), |(_, p)| format!("{p:.2}"));
+        let (judged, rows) = v.judged();
+        let mean =
+            |model: &str| overall(judged, model).map_or("—".into(), |(m, _)| format!("{m:.4}"));
+        let p95 = overall(judged, "aln").map_or("—".into(), |(_, p)| format!("{p:.2}"));
+        let all = overall(&v.summary, "aln").map_or("—".into(), |(m, _)| format!("{m:.4}"));
         let ns = |t: Option<f64>| t.map_or("—".into(), |t| format!("{t:.0}"));
-        let worse = worse_than_persistence(&v.summary).len();
-        let total = v.summary.iter().filter(|r| r.model == "aln").count();
+        let worse = worse_than_persistence(v).len();
+        let total = judged.iter().filter(|r| r.model == "aln").count();
         let baseline_means: String = baselines
             .iter()
             .map(|b| format!(" {} |", mean(b)))
             .collect();
         let _ = writeln!(
             md,
-            "| {} | {} | {} |{baseline_means} {} | {} | {} | {} | {:.1} | {}{} of {} |",
+            "| {} | {} | {} | {} | {} | {all} |{baseline_means} {} | {} | {} | {} | {:.1} | {}{} of {} |",
             v.info.name,
+            rows.as_str(),
             mean("aln"),
+            normalized(judged, "aln").map_or("—".into(), |x| format!("{x:.3}")),
             p95,
             ns(v.ns("aln", "batched")),
-            ns(v.aln_single_ns()),
+            ns(v.aln_single().map(|t| t.ns_per_state)),
             v.hardware.delays(),
             v.info
                 .stages
@@ -547,16 +733,17 @@ fn variant_section(
     let baselines = baseline_models(&v.summary);
     let _ = write!(
         md,
-        "The ALN's best and worst variable of each group, in quantization levels, beside the \
-         baselines' mean error on the same variable.\n\n\
-         | group | | variable | mean | std dev | std err | 5% trim | median | IQR | max |"
+        "The ALN's best and worst variable of each group over all test rows, in quantization \
+         levels (the mean also in SI units: levels × the size of one level), beside its mean on \
+         the held-out rows alone and the baselines' mean error on the same variable.\n\n\
+         | group | | variable | mean | mean (SI) | std dev | std err | 5% trim | median | IQR | max | held-out mean |"
     );
     for b in &baselines {
         let _ = write!(md, " {b} mean |");
     }
     let _ = writeln!(
         md,
-        "\n|---|---|---|---:|---:|---:|---:|---:|---:|---:|{}",
+        "\n|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|{}",
         "---:|".repeat(baselines.len())
     );
     let aln: Vec<&SummaryRow> = v.summary.iter().filter(|r| r.model == "aln").collect();
@@ -582,9 +769,14 @@ fn variant_section(
                 .iter()
                 .map(|b| format!(" {} |", baseline(b)))
                 .collect();
+            let si = v.si(&r.variable).map_or("—".into(), |(step, unit)| {
+                format!("{} {unit}", sig(s.mean * step))
+            });
+            let held = mean_of(&v.held_out, "aln", &r.variable)
+                .map_or("—".into(), |x| format!("{x:.4}"));
             let _ = writeln!(
                 md,
-                "| {group} | {which} | {} | {:.4} | {:.4} | {:.4} | {:.4} | {} | {} | {} |{others}",
+                "| {group} | {which} | {} | {:.4} | {si} | {:.4} | {:.4} | {:.4} | {} | {} | {} | {held} |{others}",
                 r.variable, s.mean, s.std_dev, s.std_err, s.trimmed_mean, s.median, s.iqr, s.max,
             );
         }
@@ -596,23 +788,37 @@ fn variant_section(
     }
     models_table(md, v);
 
-    let worse = worse_than_persistence(&v.summary);
+    let worse = worse_than_persistence(v);
+    let (judged, rows) = v.judged();
     let _ = writeln!(md, "### Worse than persistence\n");
     if worse.is_empty() {
         let _ = writeln!(
             md,
-            "The ALN beats persistence (mean error) on every variable.\n"
+            "On no variable is the ALN's error above persistence's beyond the 95% interval of \
+             their paired difference ({} rows).\n",
+            rows.as_str()
         );
     } else {
         let _ = writeln!(
             md,
-            "⚠ On {} of {} variables the ALN's mean error is higher than predicting no change:\n\n\
-             | variable | ALN mean | persistence mean |\n|---|---:|---:|",
+            "⚠ On {} of {} variables the ALN's error is higher than predicting no change, the \
+             95% interval of the paired difference above zero ({} rows; SI: the difference × \
+             the size of one level):\n\n\
+             | variable | ALN mean | persistence mean | difference [95% interval] | difference (SI) |\n\
+             |---|---:|---:|---|---:|",
             worse.len(),
-            aln.len()
+            judged.iter().filter(|r| r.model == "aln").count(),
+            rows.as_str()
         );
-        for (variable, mean, persistence) in &worse {
-            let _ = writeln!(md, "| ⚠ {variable} | {mean:.4} | {persistence:.4} |");
+        for (variable, mean, persistence, d) in &worse {
+            let si = v.si(variable).map_or("—".into(), |(step, unit)| {
+                format!("{} {unit}", sig(d.mean * step))
+            });
+            let _ = writeln!(
+                md,
+                "| ⚠ {variable} | {mean:.4} | {persistence:.4} | {} | {si} |",
+                findings::difference(d)
+            );
         }
         md.push('\n');
     }
@@ -742,15 +948,22 @@ fn beside_the_paper(md: &mut String, v: &Loaded) {
     md.push('\n');
 }
 
-/// Every model beside the ALN: its error over all variables and its speed.
+/// Every model beside the ALN: its error over all variables, on all and
+/// on held-out rows, against the ALN, and its speed.
 fn models_table(md: &mut String, v: &Loaded) {
+    let (judged, rows) = v.judged();
     let _ = writeln!(
         md,
-        "### Every model\n\nErrors averaged over the variables; time per predicted state (the \
-         simulator: per re-simulated frame, `simulator@k/frame` taking k integration steps per \
-         frame); frames a simulator could not step are scored as the worst prediction.\n\n\
-         | model | mean | 5% trim | p95 | max | ns/state (path, threads) | failed |\n\
-         |---|---:|---:|---:|---:|---|---:|"
+        "### Every model\n\nErrors averaged over the variables, over all test rows and over the \
+         {} rows (normalized: each variable's mean error over the standard deviation of its \
+         true levels); the ALN's paired difference against the model on those rows, with its \
+         95% interval; time per predicted state (the simulator: per re-simulated frame, \
+         `simulator@k/frame` taking k integration steps per frame), median and range of the \
+         timed runs, with the path and threads; frames a simulator could not step are scored \
+         as the worst prediction.\n\n\
+         | model | mean | 5% trim | p95 | max | {0} mean | {0} normalized | ALN − model [95%] | µs/state (path, threads) | failed |\n\
+         |---|---:|---:|---:|---:|---:|---:|---|---|---:|",
+        rows.as_str()
     );
     let mut models: Vec<&str> = v.summary.iter().map(|r| r.model.as_str()).collect();
     models.dedup();
@@ -763,20 +976,26 @@ fn models_table(md: &mut String, v: &Loaded) {
             .timings
             .iter()
             .filter(|t| t.model == model)
-            .map(|t| format!("{:.0} ({}, {})", t.ns_per_state, t.path, t.threads))
+            .map(|t| format!("{} ({}, {})", t.spread(), t.path, t.threads))
             .collect();
         let failed: u32 = v
             .timings
             .iter()
-            .filter(|t| t.model == model)
+            .filter(|t| t.model == model && t.threads == 1)
             .map(|t| t.failed)
-            .sum();
+            .max()
+            .unwrap_or(0);
+        let compared = v
+            .compared(model, None)
+            .map_or("—".into(), findings::difference);
         let _ = writeln!(
             md,
-            "| {model} | {:.4} | {:.4} | {:.2} | {max} | {} | {failed} |",
+            "| {model} | {:.4} | {:.4} | {:.2} | {max} | {} | {} | {compared} | {} | {failed} |",
             average(|r| r.stats.mean),
             average(|r| r.stats.trimmed_mean),
             average(|r| r.stats.p95),
+            overall(judged, model).map_or("—".into(), |(m, _)| format!("{m:.4}")),
+            normalized(judged, model).map_or("—".into(), |x| format!("{x:.3}")),
             if speed.is_empty() {
                 "—".into()
             } else {
@@ -785,6 +1004,19 @@ fn models_table(md: &mut String, v: &Loaded) {
         );
     }
     md.push('\n');
+}
+
+/// Four significant digits, in plain or scientific notation as the size
+/// asks.
+fn sig(x: f64) -> String {
+    if x == 0.0 {
+        "0".into()
+    } else if (1e-3..1e4).contains(&x.abs()) {
+        let decimals = (3 - x.abs().log10().floor() as i32).max(0) as usize;
+        format!("{x:.decimals$}")
+    } else {
+        format!("{x:.3e}")
+    }
 }
 
 /// Error against closed-loop horizon: each model fed its own output.

@@ -5,7 +5,9 @@
 
 use std::fmt::Write as _;
 
-use super::{Loaded, RunInfo, overall, paper_rows, worse_than_persistence};
+use super::{Loaded, RunInfo, Timing, normalized, overall, paper_rows};
+use crate::Rows;
+use crate::paired::{Interval, Verdict};
 
 /// The simulator baseline at the fewest integration steps per frame that
 /// the variant ran: (model name, steps per frame).
@@ -24,15 +26,45 @@ fn micros(ns: f64) -> String {
     format!("{:.1} µs", ns / 1000.0)
 }
 
-/// "2.1× faster" / "2.1× slower" of `a` against `b` (both ns); within 10%,
-/// "about as fast".
-fn speed_ratio(a: f64, b: f64) -> String {
-    if (a / b - 1.0).abs() < 0.1 {
-        "about as fast".into()
-    } else if a < b {
-        format!("{:.1}× faster", b / a)
+/// The speed verdict of `a` against `b` from their timed runs, which were
+/// interleaved: run k of each in round k. Faster or slower (by the ratio
+/// of medians) only when the range of the round-by-round ratios a/b lies
+/// wholly below or above 1 — a burst of load on the machine slows one
+/// round of both, so the pairs are compared, not the two ranges.
+pub(super) fn speed_verdict(a: &Timing, b: &Timing) -> String {
+    let ratios: Vec<f64> = a.runs.iter().zip(&b.runs).map(|(x, y)| x / y).collect();
+    let (lo, hi) = ratios
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &r| {
+            (lo.min(r), hi.max(r))
+        });
+    if ratios.is_empty() {
+        "not comparable in speed (no paired runs)".into()
+    } else if hi < 1.0 {
+        format!("{:.1}× faster", b.ns_per_state / a.ns_per_state)
+    } else if lo > 1.0 {
+        format!("{:.1}× slower", a.ns_per_state / b.ns_per_state)
     } else {
-        format!("{:.1}× slower", a / b)
+        format!(
+            "indistinguishable in speed (its time over the simulator's ranges from {lo:.2} to \
+             {hi:.2} across the rounds)"
+        )
+    }
+}
+
+/// "−0.136 [−0.150, −0.121]": a paired difference and its interval.
+pub(super) fn difference(i: &Interval) -> String {
+    format!("{:+.3} [{:+.3}, {:+.3}]", i.mean, i.low, i.high)
+}
+
+/// The verdict word of the ALN against another model, from the interval of
+/// their paired difference in error.
+pub(super) fn accuracy_word(i: &Interval) -> &'static str {
+    match i.verdict() {
+        Verdict::Lower => "better than",
+        Verdict::Higher => "worse than",
+        Verdict::Indistinguishable => "indistinguishable from",
+        Verdict::Tied => "tied with",
     }
 }
 
@@ -48,8 +80,17 @@ pub(super) fn findings(md: &mut String, run: &RunInfo, variants: &[Loaded]) {
          stride ahead, averaged over a variant's variables. Baselines: *persistence* predicts no \
          change, *linear* is a least-squares linear map of the state, *simulator@k/frame* \
          re-steps the physics from the logged frame with k integration steps per frame (the \
-         logged step is exact by construction). Times are from the machine named under \
-         Reproducibility.\n"
+         logged step is exact by construction). A *normalized* error divides each variable's \
+         mean error by the standard deviation of its true levels over the same rows, so runs \
+         with different ranges, level counts or codes compare. A comparison is the mean paired \
+         difference of two models' errors on the same rows (below zero: the ALN's errors are \
+         lower) with its 95% t-interval; \"better\" or \"worse\" only when the interval \
+         excludes zero, otherwise \"indistinguishable\" (\"tied\" when every difference is \
+         zero). The interval treats rows as independent; neighbouring frames are not quite, so \
+         it is on the narrow side. Times are from the machine named under Reproducibility, every \
+         model on one thread, the median of 5 runs with their range, the runs of all models \
+         interleaved in rounds; \"faster\" or \"slower\" only when the ALN's time over the \
+         other's is below 1 in every round, or above 1 in every round.\n"
     );
     for v in variants {
         variant_findings(md, v);
@@ -72,79 +113,110 @@ pub(super) fn findings(md: &mut String, run: &RunInfo, variants: &[Loaded]) {
 
 fn variant_findings(md: &mut String, v: &Loaded) {
     let name = &v.info.name;
-    let Some((aln, _)) = overall(&v.summary, "aln") else {
+    let (judged, rows) = v.judged();
+    let Some((aln, _)) = overall(judged, "aln") else {
         return;
     };
-    let variables = v.summary.iter().filter(|r| r.model == "aln").count();
-    let worse = worse_than_persistence(&v.summary).len();
+    let variables = judged.iter().filter(|r| r.model == "aln").count();
     let mut groups: Vec<(&str, usize)> = Vec::new();
-    for r in v.summary.iter().filter(|r| r.model == "aln") {
+    for r in judged.iter().filter(|r| r.model == "aln") {
         match groups.iter_mut().find(|(g, _)| *g == r.group) {
             Some((_, n)) => *n += 1,
             None => groups.push((&r.group, 1)),
         }
     }
     let groups: Vec<String> = groups.iter().map(|(g, n)| format!("{g} {n}")).collect();
+    let (all, held) = v.rows;
+    let which = match rows {
+        Rows::HeldOut if held < all => {
+            format!("on the {held} held-out test rows (of {all}; the others were trained on)")
+        }
+        Rows::HeldOut => format!("on the {held} test rows, all held out of training"),
+        Rows::All => format!("on the {all} test rows (none held out of training)"),
+    };
     let mut sentence = format!(
-        "- **`{name}`**: the ALN's mean error is {aln:.3} levels over {variables} variables \
-         ({})",
+        "- **`{name}`** {which}: the ALN's mean error is {aln:.3} levels ({:.3} normalized) \
+         over {variables} variables ({})",
+        normalized(judged, "aln").unwrap_or(f64::NAN),
         groups.join(", ")
     );
     for baseline in ["persistence", "linear"] {
-        if let Some((mean, _)) = overall(&v.summary, baseline) {
-            let verdict = if aln < mean {
-                "better than"
-            } else {
-                "worse than"
-            };
-            let _ = write!(sentence, "; {verdict} {baseline} ({mean:.3})");
+        if let (Some((mean, _)), Some(d)) = (overall(judged, baseline), v.compared(baseline, None))
+        {
+            let _ = write!(
+                sentence,
+                "; {} {baseline} ({mean:.3}; difference {})",
+                accuracy_word(d),
+                difference(d)
+            );
         }
     }
+    let [lower, higher, unclear, tied] = v.verdict_counts("persistence");
     let _ = write!(
         sentence,
-        ". It beats persistence on {} of {variables} variables",
-        variables - worse
+        ". Variable by variable it is better than persistence on {lower} of {variables}, worse \
+         on {higher}, indistinguishable on {unclear}"
     );
-    sentence.push_str(if worse * 2 > variables {
+    if tied > 0 {
+        let _ = write!(sentence, ", tied on {tied}");
+    }
+    sentence.push_str(if higher * 2 > variables {
         " — predicting no change is the better model for most of this state.\n"
     } else {
         ".\n"
     });
     md.push_str(&sentence);
+    super::replicates::finding(md, v);
     let _ = writeln!(md, "  - Model: {}.", v.description);
 
-    let batched = v.ns("aln", "batched");
-    let single = v.aln_single_ns();
-    if let (Some(aln_ns), Some((simulator, steps))) = (batched.or(single), coarsest_simulator(v))
-        && let (Some(sim_ns), Some((sim_mean, _))) =
-            (v.ns(simulator, "single"), overall(&v.summary, simulator))
+    let batched = v.timing("aln", "batched");
+    let single = v.aln_single();
+    if let (Some(aln_time), Some((simulator, steps))) = (batched.or(single), coarsest_simulator(v))
+        && let (Some(sim_time), Some((sim_mean, _))) =
+            (v.timing(simulator, "single"), overall(judged, simulator))
     {
         let path = if batched.is_some() {
             "batched"
         } else {
             "one at a time"
         };
-        let accuracy = if aln < sim_mean {
-            "more accurate"
-        } else {
-            "less accurate"
-        };
         let _ = write!(
             md,
-            "  - Speed: the ALN predicts a state in {} ({path}",
-            micros(aln_ns)
+            "  - Speed, one thread each (median and range of {} runs): the ALN predicts a state \
+             in {} ({path}",
+            aln_time.runs.len(),
+            aln_time.spread()
         );
         if let (Some(_), Some(one)) = (batched, single) {
-            let _ = write!(md, "; {} one at a time", micros(one));
+            let _ = write!(md, "; {} one at a time", one.spread());
         }
-        let _ = writeln!(
+        if let Some(all) = v.aln_all_threads() {
+            let _ = write!(
+                md,
+                "; batched on all {} threads {}",
+                all.threads,
+                all.spread()
+            );
+        }
+        let _ = write!(
             md,
             "). The simulator re-stepping a frame with {steps} step{} takes {} for an error of \
-             {sim_mean:.3}: the ALN is {} and {accuracy}.",
+             {sim_mean:.3}: the ALN is {}",
             if steps == 1 { "" } else { "s" },
-            micros(sim_ns),
-            speed_ratio(aln_ns, sim_ns),
+            sim_time.spread(),
+            speed_verdict(aln_time, sim_time),
         );
+        match v.compared(simulator, None) {
+            Some(d) => {
+                let _ = writeln!(
+                    md,
+                    ", and {} it in accuracy (difference {}).",
+                    accuracy_word(d),
+                    difference(d)
+                );
+            }
+            None => md.push_str(".\n"),
+        }
     }
 
     let c = &v.coverage;
@@ -191,7 +263,7 @@ fn variant_findings(md: &mut String, v: &Loaded) {
 fn across_variants(md: &mut String, variants: &[Loaded]) {
     let means: Vec<(&str, f64)> = variants
         .iter()
-        .filter_map(|v| Some((v.info.name.as_str(), overall(&v.summary, "aln")?.0)))
+        .filter_map(|v| Some((v.info.name.as_str(), overall(v.judged().0, "aln")?.0)))
         .collect();
     let (Some(best), Some(worst)) = (
         means.iter().min_by(|a, b| a.1.total_cmp(&b.1)),
@@ -201,7 +273,8 @@ fn across_variants(md: &mut String, variants: &[Loaded]) {
     };
     let _ = write!(
         md,
-        "- Across variants: the lowest ALN error is `{}`'s ({:.3}), the highest `{}`'s ({:.3})",
+        "- Across variants (on each one's judged rows): the lowest ALN error is `{}`'s ({:.3}), \
+         the highest `{}`'s ({:.3})",
         best.0, best.1, worst.0, worst.1
     );
     let fastest = variants
@@ -211,7 +284,7 @@ fn across_variants(md: &mut String, variants: &[Loaded]) {
     if let Some((name, t)) = fastest {
         let _ = write!(
             md,
-            "; the fastest batched prediction is `{name}`'s ({})",
+            "; the fastest batched prediction on one thread is `{name}`'s ({})",
             micros(t)
         );
     }
@@ -256,5 +329,94 @@ fn against_the_paper(md: &mut String, variants: &[Loaded]) {
                 far_higher.join(", ")
             );
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use std::collections::BTreeMap;
+    use std::sync::Arc;
+
+    use alnlab_common::{Provenance, table};
+    use arrow_array::types::UInt16Type;
+    use arrow_array::{
+        Array, BooleanArray, DictionaryArray, StringArray, UInt16Array, UInt32Array,
+    };
+
+    use super::*;
+    use crate::Predictions;
+
+    /// A verdict word only where the interval excludes zero: the ALN against
+    /// a model equal to it on every row, one that differs from it by ±1 in
+    /// turn (mean difference 0), and one whose error is 1 higher on every
+    /// other row.
+    #[test]
+    fn verdict_words_follow_the_interval_of_constructed_models() {
+        let rows = 200u32;
+        let aln: Vec<u16> = (0..rows).map(|r| 5 + (r % 3) as u16).collect();
+        let same = aln.clone();
+        let noisy: Vec<u16> = aln
+            .iter()
+            .enumerate()
+            .map(|(r, &e)| if r % 2 == 0 { e + 1 } else { e - 1 })
+            .collect();
+        let worse: Vec<u16> = aln
+            .iter()
+            .enumerate()
+            .map(|(r, &e)| e + (r % 2) as u16)
+            .collect();
+        let models = [&aln, &same, &noisy, &worse];
+        let (mut m, mut v, mut row, mut error) = (vec![], vec![], vec![], vec![]);
+        for (k, errors) in models.iter().enumerate() {
+            for variable in 0..2u16 {
+                for (r, &e) in errors.iter().enumerate() {
+                    m.push(k as u16);
+                    v.push(variable);
+                    row.push(r as u32);
+                    error.push(e);
+                }
+            }
+        }
+        let n = m.len();
+        let dictionary = |keys: Vec<u16>, values: Vec<&str>| {
+            DictionaryArray::<UInt16Type>::new(
+                UInt16Array::from(keys),
+                Arc::new(StringArray::from(values)),
+            )
+        };
+        let batch = table::batch(vec![
+            (
+                "model",
+                Arc::new(dictionary(m, vec!["aln", "same", "noisy", "worse"])) as Arc<dyn Array>,
+            ),
+            ("variable", Arc::new(dictionary(v, vec!["a.1.x", "v.1.x"]))),
+            ("row", Arc::new(UInt32Array::from(row))),
+            ("held_out", Arc::new(BooleanArray::from(vec![true; n]))),
+            ("true_level", Arc::new(UInt16Array::from(vec![7u16; n]))),
+            ("error", Arc::new(UInt16Array::from(error))),
+        ]);
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("predictions.parquet");
+        let provenance = Provenance {
+            stage: "test".into(),
+            params: serde_json::Value::Null,
+            inputs: BTreeMap::new(),
+        };
+        table::write_parquet(&path, &batch, &provenance).unwrap();
+        let comparisons = Predictions::read(&path).unwrap().compare("aln");
+        let word = |against: &str| {
+            let c = comparisons
+                .iter()
+                .find(|c| c.against == against && c.variable.is_none() && c.rows == Rows::All)
+                .unwrap();
+            (accuracy_word(&c.difference), c.difference)
+        };
+        assert_eq!(word("same").0, "tied with");
+        let (noisy_word, noisy) = word("noisy");
+        assert_eq!(noisy_word, "indistinguishable from");
+        assert!(noisy.low < 0.0 && noisy.high > 0.0 && noisy.mean == 0.0);
+        let (worse_word, worse) = word("worse");
+        assert_eq!(worse_word, "better than", "the ALN's errors are lower");
+        assert!(worse.high < 0.0 && (worse.mean + 0.5).abs() < 1e-12);
     }
 }

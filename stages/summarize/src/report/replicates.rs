@@ -1,0 +1,201 @@
+//! Replicates: a variant run again with new seeds (new simulation, split
+//! and trees). Each headline figure — a model's mean error over the
+//! variables, the ALN's paired difference against a baseline — becomes the
+//! mean across replicates with its 95% t-interval across replicates, each
+//! replicate one independent value. `replicates.csv`, beside the report,
+//! holds every figure with each replicate's value, for checking.
+
+use std::fmt::Write as _;
+use std::path::Path;
+
+use alnlab_common::{Result, atomic};
+
+use super::findings::{accuracy_word, difference};
+use super::{Loaded, Replicate, overall};
+use crate::paired::Interval;
+use crate::{Rows, SummaryRow};
+
+/// The models whose errors the headline gives.
+const MODELS: [&str; 3] = ["aln", "persistence", "linear"];
+
+/// One replicate's headline figures, on its held-out rows (all test rows
+/// when none is held out).
+pub(super) struct Figures {
+    pub seed: u64,
+    pub rows: Rows,
+    /// Mean error over the variables, per model of [`MODELS`].
+    pub means: Vec<Option<f64>>,
+    /// The ALN's mean paired difference against each baseline of
+    /// [`MODELS`] (the ALN itself excepted).
+    pub differences: Vec<Option<f64>>,
+}
+
+impl Figures {
+    pub fn read(replicate: &Replicate) -> Result<Figures> {
+        let (all, held): (Vec<SummaryRow>, Vec<SummaryRow>) = crate::read(&replicate.summary)?
+            .into_iter()
+            .partition(|r| r.rows == Rows::All);
+        let (judged, rows) = if held.is_empty() {
+            (all, Rows::All)
+        } else {
+            (held, Rows::HeldOut)
+        };
+        let comparisons = crate::read_comparisons(&replicate.comparisons)?;
+        Ok(Figures {
+            seed: replicate.seed,
+            rows,
+            means: MODELS
+                .iter()
+                .map(|m| overall(&judged, m).map(|(mean, _)| mean))
+                .collect(),
+            differences: MODELS[1..]
+                .iter()
+                .map(|b| {
+                    comparisons
+                        .iter()
+                        .find(|c| {
+                            c.rows == rows
+                                && c.model == "aln"
+                                && c.against == *b
+                                && c.variable.is_none()
+                        })
+                        .map(|c| c.difference.mean)
+                })
+                .collect(),
+        })
+    }
+}
+
+/// The interval across replicates of one figure, when every replicate has it.
+fn across(values: &[Option<f64>]) -> Option<Interval> {
+    let values: Option<Vec<f64>> = values.iter().copied().collect();
+    Interval::of(&values?)
+}
+
+/// "1.042 [1.020, 1.064]".
+fn with_interval(i: &Interval) -> String {
+    format!("{:.3} [{:.3}, {:.3}]", i.mean, i.low, i.high)
+}
+
+/// The findings' line on a variant's replicates, if it has several.
+pub(super) fn finding(md: &mut String, v: &Loaded) {
+    let n = v.replicates.len();
+    if n < 2 {
+        return;
+    }
+    let rows = v.replicates[0].rows.as_str();
+    let mut line = format!(
+        "  - Across {n} replicates (each a new simulation, split and forest; mean and 95% \
+         interval across replicates, {rows} rows):"
+    );
+    for (k, model) in MODELS.iter().enumerate() {
+        let values: Vec<Option<f64>> = v.replicates.iter().map(|f| f.means[k]).collect();
+        if let Some(i) = across(&values) {
+            let _ = write!(line, " {model} {};", with_interval(&i));
+        }
+    }
+    for (k, baseline) in MODELS[1..].iter().enumerate() {
+        let values: Vec<Option<f64>> = v.replicates.iter().map(|f| f.differences[k]).collect();
+        if let Some(i) = across(&values) {
+            let _ = write!(
+                line,
+                " the ALN is {} {baseline} (difference {});",
+                accuracy_word(&i),
+                difference(&i)
+            );
+        }
+    }
+    line.pop();
+    let _ = writeln!(md, "{line}.");
+}
+
+/// The replicates section and `replicates.csv`, when some variant has
+/// several replicates.
+pub(super) fn section(md: &mut String, variants: &[Loaded], dir: &Path) -> Result<()> {
+    if variants.iter().all(|v| v.replicates.len() < 2) {
+        return Ok(());
+    }
+    let _ = writeln!(
+        md,
+        "## Replicates\n\nEach replicate re-draws the simulation, the split and the trees from a \
+         seed derived from the experiment's. Mean errors over the variables and the ALN's mean \
+         paired difference against each baseline, per replicate (on its held-out rows), then \
+         their mean with the 95% t-interval across replicates. `replicates.csv` holds every \
+         value.\n"
+    );
+    let _ = write!(md, "| variant | replicate | seed |");
+    for m in MODELS {
+        let _ = write!(md, " {m} mean |");
+    }
+    for b in &MODELS[1..] {
+        let _ = write!(md, " ALN − {b} |");
+    }
+    let _ = writeln!(
+        md,
+        "\n|---|---|---:|{}",
+        "---:|".repeat(MODELS.len() * 2 - 1)
+    );
+    let mut csv =
+        String::from("variant,figure,replicates,mean,std_dev,ci_low,ci_high,verdict,values\n");
+    let cell = |x: Option<f64>| x.map_or("—".into(), |x| format!("{x:.4}"));
+    for v in variants.iter().filter(|v| v.replicates.len() > 1) {
+        for (k, f) in v.replicates.iter().enumerate() {
+            let _ = write!(md, "| {} | {} | {} |", v.info.name, k + 1, f.seed);
+            for &m in &f.means {
+                let _ = write!(md, " {} |", cell(m));
+            }
+            for &d in &f.differences {
+                let _ = write!(md, " {} |", cell(d));
+            }
+            md.push('\n');
+        }
+        let _ = write!(md, "| {} | mean [95%] | |", v.info.name);
+        let mut figures: Vec<(String, Vec<Option<f64>>)> = Vec::new();
+        for (k, m) in MODELS.iter().enumerate() {
+            figures.push((
+                format!("{m} mean"),
+                v.replicates.iter().map(|f| f.means[k]).collect(),
+            ));
+        }
+        for (k, b) in MODELS[1..].iter().enumerate() {
+            figures.push((
+                format!("aln - {b}"),
+                v.replicates.iter().map(|f| f.differences[k]).collect(),
+            ));
+        }
+        for (figure, values) in &figures {
+            let interval = across(values);
+            let _ = write!(
+                md,
+                " {} |",
+                interval.as_ref().map_or("—".into(), with_interval)
+            );
+            if let Some(i) = interval {
+                let listed: Vec<String> = values
+                    .iter()
+                    .map(|x| x.map_or(String::new(), |x| x.to_string()))
+                    .collect();
+                let _ = writeln!(
+                    csv,
+                    "{},{figure},{},{},{},{},{},{},{}",
+                    v.info.name,
+                    i.n,
+                    i.mean,
+                    i.std_dev,
+                    i.low,
+                    i.high,
+                    // Only a difference has a verdict.
+                    if figure.starts_with("aln - ") {
+                        i.verdict().as_str()
+                    } else {
+                        ""
+                    },
+                    listed.join(";")
+                );
+            }
+        }
+        md.push('\n');
+    }
+    md.push('\n');
+    atomic::write_bytes(&dir.join("replicates.csv"), csv.as_bytes())
+}
