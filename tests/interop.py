@@ -168,7 +168,13 @@ def check_replicates(record, report_dir):
         per = [judged_figures(r["artifacts"]["summary"]["path"], r["artifacts"]["comparisons"]["path"])
                for r in sorted(replicates, key=lambda r: r["replicate"])]
         for row in (r for r in rows if r["variant"] == name):
-            values = np.array([p[row["figure"]] for p in per])
+            if row["figure"].startswith("aln mean - "):
+                other = row["figure"][len("aln mean - "):-len(" aln mean")]
+                theirs = [judged_figures(r["artifacts"]["summary"]["path"], r["artifacts"]["comparisons"]["path"])
+                          for r in sorted(by_variant[other], key=lambda r: r["replicate"])]
+                values = np.array([p["aln mean"] - q["aln mean"] for p, q in zip(per, theirs)])
+            else:
+                values = np.array([p[row["figure"]] for p in per])
             listed = [float(x) for x in row["values"].split(";")]
             assert np.allclose(listed, values, rtol=1e-12, atol=1e-12), (row, values)
             n = len(values)
