@@ -9,13 +9,17 @@ use crate::stats::HISTOGRAM_BINS;
 type DrawResult = std::result::Result<(), Box<dyn std::error::Error>>;
 
 const SIZE: (u32, u32) = (720, 420);
-const PALETTE: [RGBColor; 6] = [
+const PALETTE: [RGBColor; 10] = [
     RGBColor(31, 119, 180),
     RGBColor(255, 127, 14),
     RGBColor(44, 160, 44),
     RGBColor(214, 39, 40),
     RGBColor(148, 103, 189),
     RGBColor(140, 86, 75),
+    RGBColor(227, 119, 194),
+    RGBColor(127, 127, 127),
+    RGBColor(188, 189, 34),
+    RGBColor(23, 190, 207),
 ];
 
 /// Draws into an SVG string; a drawing error (which plotters reports only for

@@ -9,8 +9,8 @@
 //!   model on the same rows: the mean paired difference of their errors,
 //!   per variable and averaged over the variables, with its confidence
 //!   interval and verdict ([`paired`]);
-//! - `horizons.parquet`, the closed-loop errors per model and horizon, over
-//!   all variables and starts.
+//! - `horizons.parquet`, the closed-loop errors per set of rows (all
+//!   starts, the held-out ones), model and horizon, over all variables.
 //!
 //! [`report`] renders a run's summaries, timings and training logs as
 //! Markdown and SVG.
@@ -21,6 +21,7 @@ pub mod paired;
 pub mod report;
 mod stats;
 
+use std::collections::BTreeSet;
 use std::path::Path;
 use std::sync::Arc;
 
@@ -38,7 +39,7 @@ use crate::paired::Interval;
 use crate::stats::{ErrorCounts, ErrorStats, HISTOGRAM_BINS};
 
 /// Version of what this stage writes (part of every cache key).
-pub const FORMAT_VERSION: u32 = 3;
+pub const FORMAT_VERSION: u32 = 4;
 /// File name of the summary table.
 pub const SUMMARY_FILE: &str = "summary.parquet";
 /// File name of the paired-comparisons table.
@@ -93,9 +94,11 @@ pub struct SummaryRow {
 }
 
 /// One row of `horizons.parquet`: a model's closed-loop errors after
-/// `horizon` steps, over all variables and starts.
+/// `horizon` steps, over all variables and the starts of one set of rows
+/// (all, or those held out of training).
 #[derive(Clone, Debug, PartialEq)]
 pub struct HorizonRow {
+    pub rows: Rows,
     pub model: String,
     pub horizon: u16,
     pub stats: ErrorStats,
@@ -139,33 +142,49 @@ pub fn run(
         provenance,
     )?;
     progress.advance(1);
-    let horizons = summarize_horizons(rollout_path)?;
+    let horizons = summarize_horizons(rollout_path, &predictions.held_out_rows())?;
     write_horizons(&out_dir.join(HORIZONS_FILE), &horizons, provenance)?;
     progress.advance(1);
     Ok(())
 }
 
-/// The closed-loop rows of a rollout table, by model then horizon.
-pub fn summarize_horizons(rollout_path: &Path) -> Result<Vec<HorizonRow>> {
-    let table = Table::read_columns(rollout_path, &["model", "horizon", "error"])?;
+/// The closed-loop rows of a rollout table, by set of rows (all starts,
+/// then the starts among `held_out`, if any), model and horizon.
+pub fn summarize_horizons(
+    rollout_path: &Path,
+    held_out: &BTreeSet<u32>,
+) -> Result<Vec<HorizonRow>> {
+    let table = Table::read_columns(rollout_path, &["model", "horizon", "start", "error"])?;
     let models = table.column::<DictionaryArray<UInt16Type>>("model")?;
     let horizons = table.column::<UInt16Array>("horizon")?.values();
+    let starts = table.column::<UInt32Array>("start")?.values();
     let errors = table.column::<UInt16Array>("error")?.values();
     let names = dictionary_names(models, rollout_path)?;
     let last = horizons.iter().copied().max().unwrap_or(0) as usize;
-    let mut counts = vec![ErrorCounts::default(); names.len() * (last + 1)];
-    for ((&m, &h), &e) in models.keys().values().iter().zip(horizons).zip(errors) {
-        counts[usize::from(m) * (last + 1) + usize::from(h)].add(u32::from(e), 1);
+    let per_set = names.len() * (last + 1);
+    // [all | held out] × model × horizon.
+    let mut counts = vec![ErrorCounts::default(); 2 * per_set];
+    let keys = models.keys().values();
+    for i in 0..table.num_rows() {
+        let k = usize::from(keys[i]) * (last + 1) + usize::from(horizons[i]);
+        let e = u32::from(errors[i]);
+        counts[k].add(e, 1);
+        if held_out.contains(&starts[i]) {
+            counts[per_set + k].add(e, 1);
+        }
     }
     let mut rows = Vec::new();
-    for (m, model) in names.iter().enumerate() {
-        for h in 0..=last {
-            if let Some(stats) = counts[m * (last + 1) + h].stats() {
-                rows.push(HorizonRow {
-                    model: model.clone(),
-                    horizon: h as u16,
-                    stats,
-                });
+    for (set, rows_of) in [Rows::All, Rows::HeldOut].into_iter().enumerate() {
+        for (m, model) in names.iter().enumerate() {
+            for h in 0..=last {
+                if let Some(stats) = counts[set * per_set + m * (last + 1) + h].stats() {
+                    rows.push(HorizonRow {
+                        rows: rows_of,
+                        model: model.clone(),
+                        horizon: h as u16,
+                        stats,
+                    });
+                }
             }
         }
     }
@@ -192,9 +211,14 @@ fn write_horizons(path: &Path, rows: &[HorizonRow], provenance: &Provenance) -> 
     };
     let batch = table::batch(vec![
         (
+            "rows",
+            Arc::new(StringArray::from_iter_values(
+                rows.iter().map(|r| r.rows.as_str()),
+            )) as Arc<dyn Array>,
+        ),
+        (
             "model",
-            Arc::new(StringArray::from_iter_values(rows.iter().map(|r| &r.model)))
-                as Arc<dyn Array>,
+            Arc::new(StringArray::from_iter_values(rows.iter().map(|r| &r.model))),
         ),
         (
             "horizon",
@@ -222,10 +246,14 @@ fn write_horizons(path: &Path, rows: &[HorizonRow], provenance: &Provenance) -> 
     table::write_parquet(path, &batch, provenance)
 }
 
-/// Reads `horizons.parquet` back: (model, horizon, mean, 95th percentile)
-/// per row.
-pub fn read_horizons(path: &Path) -> Result<Vec<(String, u16, f64, f64)>> {
+/// One row of `horizons.parquet` as read back: (rows, model, horizon, mean,
+/// 95th percentile).
+pub type HorizonFigures = (Rows, String, u16, f64, f64);
+
+/// Reads `horizons.parquet` back.
+pub fn read_horizons(path: &Path) -> Result<Vec<HorizonFigures>> {
     let table = Table::read(path)?;
+    let sets = rows_column(&table, path)?;
     let models = table.strings("model")?;
     let horizons = table.column::<UInt16Array>("horizon")?.values();
     let (mean, p95) = (
@@ -233,7 +261,7 @@ pub fn read_horizons(path: &Path) -> Result<Vec<(String, u16, f64, f64)>> {
         table.f64_column("p95")?.values(),
     );
     Ok((0..table.num_rows())
-        .map(|i| (models[i].clone(), horizons[i], mean[i], p95[i]))
+        .map(|i| (sets[i], models[i].clone(), horizons[i], mean[i], p95[i]))
         .collect())
 }
 
@@ -246,6 +274,8 @@ pub struct Predictions {
     errors: Vec<Vec<u16>>,
     /// Per test row, whether it was held out of training.
     held_out: Vec<bool>,
+    /// Per test row, its row in `levels.parquet`.
+    row_ids: Vec<u32>,
     /// `truth[v]`: variable v's true levels, per test row.
     truth: Vec<Vec<u16>>,
 }
@@ -310,8 +340,19 @@ impl Predictions {
             variables: variable_names,
             errors: grouped,
             held_out: held,
+            row_ids: row_of.swap_remove(0),
             truth,
         })
+    }
+
+    /// The test rows (in `levels.parquet`) held out of training.
+    pub fn held_out_rows(&self) -> BTreeSet<u32> {
+        self.row_ids
+            .iter()
+            .zip(&self.held_out)
+            .filter(|&(_, &h)| h)
+            .map(|(&r, _)| r)
+            .collect()
     }
 
     /// The sets of rows there are: all, and the held-out ones if any.
@@ -505,23 +546,30 @@ fn write(path: &Path, rows: &[SummaryRow], provenance: &Provenance) -> Result<()
     table::write_parquet(path, &batch, provenance)
 }
 
+/// A table's `rows` column, parsed.
+fn rows_column(table: &Table, path: &Path) -> Result<Vec<Rows>> {
+    table
+        .strings("rows")?
+        .iter()
+        .enumerate()
+        .map(|(i, name)| {
+            Rows::parse(name).ok_or_else(|| {
+                Error::bad_file(
+                    path,
+                    format!("row {i}: rows `{name}` is neither `all` nor `held-out`"),
+                )
+            })
+        })
+        .collect()
+}
+
 /// Reads `summary.parquet` back.
 pub fn read(path: &Path) -> Result<Vec<SummaryRow>> {
     let table = Table::read(path)?;
     let text = |name: &str| table.strings(name);
     let number = |name: &str| -> Result<&[f64]> { Ok(table.f64_column(name)?.values()) };
     let (models, variables, groups) = (text("model")?, text("variable")?, text("group")?);
-    let sets = text("rows")?
-        .iter()
-        .map(|name| {
-            Rows::parse(name).ok_or_else(|| {
-                Error::bad_file(
-                    path,
-                    format!("rows: `{name}` is neither `all` nor `held-out`"),
-                )
-            })
-        })
-        .collect::<Result<Vec<Rows>>>()?;
+    let sets = rows_column(&table, path)?;
     let n = table.column::<UInt64Array>("n")?.values();
     let max = table.column::<UInt32Array>("max")?.values();
     let (mean, std_dev, std_err) = (number("mean")?, number("std_dev")?, number("std_err")?);
@@ -610,7 +658,8 @@ pub fn read_comparisons(path: &Path) -> Result<Vec<Comparison>> {
     let table = Table::read(path)?;
     let text = |name: &str| table.strings(name);
     let number = |name: &str| -> Result<&[f64]> { Ok(table.f64_column(name)?.values()) };
-    let (sets, models, against) = (text("rows")?, text("model")?, text("against")?);
+    let sets = rows_column(&table, path)?;
+    let (models, against) = (text("model")?, text("against")?);
     let variables = table.column::<StringArray>("variable")?;
     let n = table.column::<UInt64Array>("n")?.values();
     let (mean, std_dev, low, high) = (
@@ -622,15 +671,7 @@ pub fn read_comparisons(path: &Path) -> Result<Vec<Comparison>> {
     (0..table.num_rows())
         .map(|i| {
             Ok(Comparison {
-                rows: Rows::parse(&sets[i]).ok_or_else(|| {
-                    Error::bad_file(
-                        path,
-                        format!(
-                            "row {i}: rows `{}` is neither `all` nor `held-out`",
-                            sets[i]
-                        ),
-                    )
-                })?,
+                rows: sets[i],
                 model: models[i].clone(),
                 against: against[i].clone(),
                 variable: variables
@@ -718,6 +759,7 @@ mod tests {
                 )),
             ),
             ("horizon", Arc::new(UInt16Array::from(vec![1, 1, 2, 1]))),
+            ("start", Arc::new(UInt32Array::from(vec![11, 10, 11, 12]))),
             ("error", Arc::new(UInt16Array::from(vec![1, 3, 5, 0]))),
         ]);
         let rollout_path = dir.path().join("rollout.parquet");
@@ -732,12 +774,16 @@ mod tests {
         )
         .unwrap();
         let horizons = read_horizons(&dir.path().join(HORIZONS_FILE)).unwrap();
+        // Over all starts; over the held-out ones (rows 11 and 12, not 10).
         assert_eq!(
             horizons,
             [
-                ("aln".to_string(), 1, 2.0, 2.9),
-                ("aln".to_string(), 2, 5.0, 5.0),
-                ("persistence".to_string(), 1, 0.0, 0.0)
+                (Rows::All, "aln".to_string(), 1, 2.0, 2.9),
+                (Rows::All, "aln".to_string(), 2, 5.0, 5.0),
+                (Rows::All, "persistence".to_string(), 1, 0.0, 0.0),
+                (Rows::HeldOut, "aln".to_string(), 1, 1.0, 1.0),
+                (Rows::HeldOut, "aln".to_string(), 2, 5.0, 5.0),
+                (Rows::HeldOut, "persistence".to_string(), 1, 0.0, 0.0),
             ]
         );
         let rows = read(&dir.path().join(SUMMARY_FILE)).unwrap();

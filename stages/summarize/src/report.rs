@@ -132,7 +132,8 @@ struct Loaded<'a> {
     comparisons: Vec<Comparison>,
     /// Per learned variable, the SI size of one level and its unit.
     level_si: Vec<(String, f64, &'static str)>,
-    /// (model, horizon, mean, 95th percentile) of the closed-loop errors.
+    /// (model, horizon, mean, 95th percentile) of the closed-loop errors,
+    /// from the held-out starts (all starts when none is held out).
     horizons: Vec<(String, u16, f64, f64)>,
     timings: Vec<Timing>,
     /// Mean training errors per tree, per epoch (1-based).
@@ -312,6 +313,16 @@ fn load(info: &VariantInfo) -> Result<Loaded<'_>> {
     let rows = (count(&summary), count(&held_out));
     let comparisons = crate::read_comparisons(&info.comparisons)?;
     let horizons = crate::read_horizons(&info.horizons)?;
+    let judged = if held_out.is_empty() {
+        Rows::All
+    } else {
+        Rows::HeldOut
+    };
+    let horizons = horizons
+        .into_iter()
+        .filter(|h| h.0 == judged)
+        .map(|(_, model, horizon, mean, p95)| (model, horizon, mean, p95))
+        .collect();
     let table = Table::read(&info.timings)?;
     let text = |name: &str| table.strings(name);
     let (models, paths) = (text("model")?, text("path")?);
@@ -1051,8 +1062,9 @@ fn closed_loop(md: &mut String, v: &Loaded, dir: &Path) -> Result<()> {
     atomic::write_bytes(&dir.join(&name), chart.as_bytes())?;
     let _ = writeln!(
         md,
-        "From the true state of test rows, each model is fed its own predictions; its levels \
-         are scored against the logged trajectory at every step (all variables pooled).\n\n\
+        "From the true state of test rows held out of training (all test rows when none is), \
+         each model is fed its own predictions; its levels are scored against the logged \
+         trajectory at every step (all variables pooled).\n\n\
          ![closed-loop error against horizon]({name})\n"
     );
     let _ = write!(md, "| steps |");
