@@ -374,26 +374,34 @@ impl Predictions {
     /// of the table's dictionaries.
     pub fn summarize(&self) -> Vec<SummaryRow> {
         let mut out = Vec::new();
+        let counts_of = |values: &[u16], set: &[usize]| {
+            let mut counts = ErrorCounts::default();
+            for &r in set {
+                counts.add(u32::from(values[r]), 1);
+            }
+            counts
+        };
         for (rows, set) in self.row_sets() {
+            // The true levels' spread is the variable's, whichever model.
+            let true_std_dev: Vec<f64> = self
+                .truth
+                .iter()
+                .map(|truth| {
+                    counts_of(truth, &set)
+                        .stats()
+                        .map_or(f64::NAN, |t| t.std_dev)
+                })
+                .collect();
             for (m, model) in self.models.iter().enumerate() {
                 let first = out.len();
                 for (v, variable) in self.variables.iter().enumerate() {
-                    let errors = self.errors(m, v);
-                    let mut counts = ErrorCounts::default();
-                    for &r in &set {
-                        counts.add(u32::from(errors[r]), 1);
-                    }
-                    if let Some(stats) = counts.stats() {
-                        let mut truth = ErrorCounts::default();
-                        for &r in &set {
-                            truth.add(u32::from(self.truth[v][r]), 1);
-                        }
+                    if let Some(stats) = counts_of(self.errors(m, v), &set).stats() {
                         out.push(SummaryRow {
                             rows,
                             model: model.clone(),
                             variable: variable.clone(),
                             group: group_of(variable).to_string(),
-                            true_std_dev: truth.stats().map_or(f64::NAN, |t| t.std_dev),
+                            true_std_dev: true_std_dev[v],
                             stats,
                             best_in_group: false,
                             worst_in_group: false,
