@@ -191,16 +191,7 @@ impl Loaded<'_> {
     /// The ALN against `against` on the judged rows: for `variable`, or
     /// averaged over the variables.
     fn compared(&self, against: &str, variable: Option<&str>) -> Option<&Interval> {
-        let (_, rows) = self.judged();
-        self.comparisons
-            .iter()
-            .find(|c| {
-                c.rows == rows
-                    && c.model == "aln"
-                    && c.against == against
-                    && c.variable.as_deref() == variable
-            })
-            .map(|c| &c.difference)
+        aln_against(&self.comparisons, self.judged().1, against, variable)
     }
 
     /// How the ALN compares with `against` variable by variable on the
@@ -305,19 +296,45 @@ pub fn render(run: &RunInfo, dir: &Path) -> Result<PathBuf> {
     Ok(path)
 }
 
-fn load(info: &VariantInfo) -> Result<Loaded<'_>> {
-    let (summary, held_out): (Vec<SummaryRow>, Vec<SummaryRow>) = crate::read(&info.summary)?
-        .into_iter()
-        .partition(|r| r.rows == Rows::All);
-    let count = |rows: &[SummaryRow]| rows.first().map_or(0, |r| r.stats.n);
-    let rows = (count(&summary), count(&held_out));
-    let comparisons = crate::read_comparisons(&info.comparisons)?;
-    let horizons = crate::read_horizons(&info.horizons)?;
+/// A summary split into its rows over all test rows and over the held-out
+/// ones, with the set findings judge: the held-out rows, or all when none
+/// is held out.
+fn split_rows(summary: Vec<SummaryRow>) -> (Vec<SummaryRow>, Vec<SummaryRow>, Rows) {
+    let (all, held_out): (Vec<SummaryRow>, Vec<SummaryRow>) =
+        summary.into_iter().partition(|r| r.rows == Rows::All);
     let judged = if held_out.is_empty() {
         Rows::All
     } else {
         Rows::HeldOut
     };
+    (all, held_out, judged)
+}
+
+/// The ALN against `against` on `rows`: for `variable`, or averaged over
+/// the variables.
+fn aln_against<'c>(
+    comparisons: &'c [Comparison],
+    rows: Rows,
+    against: &str,
+    variable: Option<&str>,
+) -> Option<&'c Interval> {
+    comparisons
+        .iter()
+        .find(|c| {
+            c.rows == rows
+                && c.model == "aln"
+                && c.against == against
+                && c.variable.as_deref() == variable
+        })
+        .map(|c| &c.difference)
+}
+
+fn load(info: &VariantInfo) -> Result<Loaded<'_>> {
+    let (summary, held_out, judged) = split_rows(crate::read(&info.summary)?);
+    let count = |rows: &[SummaryRow]| rows.first().map_or(0, |r| r.stats.n);
+    let rows = (count(&summary), count(&held_out));
+    let comparisons = crate::read_comparisons(&info.comparisons)?;
+    let horizons = crate::read_horizons(&info.horizons)?;
     let horizons = horizons
         .into_iter()
         .filter(|h| h.0 == judged)

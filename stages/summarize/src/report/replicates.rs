@@ -11,9 +11,9 @@ use std::path::Path;
 use alnlab_common::{Result, atomic};
 
 use super::findings::{accuracy_word, difference};
-use super::{Loaded, Replicate, overall};
+use super::{Loaded, Replicate, aln_against, overall, split_rows};
+use crate::Rows;
 use crate::paired::Interval;
-use crate::{Rows, SummaryRow};
 
 /// The models whose errors the headline gives.
 const MODELS: [&str; 3] = ["aln", "persistence", "linear"];
@@ -32,14 +32,8 @@ pub(super) struct Figures {
 
 impl Figures {
     pub fn read(replicate: &Replicate) -> Result<Figures> {
-        let (all, held): (Vec<SummaryRow>, Vec<SummaryRow>) = crate::read(&replicate.summary)?
-            .into_iter()
-            .partition(|r| r.rows == Rows::All);
-        let (judged, rows) = if held.is_empty() {
-            (all, Rows::All)
-        } else {
-            (held, Rows::HeldOut)
-        };
+        let (all, held, rows) = split_rows(crate::read(&replicate.summary)?);
+        let judged = if rows == Rows::HeldOut { held } else { all };
         let comparisons = crate::read_comparisons(&replicate.comparisons)?;
         Ok(Figures {
             seed: replicate.seed,
@@ -50,17 +44,7 @@ impl Figures {
                 .collect(),
             differences: MODELS[1..]
                 .iter()
-                .map(|b| {
-                    comparisons
-                        .iter()
-                        .find(|c| {
-                            c.rows == rows
-                                && c.model == "aln"
-                                && c.against == *b
-                                && c.variable.is_none()
-                        })
-                        .map(|c| c.difference.mean)
-                })
+                .map(|b| aln_against(&comparisons, rows, b, None).map(|d| d.mean))
                 .collect(),
         })
     }
