@@ -129,16 +129,29 @@ impl Cache {
     }
 
     /// The finished artifact with this key, if there is one whose files are
-    /// all present with their recorded sizes.
+    /// all present with their recorded sizes and content hashes. A damaged
+    /// artifact is named on stderr and not used (the run makes it again).
     pub fn lookup(&self, stage: &str, key: &str) -> Option<Artifact> {
         let dir = self.dir(stage, key);
         let record: ArtifactRecord =
             serde_json::from_slice(&fs::read(dir.join(RECORD_FILE)).ok()?).ok()?;
-        let whole = record
-            .files
-            .values()
-            .all(|f| fs::metadata(dir.join(&f.file)).is_ok_and(|m| m.len() == f.bytes));
-        (whole && record.key == key).then_some(Artifact { dir, record })
+        if record.key != key {
+            return None;
+        }
+        for f in record.files.values() {
+            let path = dir.join(&f.file);
+            let intact = fs::metadata(&path).is_ok_and(|m| m.len() == f.bytes)
+                && sha256_file(&path).is_ok_and(|sha256| sha256 == f.sha256);
+            if !intact {
+                eprintln!(
+                    "warning: {} is missing or damaged (its size or sha256 is not the recorded one); \
+                     making it again",
+                    path.display()
+                );
+                return None;
+            }
+        }
+        Some(Artifact { dir, record })
     }
 
     /// Makes the artifact: `make` writes the files named in `outputs`
@@ -281,7 +294,10 @@ mod tests {
         assert_eq!(made.sha256("x"), sha256_hex(b"whole"));
         let found = cache.lookup("s", "k").unwrap();
         assert_eq!(found.record, made.record);
-        // A truncated file makes the artifact unusable.
+        // A changed byte (same size) makes the artifact unusable, as does a
+        // truncated file.
+        fs::write(found.path("x"), b"whale").unwrap();
+        assert!(cache.lookup("s", "k").is_none());
         fs::write(found.path("x"), b"who").unwrap();
         assert!(cache.lookup("s", "k").is_none());
     }

@@ -50,11 +50,14 @@ impl std::fmt::Display for Problem {
     }
 }
 
-/// A file to archive: role, file name, where it is now.
+/// A file to archive: role, file name, where it is now, and the SHA-256
+/// its record says it has (checked as it is copied: damaged bytes are
+/// never archived).
 pub struct Source {
     pub role: String,
     pub name: String,
     pub path: PathBuf,
+    pub sha256: Option<String>,
 }
 
 /// The archive folder.
@@ -136,7 +139,7 @@ impl Archive {
         let _lock = self.lock()?;
         let mut files = Vec::new();
         for source in sources {
-            let (sha256, bytes) = self.store(&source.path)?;
+            let (sha256, bytes) = self.store(&source.path, source.sha256.as_deref())?;
             files.push(FileEntry {
                 role: source.role.clone(),
                 name: source.name.clone(),
@@ -171,12 +174,23 @@ impl Archive {
     }
 
     /// Copies `path` into the objects folder under its SHA-256 (unless it is
-    /// there already); returns the hash and size.
-    fn store(&self, path: &Path) -> Result<(String, u64)> {
+    /// there already); returns the hash and size. A file whose hash is not
+    /// `expected` is refused and nothing is stored.
+    fn store(&self, path: &Path, expected: Option<&str>) -> Result<(String, u64)> {
         let objects = self.dir.join(OBJECTS_DIR);
         fs::create_dir_all(&objects).map_err(|e| Error::io(&objects, e))?;
         let staging = objects.join(format!(".incoming.tmp-{}", std::process::id()));
-        let (sha256, bytes) = atomic::write_file(&staging, |out| copy_hashing(path, out))?;
+        let (sha256, bytes) = atomic::write_file(&staging, |out| {
+            let (sha256, bytes) = copy_hashing(path, out)?;
+            match expected {
+                Some(expected) if expected != sha256 => Err(Error::Corrupt(format!(
+                    "{}: damaged: its sha256 is {sha256}, its run record says {expected}; \
+                     not archived (run the experiment again to remake it)",
+                    path.display()
+                ))),
+                _ => Ok((sha256, bytes)),
+            }
+        })?;
         let target = self.object(&sha256);
         if target.exists() {
             fs::remove_file(&staging).map_err(|e| Error::io(&staging, e))?;
@@ -302,18 +316,53 @@ impl Archive {
     }
 
     /// Copies `entry`'s files into `to` under their names, after verifying
-    /// the whole dataset (so a damaged one writes nothing).
+    /// the whole dataset (so a damaged one writes nothing). A file of that
+    /// name already in `to` is never overwritten (unless it holds exactly
+    /// the archived bytes), and the files appear together or not at all:
+    /// they are copied into a hidden folder in `to` first, then moved.
     pub fn restore(&self, entry: &Entry, to: &Path) -> Result<()> {
         self.require_whole(entry)?;
-        self.copy_out(entry, to)
+        let mut wanted = Vec::new();
+        for file in &entry.files {
+            let target = to.join(&file.name);
+            match fs::symlink_metadata(&target) {
+                Err(e) if e.kind() == std::io::ErrorKind::NotFound => wanted.push(file),
+                Err(e) => return Err(Error::io(&target, e)),
+                Ok(meta)
+                    if meta.is_file()
+                        && copy_hashing(&target, &mut std::io::sink())?.0 == file.sha256 => {}
+                Ok(_) => {
+                    return Err(Error::Invalid(format!(
+                        "{}: exists and is not {}'s `{}`; restoring would overwrite it \
+                         (move it away or restore into another folder)",
+                        target.display(),
+                        entry.label(),
+                        file.name
+                    )));
+                }
+            }
+        }
+        let staging = to.join(format!(".restore.tmp-{}", std::process::id()));
+        let mut partial = entry.clone();
+        partial.files = wanted.into_iter().cloned().collect();
+        let copied = self.copy_out(&partial, &staging).and_then(|()| {
+            for file in &partial.files {
+                let target = to.join(&file.name);
+                fs::rename(staging.join(&file.name), &target).map_err(|e| Error::io(&target, e))?;
+            }
+            Ok(())
+        });
+        let _ = fs::remove_dir_all(&staging);
+        copied
     }
 
     /// Copies `entry`'s files into `to` under their names, each hashed as it
     /// is copied and written atomically: for a caller that has verified the
     /// dataset already (a run, before it starts) and removes `to` on failure.
     pub fn copy_out(&self, entry: &Entry, to: &Path) -> Result<()> {
-        fs::create_dir_all(to).map_err(|e| Error::io(to, e))?;
+        atomic::create_dir(to)?;
         for file in &entry.files {
+            check_file_name(&entry.label(), &file.name)?;
             let source = self.object(&file.sha256);
             let target = to.join(&file.name);
             atomic::write_file(&target, |out| {
@@ -405,6 +454,20 @@ impl Archive {
     }
 }
 
+/// A catalog's file name must be a plain name: restoring it must not write
+/// outside the folder it restores into.
+fn check_file_name(dataset: &str, name: &str) -> Result<()> {
+    let plain =
+        !name.is_empty() && name != "." && name != ".." && !name.contains(['/', '\\', '\0']);
+    if plain {
+        Ok(())
+    } else {
+        Err(Error::Corrupt(format!(
+            "dataset {dataset}: the catalog names a file `{name}`, which is not a plain file name"
+        )))
+    }
+}
+
 /// Whether `s` could be a sha256 prefix: 8 to 64 hex digits.
 fn is_hash_prefix(s: &str) -> bool {
     (8..=64).contains(&s.len()) && s.chars().all(|c| c.is_ascii_hexdigit())
@@ -449,6 +512,7 @@ mod tests {
                     role: role.to_string(),
                     name: format!("{role}.bin"),
                     path,
+                    sha256: None,
                 }
             })
             .collect()

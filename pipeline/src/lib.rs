@@ -6,6 +6,7 @@
 //! meet only through files.
 
 pub mod bench;
+pub mod budget;
 pub mod cache;
 pub mod cli;
 pub mod dataset;

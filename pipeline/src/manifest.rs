@@ -65,6 +65,10 @@ pub struct Experiment {
     /// confidence interval.
     #[serde(default = "one_replicate")]
     pub replicates: Count,
+    /// The most work a variant may ask for (`[experiment.budget]`): a
+    /// variant estimated over it is refused before anything runs.
+    #[serde(default)]
+    pub budget: crate::budget::Budget,
 }
 
 fn one_replicate() -> Count {
@@ -216,6 +220,7 @@ impl Manifest {
         if variant_entries.is_empty() {
             let stages = base_stages;
             validate(&stages, &base, &locate, None, from_dataset)?;
+            within_budget(&stages, &experiment, &base, &locate, None, from_dataset)?;
             variants.push(Variant {
                 name: "base".into(),
                 description: String::new(),
@@ -230,6 +235,14 @@ impl Manifest {
             let doc = deserialize(&merged, root_span.clone(), &locate, Some(&name))?;
             let (_, _, stages) = split(doc);
             validate(&stages, &merged, &locate, Some(&name), from_dataset)?;
+            within_budget(
+                &stages,
+                &experiment,
+                &merged,
+                &locate,
+                Some(&name),
+                from_dataset,
+            )?;
             variants.push(Variant {
                 name,
                 description,
@@ -479,6 +492,26 @@ fn validate(
             let path: Vec<&str> = std::iter::once(stage).chain(key.split('.')).collect();
             Err(locate.error(span_of(table, &path), path.join("."), variant, message))
         }
+    }
+}
+
+/// Refuses a variant whose estimated work is over the experiment's budget
+/// (the simulation's is not counted when an archived dataset holds it).
+fn within_budget(
+    stages: &Stages,
+    experiment: &Experiment,
+    table: &DeTable,
+    locate: &Locator,
+    variant: Option<&str>,
+    from_dataset: bool,
+) -> Result<(), ManifestError> {
+    let estimate = crate::budget::Estimate::of(stages);
+    match estimate.exceeds(&experiment.budget) {
+        Some(("simulate", _)) if from_dataset => Ok(()),
+        Some((stage, message)) => {
+            Err(locate.error(span_of(table, &[stage]), stage.into(), variant, message))
+        }
+        None => Ok(()),
     }
 }
 

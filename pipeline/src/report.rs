@@ -91,6 +91,19 @@ pub fn render(record: &RunRecord, reports: &Path) -> Result<PathBuf> {
 pub fn read_record(run_dir: &Path) -> Result<RunRecord> {
     let path = run_dir.join("run.json");
     let bytes = std::fs::read(&path).map_err(|e| Error::io(&path, e))?;
-    serde_json::from_slice(&bytes)
-        .map_err(|e| Error::bad_file(&path, format!("not a run record ({e})")))
+    let record: RunRecord = serde_json::from_slice(&bytes)
+        .map_err(|e| Error::bad_file(&path, format!("not a run record ({e})")))?;
+    // The names become folder and file names of the report: they must not
+    // lead out of it.
+    let names = std::iter::once(("experiment", &record.experiment))
+        .chain(record.variants.iter().map(|v| ("variant", &v.name)));
+    for (what, name) in names {
+        if !crate::manifest::is_identifier(name) {
+            return Err(Error::bad_file(
+                &path,
+                format!("{what} name {name:?} is not letters, digits, `-` and `_`"),
+            ));
+        }
+    }
+    Ok(record)
 }

@@ -17,7 +17,7 @@ use std::io::{Read, Seek, Write};
 use std::path::{Path, PathBuf};
 use std::time::{Instant, SystemTime};
 
-use alnlab_common::{ALNLAB_VERSION, Error, Provenance, Result};
+use alnlab_common::{ALNLAB_VERSION, Error, Provenance, Result, atomic};
 use serde::{Deserialize, Serialize};
 
 use crate::cache::{Artifact, Cache, StageKey};
@@ -133,7 +133,7 @@ pub struct OutLock {
 impl OutLock {
     /// Takes the lock on `out`, waiting for another holder if there is one.
     pub fn acquire(out: &Path) -> Result<OutLock> {
-        fs::create_dir_all(out).map_err(|e| Error::io(out, e))?;
+        atomic::create_dir(out)?;
         let path = out.join(".lock");
         let mut file = File::options()
             .read(true)

@@ -43,8 +43,11 @@ pub enum ModelKind {
 
 /// The file's magic bytes.
 pub const MAGIC: &[u8; 16] = b"ALNLAB-MODEL\0\0\0\0";
-/// The model file format version.
-pub const MODEL_FORMAT: u32 = 3;
+/// The model file format version (4: the file ends with its CRC-32).
+pub const MODEL_FORMAT: u32 = 4;
+/// Bytes of the smallest tree record: its id and leaf count (16), two
+/// literals (8) and one byte of node functions.
+const SMALLEST_TREE: usize = 25;
 
 /// The model's header.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -168,7 +171,8 @@ fn tree_record(id: TreeId, tree: &Tree) -> Vec<u8> {
     bytes
 }
 
-/// Writes a model file: magic, version, header, then the tree records.
+/// Writes a model file: magic, version, header, the tree records, then the
+/// CRC-32 of everything before it (so a damaged byte is noticed on read).
 fn write_file<'a>(
     path: &Path,
     header: &Header,
@@ -177,15 +181,19 @@ fn write_file<'a>(
     let json = serde_json::to_vec(header).expect("headers serialize");
     atomic::write_file(path, |out| {
         let io = |e| Error::io(path, e);
-        out.write_all(MAGIC).map_err(io)?;
-        out.write_all(&MODEL_FORMAT.to_le_bytes()).map_err(io)?;
-        out.write_all(&(json.len() as u32).to_le_bytes())
-            .map_err(io)?;
-        out.write_all(&json).map_err(io)?;
+        let mut crc = crc32fast::Hasher::new();
+        let mut put = |bytes: &[u8]| {
+            crc.update(bytes);
+            out.write_all(bytes).map_err(io)
+        };
+        put(MAGIC)?;
+        put(&MODEL_FORMAT.to_le_bytes())?;
+        put(&(json.len() as u32).to_le_bytes())?;
+        put(&json)?;
         for record in records {
-            out.write_all(&record).map_err(io)?;
+            put(&record)?;
         }
-        Ok(())
+        out.write_all(&crc.finalize().to_le_bytes()).map_err(io)
     })
 }
 
@@ -201,7 +209,20 @@ impl RawModel {
     /// the checks that need a parsed tree.
     fn read_checked(path: &Path) -> Result<(RawModel, Vec<usize>)> {
         let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+        Self::parse_checked(path, &bytes)
+    }
+
+    /// [`RawModel::read_checked`] on the file's bytes.
+    fn parse_checked(path: &Path, bytes: &[u8]) -> Result<(RawModel, Vec<usize>)> {
         let bad = |what: String| Error::bad_file(path, what);
+        if bytes.len() >= 24 && bytes[..16] == *MAGIC && u32_of(&bytes[16..20]) == MODEL_FORMAT {
+            let (body, stored) = bytes.split_at(bytes.len() - 4);
+            // Fuzzing explores the parser behind the checksum.
+            if crc32fast::hash(body) != u32_of(stored) && !cfg!(fuzzing) {
+                return Err(bad("damaged: its CRC-32 does not match its bytes".into()));
+            }
+        }
+        let bytes = &bytes[..bytes.len().saturating_sub(4)];
         let mut at = 0usize;
         let mut take = |n: usize, what: &str| -> Result<&[u8]> {
             let end = at
@@ -231,6 +252,24 @@ impl RawModel {
             .map_err(|e| bad(format!("corrupt header ({e})")))?;
         // Each tree's input bits, in file order.
         let vote = header.vote as usize;
+        // Bound what the header implies by what the file can hold before
+        // allocating for it.
+        let trees_per_vote = match header.model {
+            ModelKind::BitForest => header
+                .outputs
+                .iter()
+                .try_fold(0usize, |sum, &(_, width)| sum.checked_add(width)),
+            ModelKind::Threshold => Some(header.outputs.len()),
+        };
+        trees_per_vote
+            .and_then(|n| n.checked_mul(vote))
+            .filter(|&n| n <= bytes.len() / SMALLEST_TREE)
+            .ok_or_else(|| {
+                bad(format!(
+                    "its header promises more trees than {} bytes can hold",
+                    bytes.len()
+                ))
+            })?;
         let all_inputs: Vec<usize> = match header.model {
             ModelKind::BitForest => header
                 .outputs
@@ -308,7 +347,13 @@ impl Model {
 
     /// Reads a model file.
     pub fn read(path: &Path) -> Result<Model> {
-        let (raw, tree_inputs) = RawModel::read_checked(path)?;
+        let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+        Model::from_bytes(path, &bytes)
+    }
+
+    /// Reads a model file held in `bytes` (`path` names it in errors).
+    pub fn from_bytes(path: &Path, bytes: &[u8]) -> Result<Model> {
+        let (raw, tree_inputs) = RawModel::parse_checked(path, bytes)?;
         let bad = |what: String| Error::bad_file(path, what);
         let mut trees = Vec::with_capacity(raw.records.len());
         for (t, ((id, record), inputs)) in raw.records.iter().zip(tree_inputs).enumerate() {
@@ -434,11 +479,11 @@ mod tests {
             assert_eq!(a.functions(), b.functions());
             assert_eq!(a.literals(), b.literals());
         }
-        // 16 + 4 + 4 + header + 6 × (16 + 256 + 16) bytes.
+        // 16 + 4 + 4 + header + 6 × (16 + 256 + 16) + 4 bytes.
         let header = serde_json::to_vec(&m.header).unwrap().len();
         assert_eq!(
             std::fs::metadata(&path).unwrap().len() as usize,
-            24 + header + 6 * 288
+            24 + header + 6 * 288 + 4
         );
     }
 
@@ -487,7 +532,16 @@ mod tests {
         for cut in [0, 10, 20, 30, bytes.len() - 1] {
             std::fs::write(&path, &bytes[..cut]).unwrap();
             let e = Model::read(&path).unwrap_err().to_string();
-            assert!(e.contains("model.aln: truncated"), "cut {cut}: {e}");
+            let named = e.contains("model.aln: truncated") || e.contains("model.aln: damaged");
+            assert!(named, "cut {cut}: {e}");
+        }
+        for at in 0..bytes.len() {
+            let mut damaged = bytes.clone();
+            damaged[at] ^= 0x40;
+            let e = Model::from_bytes(&path, &damaged)
+                .err()
+                .unwrap_or_else(|| panic!("a flip at byte {at} was not noticed"));
+            assert!(e.to_string().contains("model.aln"), "{e}");
         }
         std::fs::write(&path, b"PAR1 not a model at all").unwrap();
         assert!(

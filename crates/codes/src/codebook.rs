@@ -46,17 +46,54 @@ pub fn unit_of(variable: &str) -> &'static str {
 /// those marked so or `both`.
 pub fn split_rows(levels: &Table, split: &str) -> Result<Vec<usize>> {
     let column = levels.column::<StringArray>("split")?;
-    Ok((0..levels.num_rows())
-        .filter(|&r| [split, "both"].contains(&column.value(r)))
-        .collect())
+    let mut rows = Vec::new();
+    for r in 0..levels.num_rows() {
+        match column.is_valid(r).then(|| column.value(r)) {
+            Some(s) if s == split || s == "both" => rows.push(r),
+            Some("train" | "test" | "both") => {}
+            other => {
+                return Err(Error::bad_file(
+                    levels.path(),
+                    format!(
+                        "row {r}: `split` is {}, expected train, test or both",
+                        other.map_or("null".to_string(), |s| format!("`{s}`"))
+                    ),
+                ));
+            }
+        }
+    }
+    Ok(rows)
 }
 
-/// The levels of `variable` in `levels.parquet` on one side of the pairs
-/// (`x`, the current frame, or `y`, the next).
-pub fn level_column<'a>(levels: &'a Table, side: &str, variable: &str) -> Result<&'a [u16]> {
-    Ok(levels
-        .column::<UInt16Array>(&format!("{side}.{variable}"))?
-        .values())
+/// The levels of `entry`'s variable in `levels.parquet` on one side of the
+/// pairs (`x`, the current frame, or `y`, the next), checked against the
+/// codebook: no nulls, every level below the entry's level count.
+pub fn level_column<'a>(levels: &'a Table, side: &str, entry: &Entry) -> Result<&'a [u16]> {
+    let name = format!("{side}.{}", entry.variable);
+    let column = levels.column::<UInt16Array>(&name)?;
+    if let Some(r) = (0..column.len()).find(|&r| column.is_null(r)) {
+        return Err(Error::bad_file(
+            levels.path(),
+            format!("row {r}: `{name}` is null, expected a level"),
+        ));
+    }
+    let count = entry.quantizer.levels;
+    if let Some(r) = column
+        .values()
+        .iter()
+        .position(|&l| usize::from(l) >= count)
+    {
+        return Err(Error::bad_file(
+            levels.path(),
+            format!(
+                "row {r}: `{name}` is level {}, but the codebook gives `{}` {count} levels (0…{})",
+                column.value(r),
+                entry.variable,
+                count - 1
+            ),
+        ));
+    }
+    Ok(column.values())
 }
 
 /// Uniform quantization of one variable.
@@ -141,8 +178,32 @@ impl Codebook {
             u("clamped")?,
         );
         let learned = t.column::<BooleanArray>("learned")?;
+        t.require_no_nulls()?;
+        let small = |column: &UInt64Array, name: &str, r: usize| {
+            u32::try_from(column.value(r)).map_err(|_| {
+                Error::bad_file(
+                    path,
+                    format!("row {r}: `{name}` is {}, beyond 32 bits", column.value(r)),
+                )
+            })
+        };
         let entries = (0..t.num_rows())
             .map(|r| {
+                let (lo, hi, count) = (min.value(r), max.value(r), levels.value(r));
+                if learned.value(r) && !(lo.is_finite() && hi.is_finite() && lo < hi) {
+                    return Err(Error::bad_file(
+                        path,
+                        format!(
+                            "row {r}: the range {lo}…{hi} is not a finite interval with min < max"
+                        ),
+                    ));
+                }
+                if learned.value(r) && !(2..=1 << 16).contains(&count) {
+                    return Err(Error::bad_file(
+                        path,
+                        format!("row {r}: {count} levels, expected 2 to 65536"),
+                    ));
+                }
                 let code: Code = code.value(r).parse().map_err(|_| {
                     Error::bad_file(
                         path,
@@ -158,14 +219,14 @@ impl Codebook {
                     learned: learned.value(r),
                     note: note.value(r).to_string(),
                     quantizer: Quantizer {
-                        min: min.value(r),
-                        max: max.value(r),
-                        levels: levels.value(r) as usize,
+                        min: lo,
+                        max: hi,
+                        levels: count as usize,
                     },
                     code,
-                    width: width.value(r) as u32,
-                    walk_step: step.value(r) as u32,
-                    walk_span: span.value(r) as u32,
+                    width: small(width, "width", r)?,
+                    walk_step: small(step, "walk_step", r)?,
+                    walk_span: small(span, "walk_span", r)?,
                     seed: seed.value(r),
                     clamped: clamped.value(r),
                 })

@@ -357,61 +357,104 @@ impl StateLog {
     /// file.
     pub fn read(path: &Path) -> Result<StateLog> {
         let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+        StateLog::from_bytes(path, &bytes)
+    }
+
+    /// Decodes a whole log held in `bytes` (`path` names it in errors).
+    ///
+    /// The file is read front to back once, trusting nothing it has not
+    /// checked: the data section's, the summary section's and every chunk's
+    /// CRC-32 are verified (where the writer stored them; alnlab always
+    /// does), every chunk before any of its messages is used, and no record
+    /// or decompressed chunk may be larger than [`RECORD_LIMIT`], so a
+    /// damaged length cannot make the reader allocate without bound.
+    pub fn from_bytes(path: &Path, bytes: &[u8]) -> Result<StateLog> {
+        use mcap::records::Record;
+        use mcap::sans_io::{LinearReadEvent, LinearReader, LinearReaderOptions};
+
         let bad = |what: String| Error::bad_file(path, what);
-        let summary = mcap::Summary::read(&bytes)
-            .map_err(|e| bad(format!("not a readable MCAP file ({e})")))?
-            .ok_or_else(|| bad("MCAP file has no summary section (unfinished?)".into()))?;
-        let mut metadata = Vec::new();
-        for index in &summary.metadata_indexes {
-            let record = mcap::read::metadata(&bytes, index)
-                .map_err(|e| bad(format!("corrupt metadata record ({e})")))?;
-            metadata.push((record.name, record.metadata));
-        }
-        let mut channel_ids: Vec<u16> = summary
-            .channels
-            .values()
-            .filter(|c| c.topic == STATE_TOPIC)
-            .map(|c| c.id)
-            .collect();
-        channel_ids.sort_unstable();
-        let mut scenes = Vec::new();
+        let corrupt = |e: mcap::McapError| bad(format!("not an intact MCAP file ({e})"));
+        // Fuzzing explores the parser behind the CRCs.
+        let check = !cfg!(fuzzing);
+        let mut reader = LinearReader::new_with_options(
+            LinearReaderOptions::default()
+                .with_validate_data_section_crc(check)
+                .with_validate_summary_section_crc(check)
+                .with_prevalidate_chunk_crcs(check)
+                .with_record_length_limit(RECORD_LIMIT),
+        );
+        let mut unread = bytes;
+        let mut scenes: Vec<SceneFrames> = Vec::new();
         let mut scene_of_channel = BTreeMap::new();
-        for id in channel_ids {
-            let channel = &summary.channels[&id];
-            let layout =
-                StateLayout::from_channel_metadata(&channel.metadata).ok_or_else(|| {
-                    bad(format!(
-                        "channel {id} on {STATE_TOPIC} lacks its layout metadata"
-                    ))
-                })?;
-            scene_of_channel.insert(id, scenes.len());
-            scenes.push(SceneFrames {
-                layout,
-                frames: Vec::new(),
-            });
-        }
-        let stream = mcap::MessageStream::new(&bytes)
-            .map_err(|e| bad(format!("not a readable MCAP file ({e})")))?;
-        for message in stream {
-            let message = message.map_err(|e| bad(format!("corrupt MCAP data ({e})")))?;
-            let Some(&scene) = scene_of_channel.get(&message.channel.id) else {
-                continue;
+        let mut metadata = Vec::new();
+        let mut data_ended = false;
+        let mut footer_seen = false;
+        while let Some(event) = reader.next_event() {
+            let (opcode, data) = match event.map_err(corrupt)? {
+                LinearReadEvent::ReadRequest(need) => {
+                    let n = need.min(unread.len());
+                    reader.insert(n).copy_from_slice(&unread[..n]);
+                    reader.notify_read(n);
+                    unread = &unread[n..];
+                    continue;
+                }
+                LinearReadEvent::Record { opcode, data } => (opcode, data),
             };
-            let entry = &mut scenes[scene];
-            let frame = entry.layout.decode(&message.data).ok_or_else(|| {
-                bad(format!(
-                    "message {} of scene `{}` does not fit its schema ({} bytes, expected {})",
-                    message.sequence,
-                    entry.layout.scene,
-                    message.data.len(),
-                    entry.layout.message_len()
-                ))
-            })?;
-            entry.frames.push(frame);
+            // The summary section repeats channels and metadata: read the
+            // data section's own records only.
+            match mcap::parse_record(opcode, data).map_err(corrupt)? {
+                Record::Footer(_) => footer_seen = true,
+                _ if data_ended => {}
+                Record::DataEnd(_) => data_ended = true,
+                Record::Channel(channel) if channel.topic == STATE_TOPIC => {
+                    let layout =
+                        StateLayout::from_channel_metadata(&channel.metadata).ok_or_else(|| {
+                            bad(format!(
+                                "channel {} on {STATE_TOPIC} lacks its layout metadata",
+                                channel.id
+                            ))
+                        })?;
+                    if scene_of_channel.insert(channel.id, scenes.len()).is_some() {
+                        return Err(bad(format!("channel {} is defined twice", channel.id)));
+                    }
+                    scenes.push(SceneFrames {
+                        layout,
+                        frames: Vec::new(),
+                    });
+                }
+                Record::Metadata(record) => metadata.push((record.name, record.metadata)),
+                Record::Message { header, data } => {
+                    let Some(&scene) = scene_of_channel.get(&header.channel_id) else {
+                        continue;
+                    };
+                    let entry = &mut scenes[scene];
+                    let frame = entry.layout.decode(&data).ok_or_else(|| {
+                        bad(format!(
+                            "message {} of scene `{}` does not fit its schema ({} bytes, expected {})",
+                            header.sequence,
+                            entry.layout.scene,
+                            data.len(),
+                            entry.layout.message_len()
+                        ))
+                    })?;
+                    entry.frames.push(frame);
+                }
+                _ => {}
+            }
+        }
+        if !data_ended || !footer_seen {
+            return Err(bad(
+                "MCAP file ends before its footer (unfinished or truncated)".into(),
+            ));
         }
         Ok(StateLog { scenes, metadata })
     }
 }
+
+/// The largest record, or decompressed chunk, a trajectory log may hold
+/// (1 GiB): alnlab's writer makes chunks of under 1 MiB, so only a damaged
+/// length field comes near it.
+pub const RECORD_LIMIT: usize = 1 << 30;
 
 #[cfg(test)]
 mod tests {
@@ -483,6 +526,48 @@ mod tests {
             let err = StateLog::read(&path).unwrap_err();
             assert!(err.to_string().contains("trajectory.mcap"), "{err}");
         }
+    }
+
+    #[test]
+    fn every_flipped_byte_is_refused() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("trajectory.mcap");
+        let mut writer = StateLogWriter::create(&path, &[layout()]).unwrap();
+        for i in 0..100 {
+            writer
+                .write(0, u64::from(i) * 10_000_000, &frame(i))
+                .unwrap();
+        }
+        writer.finish(&Provenance::default()).unwrap();
+        let bytes = std::fs::read(&path).unwrap();
+        StateLog::from_bytes(&path, &bytes).unwrap();
+        // Every byte of the file, each bit pattern that changes it once:
+        // the CRCs (data, summary, chunks) and the magic cover them all.
+        for at in 0..bytes.len() {
+            let mut damaged = bytes.clone();
+            damaged[at] ^= 0x10;
+            let err = StateLog::from_bytes(&path, &damaged)
+                .err()
+                .unwrap_or_else(|| panic!("a flip at byte {at} was not noticed"));
+            assert!(err.to_string().contains("trajectory.mcap"), "{err}");
+        }
+    }
+
+    #[test]
+    fn a_huge_declared_chunk_is_refused_without_allocating_it() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("trajectory.mcap");
+        let mut writer = StateLogWriter::create(&path, &[layout()]).unwrap();
+        writer.write(0, 0, &frame(0)).unwrap();
+        writer.finish(&Provenance::default()).unwrap();
+        let mut bytes = std::fs::read(&path).unwrap();
+        // The chunk record (opcode 0x06) follows the header record; its
+        // uncompressed_size is the third u64 of its body.
+        let chunk = bytes.iter().position(|&b| b == 0x06).unwrap();
+        let size_at = chunk + 1 + 8 + 16;
+        bytes[size_at..size_at + 8].copy_from_slice(&(1u64 << 61).to_le_bytes());
+        let err = StateLog::from_bytes(&path, &bytes).unwrap_err();
+        assert!(err.to_string().contains("trajectory.mcap"), "{err}");
     }
 
     #[test]

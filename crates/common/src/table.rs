@@ -2,9 +2,18 @@
 //! provenance as key-value metadata and a pinned `created_by`, and is written
 //! atomically, so equal inputs give byte-identical files and no half-written
 //! file ever looks finished.
+//!
+//! Parquet's writer here stores no page checksums, so alnlab adds one of its
+//! own over the whole file: the key `alnlab.crc32` holds the CRC-32 of every
+//! byte of the file, computed with the key's own eight hex digits read as
+//! `00000000`. Any damaged byte — in the data, the footer or the checksum —
+//! is then noticed on read. The reader checks it in every file that has it,
+//! and insists on it in a file whose `created_by` says it was written so
+//! (one flipped byte cannot remove both). Tables from other writers (pyarrow,
+//! polars) have neither and read as they are, their page checksums checked
+//! where they wrote them; snappy, gzip, lz4 and zstd pages all decode.
 
 use std::collections::BTreeMap;
-use std::fs::File;
 use std::path::Path;
 use std::sync::Arc;
 
@@ -18,27 +27,85 @@ use parquet::file::properties::WriterProperties;
 
 use crate::{ALNLAB_VERSION, Error, Provenance, Result, atomic};
 
-/// Writes `batch` to `path` (atomically) with `provenance` in the metadata.
+/// The key-value metadata key holding the file's checksum.
+pub const CHECKSUM_KEY: &str = "alnlab.crc32";
+/// The checksum's value while it is computed.
+const CHECKSUM_PLACEHOLDER: &[u8; 8] = b"00000000";
+
+/// The `created_by` of every table alnlab writes; it says the file carries
+/// its checksum.
+fn created_by() -> String {
+    format!("alnlab {ALNLAB_VERSION} crc32")
+}
+
+/// Writes `batch` to `path` (atomically) with `provenance` in the metadata
+/// and the whole file's checksum.
 pub fn write_parquet(path: &Path, batch: &RecordBatch, provenance: &Provenance) -> Result<()> {
-    let metadata = provenance
+    let mut metadata: Vec<KeyValue> = provenance
         .key_values()
         .into_iter()
         .map(|(k, v)| KeyValue::new(k, v))
         .collect();
+    metadata.push(KeyValue::new(
+        CHECKSUM_KEY.to_string(),
+        String::from_utf8(CHECKSUM_PLACEHOLDER.to_vec()).expect("ASCII"),
+    ));
     let props = WriterProperties::builder()
         .set_compression(Compression::ZSTD(
             ZstdLevel::try_new(3).expect("level 3 is valid"),
         ))
-        .set_created_by(format!("alnlab {ALNLAB_VERSION}"))
+        .set_created_by(created_by())
         .set_key_value_metadata(Some(metadata))
         .build();
-    atomic::write_file(path, |out| {
-        let mut writer = ArrowWriter::try_new(out, batch.schema(), Some(props))
-            .map_err(|e| Error::bad_file(path, e))?;
-        writer.write(batch).map_err(|e| Error::bad_file(path, e))?;
-        writer.close().map_err(|e| Error::bad_file(path, e))?;
-        Ok(())
-    })
+    let mut writer = ArrowWriter::try_new(Vec::new(), batch.schema(), Some(props))
+        .map_err(|e| Error::bad_file(path, e))?;
+    writer.write(batch).map_err(|e| Error::bad_file(path, e))?;
+    let mut bytes = writer.into_inner().map_err(|e| Error::bad_file(path, e))?;
+    let at = checksum_position(&bytes).expect("the footer holds the placeholder just written");
+    let crc = crc32fast::hash(&bytes);
+    bytes[at..at + 8].copy_from_slice(format!("{crc:08x}").as_bytes());
+    atomic::write_bytes(path, &bytes)
+}
+
+/// Where the eight hex digits of the checksum lie in a Parquet file's bytes:
+/// just after the last `alnlab.crc32` (the footer's key-value list, Thrift
+/// compact: the key, then a field header byte and the length byte 8).
+fn checksum_position(bytes: &[u8]) -> Option<usize> {
+    let key = CHECKSUM_KEY.as_bytes();
+    let key_at = bytes.windows(key.len()).rposition(|w| w == key)?;
+    let at = key_at + key.len() + 2;
+    (at + 8 <= bytes.len() && bytes[at - 1] == 8).then_some(at)
+}
+
+/// Checks the whole-file checksum of `bytes` if the file has one. Returns
+/// whether it had one.
+fn verify_checksum(path: &Path, bytes: &[u8]) -> Result<bool> {
+    let Some(at) = checksum_position(bytes) else {
+        return Ok(false);
+    };
+    // Fuzzing explores the decoder behind the checksum.
+    if cfg!(fuzzing) {
+        return Ok(true);
+    }
+    let stored = std::str::from_utf8(&bytes[at..at + 8])
+        .ok()
+        .and_then(|hex| u32::from_str_radix(hex, 16).ok());
+    let mut hasher = crc32fast::Hasher::new();
+    hasher.update(&bytes[..at]);
+    hasher.update(CHECKSUM_PLACEHOLDER);
+    hasher.update(&bytes[at + 8..]);
+    let computed = hasher.finalize();
+    if stored != Some(computed) {
+        return Err(Error::bad_file(
+            path,
+            format!(
+                "damaged: its checksum ({CHECKSUM_KEY}) does not match its bytes \
+                 (stored {}, computed {computed:08x})",
+                String::from_utf8_lossy(&bytes[at..at + 8])
+            ),
+        ));
+    }
+    Ok(true)
 }
 
 /// A whole Parquet table read into memory, with its key-value metadata.
@@ -65,9 +132,30 @@ impl Table {
     }
 
     fn read_projected(path: &Path, columns: Option<&[&str]>) -> Result<Table> {
-        let file = File::open(path).map_err(|e| Error::io(path, e))?;
-        let mut builder = ParquetRecordBatchReaderBuilder::try_new(file)
+        let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+        Table::from_bytes(path, bytes, columns)
+    }
+
+    /// Reads a table held in `bytes` (`path` names it in errors), only the
+    /// named columns when `columns` is given. The file's checksum is
+    /// verified before anything in it is decoded.
+    pub fn from_bytes(path: &Path, bytes: Vec<u8>, columns: Option<&[&str]>) -> Result<Table> {
+        let checksummed = verify_checksum(path, &bytes)?;
+        let mut builder = ParquetRecordBatchReaderBuilder::try_new(bytes::Bytes::from(bytes))
             .map_err(|e| Error::bad_file(path, format!("not a readable Parquet file ({e})")))?;
+        let written_with_checksum = builder
+            .metadata()
+            .file_metadata()
+            .created_by()
+            .is_some_and(|c| c == created_by());
+        if written_with_checksum && !checksummed {
+            return Err(Error::bad_file(
+                path,
+                format!(
+                    "damaged: alnlab wrote it with a checksum, but its `{CHECKSUM_KEY}` is gone"
+                ),
+            ));
+        }
         if let Some(columns) = columns {
             let mask = ProjectionMask::columns(builder.parquet_schema(), columns.iter().copied());
             builder = builder.with_projection(mask);
@@ -106,6 +194,21 @@ impl Table {
             metadata,
             path: path.to_path_buf(),
         })
+    }
+
+    /// An error naming the first null value's row and column, if any column
+    /// holds one (for tables whose every value must be present).
+    pub fn require_no_nulls(&self) -> Result<()> {
+        let schema = self.batch.schema();
+        for (field, column) in schema.fields().iter().zip(self.batch.columns()) {
+            if let Some(r) = (0..column.len()).find(|&r| column.is_null(r)) {
+                return Err(Error::bad_file(
+                    &self.path,
+                    format!("row {r}: `{}` is null, expected a value", field.name()),
+                ));
+            }
+        }
+        Ok(())
     }
 
     /// The number of rows.
@@ -209,6 +312,72 @@ mod tests {
                 .to_string()
                 .contains("no column `zz`")
         );
+    }
+
+    #[test]
+    fn every_flipped_byte_is_refused() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("t.parquet");
+        write_parquet(&path, &sample(), &provenance()).unwrap();
+        let bytes = std::fs::read(&path).unwrap();
+        assert!(Table::from_bytes(&path, bytes.clone(), None).is_ok());
+        for at in 0..bytes.len() {
+            let mut damaged = bytes.clone();
+            damaged[at] ^= 0x04;
+            let err = Table::from_bytes(&path, damaged, None)
+                .err()
+                .unwrap_or_else(|| panic!("a flip at byte {at} was not noticed"));
+            assert!(err.to_string().contains("t.parquet"), "{err}");
+        }
+    }
+
+    /// A table as another writer makes it: no alnlab checksum, `codec`
+    /// compression, dictionary pages on or off.
+    fn foreign(path: &Path, codec: Compression, dictionary: bool) {
+        let props = WriterProperties::builder()
+            .set_compression(codec)
+            .set_dictionary_enabled(dictionary)
+            .set_created_by("parquet-cpp-arrow version 21.0.0".into())
+            .build();
+        let file = std::fs::File::create(path).unwrap();
+        let mut writer = ArrowWriter::try_new(file, sample().schema(), Some(props)).unwrap();
+        writer.write(&sample()).unwrap();
+        writer.close().unwrap();
+    }
+
+    #[test]
+    fn tables_from_other_writers_read_in_every_common_codec() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("t.parquet");
+        let codecs = [
+            Compression::UNCOMPRESSED,
+            Compression::SNAPPY,
+            Compression::LZ4_RAW,
+            Compression::GZIP(Default::default()),
+            Compression::ZSTD(Default::default()),
+        ];
+        for codec in codecs {
+            for dictionary in [false, true] {
+                foreign(&path, codec, dictionary);
+                let t = Table::read(&path).unwrap_or_else(|e| panic!("{codec:?}: {e}"));
+                assert_eq!(t.strings("name").unwrap(), ["a", "b", "c"]);
+                assert_eq!(t.f64_column("x").unwrap().value(2), 1e9);
+            }
+        }
+    }
+
+    #[test]
+    fn a_checksummed_file_without_its_checksum_is_refused() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("t.parquet");
+        write_parquet(&path, &sample(), &provenance()).unwrap();
+        let mut bytes = std::fs::read(&path).unwrap();
+        let at = checksum_position(&bytes).unwrap() - 3;
+        bytes[at] = b'x'; // `alnlab.crc3x`: the key is gone, `created_by` remains
+        let err = Table::from_bytes(&path, bytes, None)
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("is gone"), "{err}");
     }
 
     #[test]

@@ -220,6 +220,23 @@ impl Scene {
                 "expected a duration of at least one frame_dt".into(),
             );
         }
+        // Runs and frames are numbered in 32 bits in the log.
+        if self.runs.0 > u64::from(u32::MAX) {
+            return err(
+                "runs",
+                format!("expected at most {} runs, found {}", u32::MAX, self.runs.0),
+            );
+        }
+        if self.duration.get() / self.frame_dt.get() >= f64::from(u32::MAX) {
+            return err(
+                "duration",
+                format!(
+                    "expected fewer than {} frames per run, found duration / frame_dt = {:.3e}",
+                    u32::MAX,
+                    self.duration.get() / self.frame_dt.get()
+                ),
+            );
+        }
         let arena = self.arena_radius.expect("resolved");
         if !(arena >= 0.0 && arena.is_finite()) {
             return err(

@@ -195,6 +195,7 @@ fn archive_run(
             role: role.to_string(),
             name: file_name,
             path,
+            sha256: Some(artifact.sha256.clone()),
         });
     }
     let provenance = DatasetProvenance {

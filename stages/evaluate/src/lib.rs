@@ -165,7 +165,7 @@ impl Data {
         self.learned()
             .iter()
             .map(|e| {
-                let levels = level_column(&self.levels, side, &e.variable)?;
+                let levels = level_column(&self.levels, side, e)?;
                 Ok(rows.iter().map(|&r| levels[r]).collect())
             })
             .collect()

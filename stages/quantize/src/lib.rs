@@ -343,22 +343,41 @@ fn group_scales<'a>(observed: &BTreeMap<&'a str, (f64, f64)>) -> BTreeMap<&'a st
 }
 
 /// (min, max) per variable from `stats.parquet`.
+/// Every row's variable names one, finite min ≤ max, each variable once.
 fn observed_ranges(stats: &Table) -> Result<BTreeMap<&str, (f64, f64)>> {
     let names = stats.column::<StringArray>("variable")?;
     let (min, max) = (stats.f64_column("min")?, stats.f64_column("max")?);
-    Ok((0..stats.num_rows())
-        .map(|r| (names.value(r), (min.value(r), max.value(r))))
-        .collect())
+    check_finite(stats, "min", min)?;
+    check_finite(stats, "max", max)?;
+    let mut ranges = BTreeMap::new();
+    for r in 0..stats.num_rows() {
+        let bad = |what: String| Err(Error::bad_file(stats.path(), format!("row {r}: {what}")));
+        if names.is_null(r) {
+            return bad("`variable` is null, expected a variable's name".into());
+        }
+        let (lo, hi) = (min.value(r), max.value(r));
+        if lo > hi {
+            return bad(format!("min {lo} is above max {hi}"));
+        }
+        if ranges.insert(names.value(r), (lo, hi)).is_some() {
+            return bad(format!("`{}` appears a second time", names.value(r)));
+        }
+    }
+    Ok(ranges)
 }
 
-/// A NaN or infinite value is an error naming its row and column.
+/// A null, NaN or infinite value is an error naming its row and column.
 fn check_finite(table: &Table, column: &str, values: &Float64Array) -> Result<()> {
-    match (0..values.len()).find(|&r| values.is_valid(r) && !values.value(r).is_finite()) {
+    match (0..values.len()).find(|&r| values.is_null(r) || !values.value(r).is_finite()) {
         Some(row) => Err(Error::bad_file(
             table.path(),
             format!(
                 "row {row}, column `{column}`: {} is not a finite number",
-                values.value(row)
+                if values.is_null(row) {
+                    "null".to_string()
+                } else {
+                    values.value(row).to_string()
+                }
             ),
         )),
         None => Ok(()),

@@ -257,6 +257,7 @@ impl Hardware {
 /// Renders the report into `dir` (created if need be); returns the path of
 /// `report.md`.
 pub fn render(run: &RunInfo, dir: &Path) -> Result<PathBuf> {
+    atomic::sweep_leftovers(dir)?;
     let variants: Vec<Loaded> = run.variants.iter().map(load).collect::<Result<_>>()?;
     let mut md = String::new();
     let _ = writeln!(md, "# {} — report\n", run.experiment);

@@ -37,7 +37,7 @@ use alnlab_aln::{ModelKind, Output, Target};
 use alnlab_codes::bits::Columns;
 
 /// Version of what this stage writes (part of every cache key).
-pub const FORMAT_VERSION: u32 = 4;
+pub const FORMAT_VERSION: u32 = 5;
 /// File name of the model.
 pub const MODEL_FILE: &str = "model.aln";
 /// File name of the training log table.
@@ -181,14 +181,13 @@ pub fn run(
     if rows.is_empty() {
         return Err(Error::bad_file(levels_path, "has no training rows"));
     }
-    let column = |side: &str, variable: &str| level_column(&levels, side, variable);
     let x_columns: Vec<&[u16]> = learned
         .iter()
-        .map(|e| column("x", &e.variable))
+        .map(|e| level_column(&levels, "x", e))
         .collect::<Result<_>>()?;
     let y_columns: Vec<&[u16]> = learned
         .iter()
-        .map(|e| column("y", &e.variable))
+        .map(|e| level_column(&levels, "y", e))
         .collect::<Result<_>>()?;
     let codec_refs: Vec<&Codec> = codecs.iter().collect();
     let x_bits = encode(&codec_refs, &x_columns);

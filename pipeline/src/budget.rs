@@ -1,0 +1,231 @@
+//! What a variant may cost: `alnlab check` (and every run, which checks
+//! first) estimates each variant's work from its parameters and refuses one
+//! that cannot finish on a workstation, before anything runs or is written.
+//!
+//! The estimates are upper bounds made from the parameters alone (no data
+//! yet): integration steps simulated, bytes of trajectory log, training
+//! rows, tree-node evaluations in training, simulator steps and predictions
+//! in the test stage. The limits are [`Budget`]'s defaults — at least a hundred
+//! times what the committed experiments ask for, and for the trees' memory
+//! about what a large workstation holds — and a manifest may raise them in
+//! `[experiment.budget]`.
+
+use alnlab_codes::Code;
+use alnlab_common::params::Positive;
+use serde::{Deserialize, Serialize};
+
+use crate::manifest::Stages;
+
+/// The limits a variant's estimated work must stay under
+/// (`[experiment.budget]`; every key optional).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Budget {
+    /// Integration steps simulated, over every scene and run (default 1e10).
+    #[serde(default = "default_steps")]
+    pub steps: Positive,
+    /// Bytes of trajectory log written (default 5e10, 50 GB).
+    #[serde(default = "default_log_bytes")]
+    pub log_bytes: Positive,
+    /// Tree-node evaluations in training: epochs × training rows × trees ×
+    /// leaves (default 1e15).
+    #[serde(default = "default_node_updates")]
+    pub node_updates: Positive,
+    /// Bytes of the trees in memory while training: trees × leaves × 16
+    /// (default 6.4e10, 64 GB).
+    #[serde(default = "default_model_bytes")]
+    pub model_bytes: Positive,
+    /// Steps and predictions of the test stage: the re-simulated baselines
+    /// (steps per frame × test rows) plus closed-loop predictions (starts ×
+    /// horizon × variables) (default 1e10).
+    #[serde(default = "default_test_work")]
+    pub test_work: Positive,
+}
+
+fn default_steps() -> Positive {
+    Positive(1e10)
+}
+fn default_log_bytes() -> Positive {
+    Positive(5e10)
+}
+fn default_node_updates() -> Positive {
+    Positive(1e15)
+}
+fn default_model_bytes() -> Positive {
+    Positive(6.4e10)
+}
+fn default_test_work() -> Positive {
+    Positive(1e10)
+}
+
+impl Default for Budget {
+    fn default() -> Budget {
+        Budget {
+            steps: default_steps(),
+            log_bytes: default_log_bytes(),
+            node_updates: default_node_updates(),
+            model_bytes: default_model_bytes(),
+            test_work: default_test_work(),
+        }
+    }
+}
+
+/// Upper estimates of one variant's work.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Estimate {
+    /// Integration steps simulated.
+    pub steps: f64,
+    /// Frames logged.
+    pub frames: f64,
+    /// Bytes of trajectory log.
+    pub log_bytes: f64,
+    /// Training rows.
+    pub train_rows: f64,
+    /// Tree-node evaluations in training.
+    pub node_updates: f64,
+    /// Bytes of the trees while training.
+    pub model_bytes: f64,
+    /// Test-stage steps and predictions.
+    pub test_work: f64,
+}
+
+/// An upper estimate of the learned variables of a scene of `links` links:
+/// a link's rates, velocities, accelerations, forces and angles (24), and
+/// the root's extras.
+fn variables(links: f64) -> f64 {
+    24.0 * links + 12.0
+}
+
+impl Estimate {
+    /// The estimate for `stages`.
+    pub fn of(stages: &Stages) -> Estimate {
+        let (mut steps, mut frames, mut log_bytes, mut vars) = (0.0, 0.0, 0.0, 0.0f64);
+        for scene in &stages.simulate.scene {
+            let runs = scene.runs.0 as f64;
+            let links = scene.links.map_or(1.0, |n| n.0 as f64);
+            let scene_frames = runs * (scene.duration.get() / scene.frame_dt.get() + 1.0);
+            steps += runs * scene.duration.get() / scene.dt.get();
+            frames += scene_frames;
+            // Every variable and state component a float64, plus the header.
+            log_bytes += scene_frames * (16.0 + 8.0 * (variables(links) + 13.0 * links));
+            vars = vars.max(variables(links));
+        }
+        let stride = &stages.stride;
+        let rows = frames / stride.n.0 as f64;
+        let train_rows = stride.train_rows.map_or(rows, |cap| rows.min(cap.0 as f64));
+        let test_rows = stride
+            .test_rows
+            .map_or(rows * stride.test_fraction.get(), |cap| cap.0 as f64);
+        let q = &stages.quantize;
+        let width = match q.code {
+            Code::Walk => q.width.0 as f64,
+            Code::Thermometer => q.levels.0 as f64 - 1.0,
+            Code::Binary | Code::Gray => (q.levels.0 as f64).log2().ceil(),
+        };
+        let t = &stages.train;
+        let trees = vars * width * t.vote.0 as f64;
+        let node_updates = t.epochs.0 as f64 * train_rows * trees * t.leaves.0 as f64;
+        let test = &stages.test;
+        let resimulated: f64 = test.resimulate_steps.iter().map(|s| s.0 as f64).sum();
+        let closed_loop = test.rollout_starts.0 as f64 * test.horizon.0 as f64 * vars;
+        Estimate {
+            steps,
+            frames,
+            log_bytes,
+            train_rows,
+            node_updates,
+            model_bytes: trees * t.leaves.0 as f64 * 16.0,
+            test_work: resimulated * test_rows + closed_loop,
+        }
+    }
+
+    /// The first limit of `budget` this estimate exceeds: the stage table
+    /// it concerns and a message saying what and how to proceed.
+    pub fn exceeds(&self, budget: &Budget) -> Option<(&'static str, String)> {
+        let over = [
+            (
+                "simulate",
+                "integration steps",
+                self.steps,
+                budget.steps,
+                "steps",
+                "fewer runs, a shorter duration or a larger dt",
+            ),
+            (
+                "simulate",
+                "bytes of trajectory log",
+                self.log_bytes,
+                budget.log_bytes,
+                "log_bytes",
+                "fewer runs, a shorter duration or a larger frame_dt",
+            ),
+            (
+                "train",
+                "tree-node evaluations",
+                self.node_updates,
+                budget.node_updates,
+                "node_updates",
+                "fewer epochs, leaves, votes or training rows",
+            ),
+            (
+                "train",
+                "bytes of trees in memory",
+                self.model_bytes,
+                budget.model_bytes,
+                "model_bytes",
+                "fewer leaves, votes, output bits or variables",
+            ),
+            (
+                "test",
+                "test-stage steps and predictions",
+                self.test_work,
+                budget.test_work,
+                "test_work",
+                "fewer resimulate_steps, rollout_starts, a shorter horizon or fewer test rows",
+            ),
+        ];
+        over.into_iter()
+            .find(|o| o.2 > o.3.get())
+            .map(|(stage, what, estimate, limit, key, remedy)| {
+                let limit = limit.get();
+                (
+                    stage,
+                    format!(
+                        "this asks for about {estimate:.2e} {what}, over the budget of {limit:.2e}: \
+                         it would not finish (choose {remedy}, or raise \
+                         `[experiment.budget] {key}` if you mean it)"
+                    ),
+                )
+            })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::manifest::Manifest;
+    use std::path::Path;
+
+    #[test]
+    fn every_committed_experiment_is_well_within_budget() {
+        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("experiments");
+        for entry in std::fs::read_dir(dir).unwrap() {
+            let path = entry.unwrap().path();
+            let manifest = Manifest::load(&path).unwrap();
+            for variant in &manifest.variants {
+                let e = Estimate::of(&variant.stages);
+                // Room to grow: a fifth of every limit (the trees' memory,
+                // an overestimate for the strongest forest, half).
+                let d = Budget::default();
+                let tight = Budget {
+                    steps: Positive(d.steps.get() / 5.0),
+                    log_bytes: Positive(d.log_bytes.get() / 5.0),
+                    node_updates: Positive(d.node_updates.get() / 5.0),
+                    model_bytes: Positive(d.model_bytes.get() / 2.0),
+                    test_work: Positive(d.test_work.get() / 5.0),
+                };
+                assert_eq!(e.exceeds(&tight), None, "{}: {e:?}", path.display());
+            }
+        }
+    }
+}
