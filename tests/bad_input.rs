@@ -15,40 +15,7 @@ use alnlab_common::table::{Table, batch, write_parquet};
 use arrow_array::{Array, Float64Array, RecordBatch, StringArray, UInt16Array};
 
 mod common;
-use common::{alnlab, stderr};
-
-/// A small experiment: a second's worth of pendulum, tiny trees.
-const TINY: &str = r#"
-[experiment]
-name = "tiny"
-seed = 7
-
-[[simulate.scene]]
-name = "pendulum"
-kind = "pendulum"
-runs = 2
-duration = 0.5
-dt = 0.01
-frame_dt = 0.01
-
-[stride]
-n = 1
-split = "disjoint"
-test_fraction = 0.5
-
-[quantize]
-levels = 8
-code = "gray"
-
-[train]
-leaves = 8
-epochs = 1
-
-[test]
-resimulate_steps = [1]
-rollout_starts = 1
-horizon = 2
-"#;
+use common::{TINY, alnlab, stderr};
 
 /// One bad input: the command, and what its error must mention.
 struct Case {

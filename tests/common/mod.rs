@@ -8,6 +8,40 @@ use std::process::{Command, Output};
 
 use alnlab::run::RunRecord;
 
+/// A small experiment: half a second of pendulum, tiny trees (files of a
+/// few kilobytes, a run of about a second).
+pub const TINY: &str = r#"
+[experiment]
+name = "tiny"
+seed = 7
+
+[[simulate.scene]]
+name = "pendulum"
+kind = "pendulum"
+runs = 2
+duration = 0.5
+dt = 0.01
+frame_dt = 0.01
+
+[stride]
+n = 1
+split = "disjoint"
+test_fraction = 0.5
+
+[quantize]
+levels = 8
+code = "gray"
+
+[train]
+leaves = 8
+epochs = 1
+
+[test]
+resimulate_steps = [1]
+rollout_starts = 1
+horizon = 2
+"#;
+
 /// A small, quick experiment: a tumbling box, tiny trees.
 pub const MANIFEST: &str = r#"
 [experiment]

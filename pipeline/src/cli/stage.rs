@@ -9,7 +9,7 @@ use std::path::{Path, PathBuf};
 
 use alnlab_aln::shard::Shard;
 use alnlab_common::hash::sha256_file;
-use alnlab_common::{Provenance, Result};
+use alnlab_common::{Error, Provenance, Result, atomic};
 use clap::{Arg, ArgMatches, value_parser};
 
 use crate::manifest::Manifest;
@@ -107,6 +107,7 @@ pub fn commands() -> Vec<clap::Command> {
 /// Runs `stage` alone as `args` say: its parameters from the chosen variant
 /// of the manifest, provenance from them and the inputs' hashes (as `alnlab
 /// run` writes it, so the files are the same), then names the files written.
+/// The outputs appear together when the stage succeeds, or not at all.
 pub fn execute(stage: &'static Stage, args: &ArgMatches, quiet: bool) -> Result<()> {
     let path = |id: &str| -> &Path { args.get_one::<PathBuf>(id).expect("required") };
     let manifest = Manifest::load(path("manifest"))?;
@@ -135,15 +136,31 @@ pub fn execute(stage: &'static Stage, args: &ArgMatches, quiet: bool) -> Result<
         .flatten()
         .copied()
         .unwrap_or(Shard::ALL);
-    (stage.run)(&Call {
-        stages: &variant.stages,
-        seed,
-        inputs,
-        shard,
-        provenance: &provenance,
-        out_dir: out,
-        progress: &Bar::new(stage.name, quiet),
-    })?;
+    // The stage writes into a hidden folder inside `out`; its files move
+    // into `out` only when it has finished, so a failure leaves none.
+    atomic::create_dir(out)?;
+    let staging = atomic::temporary_name(&out.join(stage.name));
+    let result = atomic::create_dir(&staging)
+        .and_then(|()| {
+            (stage.run)(&Call {
+                stages: &variant.stages,
+                seed,
+                inputs,
+                shard,
+                provenance: &provenance,
+                out_dir: &staging,
+                progress: &Bar::new(stage.name, quiet),
+            })
+        })
+        .and_then(|()| {
+            for (_, file) in stage.outputs {
+                let target = out.join(file);
+                std::fs::rename(staging.join(file), &target).map_err(|e| Error::io(&target, e))?;
+            }
+            Ok(())
+        });
+    let _ = std::fs::remove_dir_all(&staging);
+    result?;
     for (_, file) in stage.outputs {
         println!("wrote {}", out.join(file).display());
     }

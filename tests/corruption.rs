@@ -1,0 +1,131 @@
+//! The corruption sweep: single flipped bytes, spread over every kind of
+//! artifact. A stage given a damaged file alone must refuse it, naming the
+//! file; `alnlab run` over a cache holding it must notice and make it again,
+//! giving outputs identical to the undamaged run's (measured columns aside).
+
+use std::path::Path;
+
+use alnlab::run::RunRecord;
+
+mod common;
+use common::{TINY, alnlab, artifact_bytes, stderr};
+
+/// Positions per artifact: spread evenly from the first byte to the last.
+const POSITIONS: usize = 20;
+
+/// A damaged input, the stage that reads it, and its other inputs.
+type Reader<'a> = (&'a str, &'a str, Vec<(&'a str, String)>);
+
+fn run(dir: &Path) -> RunRecord {
+    let out = alnlab(dir, &["-q", "run", "tiny.toml", "--reports", "reports"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    serde_json::from_slice(&std::fs::read(dir.join("runs/tiny/run.json")).unwrap()).unwrap()
+}
+
+fn positions(len: usize) -> impl Iterator<Item = usize> {
+    (0..POSITIONS).map(move |i| i * (len - 1) / (POSITIONS - 1))
+}
+
+fn flip(path: &Path, at: usize) -> Vec<u8> {
+    let original = std::fs::read(path).unwrap();
+    let mut bytes = original.clone();
+    bytes[at] ^= 0x01;
+    std::fs::write(path, bytes).unwrap();
+    original
+}
+
+#[test]
+fn every_flipped_byte_is_refused_or_remade() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    std::fs::write(d.join("tiny.toml"), TINY).unwrap();
+    let record = run(d);
+    let intact = artifact_bytes(d, &record);
+    let artifacts = &record.variants[0].artifacts;
+    let path = |role: &str| d.join(&artifacts[role].path);
+    let kinds: Vec<String> = artifacts.keys().cloned().collect();
+    assert_eq!(kinds.len(), 13, "{kinds:?}");
+
+    // Through the cache: every kind.
+    let mut trials = 0;
+    for role in &kinds {
+        let file = path(role);
+        let len = std::fs::metadata(&file).unwrap().len() as usize;
+        for at in positions(len) {
+            flip(&file, at);
+            let again = run(d);
+            assert_eq!(
+                artifact_bytes(d, &again),
+                intact,
+                "{role}: a flip at byte {at} of {len} changed the outputs"
+            );
+            trials += 1;
+        }
+    }
+    assert_eq!(trials, 13 * POSITIONS);
+
+    // To a stage alone: every kind a stage reads.
+    let s = |p: &Path| p.to_string_lossy().into_owned();
+    // (the damaged input, the stage reading it, its other inputs intact)
+    let readers: [Reader; 9] = [
+        ("trajectory", "stride", vec![]),
+        ("pairs", "quantize", vec![("stats", s(&path("stats")))]),
+        ("stats", "quantize", vec![("pairs", s(&path("pairs")))]),
+        ("levels", "train", vec![("codebook", s(&path("codebook")))]),
+        ("codebook", "train", vec![("levels", s(&path("levels")))]),
+        (
+            "model",
+            "test",
+            vec![
+                ("trajectory", s(&path("trajectory"))),
+                ("codebook", s(&path("codebook"))),
+                ("levels", s(&path("levels"))),
+            ],
+        ),
+        (
+            "trajectory",
+            "test",
+            vec![
+                ("model", s(&path("model"))),
+                ("codebook", s(&path("codebook"))),
+                ("levels", s(&path("levels"))),
+            ],
+        ),
+        (
+            "predictions",
+            "summarize",
+            vec![("rollout", s(&path("rollout")))],
+        ),
+        (
+            "rollout",
+            "summarize",
+            vec![("predictions", s(&path("predictions")))],
+        ),
+    ];
+    for (role, stage, others) in readers {
+        let copy = d.join(format!("damaged-{role}"));
+        let len = std::fs::metadata(path(role)).unwrap().len() as usize;
+        for at in positions(len) {
+            std::fs::copy(path(role), &copy).unwrap();
+            flip(&copy, at);
+            let out_dir = d.join("alone");
+            let mut args = vec![stage.to_string(), "--manifest".into(), "tiny.toml".into()];
+            args.extend([format!("--{role}"), s(&copy)]);
+            for (other, p) in &others {
+                args.extend([format!("--{other}"), p.clone()]);
+            }
+            args.extend(["--out".into(), s(&out_dir)]);
+            let args: Vec<&str> = args.iter().map(String::as_str).collect();
+            let out = alnlab(d, &args);
+            let err = stderr(&out);
+            assert!(
+                matches!(out.status.code(), Some(1 | 2))
+                    && err.contains(&format!("damaged-{role}")),
+                "{stage} with {role} flipped at byte {at} of {len}: exit {:?}: {err}",
+                out.status.code()
+            );
+            let left = std::fs::read_dir(&out_dir).map_or(0, |e| e.count());
+            assert_eq!(left, 0, "{stage} wrote outputs from a damaged {role}");
+        }
+    }
+}
