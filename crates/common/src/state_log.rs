@@ -478,6 +478,17 @@ mod tests {
         }
     }
 
+    /// A log of `frames` frames of one scene at `path`.
+    fn write_frames(path: &Path, frames: u32) {
+        let mut writer = StateLogWriter::create(path, &[layout()]).unwrap();
+        for i in 0..frames {
+            writer
+                .write(0, u64::from(i) * 10_000_000, &frame(i))
+                .unwrap();
+        }
+        writer.finish(&Provenance::default()).unwrap();
+    }
+
     #[test]
     fn schema_names_every_field() {
         let text = layout().ros2msg();
@@ -500,13 +511,7 @@ mod tests {
     fn log_round_trip_and_truncation_errors() {
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("trajectory.mcap");
-        let mut writer = StateLogWriter::create(&path, &[layout()]).unwrap();
-        for i in 0..100 {
-            writer
-                .write(0, u64::from(i) * 10_000_000, &frame(i))
-                .unwrap();
-        }
-        writer.finish(&Provenance::default()).unwrap();
+        write_frames(&path, 100);
         let log = StateLog::read(&path).unwrap();
         assert_eq!(log.scenes.len(), 1);
         assert_eq!(log.scenes[0].layout, layout());
@@ -532,13 +537,7 @@ mod tests {
     fn every_flipped_byte_is_refused() {
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("trajectory.mcap");
-        let mut writer = StateLogWriter::create(&path, &[layout()]).unwrap();
-        for i in 0..100 {
-            writer
-                .write(0, u64::from(i) * 10_000_000, &frame(i))
-                .unwrap();
-        }
-        writer.finish(&Provenance::default()).unwrap();
+        write_frames(&path, 100);
         let bytes = std::fs::read(&path).unwrap();
         StateLog::from_bytes(&path, &bytes).unwrap();
         // Every byte of the file, each bit pattern that changes it once:
