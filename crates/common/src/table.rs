@@ -68,11 +68,19 @@ pub fn write_parquet(path: &Path, batch: &RecordBatch, provenance: &Provenance) 
 }
 
 /// Where the eight hex digits of the checksum lie in a Parquet file's bytes:
-/// just after the last `alnlab.crc32` (the footer's key-value list, Thrift
-/// compact: the key, then a field header byte and the length byte 8).
+/// just after the last `alnlab.crc32` of the footer (its key-value list,
+/// Thrift compact: the key, then a field header byte and the length byte
+/// 8). Only the footer is searched: the file's last eight bytes give its
+/// length, so the data pages are not scanned.
 fn checksum_position(bytes: &[u8]) -> Option<usize> {
     let key = CHECKSUM_KEY.as_bytes();
-    let key_at = bytes.windows(key.len()).rposition(|w| w == key)?;
+    let tail = bytes.len().checked_sub(8)?;
+    let footer_len = u32::from_le_bytes(bytes[tail..tail + 4].try_into().ok()?) as usize;
+    let footer = tail.saturating_sub(footer_len);
+    let key_at = footer
+        + bytes[footer..tail]
+            .windows(key.len())
+            .rposition(|w| w == key)?;
     let at = key_at + key.len() + 2;
     (at + 8 <= bytes.len() && bytes[at - 1] == 8).then_some(at)
 }
