@@ -400,6 +400,14 @@ impl StateLog {
                 }
                 LinearReadEvent::Record { opcode, data } => (opcode, data),
             };
+            if !used(opcode) {
+                continue;
+            }
+            if !fields_fit(opcode, data) {
+                return Err(bad(format!(
+                    "record with opcode {opcode:#04x} has a field longer than the record"
+                )));
+            }
             // The summary section repeats channels and metadata: read the
             // data section's own records only.
             match mcap::parse_record(opcode, data).map_err(corrupt)? {
@@ -448,6 +456,74 @@ impl StateLog {
             ));
         }
         Ok(StateLog { scenes, metadata })
+    }
+}
+
+/// Whether the log reader uses records of this kind; others (header,
+/// schemas, indexes, statistics) are passed over unparsed.
+fn used(opcode: u8) -> bool {
+    use mcap::records::op;
+    matches!(
+        opcode,
+        op::CHANNEL | op::METADATA | op::MESSAGE | op::DATA_END | op::FOOTER
+    )
+}
+
+/// Whether every length prefix in a record stays within the record. mcap's
+/// parser reserves the length a string declares before reading it, so an
+/// unchecked damaged prefix could ask for 4 GiB.
+fn fields_fit(opcode: u8, data: &[u8]) -> bool {
+    use mcap::records::op;
+    let mut fields = Fields(data);
+    match opcode {
+        // id, schema id, topic, message encoding, metadata
+        op::CHANNEL => fields.skip(4) && fields.string() && fields.string() && fields.map(),
+        // name, metadata
+        op::METADATA => fields.string() && fields.map(),
+        // fixed-size fields, then the rest of the record
+        _ => true,
+    }
+}
+
+/// The unread rest of a record, consumed field by field.
+struct Fields<'a>(&'a [u8]);
+
+impl Fields<'_> {
+    fn skip(&mut self, n: usize) -> bool {
+        match self.0.get(n..) {
+            Some(rest) => {
+                self.0 = rest;
+                true
+            }
+            None => false,
+        }
+    }
+
+    /// A `u32` length prefix, then that many bytes.
+    fn string(&mut self) -> bool {
+        let Some(prefix) = self.0.first_chunk::<4>() else {
+            return false;
+        };
+        let n = u32::from_le_bytes(*prefix) as usize;
+        self.skip(4) && self.skip(n)
+    }
+
+    /// A `u32` byte length, then string pairs filling exactly that many bytes.
+    fn map(&mut self) -> bool {
+        let Some(prefix) = self.0.first_chunk::<4>() else {
+            return false;
+        };
+        let n = u32::from_le_bytes(*prefix) as usize;
+        let Some(entries) = self.0.get(4..).and_then(|rest| rest.get(..n)) else {
+            return false;
+        };
+        let mut entries = Fields(entries);
+        while !entries.0.is_empty() {
+            if !(entries.string() && entries.string()) {
+                return false;
+            }
+        }
+        self.skip(4 + n)
     }
 }
 
@@ -567,6 +643,30 @@ mod tests {
         bytes[size_at..size_at + 8].copy_from_slice(&(1u64 << 61).to_le_bytes());
         let err = StateLog::from_bytes(&path, &bytes).unwrap_err();
         assert!(err.to_string().contains("trajectory.mcap"), "{err}");
+    }
+
+    #[test]
+    fn length_prefixes_must_stay_within_their_record() {
+        use mcap::records::op;
+        let string = |s: &str| [&(s.len() as u32).to_le_bytes()[..], s.as_bytes()].concat();
+        let pair = [string("k"), string("v")].concat();
+        let map = [&(pair.len() as u32).to_le_bytes()[..], &pair].concat();
+        let channel = [&[1, 0, 1, 0][..], &string("/t"), &string("cdr"), &map].concat();
+        assert!(fields_fit(op::CHANNEL, &channel));
+        assert!(fields_fit(
+            op::METADATA,
+            &[string("m"), map.clone()].concat()
+        ));
+        // The topic claims nearly 4 GiB.
+        let mut long = channel.clone();
+        long[4..8].copy_from_slice(&0xFFFF_FFF0u32.to_le_bytes());
+        assert!(!fields_fit(op::CHANNEL, &long));
+        // The map claims one byte more than it holds.
+        let mut over = channel.clone();
+        let at = channel.len() - map.len();
+        over[at] += 1;
+        assert!(!fields_fit(op::CHANNEL, &over));
+        assert!(!fields_fit(op::CHANNEL, &channel[..channel.len() - 1]));
     }
 
     #[test]
