@@ -27,6 +27,39 @@ use parquet::file::properties::WriterProperties;
 
 use crate::{ALNLAB_VERSION, Error, Provenance, Result, atomic};
 
+thread_local! {
+    /// Set while this thread decodes inside [`contained`].
+    static CONTAINED: std::cell::Cell<bool> = const { std::cell::Cell::new(false) };
+}
+
+/// Runs `decode` — parquet's decoder on bytes not yet known to be sound —
+/// turning a panic inside it into an error carrying its message. The
+/// decoder asserts on some malformed pages (fuzzing found one in its
+/// definition-level reader) rather than returning an error; such a panic
+/// is a damaged file, and no panic message reaches the terminal.
+fn contained<T>(decode: impl FnOnce() -> T) -> std::result::Result<T, String> {
+    static QUIET_HOOK: std::sync::Once = std::sync::Once::new();
+    QUIET_HOOK.call_once(|| {
+        let previous = std::panic::take_hook();
+        std::panic::set_hook(Box::new(move |info| {
+            if !CONTAINED.with(std::cell::Cell::get) {
+                previous(info);
+            }
+        }));
+    });
+    CONTAINED.with(|c| c.set(true));
+    let outcome = std::panic::catch_unwind(std::panic::AssertUnwindSafe(decode));
+    CONTAINED.with(|c| c.set(false));
+    outcome.map_err(|panic| {
+        let message = panic
+            .downcast_ref::<&str>()
+            .map(|s| s.to_string())
+            .or_else(|| panic.downcast_ref::<String>().cloned())
+            .unwrap_or_else(|| "the decoder gave up".into());
+        format!("the decoder failed: {message}")
+    })
+}
+
 /// The key-value metadata key holding the file's checksum.
 pub const CHECKSUM_KEY: &str = "alnlab.crc32";
 /// The checksum's value while it is computed.
@@ -184,8 +217,8 @@ impl Table {
             .with_batch_size(rows)
             .build()
             .map_err(|e| Error::bad_file(path, e))?;
-        let batches = reader
-            .collect::<std::result::Result<Vec<_>, _>>()
+        let batches = contained(|| reader.collect::<std::result::Result<Vec<_>, _>>())
+            .map_err(|panic| Error::bad_file(path, format!("corrupt Parquet data ({panic})")))?
             .map_err(|e| Error::bad_file(path, format!("corrupt Parquet data ({e})")))?;
         let batch = match batches.len() {
             0 => RecordBatch::new_empty(schema),
@@ -281,6 +314,14 @@ pub fn batch(columns: Vec<(&str, Arc<dyn Array>)>) -> RecordBatch {
 
 #[cfg(test)]
 mod tests {
+    #[test]
+    fn a_panic_while_decoding_is_an_error_and_later_panics_still_panic() {
+        let err = super::contained(|| -> u8 { panic!("offset + len out of bounds") }).unwrap_err();
+        assert_eq!(err, "the decoder failed: offset + len out of bounds");
+        assert_eq!(super::contained(|| 7), Ok(7));
+        assert!(std::panic::catch_unwind(|| panic!("outside")).is_err());
+    }
+
     use super::*;
     use arrow_array::UInt32Array;
 
