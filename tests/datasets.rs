@@ -96,7 +96,7 @@ fn a_run_from_an_archived_dataset_gives_the_same_bytes() {
     );
     let named = again.dataset.as_ref().unwrap();
     assert_eq!(named.dataset, "box@1");
-    let report = std::fs::read_to_string(dir.path().join("reports/e2e/report.md")).unwrap();
+    let report = std::fs::read_to_string(dir.path().join("runs/e2e/report/report.md")).unwrap();
     assert!(report.contains(&format!("| dataset | box@1 (sha256 `{}`) |", named.sha256)));
 
     // With levels the run starts at train — and a [quantize] table is refused.

@@ -534,7 +534,9 @@ fn the_report_renders_with_its_charts_and_renders_again_the_same() {
     // simulator reproduces the log: no error at all.
     let exact = summary.iter().filter(|r| r.model == "simulator@10/frame");
     assert!(exact.clone().count() > 0 && exact.clone().all(|r| r.stats.max == 0));
-    let report_path = dir.path().join("reports/e2e/report.md");
+    // The report goes to the run's own folder unless published elsewhere.
+    assert!(!dir.path().join("reports").exists());
+    let report_path = dir.path().join("runs/e2e/report/report.md");
     let report = std::fs::read_to_string(&report_path).unwrap();
     for heading in [
         "## Findings",
@@ -543,7 +545,8 @@ fn the_report_renders_with_its_charts_and_renders_again_the_same() {
         "## Notes from the experimenter\n\nThe box tumbles; *nothing* to learn.",
         "## Reproducibility",
         "Error by group (paper §4.6)",
-        "## Speed against error",
+        "![µs per predicted state against error](speed.svg)",
+        "## Glossary of variables",
     ] {
         assert!(report.contains(heading), "{heading} missing:\n{report}");
     }
@@ -578,10 +581,10 @@ fn the_report_renders_with_its_charts_and_renders_again_the_same() {
     } else {
         "indistinguishable from"
     };
-    let expected = format!(
-        "{verdict} persistence ({:.3}; difference",
-        mean("persistence")
-    );
+    // Three significant figures.
+    let persistence = mean("persistence");
+    let decimals = (2 - persistence.abs().log10().floor() as i32).max(0) as usize;
+    let expected = format!("{verdict} persistence ({persistence:.decimals$}; difference");
     assert!(report.contains(&expected), "{expected}\n{report}");
     // Every chart the report shows exists and is an SVG document.
     let charts: Vec<&str> = report
@@ -591,7 +594,7 @@ fn the_report_renders_with_its_charts_and_renders_again_the_same() {
         .collect();
     assert!(charts.len() >= 3, "{charts:?}");
     for chart in charts {
-        let svg = std::fs::read_to_string(dir.path().join("reports/e2e").join(chart)).unwrap();
+        let svg = std::fs::read_to_string(dir.path().join("runs/e2e/report").join(chart)).unwrap();
         assert!(
             svg.starts_with("<svg") && svg.trim_end().ends_with("</svg>"),
             "{chart}"
@@ -686,7 +689,7 @@ fn every_committed_experiment_runs_when_cut_down() {
         );
         let experiment: toml::Table = text.parse().unwrap();
         let name = experiment["experiment"]["name"].as_str().unwrap();
-        let report = dir.path().join("reports").join(name).join("report.md");
+        let report = dir.path().join("runs").join(name).join("report/report.md");
         let report = std::fs::read_to_string(&report).unwrap();
         let paper = experiment["experiment"].get("compare_with_paper");
         if paper.and_then(toml::Value::as_bool) == Some(true) {
@@ -696,7 +699,7 @@ fn every_committed_experiment_runs_when_cut_down() {
                 path.display()
             );
             assert!(
-                report.contains("| a | best | 0.6953 |"),
+                report.contains("| a | best | ") && report.contains(" | 0.6953 | "),
                 "the paper's own figure"
             );
         } else {

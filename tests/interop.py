@@ -67,8 +67,10 @@ def check_summary(predictions_path, summary_path):
         }
         for key, value in expected.items():
             assert math.isclose(row[key], value, rel_tol=1e-9, abs_tol=1e-12), (row["variable"], key, row[key], value)
-        bins = [xs.count(k) for k in range(10)] + [sum(1 for x in xs if x >= 10)]
-        assert bins == [row[f"hist_{k}"] for k in range(10)] + [row["hist_10_plus"]], row["variable"]
+        edges = list(range(11)) + [20, 50, 100, max(100, xs[-1]) + 1]
+        counts, _ = np.histogram(xs, bins=edges)
+        names = [f"hist_{k}" for k in range(10)] + ["hist_10_19", "hist_20_49", "hist_50_99", "hist_100_plus"]
+        assert counts.tolist() == [row[name] for name in names], row["variable"]
     return len(summary)
 
 

@@ -8,9 +8,9 @@ use alnlab_summarize::report::{self, Replicate, RunInfo, StageTime, VariantInfo}
 
 use crate::run::{RunRecord, VariantRecord};
 
-/// Renders the report of `record` into `<reports>/<experiment>/`; returns
-/// the path of `report.md`.
-pub fn render(record: &RunRecord, reports: &Path) -> Result<PathBuf> {
+/// Renders the report of `record` into `dir`; returns the path of
+/// `report.md`.
+pub fn render(record: &RunRecord, dir: &Path) -> Result<PathBuf> {
     let artifact = |v: &VariantRecord, role: &str| -> Result<PathBuf> {
         v.artifacts
             .get(role)
@@ -38,6 +38,7 @@ pub fn render(record: &RunRecord, reports: &Path) -> Result<PathBuf> {
                         seed: r.seed,
                         summary: artifact(r, "summary")?,
                         comparisons: artifact(r, "comparisons")?,
+                        horizons: artifact(r, "horizons")?,
                     })
                 })
                 .collect::<Result<_>>()?;
@@ -84,7 +85,7 @@ pub fn render(record: &RunRecord, reports: &Path) -> Result<PathBuf> {
             .as_ref()
             .map(|d| (d.dataset.clone(), d.sha256.clone())),
     };
-    report::render(&run, &reports.join(&record.experiment))
+    report::render(&run, dir)
 }
 
 /// Reads `<run_dir>/run.json`.

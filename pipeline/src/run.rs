@@ -23,7 +23,7 @@ use serde::{Deserialize, Serialize};
 use crate::cache::{Artifact, Cache, StageKey};
 use crate::dataset::{Archive, Entry};
 use crate::manifest::{Manifest, Variant, replicate_seed};
-use crate::progress::Bar;
+use crate::progress::{Bar, Overall};
 use crate::stages::{self, Archived, Call, STAGES, Stage, stage_params};
 use alnlab_aln::shard::Shard;
 
@@ -203,7 +203,9 @@ pub fn run(manifest: &Manifest, options: &RunOptions) -> Result<RunRecord> {
     let mut made_now = BTreeSet::new();
     let mut records = Vec::new();
     let replicates = manifest.experiment.replicates.0 as u32;
-    for variant in variants {
+    let overall = Overall::new(options.quiet);
+    let count = variants.len();
+    for (k, variant) in variants.iter().enumerate() {
         for replicate in 0..replicates {
             let seed = replicate_seed(manifest.experiment.seed, replicate);
             let mut graph = Graph {
@@ -217,6 +219,17 @@ pub fn run(manifest: &Manifest, options: &RunOptions) -> Result<RunRecord> {
                     format!("{} #{}", variant.name, replicate + 1)
                 } else {
                     variant.name.clone()
+                },
+                overall: &overall,
+                place: if replicates > 1 {
+                    format!(
+                        "variant {} of {count}: {}, replicate {} of {replicates}",
+                        k + 1,
+                        variant.name,
+                        replicate + 1
+                    )
+                } else {
+                    format!("variant {} of {count}: {}", k + 1, variant.name)
                 },
                 record: VariantRecord {
                     name: variant.name.clone(),
@@ -233,7 +246,7 @@ pub fn run(manifest: &Manifest, options: &RunOptions) -> Result<RunRecord> {
     }
     let record = RunRecord {
         experiment: manifest.experiment.name.clone(),
-        manifest_path: manifest.path.display().to_string(),
+        manifest_path: repository_path(&manifest.path),
         manifest_sha256: manifest.sha256.clone(),
         seed: manifest.experiment.seed,
         alnlab_version: ALNLAB_VERSION.into(),
@@ -271,6 +284,9 @@ struct Graph<'a> {
     seed: u64,
     /// The variant (and replicate) as progress and errors name it.
     label: String,
+    /// The run's overall progress line, and where this variant is in it.
+    overall: &'a Overall,
+    place: String,
     record: VariantRecord,
 }
 
@@ -285,7 +301,9 @@ impl Graph<'_> {
             None => None,
         };
         let mut made: BTreeMap<&str, Artifact> = BTreeMap::new();
-        for stage in STAGES {
+        for (j, stage) in STAGES.iter().enumerate() {
+            self.overall
+                .at(&self.place, (j + 1, STAGES.len()), stage.name);
             let from_archive = archived
                 .as_ref()
                 .filter(|(_, entry)| stage.archived.holds(entry.has_levels()));
@@ -411,10 +429,13 @@ impl Graph<'_> {
         };
         let cached = found.is_some();
         let artifact = match found {
-            Some(artifact) => artifact,
+            Some(artifact) => {
+                self.overall.found_cached();
+                artifact
+            }
             None => {
                 let label = format!("{}/{}", self.manifest.experiment.name, self.label);
-                let bar = Bar::new(&label, self.options.quiet);
+                let bar = self.overall.bar(&label);
                 let context = format!("variant `{}`, stage {name}", self.label);
                 let artifact = self
                     .cache
@@ -449,6 +470,23 @@ impl Graph<'_> {
 
 /// The commit of the git checkout holding `path`, if there is one.
 fn git_commit(path: &Path) -> Option<String> {
+    git(path, &["rev-parse", "HEAD"])
+}
+
+/// `path` relative to the root of the git repository holding it (so a
+/// record reads the same on every checkout), or as given outside one.
+fn repository_path(path: &Path) -> String {
+    let relative = || {
+        let root = PathBuf::from(git(path, &["rev-parse", "--show-toplevel"])?);
+        let absolute = std::fs::canonicalize(path).ok()?;
+        let root = std::fs::canonicalize(root).ok()?;
+        Some(absolute.strip_prefix(root).ok()?.display().to_string())
+    };
+    relative().unwrap_or_else(|| path.display().to_string())
+}
+
+/// What `git -C <path's folder> <args>` prints, trimmed, if it succeeds.
+fn git(path: &Path, args: &[&str]) -> Option<String> {
     let dir = path
         .parent()
         .filter(|p| !p.as_os_str().is_empty())
@@ -456,12 +494,12 @@ fn git_commit(path: &Path) -> Option<String> {
     let output = std::process::Command::new("git")
         .arg("-C")
         .arg(dir)
-        .args(["rev-parse", "HEAD"])
+        .args(args)
         .stderr(std::process::Stdio::null())
         .output()
         .ok()?;
-    let commit = String::from_utf8(output.stdout).ok()?.trim().to_string();
-    (output.status.success() && !commit.is_empty()).then_some(commit)
+    let text = String::from_utf8(output.stdout).ok()?.trim().to_string();
+    (output.status.success() && !text.is_empty()).then_some(text)
 }
 
 /// Where sharded stages keep their parts: `<out>/shards/<stage>/<stage

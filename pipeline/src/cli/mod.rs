@@ -56,9 +56,12 @@ pub enum Command {
   alnlab run experiments/quickstart.toml --out runs --variant walk
   alnlab run experiments/quickstart.toml --force
   alnlab run experiments/paper.toml --until quantize
+  alnlab run experiments/paper.toml --reports reports
+
+Training in two shards, then a run that merges them instead of training:
   alnlab run experiments/paper.toml --train-shard 1/2 &
   alnlab run experiments/paper.toml --train-shard 2/2
-  alnlab run experiments/paper.toml        # merges the two shards instead of training")]
+  alnlab run experiments/paper.toml")]
     Run {
         /// The experiment manifest.
         #[arg(default_value = "experiments/quickstart.toml")]
@@ -72,9 +75,11 @@ pub enum Command {
         /// Run only this variant.
         #[arg(long)]
         variant: Option<String>,
-        /// Folder for reports: the run's goes to `<reports>/<experiment>/`.
-        #[arg(long, default_value = "reports")]
-        reports: PathBuf,
+        /// Publish the report to `<REPORTS>/<experiment>/` (e.g. the
+        /// committed `reports`) instead of the run's own folder,
+        /// `<OUT>/<experiment>/report/`.
+        #[arg(long)]
+        reports: Option<PathBuf>,
         /// The dataset archive a manifest's `[data] dataset` refers to.
         #[arg(long, default_value = "datasets")]
         datasets: PathBuf,
@@ -129,13 +134,15 @@ pub enum Command {
     /// Render a run's report again from its record and artifacts, without
     /// recomputing anything.
     #[command(after_help = "Example:
-  alnlab report runs/quickstart")]
+  alnlab report runs/quickstart
+  alnlab report runs/quickstart --reports reports   # refresh the committed report")]
     Report {
         /// The run's folder: `<out>/<experiment>`, holding run.json.
         run_dir: PathBuf,
-        /// Folder for reports: the report goes to `<reports>/<experiment>/`.
-        #[arg(long, default_value = "reports")]
-        reports: PathBuf,
+        /// Publish the report to `<REPORTS>/<experiment>/` (e.g. the
+        /// committed `reports`) instead of `<RUN_DIR>/report/`.
+        #[arg(long)]
+        reports: Option<PathBuf>,
     },
     /// Validate a manifest and print it fully resolved, once per variant.
     ///
@@ -222,7 +229,8 @@ pub fn execute(matches: &ArgMatches) -> Result<()> {
                 path.display(),
                 record.wall_seconds
             );
-            let report = crate::report::render(&record, &reports)?;
+            let run_dir = options.out.join(&record.experiment);
+            let report = crate::report::render(&record, &report_dir(&run_dir, reports, &record))?;
             println!("report:     {}", report.display());
             Ok(())
         }
@@ -241,7 +249,7 @@ pub fn execute(matches: &ArgMatches) -> Result<()> {
         }
         Command::Report { run_dir, reports } => {
             let record = crate::report::read_record(&run_dir)?;
-            let report = crate::report::render(&record, &reports)?;
+            let report = crate::report::render(&record, &report_dir(&run_dir, reports, &record))?;
             println!("report: {}", report.display());
             Ok(())
         }
@@ -271,5 +279,19 @@ fn only_variant(manifest: &Manifest) -> Result<String> {
                 .collect::<Vec<_>>()
                 .join(", ")
         ))),
+    }
+}
+
+/// Where a run's report goes: `<reports>/<experiment>/` when publishing,
+/// else the run's own `report/` folder (so a run leaves a checkout's
+/// committed reports alone).
+fn report_dir(
+    run_dir: &std::path::Path,
+    reports: Option<PathBuf>,
+    record: &crate::run::RunRecord,
+) -> PathBuf {
+    match reports {
+        Some(reports) => reports.join(&record.experiment),
+        None => run_dir.join("report"),
     }
 }

@@ -1,35 +1,426 @@
 //! The report's charts, as SVG text (plotters' SVG backend: text stays text,
 //! no fonts needed).
+//!
+//! Every chart is laid out the same way: the plotting area on the left and
+//! the legend in a panel of its own to the right, never over the data;
+//! ticks chosen here — whole decades (with 2 and 5 between when the axis
+//! spans few) on log axes, whole numbers on integer axes; and each model in
+//! one fixed [`Style`] wherever it appears ([`style_of`]).
 
-use plotters::coord::ranged1d::{IntoSegmentedCoord, SegmentValue};
+use std::ops::Range;
+
+use plotters::coord::ranged1d::{DefaultFormatting, KeyPointHint, Ranged};
+use plotters::element::DashedPathElement;
 use plotters::prelude::*;
-
-use crate::stats::HISTOGRAM_BINS;
 
 type DrawResult = std::result::Result<(), Box<dyn std::error::Error>>;
 
-const SIZE: (u32, u32) = (720, 420);
-const PALETTE: [RGBColor; 10] = [
-    RGBColor(31, 119, 180),
-    RGBColor(255, 127, 14),
-    RGBColor(44, 160, 44),
-    RGBColor(214, 39, 40),
-    RGBColor(148, 103, 189),
-    RGBColor(140, 86, 75),
-    RGBColor(227, 119, 194),
-    RGBColor(127, 127, 127),
-    RGBColor(188, 189, 34),
-    RGBColor(23, 190, 207),
-];
+/// The plotting area (px); the legend panel is added to its right, and
+/// the canvas grows taller when the legend needs it.
+const PLOT: (u32, u32) = (640, 420);
+const FONT: &str = "sans-serif";
+/// Font sizes as plotters takes them (its SVG says size / 1.24 px).
+const TITLE_SIZE: f64 = 20.0;
+const LABEL_SIZE: f64 = 15.0;
+/// The legend's rows (px).
+const LEGEND_ROW: i32 = 20;
+/// Pixels per character of label text, an upper estimate for sans-serif
+/// at [`LABEL_SIZE`].
+const CHAR_WIDTH: f64 = 7.3;
+/// A marker's radius (px).
+const MARKER: i32 = 5;
 
-/// Draws into an SVG string; a drawing error (which plotters reports only for
-/// degenerate ranges) leaves a chart that says so rather than no file.
+/// Colours of the ALN's series, one per variant: Paul Tol's "bright"
+/// scheme and three of his "muted" colours, distinguishable with the
+/// common colour-vision deficiencies.
+const VARIANT_COLOURS: [RGBColor; 9] = [
+    RGBColor(0x44, 0x77, 0xAA),
+    RGBColor(0xEE, 0x66, 0x77),
+    RGBColor(0x22, 0x88, 0x33),
+    RGBColor(0xCC, 0xBB, 0x44),
+    RGBColor(0x66, 0xCC, 0xEE),
+    RGBColor(0xAA, 0x33, 0x77),
+    RGBColor(0x33, 0x22, 0x88),
+    RGBColor(0x44, 0xAA, 0x99),
+    RGBColor(0x88, 0x22, 0x55),
+];
+/// The variants' marker shapes, taken in turn once the colours run out.
+const VARIANT_MARKERS: [Marker; 4] = [
+    Marker::Circle,
+    Marker::Square,
+    Marker::Triangle,
+    Marker::Diamond,
+];
+/// The baselines keep out of the variants' colours: black and greys for
+/// persistence and linear, one brown for the simulator at every step count.
+const PERSISTENCE: RGBColor = RGBColor(0, 0, 0);
+const LINEAR: RGBColor = RGBColor(0x77, 0x77, 0x77);
+const SIMULATOR: RGBColor = RGBColor(0x99, 0x66, 0x33);
+
+/// A marker's shape.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Marker {
+    Circle,
+    Square,
+    Triangle,
+    Diamond,
+    Cross,
+    Plus,
+}
+
+/// How one model is drawn, in every chart of every report.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Style {
+    pub colour: RGBColor,
+    pub marker: Marker,
+    /// Baselines are dashed, the ALN solid.
+    pub dashed: bool,
+}
+
+/// The style of `model`'s series: the ALN by its variant's place among the
+/// report's variants (so each variant keeps its style across the report),
+/// the baselines by name (the same in every report).
+pub fn style_of(model: &str, variant: usize) -> Style {
+    let dashed = |colour, marker| Style {
+        colour,
+        marker,
+        dashed: true,
+    };
+    match model {
+        "persistence" => dashed(PERSISTENCE, Marker::Square),
+        "linear" => dashed(LINEAR, Marker::Triangle),
+        _ => match simulator_steps(model) {
+            Some(steps) => dashed(
+                SIMULATOR,
+                match steps {
+                    1 => Marker::Diamond,
+                    2..=3 => Marker::Cross,
+                    4..=6 => Marker::Plus,
+                    7..=12 => Marker::Square,
+                    _ => Marker::Circle,
+                },
+            ),
+            None => Style {
+                colour: VARIANT_COLOURS[variant % VARIANT_COLOURS.len()],
+                marker: VARIANT_MARKERS[(variant / VARIANT_COLOURS.len()) % VARIANT_MARKERS.len()],
+                dashed: false,
+            },
+        },
+    }
+}
+
+/// k of `simulator@k/frame`.
+fn simulator_steps(model: &str) -> Option<u32> {
+    model
+        .strip_prefix("simulator@")?
+        .strip_suffix("/frame")?
+        .parse()
+        .ok()
+}
+
+/// An axis of a [`Plot`].
+pub struct Axis {
+    pub label: String,
+    /// Logarithmic (values ≤ 0 are drawn at the axis floor, and the legend
+    /// says so).
+    pub log: bool,
+    /// Whole numbers only (epochs, steps): ticks at integers.
+    pub integer: bool,
+    /// A linear axis that starts at zero (errors).
+    pub from_zero: bool,
+}
+
+impl Axis {
+    pub fn linear(label: &str) -> Axis {
+        Axis {
+            label: label.into(),
+            log: false,
+            integer: false,
+            from_zero: false,
+        }
+    }
+
+    pub fn log(label: &str) -> Axis {
+        Axis {
+            log: true,
+            ..Axis::linear(label)
+        }
+    }
+
+    pub fn integer(label: &str) -> Axis {
+        Axis {
+            integer: true,
+            ..Axis::linear(label)
+        }
+    }
+
+    /// An error axis: log when its values span decades, else from zero.
+    pub fn error(label: &str, values: impl IntoIterator<Item = f64>) -> Axis {
+        let (lo, hi) = values
+            .into_iter()
+            .filter(|v| *v > 0.0)
+            .fold((f64::MAX, 0f64), |(lo, hi), v| (lo.min(v), hi.max(v)));
+        if hi > 0.0 && hi / lo >= 30.0 {
+            Axis::log(&format!("{label} (log)"))
+        } else {
+            Axis {
+                from_zero: true,
+                ..Axis::linear(label)
+            }
+        }
+    }
+}
+
+/// One point, with an optional range drawn as an error bar on each axis.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Point {
+    pub x: f64,
+    pub y: f64,
+    pub x_range: Option<(f64, f64)>,
+    pub y_range: Option<(f64, f64)>,
+}
+
+impl Point {
+    pub fn at(x: f64, y: f64) -> Point {
+        Point {
+            x,
+            y,
+            x_range: None,
+            y_range: None,
+        }
+    }
+}
+
+/// One named series of a [`Plot`].
+pub struct Series {
+    pub name: String,
+    pub style: Style,
+    pub points: Vec<Point>,
+    /// Points joined by a line (a curve), or markers alone.
+    pub joined: bool,
+    /// Markers outlined rather than filled.
+    pub hollow: bool,
+}
+
+/// A chart of series against two axes.
+pub struct Plot {
+    pub title: String,
+    pub x: Axis,
+    pub y: Axis,
+    pub series: Vec<Series>,
+    /// Draw the Pareto front of all points (lower x and lower y are better)
+    /// as a staircase under them.
+    pub pareto: bool,
+}
+
+/// The points no other point beats on both x and y (lower is better), by
+/// increasing x.
+pub fn pareto_front(points: &[(f64, f64)]) -> Vec<(f64, f64)> {
+    let mut sorted = points.to_vec();
+    sorted.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.total_cmp(&b.1)));
+    let mut front: Vec<(f64, f64)> = Vec::new();
+    for p in sorted {
+        if front.last().is_none_or(|last| p.1 < last.1) {
+            front.push(p);
+        }
+    }
+    front
+}
+
+/// One axis's range and ticks, in drawing units (log10 of the value on a
+/// log axis).
+struct Ticks {
+    range: (f64, f64),
+    /// (position, label)
+    ticks: Vec<(f64, String)>,
+    log: bool,
+    /// On a log axis: where values ≤ 0 are drawn, and whether any was.
+    floor: f64,
+    clamped: bool,
+}
+
+impl Ticks {
+    fn new(axis: &Axis, values: &[f64]) -> Ticks {
+        let finite = values.iter().copied().filter(|v| v.is_finite());
+        if axis.log {
+            let positive: Vec<f64> = finite.clone().filter(|v| *v > 0.0).collect();
+            if let Some(lo) = positive.iter().copied().reduce(f64::min) {
+                let hi = positive.iter().copied().fold(lo, f64::max);
+                let clamped = finite.clone().any(|v| v <= 0.0);
+                return Ticks::log(lo.log10(), hi.log10(), clamped);
+            }
+        }
+        let (mut lo, mut hi) =
+            finite.fold((f64::MAX, f64::MIN), |(lo, hi), v| (lo.min(v), hi.max(v)));
+        if lo > hi {
+            (lo, hi) = (0.0, 1.0);
+        }
+        if axis.from_zero {
+            lo = lo.min(0.0);
+        }
+        if hi - lo < 1e-12 {
+            hi = lo + if axis.integer { 1.0 } else { lo.abs().max(1.0) };
+        }
+        let mut step = nice_step((hi - lo) / 6.0);
+        if axis.integer {
+            step = step.max(1.0).round();
+        }
+        let first = (lo / step).ceil() as i64;
+        let last = (hi / step).floor() as i64;
+        let decimals = (-step.log10().floor()).max(0.0) as usize;
+        let ticks = (first..=last)
+            .map(|k| {
+                let v = k as f64 * step;
+                (v, format!("{v:.decimals$}"))
+            })
+            .collect();
+        let pad = (hi - lo) * 0.04;
+        Ticks {
+            range: (lo - pad, hi + pad),
+            ticks,
+            log: false,
+            floor: lo,
+            clamped: false,
+        }
+    }
+
+    /// A log axis over 10^lo … 10^hi.
+    fn log(lo: f64, hi: f64, clamped: bool) -> Ticks {
+        // Values ≤ 0 sit one step below the smallest.
+        let floor = if clamped { lo - 0.3 } else { lo };
+        let (lo_decade, hi_decade) = (floor.floor() as i32, hi.ceil() as i32);
+        let mut ticks = Vec::new();
+        let few = hi - floor < 2.5;
+        for e in lo_decade..=hi_decade {
+            let multiples: &[f64] = if few { &[1.0, 2.0, 5.0] } else { &[1.0] };
+            for &m in multiples {
+                let v = m * 10f64.powi(e);
+                let t = v.log10();
+                if t >= floor - 1e-9 && t <= hi + 1e-9 {
+                    ticks.push((t, log_label(m, e)));
+                }
+            }
+        }
+        if ticks.len() < 2 {
+            // Less than a decade with no 1-2-5 inside: plain steps.
+            let (a, b) = (10f64.powf(floor), 10f64.powf(hi));
+            let step = nice_step((b - a) / 4.0);
+            let decimals = (-step.log10().floor()).max(0.0) as usize;
+            ticks = ((a / step).ceil() as i64..=(b / step).floor() as i64)
+                .map(|k| k as f64 * step)
+                .filter(|v| *v > 0.0)
+                .map(|v| (v.log10(), format!("{v:.decimals$}")))
+                .collect();
+        }
+        let span = (hi - floor).max(0.3);
+        let pad = span * 0.04;
+        Ticks {
+            range: (floor - pad, hi.max(floor + 0.3) + pad),
+            ticks,
+            log: true,
+            floor,
+            clamped,
+        }
+    }
+
+    /// A value in drawing units.
+    fn place(&self, v: f64) -> f64 {
+        if !self.log {
+            v
+        } else if v > 0.0 {
+            v.log10().max(self.floor)
+        } else {
+            self.floor
+        }
+    }
+
+    fn label(&self, v: f64) -> String {
+        self.ticks
+            .iter()
+            .find(|(t, _)| (t - v).abs() < 1e-9)
+            .map_or_else(String::new, |(_, l)| l.clone())
+    }
+}
+
+/// An axis for plotters: a linear map of drawing units, ticked where
+/// [`Ticks`] says.
+struct TickedAxis {
+    range: (f64, f64),
+    ticks: Vec<f64>,
+}
+
+impl TickedAxis {
+    fn of(ticks: &Ticks) -> TickedAxis {
+        TickedAxis {
+            range: ticks.range,
+            ticks: ticks.ticks.iter().map(|t| t.0).collect(),
+        }
+    }
+}
+
+impl Ranged for TickedAxis {
+    type FormatOption = DefaultFormatting;
+    type ValueType = f64;
+
+    fn map(&self, value: &f64, limit: (i32, i32)) -> i32 {
+        let (lo, hi) = self.range;
+        let share = (value - lo) / (hi - lo);
+        limit.0 + (share * f64::from(limit.1 - limit.0)).round() as i32
+    }
+
+    fn key_points<Hint: KeyPointHint>(&self, _hint: Hint) -> Vec<f64> {
+        self.ticks.clone()
+    }
+
+    fn range(&self) -> Range<f64> {
+        self.range.0..self.range.1
+    }
+}
+
+/// 1, 2 or 5 times a power of ten, at least `raw`.
+fn nice_step(raw: f64) -> f64 {
+    let raw = raw.max(1e-12);
+    let power = 10f64.powf(raw.log10().floor());
+    [1.0, 2.0, 5.0, 10.0]
+        .into_iter()
+        .map(|m| m * power)
+        .find(|s| *s >= raw * 0.999)
+        .unwrap_or(10.0 * power)
+}
+
+/// The label of m·10^e: plain digits from 0.001 to 9999, else "2·10⁵".
+fn log_label(m: f64, e: i32) -> String {
+    if (-3..4).contains(&e) {
+        let v = m * 10f64.powi(e);
+        let decimals = (-e).max(0) as usize;
+        format!("{v:.decimals$}")
+    } else {
+        let superscript: String = e
+            .to_string()
+            .chars()
+            .map(|c| match c {
+                '-' => '⁻',
+                d => ['⁰', '¹', '²', '³', '⁴', '⁵', '⁶', '⁷', '⁸', '⁹'][d as usize - '0' as usize],
+            })
+            .collect();
+        if m == 1.0 {
+            format!("10{superscript}")
+        } else {
+            format!("{m}·10{superscript}")
+        }
+    }
+}
+
+/// Draws a canvas of `size` into an SVG string; a drawing error (which
+/// plotters reports only for degenerate ranges) leaves a chart that says
+/// so rather than no file.
 fn svg(
+    size: (u32, u32),
     draw: impl FnOnce(&DrawingArea<SVGBackend, plotters::coord::Shift>) -> DrawResult,
 ) -> String {
     let mut text = String::new();
     {
-        let root = SVGBackend::with_string(&mut text, SIZE).into_drawing_area();
+        let root = SVGBackend::with_string(&mut text, size).into_drawing_area();
         if let Err(e) = root
             .fill(&WHITE)
             .map_err(Into::into)
@@ -38,7 +429,7 @@ fn svg(
             let _ = root.fill(&WHITE);
             let _ = root.draw_text(
                 &format!("chart not drawn: {e}"),
-                &("sans-serif", 16).into_text_style(&root),
+                &(FONT, LABEL_SIZE).into_text_style(&root),
                 (20, 20),
             );
         }
@@ -47,137 +438,293 @@ fn svg(
     text
 }
 
-/// The §4.5 view: errors of 0 … 9 levels and of 10 or more.
-pub fn histogram(title: &str, counts: &[u64; HISTOGRAM_BINS]) -> String {
-    svg(|root| {
-        let top = counts.iter().copied().max().unwrap_or(0).max(1) as f64 * 1.1;
+fn text_style(size: f64) -> TextStyle<'static> {
+    (FONT, size).into_font().color(&BLACK)
+}
+
+/// A marker of `style` centred on pixel `at`.
+fn draw_marker<DB: DrawingBackend>(
+    area: &DrawingArea<DB, plotters::coord::Shift>,
+    marker: Marker,
+    (x, y): (i32, i32),
+    colour: RGBColor,
+    hollow: bool,
+) -> DrawResult
+where
+    DB::ErrorType: 'static,
+{
+    let r = MARKER;
+    let fill = if hollow {
+        colour.stroke_width(2)
+    } else {
+        colour.filled()
+    };
+    let outline = |points: Vec<(i32, i32)>| -> DrawResult {
+        if hollow {
+            let mut closed = points.clone();
+            closed.push(points[0]);
+            area.draw(&PathElement::new(closed, colour.stroke_width(2)))?;
+        } else {
+            area.draw(&Polygon::new(points, colour.filled()))?;
+        }
+        Ok(())
+    };
+    match marker {
+        Marker::Circle => area.draw(&Circle::new((x, y), r, fill))?,
+        Marker::Square => outline(vec![
+            (x - r + 1, y - r + 1),
+            (x + r - 1, y - r + 1),
+            (x + r - 1, y + r - 1),
+            (x - r + 1, y + r - 1),
+        ])?,
+        Marker::Triangle => outline(vec![
+            (x, y - r - 1),
+            (x + r + 1, y + r - 1),
+            (x - r - 1, y + r - 1),
+        ])?,
+        Marker::Diamond => outline(vec![
+            (x, y - r - 1),
+            (x + r + 1, y),
+            (x, y + r + 1),
+            (x - r - 1, y),
+        ])?,
+        Marker::Cross | Marker::Plus => {
+            let arms = if marker == Marker::Cross {
+                [
+                    [(x - r, y - r), (x + r, y + r)],
+                    [(x - r, y + r), (x + r, y - r)],
+                ]
+            } else {
+                [
+                    [(x - r - 1, y), (x + r + 1, y)],
+                    [(x, y - r - 1), (x, y + r + 1)],
+                ]
+            };
+            for arm in arms {
+                area.draw(&PathElement::new(arm.to_vec(), colour.stroke_width(2)))?;
+            }
+        }
+    }
+    Ok(())
+}
+
+/// A line through pixel points, dashed or solid.
+fn draw_line<DB: DrawingBackend>(
+    area: &DrawingArea<DB, plotters::coord::Shift>,
+    points: Vec<(i32, i32)>,
+    colour: RGBColor,
+    dashed: bool,
+    width: u32,
+) -> DrawResult
+where
+    DB::ErrorType: 'static,
+{
+    if dashed {
+        area.draw(&DashedPathElement::new(
+            points,
+            7,
+            4,
+            colour.stroke_width(width),
+        ))?;
+    } else {
+        area.draw(&PathElement::new(points, colour.stroke_width(width)))?;
+    }
+    Ok(())
+}
+
+/// One row of a legend.
+enum Entry<'a> {
+    Series(&'a Series),
+    Front,
+    Note(&'a str),
+}
+
+/// Draws `plot` as SVG.
+pub fn plot(plot: &Plot) -> String {
+    let points = || plot.series.iter().flat_map(|s| &s.points);
+    let xs: Vec<f64> = points()
+        .flat_map(|p| {
+            let (lo, hi) = p.x_range.unwrap_or((p.x, p.x));
+            [p.x, lo, hi]
+        })
+        .collect();
+    let ys: Vec<f64> = points()
+        .flat_map(|p| {
+            let (lo, hi) = p.y_range.unwrap_or((p.y, p.y));
+            [p.y, lo, hi]
+        })
+        .collect();
+    let x = Ticks::new(&plot.x, &xs);
+    let y = Ticks::new(&plot.y, &ys);
+    let zero_note = if x.clamped || y.clamped {
+        "zero: drawn at the axis floor"
+    } else {
+        ""
+    };
+    let mut entries: Vec<Entry> = plot.series.iter().map(Entry::Series).collect();
+    if plot.pareto {
+        entries.push(Entry::Front);
+    }
+    if !zero_note.is_empty() {
+        entries.push(Entry::Note(zero_note));
+    }
+    let longest = entries
+        .iter()
+        .map(|e| match e {
+            Entry::Series(s) => s.name.chars().count(),
+            Entry::Front => "Pareto front".len(),
+            Entry::Note(n) => n.chars().count(),
+        })
+        .max()
+        .unwrap_or(0);
+    let legend_width = (longest as f64 * CHAR_WIDTH) as u32 + 56;
+    let height = PLOT.1.max(60 + entries.len() as u32 * LEGEND_ROW as u32);
+    svg((PLOT.0 + legend_width, height), |root| {
+        let (left, legend) = root.split_horizontally(PLOT.0);
+        let (area, _) = left.split_vertically(PLOT.1);
+        let mut chart = ChartBuilder::on(&area)
+            .caption(&plot.title, (FONT, TITLE_SIZE))
+            .margin(14)
+            .x_label_area_size(48)
+            .y_label_area_size(72)
+            .build_cartesian_2d(TickedAxis::of(&x), TickedAxis::of(&y))?;
+        chart
+            .configure_mesh()
+            .x_desc(plot.x.label.as_str())
+            .y_desc(plot.y.label.as_str())
+            .label_style(text_style(LABEL_SIZE))
+            .axis_desc_style(text_style(LABEL_SIZE))
+            .x_label_formatter(&|v| x.label(*v))
+            .y_label_formatter(&|v| y.label(*v))
+            .light_line_style(WHITE)
+            .bold_line_style(BLACK.mix(0.12))
+            .draw()?;
+        let px = |p: (f64, f64)| chart.backend_coord(&(x.place(p.0), y.place(p.1)));
+
+        if plot.pareto {
+            let all: Vec<(f64, f64)> = plot
+                .series
+                .iter()
+                .flat_map(|s| s.points.iter().map(|p| (p.x, p.y)))
+                .collect();
+            let front = pareto_front(&all);
+            let mut steps = Vec::new();
+            for (k, &p) in front.iter().enumerate() {
+                if k > 0 {
+                    steps.push(px((p.0, front[k - 1].1)));
+                }
+                steps.push(px(p));
+            }
+            draw_line(root, steps, RGBColor(0x55, 0x55, 0x55), true, 1)?;
+        }
+        for s in &plot.series {
+            let colour = s.style.colour;
+            if s.joined && s.points.len() > 1 {
+                let line = s.points.iter().map(|p| px((p.x, p.y))).collect();
+                draw_line(root, line, colour, s.style.dashed, 2)?;
+            }
+            for p in &s.points {
+                let at = px((p.x, p.y));
+                if let Some((lo, hi)) = p.y_range {
+                    let (a, b) = (px((p.x, lo)), px((p.x, hi)));
+                    root.draw(&PathElement::new(vec![a, b], colour.stroke_width(1)))?;
+                    for end in [a, b] {
+                        let cap = vec![(end.0 - 4, end.1), (end.0 + 4, end.1)];
+                        root.draw(&PathElement::new(cap, colour.stroke_width(1)))?;
+                    }
+                }
+                if let Some((lo, hi)) = p.x_range {
+                    let (a, b) = (px((lo, p.y)), px((hi, p.y)));
+                    root.draw(&PathElement::new(vec![a, b], colour.stroke_width(1)))?;
+                    for end in [a, b] {
+                        let cap = vec![(end.0, end.1 - 4), (end.0, end.1 + 4)];
+                        root.draw(&PathElement::new(cap, colour.stroke_width(1)))?;
+                    }
+                }
+                draw_marker(root, s.style.marker, at, colour, s.hollow)?;
+            }
+        }
+
+        // The legend, in its own panel.
+        let font = text_style(LABEL_SIZE).pos(plotters::style::text_anchor::Pos::new(
+            plotters::style::text_anchor::HPos::Left,
+            plotters::style::text_anchor::VPos::Center,
+        ));
+        for (k, entry) in entries.iter().enumerate() {
+            let y0 = 50 + k as i32 * LEGEND_ROW;
+            let (name, line): (&str, Option<(RGBColor, bool)>) = match entry {
+                Entry::Series(s) => {
+                    if s.joined {
+                        draw_line(
+                            &legend,
+                            vec![(4, y0), (32, y0)],
+                            s.style.colour,
+                            s.style.dashed,
+                            2,
+                        )?;
+                    }
+                    draw_marker(&legend, s.style.marker, (18, y0), s.style.colour, s.hollow)?;
+                    (&s.name, None)
+                }
+                Entry::Front => ("Pareto front", Some((RGBColor(0x55, 0x55, 0x55), true))),
+                Entry::Note(note) => (note, None),
+            };
+            if let Some((colour, dashed)) = line {
+                draw_line(&legend, vec![(4, y0), (32, y0)], colour, dashed, 1)?;
+            }
+            legend.draw_text(name, &font, (40, y0))?;
+        }
+        Ok(())
+    })
+}
+
+/// A histogram of errors: the share of errors in each named bin, bars in
+/// `colour`.
+pub fn histogram(title: &str, bins: &[(String, u64)], colour: RGBColor) -> String {
+    let total = bins.iter().map(|b| b.1).sum::<u64>().max(1) as f64;
+    let shares: Vec<f64> = bins.iter().map(|b| 100.0 * b.1 as f64 / total).collect();
+    let axis = Axis {
+        from_zero: true,
+        ..Axis::linear("share of errors (%)")
+    };
+    let y = Ticks::new(&axis, &shares);
+    let n = bins.len() as f64;
+    // Wide enough that bin names like "10–19" keep apart.
+    svg((PLOT.0 + 80, PLOT.1), |root| {
         let mut chart = ChartBuilder::on(root)
-            .caption(title, ("sans-serif", 20))
-            .margin(12)
-            .x_label_area_size(40)
-            .y_label_area_size(60)
-            .build_cartesian_2d((0u32..HISTOGRAM_BINS as u32).into_segmented(), 0f64..top)?;
+            .caption(title, (FONT, TITLE_SIZE))
+            .margin(14)
+            .x_label_area_size(48)
+            .y_label_area_size(72)
+            .build_cartesian_2d(
+                TickedAxis {
+                    range: (0.0, n),
+                    ticks: (0..bins.len()).map(|k| k as f64 + 0.5).collect(),
+                },
+                TickedAxis {
+                    range: (0.0, y.range.1),
+                    ticks: y.ticks.iter().map(|t| t.0).collect(),
+                },
+            )?;
         chart
             .configure_mesh()
             .disable_x_mesh()
             .x_desc("error (levels)")
-            .y_desc("count")
-            .x_label_formatter(&|v| match v {
-                SegmentValue::CenterOf(b) if *b as usize + 1 == HISTOGRAM_BINS => "10+".into(),
-                SegmentValue::CenterOf(b) => b.to_string(),
-                _ => String::new(),
+            .y_desc(axis.label.as_str())
+            .label_style(text_style(LABEL_SIZE))
+            .axis_desc_style(text_style(LABEL_SIZE))
+            .x_label_formatter(&|v| {
+                bins.get(v.floor() as usize)
+                    .map_or_else(String::new, |b| b.0.clone())
             })
+            .y_label_formatter(&|v| y.label(*v))
+            .light_line_style(WHITE)
+            .bold_line_style(BLACK.mix(0.12))
             .draw()?;
-        chart.draw_series(counts.iter().enumerate().map(|(bin, &count)| {
-            let bin = bin as u32;
-            let mut bar = Rectangle::new(
-                [
-                    (SegmentValue::Exact(bin), 0.0),
-                    (SegmentValue::Exact(bin + 1), count as f64),
-                ],
-                PALETTE[0].filled(),
-            );
-            bar.set_margin(0, 0, 4, 4);
-            bar
+        chart.draw_series(shares.iter().enumerate().map(|(k, &share)| {
+            let k = k as f64;
+            Rectangle::new([(k + 0.1, 0.0), (k + 0.9, share)], colour.filled())
         }))?;
-        Ok(())
-    })
-}
-
-/// Lines, one per named series of (x, y) points.
-pub fn lines(
-    title: &str,
-    x_desc: &str,
-    y_desc: &str,
-    series: &[(String, Vec<(f64, f64)>)],
-) -> String {
-    svg(|root| {
-        let points = series.iter().flat_map(|(_, p)| p);
-        let (x_max, y_max) = points.fold((1f64, 0f64), |(x, y), p| (x.max(p.0), y.max(p.1)));
-        let mut chart = ChartBuilder::on(root)
-            .caption(title, ("sans-serif", 20))
-            .margin(12)
-            .x_label_area_size(40)
-            .y_label_area_size(60)
-            .build_cartesian_2d(0f64..x_max, 0f64..(y_max * 1.1).max(1e-9))?;
-        chart
-            .configure_mesh()
-            .x_desc(x_desc)
-            .y_desc(y_desc)
-            .draw()?;
-        for (k, (name, points)) in series.iter().enumerate() {
-            let color = PALETTE[k % PALETTE.len()];
-            chart
-                .draw_series(LineSeries::new(
-                    points.iter().copied(),
-                    color.stroke_width(2),
-                ))?
-                .label(name.as_str())
-                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], color));
-        }
-        chart
-            .configure_series_labels()
-            .background_style(WHITE.mix(0.8))
-            .border_style(BLACK)
-            .draw()?;
-        Ok(())
-    })
-}
-
-/// One point of the speed chart.
-pub struct SpeedPoint {
-    pub label: String,
-    pub ns_per_state: f64,
-    pub mean: f64,
-    pub p95: f64,
-}
-
-/// Speed against error: ns per predicted state (log scale) against mean
-/// error (filled) and 95th-percentile error (hollow), one colour per label.
-pub fn speed(points: &[SpeedPoint]) -> String {
-    svg(|root| {
-        let (lo, hi) = points.iter().fold((f64::MAX, f64::MIN), |(lo, hi), p| {
-            (lo.min(p.ns_per_state), hi.max(p.ns_per_state))
-        });
-        let (lo, hi) = if lo <= hi {
-            (lo / 2.0, hi * 2.0)
-        } else {
-            (1.0, 1e6)
-        };
-        let y_max = points
-            .iter()
-            .map(|p| p.p95.max(p.mean))
-            .fold(0f64, f64::max)
-            * 1.15;
-        let mut chart = ChartBuilder::on(root)
-            .caption("speed against error", ("sans-serif", 20))
-            .margin(12)
-            .x_label_area_size(40)
-            .y_label_area_size(60)
-            .build_cartesian_2d((lo.max(1e-3)..hi).log_scale(), 0f64..y_max.max(1.0))?;
-        chart
-            .configure_mesh()
-            .x_desc("ns per predicted state (log)")
-            .y_desc("error (levels): mean ●, 95th percentile ○")
-            .draw()?;
-        for (k, p) in points.iter().enumerate() {
-            let color = PALETTE[k % PALETTE.len()];
-            chart
-                .draw_series([Circle::new((p.ns_per_state, p.mean), 6, color.filled())])?
-                .label(p.label.as_str())
-                .legend(move |(x, y)| Circle::new((x + 10, y), 5, color.filled()));
-            chart.draw_series([Circle::new(
-                (p.ns_per_state, p.p95),
-                6,
-                color.stroke_width(2),
-            )])?;
-        }
-        chart
-            .configure_series_labels()
-            .position(SeriesLabelPosition::UpperRight)
-            .background_style(WHITE.mix(0.8))
-            .border_style(BLACK)
-            .draw()?;
         Ok(())
     })
 }
@@ -196,23 +743,78 @@ mod tests {
 
     #[test]
     fn charts_are_svg_with_their_labels() {
-        let h = histogram("worst", &[5, 3, 2, 1, 0, 0, 0, 0, 0, 0, 4]);
+        let bins: Vec<(String, u64)> = ["0", "1", "10–19", "100+"]
+            .iter()
+            .map(|b| (b.to_string(), 3))
+            .collect();
+        let h = histogram("worst", &bins, VARIANT_COLOURS[0]);
         well_formed(&h);
-        assert!(h.contains("10+"));
-        let l = lines(
-            "training",
-            "epoch",
-            "errors",
-            &[("v".into(), vec![(1.0, 3.0), (2.0, 1.0)])],
-        );
-        well_formed(&l);
-        let s = speed(&[SpeedPoint {
-            label: "aln batched".into(),
-            ns_per_state: 1500.0,
-            mean: 1.2,
-            p95: 4.0,
-        }]);
-        well_formed(&s);
-        assert!(s.contains("aln batched"));
+        assert!(h.contains("10–19") && h.contains("100+"));
+        let series = |name: &str, model: &str| Series {
+            name: name.into(),
+            style: style_of(model, 0),
+            points: vec![Point::at(1.0, 3.0), Point::at(20.0, 0.0)],
+            joined: true,
+            hollow: false,
+        };
+        let p = plot(&Plot {
+            title: "t".into(),
+            x: Axis::log("x"),
+            y: Axis::log("y"),
+            series: vec![
+                series("aln · walk", "aln"),
+                series("persistence", "persistence"),
+            ],
+            pareto: true,
+        });
+        well_formed(&p);
+        assert!(p.contains("aln · walk") && p.contains("Pareto front"));
+        assert!(p.contains("zero: drawn at the axis floor"));
+    }
+
+    #[test]
+    fn styles_are_fixed_and_distinct() {
+        let mut seen = Vec::new();
+        for k in 0..12 {
+            seen.push(style_of("aln", k));
+        }
+        for model in [
+            "persistence",
+            "linear",
+            "simulator@1/frame",
+            "simulator@2/frame",
+            "simulator@5/frame",
+            "simulator@10/frame",
+        ] {
+            assert_eq!(style_of(model, 0), style_of(model, 7), "{model}");
+            seen.push(style_of(model, 0));
+        }
+        for (i, a) in seen.iter().enumerate() {
+            for b in &seen[..i] {
+                assert!(
+                    (a.colour, a.marker, a.dashed) != (b.colour, b.marker, b.dashed),
+                    "{a:?} twice"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn log_ticks_are_decades_with_readable_labels() {
+        let t = Ticks::new(&Axis::log("ns"), &[300.0, 2e5]);
+        let labels: Vec<&str> = t.ticks.iter().map(|(_, l)| l.as_str()).collect();
+        assert_eq!(labels, ["1000", "10⁴", "10⁵"]);
+        let t = Ticks::new(&Axis::log("e"), &[0.04, 3.0]);
+        let labels: Vec<&str> = t.ticks.iter().map(|(_, l)| l.as_str()).collect();
+        assert_eq!(labels, ["0.05", "0.1", "0.2", "0.5", "1", "2"]);
+        let t = Ticks::new(&Axis::integer("epoch"), &[1.0, 3.0]);
+        let labels: Vec<&str> = t.ticks.iter().map(|(_, l)| l.as_str()).collect();
+        assert_eq!(labels, ["1", "2", "3"]);
+    }
+
+    #[test]
+    fn the_pareto_front_keeps_points_nothing_beats() {
+        let front = pareto_front(&[(1.0, 5.0), (2.0, 6.0), (3.0, 2.0), (4.0, 2.0), (5.0, 1.0)]);
+        assert_eq!(front, [(1.0, 5.0), (3.0, 2.0), (5.0, 1.0)]);
     }
 }

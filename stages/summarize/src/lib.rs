@@ -39,7 +39,7 @@ use crate::paired::Interval;
 use crate::stats::{ErrorCounts, ErrorStats, HISTOGRAM_BINS};
 
 /// Version of what this stage writes (part of every cache key).
-pub const FORMAT_VERSION: u32 = 4;
+pub const FORMAT_VERSION: u32 = 5;
 /// File name of the summary table.
 pub const SUMMARY_FILE: &str = "summary.parquet";
 /// File name of the paired-comparisons table.
@@ -535,11 +535,7 @@ fn write(path: &Path, rows: &[SummaryRow], provenance: &Provenance) -> Result<()
         ),
     ];
     for bin in 0..HISTOGRAM_BINS {
-        let name = if bin + 1 == HISTOGRAM_BINS {
-            format!("hist_{bin}_plus")
-        } else {
-            format!("hist_{bin}")
-        };
+        let name = histogram_column(bin);
         let counts = rows.iter().map(|r| r.stats.histogram[bin]);
         columns.push((name, Arc::new(UInt64Array::from_iter_values(counts))));
     }
@@ -571,6 +567,17 @@ fn rows_column(table: &Table, path: &Path) -> Result<Vec<Rows>> {
         .collect()
 }
 
+/// The summary column of histogram bin `bin`: `hist_7`, `hist_10_19`,
+/// `hist_100_plus`.
+fn histogram_column(bin: usize) -> String {
+    format!(
+        "hist_{}",
+        stats::histogram_bin_name(bin)
+            .replace('–', "_")
+            .replace('+', "_plus")
+    )
+}
+
 /// Reads `summary.parquet` back.
 pub fn read(path: &Path) -> Result<Vec<SummaryRow>> {
     let table = Table::read(path)?;
@@ -589,11 +596,7 @@ pub fn read(path: &Path) -> Result<Vec<SummaryRow>> {
     );
     let bins: Vec<&[u64]> = (0..HISTOGRAM_BINS)
         .map(|bin| {
-            let name = if bin + 1 == HISTOGRAM_BINS {
-                format!("hist_{bin}_plus")
-            } else {
-                format!("hist_{bin}")
-            };
+            let name = histogram_column(bin);
             Ok(table.column::<UInt64Array>(&name)?.values().as_ref())
         })
         .collect::<Result<_>>()?;

@@ -10,8 +10,13 @@
 //! chart. The findings in plain sentences ([`findings`]) head it all, then
 //! a reproducibility block.
 
+mod across;
 mod findings;
+mod format;
+mod glossary;
+pub mod html;
 mod replicates;
+mod variant;
 
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
@@ -25,9 +30,9 @@ use arrow_array::cast::AsArray;
 use arrow_array::types::Float64Type;
 use arrow_array::{Float64Array, ListArray, UInt32Array, UInt64Array};
 
-use crate::charts::{self, SpeedPoint};
 use crate::paired::{Interval, Verdict};
 use crate::{Comparison, REPORT_FILE, Rows, SummaryRow};
+use format::{Align, MdTable};
 
 /// What the report needs of a run.
 pub struct RunInfo {
@@ -75,11 +80,13 @@ pub struct VariantInfo {
     pub replicates: Vec<Replicate>,
 }
 
-/// One replicate of a variant: its seed and its summaries.
+/// One replicate of a variant: its seed, its summaries and its
+/// closed-loop figures.
 pub struct Replicate {
     pub seed: u64,
     pub summary: PathBuf,
     pub comparisons: PathBuf,
+    pub horizons: PathBuf,
 }
 
 /// One stage of a variant in the run.
@@ -108,13 +115,13 @@ struct Timing {
 }
 
 impl Timing {
-    /// "3.8 µs (3.6–4.1)": median and range.
+    /// "3.81 µs (3.62–4.10)": median and range.
     fn spread(&self) -> String {
         format!(
-            "{:.1} µs ({:.1}–{:.1})",
-            self.ns_per_state / 1000.0,
-            self.ns_min / 1000.0,
-            self.ns_max / 1000.0
+            "{} ({}–{})",
+            format::micros(self.ns_per_state),
+            format::sig3(self.ns_min / 1000.0),
+            format::sig3(self.ns_max / 1000.0)
         )
     }
 }
@@ -254,47 +261,48 @@ impl Hardware {
     }
 }
 
-/// Renders the report into `dir` (created if need be); returns the path of
+/// Renders the report into `dir` (created if need be): `report.md`, the
+/// same as `report.html`, and their charts; returns the path of
 /// `report.md`.
 pub fn render(run: &RunInfo, dir: &Path) -> Result<PathBuf> {
     atomic::sweep_leftovers(dir)?;
     let variants: Vec<Loaded> = run.variants.iter().map(load).collect::<Result<_>>()?;
+    let shared = across::shares_baselines(&variants);
     let mut md = String::new();
     let _ = writeln!(md, "# {} — report\n", run.experiment);
     findings::findings(&mut md, run, &variants);
-    reproducibility(&mut md, run, &variants);
+    across::charts(&mut md, &variants, shared, dir)?;
+    across::side_by_side(&mut md, &variants, shared);
     replicates::section(&mut md, &variants, dir)?;
-    side_by_side(&mut md, &variants);
-
-    let mut points = Vec::new();
-    for v in &variants {
-        for t in &v.timings {
-            if let Some((mean, p95)) = overall(&v.summary, &t.model) {
-                points.push(SpeedPoint {
-                    label: format!("{} {} {} ({} thr)", v.info.name, t.model, t.path, t.threads),
-                    ns_per_state: t.ns_per_state,
-                    mean,
-                    p95,
-                });
-            }
-        }
+    let n = variants.len();
+    for (k, v) in variants.iter().enumerate() {
+        variant::section(&mut md, v, (k, n), shared, dir, run.compare_with_paper)?;
     }
-    atomic::write_bytes(&dir.join("speed.svg"), charts::speed(&points).as_bytes())?;
-    let _ = writeln!(md, "## Speed against error\n");
-    let _ = writeln!(
-        md,
-        "![ns per predicted state against error](speed.svg)\n\nEach point is one model and evaluation \
-         path of one variant: its ns per predicted state (for the simulator, per re-simulated \
-         frame, at several integration steps per frame) on this machine against its error \
-         averaged over the variables (mean filled, 95th percentile hollow).\n"
-    );
-
-    for v in &variants {
-        variant_section(&mut md, v, dir, run.compare_with_paper)?;
-    }
+    glossary::section(&mut md, &variants);
+    reproducibility(&mut md, run, &variants);
     let path = dir.join(REPORT_FILE);
     atomic::write_bytes(&path, md.as_bytes())?;
+    remove_stale_charts(dir, &md)?;
+    let title = format!("{} — report", run.experiment);
+    atomic::write_bytes(
+        &dir.join(html::HTML_FILE),
+        html::page(&title, &md).as_bytes(),
+    )?;
     Ok(path)
+}
+
+/// Removes the charts in `dir` the report no longer shows (left by an
+/// earlier rendering, or an earlier version's layout).
+fn remove_stale_charts(dir: &Path, md: &str) -> Result<()> {
+    let entries = std::fs::read_dir(dir).map_err(|e| alnlab_common::Error::io(dir, e))?;
+    for entry in entries {
+        let path = entry.map_err(|e| alnlab_common::Error::io(dir, e))?.path();
+        let name = path.file_name().and_then(|n| n.to_str()).unwrap_or("");
+        if name.ends_with(".svg") && !md.contains(&format!("]({name})")) {
+            std::fs::remove_file(&path).map_err(|e| alnlab_common::Error::io(&path, e))?;
+        }
+    }
+    Ok(())
 }
 
 /// A summary split into its rows over all test rows and over the held-out
@@ -595,21 +603,31 @@ fn worse_than_persistence<'a>(v: &'a Loaded) -> Vec<(&'a str, f64, f64, &'a Inte
         .collect()
 }
 
+/// How the run was made: manifest, seeds, versions, machine, and every
+/// stage's time.
 fn reproducibility(md: &mut String, run: &RunInfo, variants: &[Loaded]) {
     let machine = variants
         .iter()
         .flat_map(|v| v.timings.first())
-        .map(|t| format!("{}, {} cores", t.cpu, t.cores))
+        .map(|t| {
+            let cpu = if t.cpu.trim().is_empty() {
+                "CPU model not reported"
+            } else {
+                t.cpu.trim()
+            };
+            format!("{cpu}, {} cores", t.cores)
+        })
         .next()
         .unwrap_or_else(|| "—".into());
     let _ = writeln!(md, "## Reproducibility\n");
-    let _ = writeln!(md, "| | |\n|---|---|");
-    let _ = writeln!(md, "| manifest | `{}` |", run.manifest_path);
-    let _ = writeln!(md, "| manifest sha256 | `{}` |", run.manifest_sha256);
+    let mut table = MdTable::new(&["what"]).column("", Align::Left);
+    let mut add = |what: &str, value: String| table.row(vec![what.into(), value]);
+    add("manifest", format!("`{}`", run.manifest_path));
+    add("manifest sha256", format!("`{}`", run.manifest_sha256));
     if let Some((dataset, sha256)) = &run.dataset {
-        let _ = writeln!(md, "| dataset | {dataset} (sha256 `{sha256}`) |");
+        add("dataset", format!("{dataset} (sha256 `{sha256}`)"));
     }
-    let _ = writeln!(md, "| seed | {} |", run.seed);
+    add("seed", run.seed.to_string());
     if let Some(v) = variants.first().filter(|v| v.info.replicates.len() > 1) {
         let seeds: Vec<String> = v
             .info
@@ -617,307 +635,41 @@ fn reproducibility(md: &mut String, run: &RunInfo, variants: &[Loaded]) {
             .iter()
             .map(|r| r.seed.to_string())
             .collect();
-        let _ = writeln!(
-            md,
-            "| replicates | {} (seeds {}) |",
-            seeds.len(),
-            seeds.join(", ")
+        add(
+            "replicates",
+            format!("{} (seeds {})", seeds.len(), seeds.join(", ")),
         );
     }
-    let _ = writeln!(md, "| alnlab | {} |", run.alnlab_version);
+    add("alnlab", run.alnlab_version.clone());
     let commit = run
         .git_commit
         .as_deref()
         .unwrap_or("(not in a git checkout)");
-    let _ = writeln!(md, "| git commit | `{commit}` |");
-    let _ = writeln!(md, "| machine | {machine} |");
-    let _ = writeln!(md, "| started | {} |", run.started);
-    let _ = writeln!(md, "| wall time | {:.2} s |\n", run.wall_seconds);
+    add("git commit", format!("`{commit}`"));
+    add("machine", machine);
+    add("started", run.started.clone());
+    add("wall time", format!("{} s", format::sig3(run.wall_seconds)));
+    table.write(md);
     let _ = writeln!(
         md,
-        "| variant | stage | cached | wall (s) | compute when made (s) |"
+        "Stage times of this run (first replicate): wall time in this run (a cached stage only \
+         looked up), and compute time when the artifact was made.\n"
     );
-    let _ = writeln!(md, "|---|---|---|---:|---:|");
+    let mut table = MdTable::new(&["variant", "stage"])
+        .column("cached", Align::Left)
+        .numbers(&["wall (s)", "compute when made (s)"]);
     for v in variants {
         for s in &v.info.stages {
-            let _ = writeln!(
-                md,
-                "| {} | {} | {} | {:.3} | {:.3} |",
-                v.info.name,
-                s.stage,
-                if s.cached { "yes" } else { "no" },
-                s.wall_seconds,
-                s.compute_seconds
-            );
+            table.row(vec![
+                format!("`{}`", v.info.name),
+                s.stage.clone(),
+                if s.cached { "yes" } else { "no" }.into(),
+                format::sig3(s.wall_seconds),
+                format::sig3(s.compute_seconds),
+            ]);
         }
     }
-    md.push('\n');
-}
-
-fn side_by_side(md: &mut String, variants: &[Loaded]) {
-    let _ = writeln!(md, "## Variants side by side\n");
-    let mut baselines: Vec<&str> = Vec::new();
-    for v in variants {
-        for b in baseline_models(&v.summary) {
-            if !baselines.contains(&b) {
-                baselines.push(b);
-            }
-        }
-    }
-    let _ = write!(
-        md,
-        "Errors in quantization levels averaged over the variables, on each variant's held-out \
-         test rows (all test rows when none is held out), and the ALN's also over all test rows; \
-         times on one thread (median of the timed runs); training time as computed (also when \
-         the stage was cached); the trees' memory while training. \"Worse than persistence\" \
-         counts the variables whose paired difference's interval lies above zero.\n\n\
-         | variant | rows | ALN mean | ALN normalized | ALN p95 | ALN mean, all test rows |"
-    );
-    for b in &baselines {
-        let _ = write!(md, " {b} mean |");
-    }
-    let _ = writeln!(
-        md,
-        " ALN batched ns/state | ALN single ns/state | hardware estimate (gate delays) | \
-         training (s) | trees (MiB) | variables worse than persistence |\n\
-         |---|---|---:|---:|---:|---:|{}---:|---:|---:|---:|---:|---:|",
-        "---:|".repeat(baselines.len())
-    );
-    for v in variants {
-        let (judged, rows) = v.judged();
-        let mean =
-            |model: &str| overall(judged, model).map_or("—".into(), |(m, _)| format!("{m:.4}"));
-        let p95 = overall(judged, "aln").map_or("—".into(), |(_, p)| format!("{p:.2}"));
-        let all = overall(&v.summary, "aln").map_or("—".into(), |(m, _)| format!("{m:.4}"));
-        let ns = |t: Option<f64>| t.map_or("—".into(), |t| format!("{t:.0}"));
-        let worse = worse_than_persistence(v).len();
-        let total = judged.iter().filter(|r| r.model == "aln").count();
-        let baseline_means: String = baselines
-            .iter()
-            .map(|b| format!(" {} |", mean(b)))
-            .collect();
-        let _ = writeln!(
-            md,
-            "| {} | {} | {} | {} | {} | {all} |{baseline_means} {} | {} | {} | {} | {:.1} | {}{} of {} |",
-            v.info.name,
-            rows.as_str(),
-            mean("aln"),
-            normalized(judged, "aln").map_or("—".into(), |x| format!("{x:.3}")),
-            p95,
-            ns(v.ns("aln", "batched")),
-            ns(v.aln_single().map(|t| t.ns_per_state)),
-            v.hardware.delays(),
-            v.info
-                .stages
-                .iter()
-                .find(|s| s.stage == "train")
-                .map_or("—".into(), |s| format!("{:.1}", s.compute_seconds)),
-            v.tree_bytes as f64 / (1024.0 * 1024.0),
-            if worse > 0 { "⚠ " } else { "" },
-            worse,
-            total
-        );
-    }
-    md.push('\n');
-}
-
-fn file_name(variant: &str, chart: &str) -> String {
-    let safe: String = variant
-        .chars()
-        .map(|c| {
-            if c.is_ascii_alphanumeric() || c == '-' || c == '_' {
-                c
-            } else {
-                '-'
-            }
-        })
-        .collect();
-    format!("{safe}-{chart}.svg")
-}
-
-fn variant_section(
-    md: &mut String,
-    v: &Loaded,
-    dir: &Path,
-    compare_with_paper: bool,
-) -> Result<()> {
-    let _ = writeln!(md, "## Variant `{}`\n", v.info.name);
-    if !v.info.description.is_empty() {
-        let _ = writeln!(md, "{}\n", v.info.description);
-    }
-
-    if !v.not_learned.is_empty() {
-        let _ = writeln!(
-            md,
-            "### Variables not learned\n\nThe data hold them, but they carry nothing to predict; \
-             no model is scored on them.\n\n| variable | why |\n|---|---|"
-        );
-        for (variable, note) in &v.not_learned {
-            let _ = writeln!(md, "| `{variable}` | {note} |");
-        }
-        let _ = writeln!(md);
-    }
-
-    let _ = writeln!(md, "### Error by group (paper §4.6)\n");
-    let baselines = baseline_models(&v.summary);
-    let _ = write!(
-        md,
-        "The ALN's best and worst variable of each group over all test rows, in quantization \
-         levels (the mean also in SI units: levels × the size of one level), beside its mean on \
-         the held-out rows alone and the baselines' mean error on the same variable.\n\n\
-         | group | | variable | mean | mean (SI) | std dev | std err | 5% trim | median | IQR | max | held-out mean |"
-    );
-    for b in &baselines {
-        let _ = write!(md, " {b} mean |");
-    }
-    let _ = writeln!(
-        md,
-        "\n|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|{}",
-        "---:|".repeat(baselines.len())
-    );
-    let aln: Vec<&SummaryRow> = v.summary.iter().filter(|r| r.model == "aln").collect();
-    let mut groups: Vec<&str> = aln.iter().map(|r| r.group.as_str()).collect();
-    groups.dedup();
-    for group in groups {
-        for (which, pick) in [("best", true), ("worst", false)] {
-            let Some(r) = aln.iter().find(|r| {
-                r.group == group
-                    && if pick {
-                        r.best_in_group
-                    } else {
-                        r.worst_in_group
-                    }
-            }) else {
-                continue;
-            };
-            let s = &r.stats;
-            let baseline = |m: &str| {
-                mean_of(&v.summary, m, &r.variable).map_or("—".into(), |x| format!("{x:.4}"))
-            };
-            let others: String = baselines
-                .iter()
-                .map(|b| format!(" {} |", baseline(b)))
-                .collect();
-            let si = v.si(&r.variable).map_or("—".into(), |(step, unit)| {
-                format!("{} {unit}", sig(s.mean * step))
-            });
-            let held = mean_of(&v.held_out, "aln", &r.variable)
-                .map_or("—".into(), |x| format!("{x:.4}"));
-            let _ = writeln!(
-                md,
-                "| {group} | {which} | {} | {:.4} | {si} | {:.4} | {:.4} | {:.4} | {} | {} | {} | {held} |{others}",
-                r.variable, s.mean, s.std_dev, s.std_err, s.trimmed_mean, s.median, s.iqr, s.max,
-            );
-        }
-    }
-    md.push('\n');
-
-    if compare_with_paper {
-        beside_the_paper(md, v);
-    }
-    models_table(md, v);
-
-    let worse = worse_than_persistence(v);
-    let (judged, rows) = v.judged();
-    let _ = writeln!(md, "### Worse than persistence\n");
-    if worse.is_empty() {
-        let _ = writeln!(
-            md,
-            "On no variable is the ALN's error above persistence's beyond the 95% interval of \
-             their paired difference ({} rows).\n",
-            rows.as_str()
-        );
-    } else {
-        let _ = writeln!(
-            md,
-            "⚠ On {} of {} variables the ALN's error is higher than predicting no change, the \
-             95% interval of the paired difference above zero ({} rows; SI: the difference × \
-             the size of one level):\n\n\
-             | variable | ALN mean | persistence mean | difference [95% interval] | difference (SI) |\n\
-             |---|---:|---:|---|---:|",
-            worse.len(),
-            judged.iter().filter(|r| r.model == "aln").count(),
-            rows.as_str()
-        );
-        for (variable, mean, persistence, d) in &worse {
-            let si = v.si(variable).map_or("—".into(), |(step, unit)| {
-                format!("{} {unit}", sig(d.mean * step))
-            });
-            let _ = writeln!(
-                md,
-                "| ⚠ {variable} | {mean:.4} | {persistence:.4} | {} | {si} |",
-                findings::difference(d)
-            );
-        }
-        md.push('\n');
-    }
-
-    if let Some(worst) = aln
-        .iter()
-        .max_by(|a, b| a.stats.mean.total_cmp(&b.stats.mean))
-    {
-        let name = file_name(&v.info.name, "histogram");
-        let title = format!("{}: errors of {}", v.info.name, worst.variable);
-        atomic::write_bytes(
-            &dir.join(&name),
-            charts::histogram(&title, &worst.stats.histogram).as_bytes(),
-        )?;
-        let _ = writeln!(
-            md,
-            "### Error histogram of the worst variable, `{}` (paper §4.5)\n",
-            worst.variable
-        );
-        let _ = writeln!(md, "![histogram]({name})\n");
-        let _ = writeln!(
-            md,
-            "| error (levels) | 0 | 1 | 2 | 3 | 4 | 5 | 6 | 7 | 8 | 9 | 10+ |"
-        );
-        let _ = writeln!(
-            md,
-            "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"
-        );
-        let counts: Vec<String> = worst.stats.histogram.iter().map(u64::to_string).collect();
-        let _ = writeln!(md, "| count | {} |\n", counts.join(" | "));
-    }
-
-    let name = file_name(&v.info.name, "training");
-    let series = vec![("mean errors per tree".to_string(), v.training.clone())];
-    let title = format!("{}: training errors per epoch", v.info.name);
-    atomic::write_bytes(
-        &dir.join(&name),
-        charts::lines(&title, "epoch", "errors per tree", &series).as_bytes(),
-    )?;
-    let _ = writeln!(md, "### Training\n\n![training errors per epoch]({name})\n");
-
-    let h = &v.hardware;
-    let _ = writeln!(md, "### Hardware estimate (paper §5)\n");
-    let _ = match h.kind {
-        ModelKind::BitForest => writeln!(
-            md,
-            "Pruned trees are at most {} gate delays deep (mean {:.1}); decoding a {}-bit code takes \
-             about twice its width: {} + 2·{} = **{} gate delays** per predicted state, all trees \
-             in parallel.\n",
-            h.max_depth,
-            h.mean_depth,
-            h.max_width,
-            h.max_depth,
-            h.max_width,
-            h.delays()
-        ),
-        ModelKind::Threshold => writeln!(
-            md,
-            "Pruned trees are at most {} gate delays deep (mean {:.1}); the binary search over {} \
-             levels takes {} evaluations in sequence: {}·{} = **{} gate delays** per predicted state.\n",
-            h.max_depth,
-            h.mean_depth,
-            h.max_width + 1,
-            h.levels_steps,
-            h.max_depth,
-            h.levels_steps,
-            h.delays()
-        ),
-    };
-    closed_loop(md, v, dir)
+    table.write(md);
 }
 
 /// The rows of the paper's §4.6 table (its CSV fields: group, best|worst,
@@ -942,173 +694,4 @@ fn paper_rows(summary: &[SummaryRow]) -> Vec<(Vec<&'static str>, Option<&Summary
             (f, ours)
         })
         .collect()
-}
-
-/// Our best and worst variable of each group beside the paper's (§4.6).
-fn beside_the_paper(md: &mut String, v: &Loaded) {
-    let _ = writeln!(
-        md,
-        "### Beside the paper (§4.6)\n\nThe paper's numbers as published (its table of §4.6), ours \
-         for the same group and rank; errors in quantization levels. Our variables and ranges are \
-         our simulator's, not DynaTree's, so a row compares like with like only as far as the \
-         groups do.\n\n\
-         | group | | paper mean | our mean (variable) | paper 5% trim | ours | paper median | ours | \
-         paper IQR | ours | paper max | ours |\n\
-         |---|---|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|"
-    );
-    for (f, ours) in paper_rows(&v.summary) {
-        let (group, which) = (f[0], f[1]);
-        let (mean, trim, median, iqr, max) = match ours {
-            Some(r) => (
-                format!("{:.4} ({})", r.stats.mean, r.variable),
-                format!("{:.4}", r.stats.trimmed_mean),
-                r.stats.median.to_string(),
-                r.stats.iqr.to_string(),
-                r.stats.max.to_string(),
-            ),
-            None => ("—".into(), "—".into(), "—".into(), "—".into(), "—".into()),
-        };
-        let _ = writeln!(
-            md,
-            "| {group} | {which} | {} | {mean} | {} | {trim} | {} | {median} | {} | {iqr} | {} | {max} |",
-            f[2], f[5], f[6], f[7], f[8]
-        );
-    }
-    md.push('\n');
-}
-
-/// Every model beside the ALN: its error over all variables, on all and
-/// on held-out rows, against the ALN, and its speed.
-fn models_table(md: &mut String, v: &Loaded) {
-    let (judged, rows) = v.judged();
-    let _ = writeln!(
-        md,
-        "### Every model\n\nErrors averaged over the variables, over all test rows and over the \
-         {} rows (normalized: each variable's mean error over the standard deviation of its \
-         true levels); the ALN's paired difference against the model on those rows, with its \
-         95% interval; time per predicted state (the simulator: per re-simulated frame, \
-         `simulator@k/frame` taking k integration steps per frame), median and range of the \
-         timed runs, with the path and threads; frames a simulator could not step are scored \
-         as the worst prediction.\n\n\
-         | model | mean | 5% trim | p95 | max | {0} mean | {0} normalized | ALN − model [95%] | µs/state (path, threads) | failed |\n\
-         |---|---:|---:|---:|---:|---:|---:|---|---|---:|",
-        rows.as_str()
-    );
-    let mut models: Vec<&str> = v.summary.iter().map(|r| r.model.as_str()).collect();
-    models.dedup();
-    for model in models {
-        let rows: Vec<&SummaryRow> = v.summary.iter().filter(|r| r.model == model).collect();
-        let n = rows.len() as f64;
-        let average = |f: fn(&SummaryRow) -> f64| rows.iter().map(|r| f(r)).sum::<f64>() / n;
-        let max = rows.iter().map(|r| r.stats.max).max().unwrap_or(0);
-        let speed: Vec<String> = v
-            .timings
-            .iter()
-            .filter(|t| t.model == model)
-            .map(|t| format!("{} ({}, {})", t.spread(), t.path, t.threads))
-            .collect();
-        let failed: u32 = v
-            .timings
-            .iter()
-            .filter(|t| t.model == model && t.threads == 1)
-            .map(|t| t.failed)
-            .max()
-            .unwrap_or(0);
-        let compared = v
-            .compared(model, None)
-            .map_or("—".into(), findings::difference);
-        let _ = writeln!(
-            md,
-            "| {model} | {:.4} | {:.4} | {:.2} | {max} | {} | {} | {compared} | {} | {failed} |",
-            average(|r| r.stats.mean),
-            average(|r| r.stats.trimmed_mean),
-            average(|r| r.stats.p95),
-            overall(judged, model).map_or("—".into(), |(m, _)| format!("{m:.4}")),
-            normalized(judged, model).map_or("—".into(), |x| format!("{x:.3}")),
-            if speed.is_empty() {
-                "—".into()
-            } else {
-                speed.join("; ")
-            },
-        );
-    }
-    md.push('\n');
-}
-
-/// Four significant digits, in plain or scientific notation as the size
-/// asks.
-fn sig(x: f64) -> String {
-    if x == 0.0 {
-        "0".into()
-    } else if (1e-3..1e4).contains(&x.abs()) {
-        let decimals = (3 - x.abs().log10().floor() as i32).max(0) as usize;
-        format!("{x:.decimals$}")
-    } else {
-        format!("{x:.3e}")
-    }
-}
-
-/// Error against closed-loop horizon: each model fed its own output.
-fn closed_loop(md: &mut String, v: &Loaded, dir: &Path) -> Result<()> {
-    let _ = writeln!(
-        md,
-        "### Closed loop
-"
-    );
-    if v.horizons.is_empty() {
-        let _ = writeln!(
-            md,
-            "No test row has enough logged frames after it for a rollout.\n"
-        );
-        return Ok(());
-    }
-    let mut models: Vec<&str> = v.horizons.iter().map(|h| h.0.as_str()).collect();
-    models.dedup();
-    let series: Vec<(String, Vec<(f64, f64)>)> = models
-        .iter()
-        .map(|&m| {
-            let points = v.horizons.iter().filter(|h| h.0 == m);
-            (
-                m.to_string(),
-                points.map(|h| (f64::from(h.1), h.2)).collect(),
-            )
-        })
-        .collect();
-    let name = file_name(&v.info.name, "closed-loop");
-    let title = format!("{}: closed-loop error against horizon", v.info.name);
-    let chart = charts::lines(&title, "steps fed back", "mean error (levels)", &series);
-    atomic::write_bytes(&dir.join(&name), chart.as_bytes())?;
-    let _ = writeln!(
-        md,
-        "From the true state of test rows held out of training (all test rows when none is), \
-         each model is fed its own predictions; its levels are scored against the logged \
-         trajectory at every step (all variables pooled).\n\n\
-         ![closed-loop error against horizon]({name})\n"
-    );
-    let _ = write!(md, "| steps |");
-    for m in &models {
-        let _ = write!(md, " {m} mean | {m} p95 |");
-    }
-    let _ = write!(md, "\n|---:|");
-    for _ in &models {
-        let _ = write!(md, "---:|---:|");
-    }
-    md.push('\n');
-    let mut steps: Vec<u16> = v.horizons.iter().map(|h| h.1).collect();
-    steps.sort_unstable();
-    steps.dedup();
-    for step in steps {
-        let _ = write!(md, "| {step} |");
-        for m in &models {
-            match v.horizons.iter().find(|h| h.0 == *m && h.1 == step) {
-                Some(h) => {
-                    let _ = write!(md, " {:.3} | {:.1} |", h.2, h.3);
-                }
-                None => md.push_str(" — | — |"),
-            }
-        }
-        md.push('\n');
-    }
-    md.push('\n');
-    Ok(())
 }

@@ -10,11 +10,30 @@
 //! std err = std dev / √n, the 5% trimmed mean drops ⌊0.05·n⌋ values from each
 //! end (as `scipy.stats.trim_mean(x, 0.05)`), median and quartiles
 //! interpolate linearly between order statistics (numpy's default), IQR =
-//! Q3 − Q1, and the histogram counts errors of 0, 1, …, 9 levels and of 10 or
-//! more (the paper's §4.5 view).
+//! Q3 − Q1, and the histogram counts errors of 0, 1, …, 9 levels (the
+//! paper's §4.5 view) and then the tail: 10–19, 20–49, 50–99, 100 or more.
 
-/// Bins of [`ErrorStats::histogram`]: 0 … 9 levels, then 10 or more.
-pub const HISTOGRAM_BINS: usize = 11;
+/// The lowest error of each bin of [`ErrorStats::histogram`]; a bin holds
+/// errors up to the next bin's lowest, the last bin every larger error.
+pub const HISTOGRAM_EDGES: [u32; HISTOGRAM_BINS] = [0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 20, 50, 100];
+
+/// Bins of [`ErrorStats::histogram`].
+pub const HISTOGRAM_BINS: usize = 14;
+
+/// The bin of [`ErrorStats::histogram`] holding errors of `error` levels.
+pub fn histogram_bin(error: u32) -> usize {
+    HISTOGRAM_EDGES.partition_point(|&edge| edge <= error) - 1
+}
+
+/// A bin's name: `7`, `10–19`, `100+`.
+pub fn histogram_bin_name(bin: usize) -> String {
+    let low = HISTOGRAM_EDGES[bin];
+    match HISTOGRAM_EDGES.get(bin + 1) {
+        Some(&next) if next == low + 1 => low.to_string(),
+        Some(&next) => format!("{low}–{}", next - 1),
+        None => format!("{low}+"),
+    }
+}
 
 /// The statistics of one set of errors.
 #[derive(Clone, Debug, PartialEq)]
@@ -29,7 +48,7 @@ pub struct ErrorStats {
     /// The 95th percentile (linear interpolation).
     pub p95: f64,
     pub max: u32,
-    /// Errors of 0, 1, …, 9 levels, and of 10 or more.
+    /// Errors per bin of [`HISTOGRAM_EDGES`].
     pub histogram: [u64; HISTOGRAM_BINS],
 }
 
@@ -89,7 +108,7 @@ impl ErrorCounts {
         };
         let mut histogram = [0u64; HISTOGRAM_BINS];
         for (e, &c) in self.counts.iter().enumerate() {
-            histogram[e.min(HISTOGRAM_BINS - 1)] += c;
+            histogram[histogram_bin(e as u32)] += c;
         }
         Some(ErrorStats {
             n,
@@ -272,8 +291,39 @@ mod tests {
         assert_eq!(s.trimmed_mean, 2699.0 / 8100.0);
         assert_eq!((s.median, s.iqr, s.max), (0.0, 1.0, 151));
         assert_eq!(
-            s.histogram,
-            [6300, 1854, 343, 185, 109, 48, 31, 12, 21, 21, 76]
+            s.histogram[..10],
+            [6300, 1854, 343, 185, 109, 48, 31, 12, 21, 21]
         );
+        // The paper's one bar of 10 or more, and its tail.
+        assert_eq!(s.histogram[10..].iter().sum::<u64>(), 76);
+        let tail = |low: u32, high: u32| {
+            (0..76)
+                .filter(|k| (low..high).contains(&(10 + k * 141 / 75)))
+                .count() as u64
+        };
+        assert_eq!(
+            s.histogram[10..],
+            [tail(10, 20), tail(20, 50), tail(50, 100), tail(100, 200)]
+        );
+    }
+
+    #[test]
+    fn histogram_bins_cover_every_error_once() {
+        let names: Vec<String> = (0..HISTOGRAM_BINS).map(histogram_bin_name).collect();
+        assert_eq!(names[9..], ["9", "10–19", "20–49", "50–99", "100+"]);
+        for (error, bin) in [
+            (0, 0),
+            (9, 9),
+            (10, 10),
+            (19, 10),
+            (20, 11),
+            (49, 11),
+            (50, 12),
+            (99, 12),
+            (100, 13),
+            (u32::MAX, 13),
+        ] {
+            assert_eq!(histogram_bin(error), bin, "{error}");
+        }
     }
 }

@@ -5,6 +5,7 @@
 
 use std::fmt::Write as _;
 
+use super::format::{estimate, interval, micros, sig3};
 use super::{Loaded, RunInfo, Timing, normalized, overall, paper_rows};
 use crate::Rows;
 use crate::paired::{Interval, Verdict};
@@ -19,11 +20,6 @@ fn coarsest_simulator<'a>(v: &'a Loaded) -> Option<(&'a str, u32)> {
             Some((t.model.as_str(), steps.parse().ok()?))
         })
         .min_by_key(|&(_, steps)| steps)
-}
-
-/// "1.23 µs" for a time in ns.
-fn micros(ns: f64) -> String {
-    format!("{:.1} µs", ns / 1000.0)
 }
 
 /// The speed verdict of `a` against `b` from their timed runs, which were
@@ -41,20 +37,22 @@ pub(super) fn speed_verdict(a: &Timing, b: &Timing) -> String {
     if ratios.is_empty() {
         "not comparable in speed (no paired runs)".into()
     } else if hi < 1.0 {
-        format!("{:.1}× faster", b.ns_per_state / a.ns_per_state)
+        format!("{}× faster", sig3(b.ns_per_state / a.ns_per_state))
     } else if lo > 1.0 {
-        format!("{:.1}× slower", a.ns_per_state / b.ns_per_state)
+        format!("{}× slower", sig3(a.ns_per_state / b.ns_per_state))
     } else {
         format!(
-            "indistinguishable in speed (its time over the simulator's ranges from {lo:.2} to \
-             {hi:.2} across the rounds)"
+            "indistinguishable in speed (its time over the simulator's ranges from {} to {} \
+             across the rounds)",
+            sig3(lo),
+            sig3(hi)
         )
     }
 }
 
-/// "−0.136 [−0.150, −0.121]": a paired difference and its interval.
+/// "-0.136 [-0.150, -0.121]": a paired difference and its interval.
 pub(super) fn difference(i: &Interval) -> String {
-    format!("{:+.3} [{:+.3}, {:+.3}]", i.mean, i.low, i.high)
+    interval(i.mean, i.low, i.high)
 }
 
 /// The verdict word of the ALN against another model, from the interval of
@@ -139,9 +137,10 @@ fn variant_findings(md: &mut String, v: &Loaded) {
         n => format!(", replicate 1 of {n} (seed {})", v.info.replicates[0].seed),
     };
     let mut sentence = format!(
-        "- **`{name}`**{replicate} {which}: the ALN's mean error is {aln:.3} levels ({:.3} \
-         normalized) over {variables} variables ({})",
-        normalized(judged, "aln").unwrap_or(f64::NAN),
+        "- **`{name}`**{replicate} {which}: the ALN's mean error is {} levels ({} normalized) \
+         over {variables} variables ({})",
+        sig3(aln),
+        sig3(normalized(judged, "aln").unwrap_or(f64::NAN)),
         groups.join(", ")
     );
     for baseline in ["persistence", "linear"] {
@@ -149,8 +148,9 @@ fn variant_findings(md: &mut String, v: &Loaded) {
         {
             let _ = write!(
                 sentence,
-                "; {} {baseline} ({mean:.3}; difference {})",
+                "; {} {baseline} ({}; difference {})",
                 accuracy_word(d),
+                sig3(mean),
                 difference(d)
             );
         }
@@ -205,9 +205,10 @@ fn variant_findings(md: &mut String, v: &Loaded) {
         let _ = write!(
             md,
             "). The simulator re-stepping a frame with {steps} step{} takes {} for an error of \
-             {sim_mean:.3}: the ALN is {}",
+             {}: the ALN is {}",
             if steps == 1 { "" } else { "s" },
             sim_time.spread(),
+            sig3(sim_mean),
             speed_verdict(aln_time, sim_time),
         );
         match v.compared(simulator, None) {
@@ -248,14 +249,17 @@ fn variant_findings(md: &mut String, v: &Loaded) {
             let _ = write!(
                 md,
                 "  - Closed loop: fed its own predictions for {last} steps, the ALN's mean error \
-                 grows to {aln:.2} levels, against {persistence:.2} for persistence"
+                 grows to {} levels, against {} for persistence",
+                sig3(aln),
+                sig3(persistence)
             );
             if let Some((simulator, steps)) = coarsest_simulator(v)
                 && let Some(sim) = at(simulator)
             {
                 let _ = write!(
                     md,
-                    " and {sim:.2} for the simulator at {steps} step{} per frame",
+                    " and {} for the simulator at {steps} step{} per frame",
+                    sig3(sim),
                     if steps == 1 { "" } else { "s" }
                 );
             }
@@ -278,8 +282,11 @@ fn across_variants(md: &mut String, variants: &[Loaded]) {
     let _ = write!(
         md,
         "- Across variants (each on its own held-out rows; a ranking, not a paired test): the \
-         ALN's mean error ranges from {:.3} (`{}`) to {:.3} (`{}`)",
-        best.1, best.0, worst.1, worst.0
+         ALN's mean error ranges from {} (`{}`) to {} (`{}`)",
+        sig3(best.1),
+        best.0,
+        sig3(worst.1),
+        worst.0
     );
     // With replicates, the variants compared paired by replicate, against
     // the one of lowest mean error across replicates.
@@ -304,12 +311,10 @@ fn across_variants(md: &mut String, variants: &[Loaded]) {
         if !others.is_empty() {
             let _ = write!(
                 md,
-                "; across replicates (paired by replicate), `{}` has the lowest ALN error ({:.3} \
-                 [{:.3}, {:.3}]): {}",
+                "; across replicates (paired by replicate), `{}` has the lowest ALN error ({}): \
+                 {}",
                 best.info.name,
-                mean.mean,
-                mean.low,
-                mean.high,
+                estimate(mean.mean, mean.low, mean.high),
                 others.join(", ")
             );
         }
@@ -343,7 +348,10 @@ fn against_the_paper(md: &mut String, variants: &[Loaded]) {
                 if r.stats.mean < paper {
                     lower += 1;
                 } else if r.stats.mean > 2.0 * paper {
-                    far_higher.push(format!("{group} {which} ({:.2} vs {paper})", r.stats.mean));
+                    far_higher.push(format!(
+                        "{group} {which} ({} vs {paper})",
+                        sig3(r.stats.mean)
+                    ));
                 }
             }
         }

@@ -11,12 +11,13 @@ use std::path::Path;
 use alnlab_common::{Result, atomic};
 
 use super::findings::{accuracy_word, difference};
+use super::format::{estimate, sig3};
 use super::{Loaded, Replicate, aln_against, overall, split_rows};
 use crate::Rows;
 use crate::paired::Interval;
 
 /// The models whose errors the headline gives.
-const MODELS: [&str; 3] = ["aln", "persistence", "linear"];
+pub(super) const MODELS: [&str; 3] = ["aln", "persistence", "linear"];
 
 /// One replicate's headline figures, on its held-out rows (all test rows
 /// when none is held out).
@@ -28,6 +29,8 @@ pub(super) struct Figures {
     /// The ALN's mean paired difference against each baseline of
     /// [`MODELS`] (the ALN itself excepted).
     pub differences: Vec<Option<f64>>,
+    /// (model, step, mean) of the closed-loop errors.
+    pub horizons: Vec<(String, u16, f64)>,
 }
 
 impl Figures {
@@ -35,7 +38,13 @@ impl Figures {
         let (all, held, rows) = split_rows(crate::read(&replicate.summary)?);
         let judged = if rows == Rows::HeldOut { held } else { all };
         let comparisons = crate::read_comparisons(&replicate.comparisons)?;
+        let horizons = crate::read_horizons(&replicate.horizons)?
+            .into_iter()
+            .filter(|h| h.0 == rows)
+            .map(|(_, model, step, mean, _)| (model, step, mean))
+            .collect();
         Ok(Figures {
+            horizons,
             seed: replicate.seed,
             rows,
             means: MODELS
@@ -79,9 +88,9 @@ pub(super) fn aln_mean(v: &Loaded) -> Option<Interval> {
     across(&values)
 }
 
-/// "1.042 [1.020, 1.064]".
+/// "1.04 [1.02, 1.06]".
 fn with_interval(i: &Interval) -> String {
-    format!("{:.3} [{:.3}, {:.3}]", i.mean, i.low, i.high)
+    estimate(i.mean, i.low, i.high)
 }
 
 /// The findings' line on a variant's replicates, if it has several.
@@ -145,7 +154,7 @@ pub(super) fn section(md: &mut String, variants: &[Loaded], dir: &Path) -> Resul
     );
     let mut csv =
         String::from("variant,figure,replicates,mean,std_dev,ci_low,ci_high,verdict,values\n");
-    let cell = |x: Option<f64>| x.map_or("—".into(), |x| format!("{x:.4}"));
+    let cell = |x: Option<f64>| x.map_or("—".into(), sig3);
     for v in variants.iter().filter(|v| v.replicates.len() > 1) {
         for (k, f) in v.replicates.iter().enumerate() {
             let _ = write!(md, "| {} | {} | {} |", v.info.name, k + 1, f.seed);

@@ -1,0 +1,462 @@
+//! The report's view across variants: one chart each for closed-loop error
+//! against horizon, speed against error (with its Pareto front) and
+//! training, every variant's ALN on it (and the baselines once, when the
+//! variants share their test rows); then the side-by-side tables and the
+//! baselines' table, given once rather than per variant.
+
+use std::fmt::Write as _;
+use std::path::Path;
+
+use alnlab_common::{Result, atomic};
+
+use super::format::{Align, MdTable, interval, micros, sig3};
+use super::{Loaded, baseline_models, normalized, overall, worse_than_persistence};
+use crate::charts::{self, Axis, Plot, Point, Series, style_of};
+use crate::paired::Interval;
+
+/// The chart files this section writes.
+pub(super) const CLOSED_LOOP: &str = "closed-loop.svg";
+pub(super) const SPEED: &str = "speed.svg";
+pub(super) const TRAINING: &str = "training.svg";
+
+/// Whether the variants' baselines are the same — they ran on the same
+/// test rows — so the baselines are given once, and errors in levels compare
+/// across variants.
+pub(super) fn shares_baselines(variants: &[Loaded]) -> bool {
+    let baselines = |v: &Loaded| -> Vec<(String, String, u64)> {
+        v.judged()
+            .0
+            .iter()
+            .filter(|r| r.model != "aln")
+            .map(|r| (r.model.clone(), r.variable.clone(), r.stats.mean.to_bits()))
+            .collect()
+    };
+    variants
+        .windows(2)
+        .all(|w| baselines(&w[0]) == baselines(&w[1]))
+}
+
+/// The ALN's series name: with its variant's when there are several.
+pub(super) fn aln_name(v: &Loaded, variants: usize) -> String {
+    if variants > 1 {
+        format!("aln · {}", v.info.name)
+    } else {
+        "aln".into()
+    }
+}
+
+/// A model's closed-loop mean error per step: across replicates (mean and
+/// 95% interval) when the variant has several, else its first replicate's.
+pub(super) fn horizon_points(v: &Loaded, model: &str) -> Vec<Point> {
+    let first: Vec<(u16, f64)> = v
+        .horizons
+        .iter()
+        .filter(|h| h.0 == model)
+        .map(|h| (h.1, h.2))
+        .collect();
+    first
+        .iter()
+        .map(|&(step, mean)| {
+            let values: Option<Vec<f64>> = v
+                .replicates
+                .iter()
+                .map(|f| {
+                    f.horizons
+                        .iter()
+                        .find(|h| h.0 == model && h.1 == step)
+                        .map(|h| h.2)
+                })
+                .collect();
+            match values
+                .filter(|v| v.len() > 1)
+                .and_then(|v| Interval::of(&v))
+            {
+                Some(i) => Point {
+                    y_range: Some((i.low, i.high)),
+                    ..Point::at(f64::from(step), i.mean)
+                },
+                None => Point::at(f64::from(step), mean),
+            }
+        })
+        .collect()
+}
+
+/// A model's mean error on the judged rows, across replicates when there
+/// are several (the headline models only).
+fn mean_point(v: &Loaded, model: &str) -> Option<(f64, Option<(f64, f64)>)> {
+    let (mean, _) = overall(v.judged().0, model)?;
+    let k = super::replicates::MODELS.iter().position(|m| *m == model);
+    let across = k.and_then(|k| {
+        let values: Option<Vec<f64>> = v.replicates.iter().map(|f| f.means[k]).collect();
+        values
+            .filter(|v| v.len() > 1)
+            .and_then(|v| Interval::of(&v))
+    });
+    Some(match across {
+        Some(i) => (i.mean, Some((i.low, i.high))),
+        None => (mean, None),
+    })
+}
+
+/// Writes the three cross-variant charts and their captions.
+pub(super) fn charts(md: &mut String, variants: &[Loaded], shared: bool, dir: &Path) -> Result<()> {
+    let n = variants.len();
+    let replicated = variants.iter().any(|v| v.replicates.len() > 1);
+    let _ = writeln!(
+        md,
+        "## {}\n",
+        if n > 1 { "Across variants" } else { "Charts" }
+    );
+    let bars = if replicated {
+        " Error bars: the 95% interval across replicates (the line: their mean)."
+    } else {
+        ""
+    };
+
+    // Closed loop.
+    if variants.iter().any(|v| !v.horizons.is_empty()) {
+        let mut series: Vec<Series> = variants
+            .iter()
+            .enumerate()
+            .map(|(k, v)| Series {
+                name: aln_name(v, n),
+                style: style_of("aln", k),
+                points: horizon_points(v, "aln"),
+                joined: true,
+                hollow: false,
+            })
+            .collect();
+        if shared {
+            let mut models: Vec<&str> = variants[0].horizons.iter().map(|h| h.0.as_str()).collect();
+            models.dedup();
+            for model in models.into_iter().filter(|m| *m != "aln") {
+                series.push(Series {
+                    name: model.to_string(),
+                    style: style_of(model, 0),
+                    points: horizon_points(&variants[0], model),
+                    joined: true,
+                    hollow: false,
+                });
+            }
+        }
+        let ys = series.iter().flat_map(|s| s.points.iter().map(|p| p.y));
+        let chart = charts::plot(&Plot {
+            title: "closed-loop error against horizon".into(),
+            x: Axis::integer("steps fed back"),
+            y: Axis::error("mean error (levels)", ys),
+            series,
+            pareto: false,
+        });
+        atomic::write_bytes(&dir.join(CLOSED_LOOP), chart.as_bytes())?;
+        let baselines = if shared {
+            "; the baselines, the same for every variant, once"
+        } else {
+            " (the variants ran on different data, so each one's baselines are in its own \
+             section)"
+        };
+        let _ = writeln!(
+            md,
+            "![closed-loop error against horizon]({CLOSED_LOOP})\n\nFrom the true state of test \
+             rows held out of training (all test rows when none is), each model is fed its own \
+             predictions; its levels are scored against the logged trajectory at every step (all \
+             variables pooled). Every variant's ALN{baselines}.{bars}\n"
+        );
+    }
+
+    // Speed against error.
+    let unit = if shared {
+        "mean error (levels)"
+    } else {
+        "normalized error"
+    };
+    let y_of = |v: &Loaded, model: &str| -> Option<(f64, Option<(f64, f64)>)> {
+        if shared {
+            mean_point(v, model)
+        } else {
+            normalized(v.judged().0, model).map(|x| (x, None))
+        }
+    };
+    let mut series = Vec::new();
+    for (k, v) in variants.iter().enumerate() {
+        let Some((y, y_range)) = y_of(v, "aln") else {
+            continue;
+        };
+        for t in v
+            .timings
+            .iter()
+            .filter(|t| t.model == "aln" && t.threads == 1)
+        {
+            let single = t.path != "batched";
+            series.push(Series {
+                name: format!(
+                    "{}, {}",
+                    aln_name(v, n),
+                    if single { "one at a time" } else { "batched" }
+                ),
+                style: style_of("aln", k),
+                points: vec![Point {
+                    x_range: Some((t.ns_min / 1000.0, t.ns_max / 1000.0)),
+                    y_range,
+                    ..Point::at(t.ns_per_state / 1000.0, y)
+                }],
+                joined: false,
+                hollow: single,
+            });
+        }
+    }
+    let baseline_times = if shared { &variants[..1] } else { &[] };
+    for v in baseline_times {
+        for t in v
+            .timings
+            .iter()
+            .filter(|t| t.model != "aln" && t.threads == 1)
+        {
+            let Some((y, y_range)) = y_of(v, &t.model) else {
+                continue;
+            };
+            series.push(Series {
+                name: t.model.clone(),
+                style: style_of(&t.model, 0),
+                points: vec![Point {
+                    x_range: Some((t.ns_min / 1000.0, t.ns_max / 1000.0)),
+                    y_range,
+                    ..Point::at(t.ns_per_state / 1000.0, y)
+                }],
+                joined: false,
+                hollow: false,
+            });
+        }
+    }
+    if !series.is_empty() {
+        let ys = series.iter().flat_map(|s| s.points.iter().map(|p| p.y));
+        let chart = charts::plot(&Plot {
+            title: "speed against error, one thread".into(),
+            x: Axis::log("µs per predicted state (log)"),
+            y: Axis::error(unit, ys),
+            series,
+            pareto: true,
+        });
+        atomic::write_bytes(&dir.join(SPEED), chart.as_bytes())?;
+        let whose = if shared {
+            "every variant's ALN (filled: batched; hollow: one state at a time) and the timed \
+             baselines"
+        } else {
+            "every variant's ALN (filled: batched; hollow: one state at a time); the variants \
+             ran on different data, so the error is normalized (each variable's mean error over \
+             the standard deviation of its true levels) and the baselines are in each variant's \
+             section"
+        };
+        let _ = writeln!(
+            md,
+            "![µs per predicted state against error]({SPEED})\n\nTime per predicted state on one \
+             thread (median of the timed runs; horizontal bars their range; the simulator per \
+             re-simulated frame) against error averaged over the variables on the held-out rows, \
+             for {whose}. The dashed staircase is the Pareto front: no point beats one on it in \
+             both speed and error.{bars}\n"
+        );
+    }
+
+    // Training.
+    let series: Vec<Series> = variants
+        .iter()
+        .enumerate()
+        .filter(|(_, v)| !v.training.is_empty())
+        .map(|(k, v)| Series {
+            name: aln_name(v, n),
+            style: style_of("aln", k),
+            points: v.training.iter().map(|&(x, y)| Point::at(x, y)).collect(),
+            joined: true,
+            hollow: false,
+        })
+        .collect();
+    if !series.is_empty() {
+        let ys = series.iter().flat_map(|s| s.points.iter().map(|p| p.y));
+        let chart = charts::plot(&Plot {
+            title: "training errors per epoch".into(),
+            x: Axis::integer("epoch"),
+            y: Axis::error("errors per tree (mean)", ys),
+            series,
+            pareto: false,
+        });
+        atomic::write_bytes(&dir.join(TRAINING), chart.as_bytes())?;
+        let _ = writeln!(
+            md,
+            "![training errors per epoch]({TRAINING})\n\nTraining rows each tree got wrong in an \
+             epoch, averaged over the trees (first replicate).\n"
+        );
+    }
+    if shared && variants.iter().any(|v| !v.horizons.is_empty()) {
+        closed_loop_table(md, variants);
+    }
+    Ok(())
+}
+
+/// The closed-loop figures behind the chart, when the variants share their
+/// baselines: each variant's ALN and the baselines once.
+fn closed_loop_table(md: &mut String, variants: &[Loaded]) {
+    let n = variants.len();
+    let mut columns: Vec<(String, &Loaded, &str)> = variants
+        .iter()
+        .map(|v| (aln_name(v, n), v, "aln"))
+        .collect();
+    let mut models: Vec<&str> = variants[0].horizons.iter().map(|h| h.0.as_str()).collect();
+    models.dedup();
+    for m in models.into_iter().filter(|m| *m != "aln") {
+        columns.push((m.to_string(), &variants[0], m));
+    }
+    closed_loop_rows(md, &columns);
+}
+
+/// A closed-loop table, one row per step: the mean (and then the 95th
+/// percentile) of each (name, variant, model) column, first replicate.
+pub(super) fn closed_loop_rows(md: &mut String, columns: &[(String, &Loaded, &str)]) {
+    let mut steps: Vec<u16> = columns
+        .iter()
+        .flat_map(|(_, v, _)| v.horizons.iter().map(|h| h.1))
+        .collect();
+    steps.sort_unstable();
+    steps.dedup();
+    for (what, pick) in [("mean", 2usize), ("95th percentile", 3)] {
+        let _ = writeln!(md, "Closed-loop error, {what} (levels):\n");
+        let names: Vec<&str> = columns.iter().map(|c| c.0.as_str()).collect();
+        let mut table = MdTable::new(&["steps"]).numbers(&names);
+        for &step in &steps {
+            let mut cells = vec![step.to_string()];
+            for (_, v, model) in columns {
+                cells.push(
+                    v.horizons
+                        .iter()
+                        .find(|h| h.0 == *model && h.1 == step)
+                        .map_or("—".into(), |h| sig3(if pick == 2 { h.2 } else { h.3 })),
+                );
+            }
+            table.row(cells);
+        }
+        table.write(md);
+    }
+}
+
+/// The variants side by side: accuracy, then cost; and the baselines once
+/// when the variants share them.
+pub(super) fn side_by_side(md: &mut String, variants: &[Loaded], shared: bool) {
+    let _ = writeln!(
+        md,
+        "## Variants side by side\n\nErrors in quantization levels averaged over the variables, \
+         on each variant's held-out test rows (all test rows when none is held out), first \
+         replicate; \"worse than persistence\" counts the variables whose paired difference's \
+         95% interval lies above zero.\n"
+    );
+    let mut table = MdTable::new(&["variant"])
+        .column("rows", Align::Left)
+        .numbers(&[
+            "ALN mean",
+            "ALN normalized",
+            "ALN p95",
+            "ALN mean, all test rows",
+        ])
+        .column("ALN − persistence [95%]", Align::Left)
+        .numbers(&["variables worse than persistence"]);
+    for v in variants {
+        let (judged, rows) = v.judged();
+        let aln = overall(judged, "aln");
+        let worse = worse_than_persistence(v).len();
+        let total = judged.iter().filter(|r| r.model == "aln").count();
+        table.row(vec![
+            format!("`{}`", v.info.name),
+            rows.as_str().into(),
+            aln.map_or("—".into(), |(m, _)| sig3(m)),
+            normalized(judged, "aln").map_or("—".into(), sig3),
+            aln.map_or("—".into(), |(_, p)| sig3(p)),
+            overall(&v.summary, "aln").map_or("—".into(), |(m, _)| sig3(m)),
+            v.compared("persistence", None)
+                .map_or("—".into(), |d| interval(d.mean, d.low, d.high)),
+            format!("{}{worse} of {total}", if worse > 0 { "⚠ " } else { "" }),
+        ]);
+    }
+    table.write(md);
+
+    let _ = writeln!(
+        md,
+        "Cost: time per predicted state on one thread (median of the timed runs), the §5 \
+         hardware estimate, training time as computed (also when the stage was cached) and the \
+         trees' memory while training.\n"
+    );
+    let mut table = MdTable::new(&["variant"]).numbers(&[
+        "ALN batched",
+        "ALN one at a time",
+        "hardware (gate delays)",
+        "training (s)",
+        "trees (MiB)",
+    ]);
+    for v in variants {
+        let time = |t: Option<f64>| t.map_or("—".into(), micros);
+        table.row(vec![
+            format!("`{}`", v.info.name),
+            time(v.ns("aln", "batched")),
+            time(v.aln_single().map(|t| t.ns_per_state)),
+            v.hardware.delays().to_string(),
+            v.info
+                .stages
+                .iter()
+                .find(|s| s.stage == "train")
+                .map_or("—".into(), |s| sig3(s.compute_seconds)),
+            sig3(v.tree_bytes as f64 / (1024.0 * 1024.0)),
+        ]);
+    }
+    table.write(md);
+
+    if shared && let Some(v) = variants.first() {
+        let _ = writeln!(
+            md,
+            "### Baselines\n\nThe same for every variant: they ran on the same test rows. Errors \
+             on the {} rows; time per predicted state, median and range of the timed runs (the \
+             simulator: per re-simulated frame, `simulator@k/frame` taking k integration steps \
+             per frame); frames a simulator could not step are scored as the worst \
+             prediction.\n",
+            v.judged().1.as_str()
+        );
+        baselines_table(md, v, false);
+    }
+}
+
+/// The models other than the ALN (with the ALN's own row and its paired
+/// difference against each when `with_aln`): errors and speed.
+pub(super) fn baselines_table(md: &mut String, v: &Loaded, with_aln: bool) {
+    let (judged, _) = v.judged();
+    let mut table = MdTable::new(&["model"]).numbers(&["mean", "normalized", "p95", "max"]);
+    if with_aln {
+        table = table.column("ALN − model [95%]", Align::Left);
+    }
+    table = table
+        .column("µs per state (range)", Align::Left)
+        .numbers(&["failed"]);
+    let mut models = baseline_models(judged);
+    if with_aln {
+        models.insert(0, "aln");
+    }
+    for model in models {
+        let rows: Vec<_> = judged.iter().filter(|r| r.model == model).collect();
+        let max = rows.iter().map(|r| r.stats.max).max().unwrap_or(0);
+        let timing = v
+            .timings
+            .iter()
+            .find(|t| t.model == model && t.threads == 1);
+        let mut cells = vec![
+            format!("`{model}`"),
+            overall(judged, model).map_or("—".into(), |(m, _)| sig3(m)),
+            normalized(judged, model).map_or("—".into(), sig3),
+            overall(judged, model).map_or("—".into(), |(_, p)| sig3(p)),
+            max.to_string(),
+        ];
+        if with_aln {
+            cells.push(
+                v.compared(model, None)
+                    .map_or("—".into(), |d| interval(d.mean, d.low, d.high)),
+            );
+        }
+        cells.push(timing.map_or("—".into(), |t| format!("{} ({})", t.spread(), t.path)));
+        cells.push(timing.map_or(0, |t| t.failed).to_string());
+        table.row(cells);
+    }
+    table.write(md);
+}

@@ -1,0 +1,192 @@
+//! How the report writes numbers and tables: three significant figures
+//! throughout, times in µs, intervals with one number of decimals for all
+//! three figures, and tables of at most [`MAX_COLUMNS`] columns.
+
+use std::fmt::Write as _;
+
+/// The most columns a table may have: wider ones are split, their key
+/// columns repeated in each part.
+pub const MAX_COLUMNS: usize = 9;
+
+/// Decimals that give `x` three significant figures (none for ≥ 100).
+fn decimals_for(x: f64) -> usize {
+    if x == 0.0 || !x.is_finite() {
+        return 2;
+    }
+    (2 - x.abs().log10().floor() as i32).max(0) as usize
+}
+
+/// Three significant figures: 1.87, 0.0835, 81.9, 5470 (from 100 up
+/// written whole); a whole number (a count, a median of whole errors) as
+/// itself: 2, 17.
+pub fn sig3(x: f64) -> String {
+    if x.is_nan() {
+        return "—".into();
+    }
+    if x.fract() == 0.0 && x.abs() < 1e15 {
+        return format!("{x:.0}");
+    }
+    if x.abs() < 1e-3 {
+        return format!("{x:.2e}");
+    }
+    // Round first: 9.996 has three figures as 10.0.
+    let rounded: f64 = format!("{x:.2e}").parse().unwrap_or(x);
+    format!("{rounded:.*}", decimals_for(rounded))
+}
+
+/// A mean and its interval, each to the decimals that give the largest of
+/// them three significant figures, signed: "+0.517 [+0.495, +0.540]".
+pub fn interval(mean: f64, low: f64, high: f64) -> String {
+    let largest = mean.abs().max(low.abs()).max(high.abs());
+    let d = decimals_for(largest);
+    format!("{mean:+.d$} [{low:+.d$}, {high:+.d$}]")
+}
+
+/// A mean and its unsigned interval: "1.91 [1.66, 2.16]".
+pub fn estimate(mean: f64, low: f64, high: f64) -> String {
+    let d = decimals_for(mean.abs().max(low.abs()).max(high.abs()));
+    format!("{mean:.d$} [{low:.d$}, {high:.d$}]")
+}
+
+/// A time per state given in ns, in µs: "5.50 µs".
+pub fn micros(ns: f64) -> String {
+    format!("{} µs", sig3(ns / 1000.0))
+}
+
+/// A column's alignment.
+#[derive(Clone, Copy)]
+pub enum Align {
+    Left,
+    Right,
+}
+
+/// A Markdown table: key columns that name a row, and value columns.
+pub struct MdTable {
+    keys: Vec<(String, Align)>,
+    values: Vec<(String, Align)>,
+    rows: Vec<Vec<String>>,
+}
+
+impl MdTable {
+    /// A table with these key columns (left-aligned).
+    pub fn new(keys: &[&str]) -> MdTable {
+        MdTable {
+            keys: keys.iter().map(|k| (k.to_string(), Align::Left)).collect(),
+            values: Vec::new(),
+            rows: Vec::new(),
+        }
+    }
+
+    /// Adds a value column.
+    pub fn column(mut self, name: &str, align: Align) -> MdTable {
+        self.values.push((name.to_string(), align));
+        self
+    }
+
+    /// Adds value columns, right-aligned (numbers).
+    pub fn numbers<S: AsRef<str>>(mut self, names: &[S]) -> MdTable {
+        for n in names {
+            self.values.push((n.as_ref().to_string(), Align::Right));
+        }
+        self
+    }
+
+    /// Adds a row: its keys, then its values.
+    pub fn row(&mut self, cells: Vec<String>) {
+        debug_assert_eq!(cells.len(), self.keys.len() + self.values.len());
+        self.rows.push(cells);
+    }
+
+    /// Writes the table, split into parts of at most [`MAX_COLUMNS`]
+    /// columns when wider.
+    pub fn write(&self, md: &mut String) {
+        let per_part = (MAX_COLUMNS - self.keys.len()).max(1);
+        let parts = self.values.len().div_ceil(per_part).max(1);
+        // Spread the values evenly over the parts.
+        let size = self.values.len().div_ceil(parts).max(1);
+        let k = self.keys.len();
+        for part in 0..parts {
+            let columns: Vec<usize> = (0..k)
+                .chain((k + part * size..k + ((part + 1) * size).min(self.values.len())).take(size))
+                .collect();
+            let header = |c: usize| {
+                if c < k {
+                    &self.keys[c]
+                } else {
+                    &self.values[c - k]
+                }
+            };
+            md.push('|');
+            for &c in &columns {
+                let _ = write!(md, " {} |", header(c).0);
+            }
+            md.push_str("\n|");
+            for &c in &columns {
+                md.push_str(match header(c).1 {
+                    Align::Left => "---|",
+                    Align::Right => "---:|",
+                });
+            }
+            md.push('\n');
+            for row in &self.rows {
+                md.push('|');
+                for &c in &columns {
+                    let _ = write!(md, " {} |", row[c]);
+                }
+                md.push('\n');
+            }
+            md.push('\n');
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn three_significant_figures() {
+        let cases = [
+            (1.8738, "1.87"),
+            (0.08349, "0.0835"),
+            (81.94, "81.9"),
+            (0.19, "0.190"),
+            (213.0, "213"),
+            (5472.6, "5470"),
+            (9.996, "10.0"),
+            (-0.0380, "-0.0380"),
+            (0.0, "0"),
+            (2.0, "2"),
+            (17.0, "17"),
+        ];
+        for (x, s) in cases {
+            assert_eq!(sig3(x), s, "{x}");
+        }
+        assert_eq!(interval(0.517, 0.495, 0.540), "+0.517 [+0.495, +0.540]");
+        assert_eq!(
+            interval(-0.038, -0.068, -0.007),
+            "-0.0380 [-0.0680, -0.0070]"
+        );
+        assert_eq!(micros(5472.0), "5.47 µs");
+    }
+
+    #[test]
+    fn wide_tables_split_repeating_their_keys() {
+        let names: Vec<String> = (0..12).map(|i| format!("v{i}")).collect();
+        let mut t = MdTable::new(&["model"]).numbers(&names);
+        let mut cells = vec!["aln".to_string()];
+        cells.extend((0..12).map(|i| i.to_string()));
+        t.row(cells);
+        let mut md = String::new();
+        t.write(&mut md);
+        let headers: Vec<&str> = md.lines().filter(|l| l.starts_with("| model")).collect();
+        assert_eq!(headers.len(), 2, "{md}");
+        for h in &headers {
+            assert!(h.matches('|').count() - 1 <= MAX_COLUMNS, "{h}");
+        }
+        assert!(
+            md.contains("| aln | 0 |") && md.contains("| aln | 6 |"),
+            "{md}"
+        );
+    }
+}

@@ -1,0 +1,391 @@
+//! One variant's section of the report: what it did not learn, its error
+//! by group (paper §4.6) beside the baselines and the paper, the ALN
+//! against every model, where it is worse than persistence, the §4.5
+//! histogram with its tail, the §5 hardware estimate, and — when the
+//! variants ran on different data — its own closed-loop chart.
+
+use std::fmt::Write as _;
+use std::path::Path;
+
+use alnlab_aln::ModelKind;
+use alnlab_common::{Result, atomic};
+
+use super::across::{aln_name, baselines_table, closed_loop_rows, horizon_points};
+use super::format::{Align, MdTable, interval, sig3};
+use super::{Loaded, SummaryRow, baseline_models, mean_of, paper_rows, worse_than_persistence};
+use crate::charts::{self, Axis, Plot, Series, style_of};
+use crate::stats::{HISTOGRAM_BINS, histogram_bin_name};
+
+/// A chart's file name: the variant's name, made safe, and the chart's.
+fn file_name(variant: &str, chart: &str) -> String {
+    let safe: String = variant
+        .chars()
+        .map(|c| {
+            if c.is_ascii_alphanumeric() || c == '-' || c == '_' {
+                c
+            } else {
+                '-'
+            }
+        })
+        .collect();
+    format!("{safe}-{chart}.svg")
+}
+
+/// Writes variant `v` (the `k`th of `n`), its charts into `dir`.
+pub(super) fn section(
+    md: &mut String,
+    v: &Loaded,
+    (k, n): (usize, usize),
+    shared: bool,
+    dir: &Path,
+    compare_with_paper: bool,
+) -> Result<()> {
+    let _ = writeln!(md, "## Variant `{}`\n", v.info.name);
+    if !v.info.description.is_empty() {
+        let _ = writeln!(md, "{}\n", v.info.description);
+    }
+    let _ = writeln!(md, "Model: {}.\n", v.description);
+
+    if !v.not_learned.is_empty() {
+        let _ = writeln!(
+            md,
+            "### Variables not learned\n\nThe data hold them, but they carry nothing to predict; \
+             no model is scored on them.\n"
+        );
+        let mut table = MdTable::new(&["variable"]).column("why", Align::Left);
+        for (variable, note) in &v.not_learned {
+            table.row(vec![format!("`{variable}`"), note.clone()]);
+        }
+        table.write(md);
+    }
+
+    by_group(md, v);
+    if compare_with_paper {
+        beside_the_paper(md, v);
+    }
+
+    let _ = writeln!(md, "### The ALN against every model\n");
+    if shared {
+        let _ = writeln!(
+            md,
+            "The ALN's mean paired difference in error against each model on the {} rows, with \
+             its 95% interval (the models' own figures are under Baselines).\n",
+            v.judged().1.as_str()
+        );
+        let mut table = MdTable::new(&["model"])
+            .column("ALN − model [95%]", Align::Left)
+            .column("the ALN is", Align::Left);
+        for model in baseline_models(v.judged().0) {
+            if let Some(d) = v.compared(model, None) {
+                table.row(vec![
+                    format!("`{model}`"),
+                    interval(d.mean, d.low, d.high),
+                    super::findings::accuracy_word(d).into(),
+                ]);
+            }
+        }
+        table.write(md);
+    } else {
+        let _ = writeln!(
+            md,
+            "Errors averaged over the variables on the {} rows (normalized: each variable's mean \
+             error over the standard deviation of its true levels); the ALN's paired difference \
+             against each model, with its 95% interval; time per predicted state on one thread, \
+             median and range of the timed runs (the simulator: per re-simulated frame); frames \
+             a simulator could not step are scored as the worst prediction.\n",
+            v.judged().1.as_str()
+        );
+        baselines_table(md, v, true);
+    }
+
+    worse(md, v);
+    histogram(md, v, k, dir)?;
+    hardware(md, v);
+
+    if !shared && !v.horizons.is_empty() {
+        let mut models: Vec<&str> = v.horizons.iter().map(|h| h.0.as_str()).collect();
+        models.dedup();
+        let series: Vec<Series> = models
+            .iter()
+            .map(|&m| Series {
+                name: if m == "aln" {
+                    aln_name(v, n)
+                } else {
+                    m.to_string()
+                },
+                style: style_of(m, k),
+                points: horizon_points(v, m),
+                joined: true,
+                hollow: false,
+            })
+            .collect();
+        let ys = series.iter().flat_map(|s| s.points.iter().map(|p| p.y));
+        let chart = charts::plot(&Plot {
+            title: format!("{}: closed-loop error against horizon", v.info.name),
+            x: Axis::integer("steps fed back"),
+            y: Axis::error("mean error (levels)", ys),
+            series,
+            pareto: false,
+        });
+        let name = file_name(&v.info.name, "closed-loop");
+        atomic::write_bytes(&dir.join(&name), chart.as_bytes())?;
+        let _ = writeln!(
+            md,
+            "### Closed loop\n\n![closed-loop error against horizon]({name})\n\nAs in the chart \
+             across variants, with this variant's baselines.\n"
+        );
+        let columns: Vec<(String, &Loaded, &str)> =
+            models.iter().map(|&m| (m.to_string(), v, m)).collect();
+        closed_loop_rows(md, &columns);
+    }
+    Ok(())
+}
+
+/// The §4.6 table: the ALN's best and worst variable of each group, their
+/// statistics, then the same variables beside the baselines.
+fn by_group(md: &mut String, v: &Loaded) {
+    let _ = writeln!(
+        md,
+        "### Error by group (paper §4.6)\n\nThe ALN's best and worst variable of each group over \
+         all test rows, in quantization levels (the mean also in SI units: levels × the size of \
+         one level), and its mean on the held-out rows alone.\n"
+    );
+    let aln: Vec<&SummaryRow> = v.summary.iter().filter(|r| r.model == "aln").collect();
+    let mut groups: Vec<&str> = aln.iter().map(|r| r.group.as_str()).collect();
+    groups.dedup();
+    let mut picked: Vec<(&str, &str, &SummaryRow)> = Vec::new();
+    for group in groups {
+        for (which, best) in [("best", true), ("worst", false)] {
+            if let Some(r) = aln.iter().find(|r| {
+                r.group == group
+                    && if best {
+                        r.best_in_group
+                    } else {
+                        r.worst_in_group
+                    }
+            }) {
+                picked.push((group, which, r));
+            }
+        }
+    }
+    let keys = ["group", "", "variable"];
+    let mut table = MdTable::new(&keys).numbers(&[
+        "mean",
+        "mean (SI)",
+        "std dev",
+        "std err",
+        "5% trim",
+        "median",
+        "IQR",
+        "max",
+        "held-out mean",
+    ]);
+    for &(group, which, r) in &picked {
+        let s = &r.stats;
+        let si = v.si(&r.variable).map_or("—".into(), |(step, unit)| {
+            format!("{} {unit}", sig3(s.mean * step))
+        });
+        table.row(vec![
+            group.into(),
+            which.into(),
+            format!("`{}`", r.variable),
+            sig3(s.mean),
+            si,
+            sig3(s.std_dev),
+            sig3(s.std_err),
+            sig3(s.trimmed_mean),
+            sig3(s.median),
+            sig3(s.iqr),
+            s.max.to_string(),
+            mean_of(&v.held_out, "aln", &r.variable).map_or("—".into(), sig3),
+        ]);
+    }
+    table.write(md);
+
+    let baselines = baseline_models(&v.summary);
+    if baselines.is_empty() {
+        return;
+    }
+    let _ = writeln!(
+        md,
+        "The same variables: mean error of the ALN and of each baseline over all test rows.\n"
+    );
+    let mut names = vec!["aln"];
+    names.extend(&baselines);
+    let mut table = MdTable::new(&keys).numbers(&names);
+    for &(group, which, r) in &picked {
+        let mut cells = vec![group.into(), which.into(), format!("`{}`", r.variable)];
+        for m in &names {
+            cells.push(mean_of(&v.summary, m, &r.variable).map_or("—".into(), sig3));
+        }
+        table.row(cells);
+    }
+    table.write(md);
+}
+
+/// Our best and worst variable of each group beside the paper's (§4.6).
+fn beside_the_paper(md: &mut String, v: &Loaded) {
+    let _ = writeln!(
+        md,
+        "### Beside the paper (§4.6)\n\nThe paper's numbers as published (its table of §4.6), \
+         ours for the same group and rank; errors in quantization levels. Our variables and \
+         ranges are our simulator's, not DynaTree's, so a row compares like with like only as \
+         far as the groups do.\n"
+    );
+    let mut table = MdTable::new(&["group", ""])
+        .column("our variable", Align::Left)
+        .numbers(&[
+            "paper mean",
+            "ours",
+            "paper 5% trim",
+            "ours",
+            "paper median",
+            "ours",
+            "paper IQR",
+            "ours",
+            "paper max",
+            "ours",
+        ]);
+    for (f, ours) in paper_rows(&v.summary) {
+        let ours_or = |x: Option<String>| x.unwrap_or_else(|| "—".into());
+        table.row(vec![
+            f[0].into(),
+            f[1].into(),
+            ours_or(ours.map(|r| format!("`{}`", r.variable))),
+            f[2].into(),
+            ours_or(ours.map(|r| sig3(r.stats.mean))),
+            f[5].into(),
+            ours_or(ours.map(|r| sig3(r.stats.trimmed_mean))),
+            f[6].into(),
+            ours_or(ours.map(|r| sig3(r.stats.median))),
+            f[7].into(),
+            ours_or(ours.map(|r| sig3(r.stats.iqr))),
+            f[8].into(),
+            ours_or(ours.map(|r| r.stats.max.to_string())),
+        ]);
+    }
+    table.write(md);
+}
+
+/// The variables where the ALN is worse than persistence.
+fn worse(md: &mut String, v: &Loaded) {
+    let worse = worse_than_persistence(v);
+    let (judged, rows) = v.judged();
+    let _ = writeln!(md, "### Worse than persistence\n");
+    if worse.is_empty() {
+        let _ = writeln!(
+            md,
+            "On no variable is the ALN's error above persistence's beyond the 95% interval of \
+             their paired difference ({} rows).\n",
+            rows.as_str()
+        );
+        return;
+    }
+    let _ = writeln!(
+        md,
+        "⚠ On {} of {} variables the ALN's error is higher than predicting no change, the 95% \
+         interval of the paired difference above zero ({} rows; SI: the difference × the size \
+         of one level):\n",
+        worse.len(),
+        judged.iter().filter(|r| r.model == "aln").count(),
+        rows.as_str()
+    );
+    let mut table = MdTable::new(&["variable"])
+        .numbers(&["ALN mean", "persistence mean"])
+        .column("difference [95%]", Align::Left)
+        .numbers(&["difference (SI)"]);
+    for (variable, mean, persistence, d) in &worse {
+        let si = v.si(variable).map_or("—".into(), |(step, unit)| {
+            format!("{} {unit}", sig3(d.mean * step))
+        });
+        table.row(vec![
+            format!("⚠ `{variable}`"),
+            sig3(*mean),
+            sig3(*persistence),
+            interval(d.mean, d.low, d.high),
+            si,
+        ]);
+    }
+    table.write(md);
+}
+
+/// The §4.5 histogram of the worst variable, with its tail.
+fn histogram(md: &mut String, v: &Loaded, k: usize, dir: &Path) -> Result<()> {
+    let Some(worst) = v
+        .summary
+        .iter()
+        .filter(|r| r.model == "aln")
+        .max_by(|a, b| a.stats.mean.total_cmp(&b.stats.mean))
+    else {
+        return Ok(());
+    };
+    let bins: Vec<(String, u64)> = (0..HISTOGRAM_BINS)
+        .map(|b| (histogram_bin_name(b), worst.stats.histogram[b]))
+        .collect();
+    let name = file_name(&v.info.name, "histogram");
+    let title = format!("{}: errors of {}", v.info.name, worst.variable);
+    let chart = charts::histogram(&title, &bins, style_of("aln", k).colour);
+    atomic::write_bytes(&dir.join(&name), chart.as_bytes())?;
+    let _ = writeln!(
+        md,
+        "### Error histogram of the worst variable, `{}` (paper §4.5)\n\n![histogram]({name})\n\n\
+         All test rows; the paper's bars of 0 to 9 levels, then its \"10 or more\" split to show \
+         the tail.\n",
+        worst.variable
+    );
+    let total = worst.stats.n.max(1) as f64;
+    let mut table = MdTable::new(&["error (levels)"]).numbers(&["count", "share"]);
+    for (bin, count) in bins {
+        table.row(vec![
+            bin,
+            count.to_string(),
+            format!("{}%", sig3(100.0 * count as f64 / total)),
+        ]);
+    }
+    table.write(md);
+    Ok(())
+}
+
+/// The §5 estimate from the pruned trees.
+fn hardware(md: &mut String, v: &Loaded) {
+    let h = &v.hardware;
+    let _ = writeln!(md, "### Hardware estimate (paper §5)\n");
+    let _ = match h.kind {
+        ModelKind::BitForest => writeln!(
+            md,
+            "Pruned trees are at most {} gate delays deep (mean {}); decoding a {}-bit code takes \
+             about twice its width: {} + 2·{} = **{} gate delays** per predicted state, all trees \
+             in parallel.\n",
+            h.max_depth,
+            sig3(h.mean_depth),
+            h.max_width,
+            h.max_depth,
+            h.max_width,
+            h.delays()
+        ),
+        ModelKind::Threshold => writeln!(
+            md,
+            "Pruned trees are at most {} gate delays deep (mean {}); the binary search over {} \
+             levels takes {} evaluations in sequence: {}·{} = **{} gate delays** per predicted \
+             state.\n",
+            h.max_depth,
+            sig3(h.mean_depth),
+            h.max_width + 1,
+            h.levels_steps,
+            h.max_depth,
+            h.levels_steps,
+            h.delays()
+        ),
+    };
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn chart_file_names_are_safe() {
+        assert_eq!(
+            super::file_name("a b/c", "histogram"),
+            "a-b-c-histogram.svg"
+        );
+    }
+}
