@@ -129,7 +129,11 @@ fn shards_trained_apart_merge_into_the_model_of_one_process() {
         m.remove(alnlab_common::table::CHECKSUM_KEY);
         m
     };
-    assert_eq!(provenance(&log), provenance(&whole_log), "the same provenance");
+    assert_eq!(
+        provenance(&log),
+        provenance(&whole_log),
+        "the same provenance"
+    );
 
     // Bad shards are user errors that say what is wrong.
     for (args, says) in [
