@@ -532,6 +532,31 @@ where
     Ok(())
 }
 
+/// An error bar from pixel `a` to `b` (vertical or horizontal), capped at
+/// both ends across its direction.
+fn draw_error_bar<DB: DrawingBackend>(
+    area: &DrawingArea<DB, plotters::coord::Shift>,
+    a: (i32, i32),
+    b: (i32, i32),
+    colour: RGBColor,
+) -> DrawResult
+where
+    DB::ErrorType: 'static,
+{
+    let style = colour.stroke_width(1);
+    area.draw(&PathElement::new(vec![a, b], style))?;
+    let vertical = a.0 == b.0;
+    for (x, y) in [a, b] {
+        let cap = if vertical {
+            vec![(x - 4, y), (x + 4, y)]
+        } else {
+            vec![(x, y - 4), (x, y + 4)]
+        };
+        area.draw(&PathElement::new(cap, style))?;
+    }
+    Ok(())
+}
+
 /// One row of a legend.
 enum Entry<'a> {
     Series(&'a Series),
@@ -626,20 +651,10 @@ pub fn plot(plot: &Plot) -> String {
             for p in &s.points {
                 let at = px((p.x, p.y));
                 if let Some((lo, hi)) = p.y_range {
-                    let (a, b) = (px((p.x, lo)), px((p.x, hi)));
-                    root.draw(&PathElement::new(vec![a, b], colour.stroke_width(1)))?;
-                    for end in [a, b] {
-                        let cap = vec![(end.0 - 4, end.1), (end.0 + 4, end.1)];
-                        root.draw(&PathElement::new(cap, colour.stroke_width(1)))?;
-                    }
+                    draw_error_bar(root, px((p.x, lo)), px((p.x, hi)), colour)?;
                 }
                 if let Some((lo, hi)) = p.x_range {
-                    let (a, b) = (px((lo, p.y)), px((hi, p.y)));
-                    root.draw(&PathElement::new(vec![a, b], colour.stroke_width(1)))?;
-                    for end in [a, b] {
-                        let cap = vec![(end.0, end.1 - 4), (end.0, end.1 + 4)];
-                        root.draw(&PathElement::new(cap, colour.stroke_width(1)))?;
-                    }
+                    draw_error_bar(root, px((lo, p.y)), px((hi, p.y)), colour)?;
                 }
                 draw_marker(root, s.style.marker, at, colour, s.hollow)?;
             }

@@ -45,6 +45,13 @@ pub(super) fn aln_name(v: &Loaded, variants: usize) -> String {
     }
 }
 
+/// The models with closed-loop figures in variant `v`, in their order.
+pub(super) fn horizon_models<'a>(v: &'a Loaded) -> Vec<&'a str> {
+    let mut models: Vec<&str> = v.horizons.iter().map(|h| h.0.as_str()).collect();
+    models.dedup();
+    models
+}
+
 /// A model's closed-loop mean error per step: across replicates (mean and
 /// 95% interval) when the variant has several, else its first replicate's.
 pub(super) fn horizon_points(v: &Loaded, model: &str) -> Vec<Point> {
@@ -127,9 +134,10 @@ pub(super) fn charts(md: &mut String, variants: &[Loaded], shared: bool, dir: &P
             })
             .collect();
         if shared {
-            let mut models: Vec<&str> = variants[0].horizons.iter().map(|h| h.0.as_str()).collect();
-            models.dedup();
-            for model in models.into_iter().filter(|m| *m != "aln") {
+            for model in horizon_models(&variants[0])
+                .into_iter()
+                .filter(|m| *m != "aln")
+            {
                 series.push(Series {
                     name: model.to_string(),
                     style: style_of(model, 0),
@@ -299,9 +307,10 @@ fn closed_loop_table(md: &mut String, variants: &[Loaded]) {
         .iter()
         .map(|v| (aln_name(v, n), v, "aln"))
         .collect();
-    let mut models: Vec<&str> = variants[0].horizons.iter().map(|h| h.0.as_str()).collect();
-    models.dedup();
-    for m in models.into_iter().filter(|m| *m != "aln") {
+    for m in horizon_models(&variants[0])
+        .into_iter()
+        .filter(|m| *m != "aln")
+    {
         columns.push((m.to_string(), &variants[0], m));
     }
     closed_loop_rows(md, &columns);

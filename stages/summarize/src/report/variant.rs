@@ -10,7 +10,7 @@ use std::path::Path;
 use alnlab_aln::ModelKind;
 use alnlab_common::{Result, atomic};
 
-use super::across::{aln_name, baselines_table, closed_loop_rows, horizon_points};
+use super::across::{aln_name, baselines_table, closed_loop_rows, horizon_models, horizon_points};
 use super::format::{Align, MdTable, interval, sig3};
 use super::{Loaded, SummaryRow, baseline_models, mean_of, paper_rows, worse_than_persistence};
 use crate::charts::{self, Axis, Plot, Series, style_of};
@@ -103,8 +103,7 @@ pub(super) fn section(
     hardware(md, v);
 
     if !shared && !v.horizons.is_empty() {
-        let mut models: Vec<&str> = v.horizons.iter().map(|h| h.0.as_str()).collect();
-        models.dedup();
+        let models = horizon_models(v);
         let series: Vec<Series> = models
             .iter()
             .map(|&m| Series {
