@@ -9,7 +9,7 @@ use std::path::{Path, PathBuf};
 use std::process::Output;
 use std::sync::Arc;
 
-use alnlab::run::RunRecord;
+use alnlab::records::RunRecord;
 use alnlab_common::Provenance;
 use alnlab_common::table::{Table, batch, write_parquet};
 use arrow_array::{Array, Float64Array, RecordBatch, StringArray, UInt16Array};

@@ -5,7 +5,7 @@
 
 use std::path::Path;
 
-use alnlab::run::RunRecord;
+use alnlab::records::RunRecord;
 
 mod common;
 use common::{TINY, alnlab, artifact_bytes, stderr};

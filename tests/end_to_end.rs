@@ -4,7 +4,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
-use alnlab::run::RunRecord;
+use alnlab::records::RunRecord;
 use alnlab::stages;
 
 mod common;

@@ -155,6 +155,40 @@ def judged_figures(summary_path, comparisons_path):
     return figures
 
 
+def check_metrics(variant):
+    """The run record's metrics, recomputed from the artifacts: the headline
+    figures, every variable's mean error, the one-thread timings and the
+    training errors per epoch. Returns how many were compared."""
+    a = variant["artifacts"]
+    metrics = variant["metrics"]
+    values = metrics["values"]
+    summary = pq.read_table(a["summary"]["path"]).to_pylist()
+    rows = metrics["rows"]
+    assert rows == ("held-out" if any(r["rows"] == "held-out" for r in summary) else "all")
+    expected = {}
+    # judged_figures names them "aln mean" and "aln - persistence".
+    for label, figure in judged_figures(a["summary"]["path"], a["comparisons"]["path"]).items():
+        if label.endswith(" mean"):
+            expected[f"error/{label.removesuffix(' mean')}"] = figure
+        else:
+            expected[f"difference/{label.removeprefix('aln - ')}"] = figure
+    for r in summary:
+        if r["rows"] == rows:
+            expected[f"error_by_variable/{r['model']}/{r['variable']}"] = r["mean"]
+    for t in pq.read_table(a["timings"]["path"]).to_pylist():
+        if t["threads"] == 1:
+            expected[f"ns_per_state/{t['model']}/{t['path']}"] = t["ns_per_state"]
+    for name, value in expected.items():
+        assert math.isclose(values[name], value, rel_tol=1e-12, abs_tol=1e-12), (name, values[name], value)
+    training = pq.read_table(a["training"]["path"]).to_pylist()
+    per_epoch = {}
+    for row in training:
+        per_epoch.setdefault(row["epoch"], []).append(row["errors"])
+    series = [[e, float(np.mean(v))] for e, v in sorted(per_epoch.items())]
+    assert metrics["steps"]["training_error"] == series, "training errors per epoch"
+    return len(expected) + len(series)
+
+
 def check_replicates(record, report_dir):
     """replicates.csv: every figure's per-replicate values recomputed from
     each replicate's summary and comparisons, and their mean, standard
@@ -257,10 +291,11 @@ def main(run_json: str, report_dir: str) -> int:
         summaries = check_summary(artifacts["predictions"]["path"], artifacts["summary"]["path"])
         compared = check_comparisons(artifacts["predictions"]["path"], artifacts["comparisons"]["path"])
         rolled = check_rollout(artifacts["predictions"]["path"], artifacts["rollout"]["path"])
+        metrics = check_metrics(variant)
         print(f"{variant['name']}: {len(frames)} /state messages decoded, "
               f"{len(pairs)} pair rows match, {checked} Parquet files read, "
               f"{summaries} summary rows recomputed, {compared} paired comparisons recomputed, "
-              f"{rolled} first rollout steps match")
+              f"{rolled} first rollout steps match, {metrics} record metrics recomputed")
     print(f"report: {check_report(report_dir)} SVG charts parse, "
           f"{check_replicates(record, report_dir)} figures across replicates recomputed")
     return 0

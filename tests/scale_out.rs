@@ -4,7 +4,7 @@
 
 use std::path::Path;
 
-use alnlab::run::RunRecord;
+use alnlab::records::RunRecord;
 
 mod common;
 use common::{MANIFEST, alnlab, run_ok, stderr, write_manifest};

@@ -8,7 +8,7 @@
 //! A manifest either simulates its data (`[[simulate.scene]]`, `[stride]`)
 //! or takes it from the dataset archive (`[data] dataset = "NAME@VERSION"`).
 
-use std::collections::BTreeSet;
+use std::collections::{BTreeMap, BTreeSet};
 use std::fmt;
 use std::path::{Path, PathBuf};
 
@@ -281,6 +281,29 @@ impl Manifest {
     /// The fully resolved manifest of one variant, as TOML (without the
     /// tables of stages an archived dataset stands for).
     pub fn resolved_toml(&self, variant: &Variant) -> String {
+        toml::to_string(&self.resolved_table(variant))
+            .expect("resolved parameters serialize to TOML")
+    }
+
+    /// `variant`'s resolved parameters as dotted keys (`train.vote`,
+    /// `simulate.scene.0.dt`) and their values as text (strings bare,
+    /// arrays of values inline: `[0.0, 0.0, -9.81]`): what run records keep,
+    /// `alnlab runs` compares and an MLflow export logs. The experiment's
+    /// name, description and notes are not parameters.
+    pub fn parameters(&self, variant: &Variant) -> BTreeMap<String, String> {
+        let mut table = self.resolved_table(variant);
+        if let Some(toml::Value::Table(experiment)) = table.get_mut("experiment") {
+            for prose in ["name", "description", "notes"] {
+                experiment.remove(prose);
+            }
+        }
+        let mut flat = BTreeMap::new();
+        flatten("", &toml::Value::Table(table), &mut flat);
+        flat
+    }
+
+    /// The resolved tables of `variant`, every default filled in.
+    fn resolved_table(&self, variant: &Variant) -> toml::Table {
         #[derive(Serialize)]
         struct Resolved<'a> {
             experiment: &'a Experiment,
@@ -301,7 +324,39 @@ impl Manifest {
                 table.remove(stage.name);
             }
         }
-        toml::to_string(&table).expect("resolved parameters serialize to TOML")
+        table
+    }
+}
+
+/// Adds `value` under `key` to `flat`: tables and arrays of tables by
+/// their keys and indices, anything else as its text.
+fn flatten(key: &str, value: &toml::Value, flat: &mut BTreeMap<String, String>) {
+    let join = |k: &str| {
+        if key.is_empty() {
+            k.to_string()
+        } else {
+            format!("{key}.{k}")
+        }
+    };
+    match value {
+        toml::Value::Table(table) => {
+            for (k, v) in table {
+                flatten(&join(k), v, flat);
+            }
+        }
+        toml::Value::Array(items)
+            if !items.is_empty() && items.iter().all(toml::Value::is_table) =>
+        {
+            for (i, item) in items.iter().enumerate() {
+                flatten(&join(&i.to_string()), item, flat);
+            }
+        }
+        toml::Value::String(text) => {
+            flat.insert(key.to_string(), text.clone());
+        }
+        other => {
+            flat.insert(key.to_string(), other.to_string());
+        }
     }
 }
 

@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 use alnlab_common::{Error, Result};
 use alnlab_summarize::report::{self, Replicate, RunInfo, StageTime, VariantInfo};
 
-use crate::run::{RunRecord, VariantRecord};
+use crate::records::{RunRecord, VariantRecord};
 
 /// Renders the report of `record` into `dir`; returns the path of
 /// `report.md`.
@@ -86,25 +86,4 @@ pub fn render(record: &RunRecord, dir: &Path) -> Result<PathBuf> {
             .map(|d| (d.dataset.clone(), d.sha256.clone())),
     };
     report::render(&run, dir)
-}
-
-/// Reads `<run_dir>/run.json`.
-pub fn read_record(run_dir: &Path) -> Result<RunRecord> {
-    let path = run_dir.join("run.json");
-    let bytes = std::fs::read(&path).map_err(|e| Error::io(&path, e))?;
-    let record: RunRecord = serde_json::from_slice(&bytes)
-        .map_err(|e| Error::bad_file(&path, format!("not a run record ({e})")))?;
-    // The names become folder and file names of the report: they must not
-    // lead out of it.
-    let names = std::iter::once(("experiment", &record.experiment))
-        .chain(record.variants.iter().map(|v| ("variant", &v.name)));
-    for (what, name) in names {
-        if !crate::manifest::is_identifier(name) {
-            return Err(Error::bad_file(
-                &path,
-                format!("{what} name {name:?} is not letters, digits, `-` and `_`"),
-            ));
-        }
-    }
-    Ok(record)
 }

@@ -18,12 +18,12 @@ use std::path::{Path, PathBuf};
 use std::time::{Instant, SystemTime};
 
 use alnlab_common::{ALNLAB_VERSION, Error, Provenance, Result, atomic};
-use serde::{Deserialize, Serialize};
 
 use crate::cache::{Artifact, Cache, StageKey};
 use crate::dataset::{Archive, Entry};
 use crate::manifest::{Manifest, Variant, replicate_seed};
 use crate::progress::{Bar, Overall};
+use crate::records::{self, ArtifactRef, DatasetRef, RunRecord, StageRecord, VariantRecord};
 use crate::stages::{self, Archived, Call, STAGES, Stage, stage_params};
 use alnlab_aln::shard::Shard;
 
@@ -48,81 +48,6 @@ pub struct RunOptions {
 
 /// Version of the `dataset` artifact's layout (part of its cache key).
 const DATASET_FORMAT_VERSION: u32 = 1;
-
-/// `<out>/<experiment>/run.json`: what a run did and what it produced.
-#[derive(Clone, Debug, Serialize, Deserialize)]
-pub struct RunRecord {
-    pub experiment: String,
-    pub manifest_path: String,
-    pub manifest_sha256: String,
-    pub seed: u64,
-    pub alnlab_version: String,
-    pub git_commit: Option<String>,
-    pub started: String,
-    pub finished: String,
-    pub wall_seconds: f64,
-    pub variants: Vec<VariantRecord>,
-    /// The manifest asked for the paper's §4.6 numbers in the report.
-    #[serde(default)]
-    pub compare_with_paper: bool,
-    /// The manifest's description of the experiment.
-    #[serde(default)]
-    pub description: String,
-    /// The manifest's notes on the results.
-    #[serde(default)]
-    pub notes: String,
-    /// The archived dataset the data came from, if any.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub dataset: Option<DatasetRef>,
-}
-
-/// An archived dataset, as a run record names it.
-#[derive(Clone, Debug, Serialize, Deserialize)]
-pub struct DatasetRef {
-    /// `name@version`.
-    pub dataset: String,
-    /// Its catalog entry's sha256.
-    pub sha256: String,
-}
-
-/// What one variant's stages did.
-#[derive(Clone, Debug, Serialize, Deserialize)]
-pub struct VariantRecord {
-    pub name: String,
-    pub description: String,
-    /// Which replicate of the variant this is (0-based; the experiment's
-    /// `replicates` runs each variant that many times).
-    #[serde(default)]
-    pub replicate: u32,
-    /// The replicate's seed ([`crate::manifest::replicate_seed`]).
-    #[serde(default)]
-    pub seed: u64,
-    /// Every artifact file by role (`trajectory`, `stats`, `pairs`, …).
-    pub artifacts: BTreeMap<String, ArtifactRef>,
-    /// The stages in execution order.
-    pub stages: Vec<StageRecord>,
-}
-
-/// One artifact file.
-#[derive(Clone, Debug, Serialize, Deserialize)]
-pub struct ArtifactRef {
-    pub path: String,
-    pub sha256: String,
-    pub cache_key: String,
-}
-
-/// One stage of one variant.
-#[derive(Clone, Debug, Serialize, Deserialize)]
-pub struct StageRecord {
-    pub stage: String,
-    pub cache_key: String,
-    /// Whether the artifact was reused rather than made.
-    pub cached: bool,
-    /// Time this run spent on the stage (s).
-    pub wall_seconds: f64,
-    /// Time the stage took when it made the artifact (s).
-    pub compute_seconds: f64,
-}
 
 /// Holds the output folder's lock for the duration of a run; a second run on
 /// the same folder waits (saying so) until the first is done.
@@ -238,13 +163,22 @@ pub fn run(manifest: &Manifest, options: &RunOptions) -> Result<RunRecord> {
                     seed,
                     artifacts: BTreeMap::new(),
                     stages: Vec::new(),
+                    parameters: manifest.parameters(variant),
+                    metrics: None,
                 },
             };
             graph.run_variant(variant)?;
             records.push(graph.record);
         }
     }
+    if options.until.is_none() {
+        for record in &mut records {
+            record.metrics = Some(metrics_of(record)?);
+        }
+    }
     let record = RunRecord {
+        format: records::FORMAT,
+        id: records::new_id(started, &manifest.experiment.name, &manifest.sha256),
         experiment: manifest.experiment.name.clone(),
         manifest_path: repository_path(&manifest.path),
         manifest_sha256: manifest.sha256.clone(),
@@ -264,11 +198,33 @@ pub fn run(manifest: &Manifest, options: &RunOptions) -> Result<RunRecord> {
         }),
     };
     if options.until.is_none() {
-        let path = options.out.join(&manifest.experiment.name).join("run.json");
-        let json = serde_json::to_vec_pretty(&record).expect("records serialize");
-        alnlab_common::atomic::write_bytes(&path, &json)?;
+        records::store(&options.out, &record)?;
     }
     Ok(record)
+}
+
+/// A variant's headline metrics, from the artifacts it has just made or
+/// found.
+fn metrics_of(record: &VariantRecord) -> Result<alnlab_summarize::metrics::Metrics> {
+    let path = |role: &str| {
+        record
+            .artifacts
+            .get(role)
+            .map(|a| PathBuf::from(&a.path))
+            .ok_or_else(|| {
+                Error::Invalid(format!(
+                    "variant `{}` made no `{role}` artifact",
+                    record.name
+                ))
+            })
+    };
+    alnlab_summarize::metrics::read(&alnlab_summarize::metrics::Sources {
+        summary: &path("summary")?,
+        comparisons: &path("comparisons")?,
+        horizons: &path("horizons")?,
+        timings: &path("timings")?,
+        training: &path("training")?,
+    })
 }
 
 /// One variant's walk through the stages.

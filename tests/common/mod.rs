@@ -6,7 +6,7 @@
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
-use alnlab::run::RunRecord;
+use alnlab::records::RunRecord;
 
 /// A small experiment: half a second of pendulum, tiny trees (files of a
 /// few kilobytes, a run of about a second).

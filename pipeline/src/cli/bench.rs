@@ -205,7 +205,7 @@ pub fn execute(bench: Bench, quiet: bool) -> Result<()> {
             json,
         } => {
             let roles = ["model", "codebook", "levels", "trajectory"];
-            let record = crate::report::read_record(&run_dir)?;
+            let record = crate::records::read_record(&run_dir)?;
             let chosen = super::dataset::pick_variant(
                 &record.variants,
                 variant.as_deref(),

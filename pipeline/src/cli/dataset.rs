@@ -8,8 +8,8 @@ use alnlab_common::{Error, Result};
 use crate::dataset::{
     Archive, BASE_ROLES, DatasetProvenance, Entry, LEVEL_ROLES, Source, check_name,
 };
-use crate::report::read_record;
-use crate::run::VariantRecord;
+use crate::records::VariantRecord;
+use crate::records::read_record;
 use clap::Subcommand;
 
 /// The `alnlab dataset` subcommands.

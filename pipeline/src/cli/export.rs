@@ -1,4 +1,5 @@
-//! `alnlab export …`: an experiment as a workflow for another engine.
+//! `alnlab export …`: an experiment as a workflow for another engine, a
+//! recorded run to an experiment tracker.
 
 use std::path::{Path, PathBuf};
 
@@ -6,6 +7,7 @@ use alnlab_common::{Error, Result};
 use clap::Subcommand;
 
 use crate::manifest::Manifest;
+use crate::{mlflow, records};
 
 /// The `alnlab export` subcommands.
 #[derive(Debug, Subcommand)]
@@ -39,6 +41,34 @@ pub enum ExportCommand {
         /// The alnlab binary the jobs run (default: this one).
         #[arg(long)]
         alnlab: Option<PathBuf>,
+    },
+    /// Hand a recorded run to an MLflow tracking server, through its REST
+    /// API: each variant (and replicate) becomes an MLflow run with the
+    /// variant's resolved parameters, its metrics (figures, and training
+    /// and closed-loop errors by step), tags (run id, git commit, manifest
+    /// sha256) and the report as artifacts. Exporting again adds nothing.
+    ///
+    /// The server must serve artifacts (`mlflow server`'s default). Set
+    /// MLFLOW_TRACKING_TOKEN, or MLFLOW_TRACKING_USERNAME and
+    /// MLFLOW_TRACKING_PASSWORD, for a server that asks for them.
+    #[command(after_help = "Examples:
+  mlflow server --backend-store-uri sqlite:///mlflow.db --host 127.0.0.1 --port 5000 &
+  alnlab export mlflow quickstart --tracking-uri http://127.0.0.1:5000
+  alnlab export mlflow 20261123-152818-0ef52a --out /scratch/runs --experiment worm-codes")]
+    Mlflow {
+        /// The run: an id (or a unique prefix), an experiment's name (its
+        /// latest run) or NAME~N, as `alnlab runs list` shows them.
+        run: String,
+        /// The tracking server's address.
+        #[arg(long, env = "MLFLOW_TRACKING_URI")]
+        tracking_uri: String,
+        /// The output folder the run was made in.
+        #[arg(long, default_value = "runs")]
+        out: PathBuf,
+        /// The MLflow experiment to export into (default: the alnlab
+        /// experiment's name).
+        #[arg(long)]
+        experiment: Option<String>,
     },
 }
 
@@ -75,5 +105,55 @@ pub fn execute(command: ExportCommand) -> Result<()> {
             );
             Ok(())
         }
+        ExportCommand::Mlflow {
+            run,
+            tracking_uri,
+            out,
+            experiment,
+        } => export_mlflow(&run, &tracking_uri, &out, experiment),
     }
+}
+
+/// `alnlab export mlflow`: the report is rendered from the record into a
+/// temporary folder (so a run other than the latest gets its own report);
+/// without its artifacts in the cache, the export goes on without it.
+fn export_mlflow(
+    reference: &str,
+    tracking_uri: &str,
+    out: &Path,
+    experiment: Option<String>,
+) -> Result<()> {
+    let (stored, _) = records::find(out, reference)?;
+    let record = &stored.record;
+    let client = mlflow::Client::new(tracking_uri)?;
+    let staging = tempfile::tempdir().map_err(|e| Error::io(&std::env::temp_dir(), e))?;
+    let report = match crate::report::render(record, staging.path()) {
+        Ok(_) => Some(staging.path()),
+        Err(e) => {
+            eprintln!("warning: the report is not exported: rendering it failed ({e})");
+            None
+        }
+    };
+    let experiment = experiment.unwrap_or_else(|| record.experiment.clone());
+    println!(
+        "run {} ({}) → MLflow experiment `{experiment}` at {tracking_uri}",
+        record.id, record.experiment
+    );
+    mlflow::export(&client, record, &experiment, report, |variant, outcome| {
+        let name = format!("{} #{}", variant.name, variant.replicate + 1);
+        match outcome {
+            mlflow::Outcome::Exported {
+                run_id,
+                params,
+                metrics,
+                artifacts,
+            } => println!(
+                "  {name}: MLflow run {run_id} — {params} parameters, {metrics} metric values, \
+                 {artifacts} artifacts"
+            ),
+            mlflow::Outcome::AlreadyThere { run_id } => {
+                println!("  {name}: already exported as MLflow run {run_id}")
+            }
+        }
+    })
 }

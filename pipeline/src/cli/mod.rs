@@ -1,11 +1,12 @@
 //! The `alnlab` command line: the top-level arguments and a thin dispatch.
 //! Each group of commands has its module — [`stage`] (every stage alone,
-//! from the stage table), [`dataset`], [`export`], [`bench`] — and the
+//! from the stage table), [`dataset`], [`export`], [`bench`], [`runs`] — and the
 //! experiment commands (`run`, `check`, `report`, `merge-models`) are here.
 
 pub mod bench;
 pub mod dataset;
 pub mod export;
+pub mod runs;
 pub mod stage;
 
 use std::path::PathBuf;
@@ -154,6 +155,16 @@ Training in two shards, then a run that merges them instead of training:
         /// The experiment manifest.
         manifest: PathBuf,
     },
+    /// List, show and compare recorded runs: every `alnlab run` keeps its
+    /// record (parameters, headline metrics, artifacts) under
+    /// <OUT>/<experiment>/records/<id>.json. Without a subcommand: `list`.
+    #[command(after_help = "Examples:
+  alnlab runs                                    # every run under runs/, one line per variant
+  alnlab runs list --where train.vote=3 --json
+  alnlab runs show quickstart                    # the latest quickstart run
+  alnlab runs diff quickstart~1 quickstart --only-changed
+  alnlab export mlflow quickstart --tracking-uri http://127.0.0.1:5000")]
+    Runs(runs::RunsArgs),
     /// Benchmarks; each prints its figures, or one JSON object with --json.
     #[command(
         subcommand,
@@ -223,7 +234,11 @@ pub fn execute(matches: &ArgMatches) -> Result<()> {
             if options.until.is_some() {
                 return Ok(());
             }
-            let path = options.out.join(&record.experiment).join("run.json");
+            let path = options
+                .out
+                .join(&record.experiment)
+                .join(crate::records::RECORDS_DIR)
+                .join(format!("{}.json", record.id));
             println!(
                 "run record: {}  ({:.3} s)",
                 path.display(),
@@ -237,6 +252,7 @@ pub fn execute(matches: &ArgMatches) -> Result<()> {
         Command::Dataset { datasets, command } => dataset::execute(&datasets, command),
         Command::Export(command) => export::execute(command),
         Command::Bench(command) => bench::execute(command, quiet),
+        Command::Runs(args) => runs::execute(args),
         Command::MergeModels { parts, out } => {
             // The merged files carry the parts' provenance (the train
             // stage's parameters and inputs, the same for every part).
@@ -248,7 +264,7 @@ pub fn execute(matches: &ArgMatches) -> Result<()> {
             Ok(())
         }
         Command::Report { run_dir, reports } => {
-            let record = crate::report::read_record(&run_dir)?;
+            let record = crate::records::read_record(&run_dir)?;
             let report = crate::report::render(&record, &report_dir(&run_dir, reports, &record))?;
             println!("report: {}", report.display());
             Ok(())
@@ -288,7 +304,7 @@ fn only_variant(manifest: &Manifest) -> Result<String> {
 fn report_dir(
     run_dir: &std::path::Path,
     reports: Option<PathBuf>,
-    record: &crate::run::RunRecord,
+    record: &crate::records::RunRecord,
 ) -> PathBuf {
     match reports {
         Some(reports) => reports.join(&record.experiment),

@@ -13,10 +13,12 @@
 //!   starts, the held-out ones), model and horizon, over all variables.
 //!
 //! [`report`] renders a run's summaries, timings and training logs as
-//! Markdown and SVG.
+//! Markdown and SVG; [`metrics`] gives a variant's headline figures as
+//! named numbers, for tracking runs.
 
 pub mod bench;
 mod charts;
+pub mod metrics;
 pub mod paired;
 pub mod report;
 mod stats;

@@ -12,7 +12,7 @@
 
 mod across;
 mod findings;
-mod format;
+pub mod format;
 mod glossary;
 pub mod html;
 mod replicates;
@@ -98,17 +98,17 @@ pub struct StageTime {
 }
 
 /// One row of `timings.parquet`.
-struct Timing {
-    model: String,
-    path: String,
+pub(crate) struct Timing {
+    pub(crate) model: String,
+    pub(crate) path: String,
     /// ns per state: the median of the timed runs, and their range.
-    ns_per_state: f64,
+    pub(crate) ns_per_state: f64,
     ns_min: f64,
     ns_max: f64,
     /// ns per state of every run, in round order: run k of every model was
     /// timed in the same round.
     runs: Vec<f64>,
-    threads: u32,
+    pub(crate) threads: u32,
     cores: u32,
     cpu: String,
     failed: u32,
@@ -308,7 +308,7 @@ fn remove_stale_charts(dir: &Path, md: &str) -> Result<()> {
 /// A summary split into its rows over all test rows and over the held-out
 /// ones, with the set findings judge: the held-out rows, or all when none
 /// is held out.
-fn split_rows(summary: Vec<SummaryRow>) -> (Vec<SummaryRow>, Vec<SummaryRow>, Rows) {
+pub(crate) fn split_rows(summary: Vec<SummaryRow>) -> (Vec<SummaryRow>, Vec<SummaryRow>, Rows) {
     let (all, held_out): (Vec<SummaryRow>, Vec<SummaryRow>) =
         summary.into_iter().partition(|r| r.rows == Rows::All);
     let judged = if held_out.is_empty() {
@@ -321,7 +321,7 @@ fn split_rows(summary: Vec<SummaryRow>) -> (Vec<SummaryRow>, Vec<SummaryRow>, Ro
 
 /// The ALN against `against` on `rows`: for `variable`, or averaged over
 /// the variables.
-fn aln_against<'c>(
+pub(crate) fn aln_against<'c>(
     comparisons: &'c [Comparison],
     rows: Rows,
     against: &str,
@@ -349,54 +349,8 @@ fn load(info: &VariantInfo) -> Result<Loaded<'_>> {
         .filter(|h| h.0 == judged)
         .map(|(_, model, horizon, mean, p95)| (model, horizon, mean, p95))
         .collect();
-    let table = Table::read(&info.timings)?;
-    let text = |name: &str| table.strings(name);
-    let (models, paths) = (text("model")?, text("path")?);
-    let ns = table.column::<Float64Array>("ns_per_state")?.values();
-    let ns_min = table.column::<Float64Array>("ns_min")?.values();
-    let ns_max = table.column::<Float64Array>("ns_max")?.values();
-    let runs = table.column::<ListArray>("ns_runs")?;
-    let threads = table.column::<UInt32Array>("threads")?.values();
-    let cores = table.column::<UInt32Array>("cores")?.values();
-    let cpu = text("cpu")?;
-    let failed = table.column::<UInt32Array>("failed")?.values();
-    let timings = (0..table.num_rows())
-        .map(|i| Timing {
-            model: models[i].clone(),
-            path: paths[i].clone(),
-            ns_per_state: ns[i],
-            ns_min: ns_min[i],
-            ns_max: ns_max[i],
-            runs: runs
-                .value(i)
-                .as_primitive_opt::<Float64Type>()
-                .map(|r| r.values().to_vec())
-                .unwrap_or_default(),
-            threads: threads[i],
-            cores: cores[i],
-            cpu: cpu[i].clone(),
-            failed: failed[i],
-        })
-        .collect();
-
-    let log = Table::read(&info.training)?;
-    let epochs = log.column::<UInt32Array>("epoch")?.values();
-    let errors = log.column::<UInt64Array>("errors")?.values();
-    let mut per_epoch: Vec<(u64, u64)> = Vec::new();
-    for (&epoch, &e) in epochs.iter().zip(errors.iter()) {
-        let k = epoch as usize;
-        if per_epoch.len() < k {
-            per_epoch.resize(k, (0, 0));
-        }
-        per_epoch[k - 1].0 += e;
-        per_epoch[k - 1].1 += 1;
-    }
-    let training = per_epoch
-        .iter()
-        .enumerate()
-        .filter(|(_, (_, trees))| *trees > 0)
-        .map(|(k, (sum, trees))| ((k + 1) as f64, *sum as f64 / *trees as f64))
-        .collect();
+    let timings = read_timings(&info.timings)?;
+    let training = read_training(&info.training)?;
 
     let model = Model::read(&info.model)?;
     let depths: Vec<u32> = model.trees.iter().map(|(_, t)| t.prune().depth()).collect();
@@ -501,6 +455,68 @@ fn load(info: &VariantInfo) -> Result<Loaded<'_>> {
     })
 }
 
+/// Reads `timings.parquet`.
+pub(crate) fn read_timings(path: &Path) -> Result<Vec<Timing>> {
+    let table = Table::read(path)?;
+    let text = |name: &str| table.strings(name);
+    let (models, paths) = (text("model")?, text("path")?);
+    let ns = table.column::<Float64Array>("ns_per_state")?.values();
+    let ns_min = table.column::<Float64Array>("ns_min")?.values();
+    let ns_max = table.column::<Float64Array>("ns_max")?.values();
+    let runs = table.column::<ListArray>("ns_runs")?;
+    let threads = table.column::<UInt32Array>("threads")?.values();
+    let cores = table.column::<UInt32Array>("cores")?.values();
+    let cpu = text("cpu")?;
+    let failed = table.column::<UInt32Array>("failed")?.values();
+    Ok((0..table.num_rows())
+        .map(|i| Timing {
+            model: models[i].clone(),
+            path: paths[i].clone(),
+            ns_per_state: ns[i],
+            ns_min: ns_min[i],
+            ns_max: ns_max[i],
+            runs: runs
+                .value(i)
+                .as_primitive_opt::<Float64Type>()
+                .map(|r| r.values().to_vec())
+                .unwrap_or_default(),
+            threads: threads[i],
+            cores: cores[i],
+            cpu: cpu[i].clone(),
+            failed: failed[i],
+        })
+        .collect())
+}
+
+/// Reads `training.parquet`: the mean training errors per tree, per epoch
+/// (1-based).
+pub(crate) fn read_training(path: &Path) -> Result<Vec<(f64, f64)>> {
+    let log = Table::read(path)?;
+    let epochs = log.column::<UInt32Array>("epoch")?.values();
+    let errors = log.column::<UInt64Array>("errors")?.values();
+    let mut per_epoch: Vec<(u64, u64)> = Vec::new();
+    for (&epoch, &e) in epochs.iter().zip(errors.iter()) {
+        let k = epoch as usize;
+        if k == 0 {
+            return Err(alnlab_common::Error::bad_file(
+                path,
+                "epochs count from 1; found 0",
+            ));
+        }
+        if per_epoch.len() < k {
+            per_epoch.resize(k, (0, 0));
+        }
+        per_epoch[k - 1].0 += e;
+        per_epoch[k - 1].1 += 1;
+    }
+    Ok(per_epoch
+        .iter()
+        .enumerate()
+        .filter(|(_, (_, trees))| *trees > 0)
+        .map(|(k, (sum, trees))| ((k + 1) as f64, *sum as f64 / *trees as f64))
+        .collect())
+}
+
 /// What a model is and learns, in a sentence: its kind and trees, its
 /// target (with the range of k and the code of a residual target), and
 /// which inputs its outputs read.
@@ -540,7 +556,7 @@ fn describe(header: &Header, trees: usize, leaves: usize) -> String {
 }
 
 /// (mean, 95th percentile) of a model's errors, averaged over the variables.
-fn overall(summary: &[SummaryRow], model: &str) -> Option<(f64, f64)> {
+pub(crate) fn overall(summary: &[SummaryRow], model: &str) -> Option<(f64, f64)> {
     let rows: Vec<&SummaryRow> = summary.iter().filter(|r| r.model == model).collect();
     let n = rows.len() as f64;
     (!rows.is_empty()).then(|| {
