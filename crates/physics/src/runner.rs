@@ -202,6 +202,9 @@ pub fn simulate_run(
 pub struct Runner<'a> {
     p: &'a Prepared,
     controller: Controller,
+    /// Torques set from outside (a planner's), standing in for the
+    /// controller's while set.
+    driven: Option<Vec<Vector3<f64>>>,
     forces: SceneForces<'a>,
     hinge_torques: Vec<Vector3<f64>>,
     stepper: Stepper,
@@ -219,6 +222,7 @@ impl<'a> Runner<'a> {
                 hinges,
                 scene::run_seed(seed ^ 0xC0DE, scene_index, run),
             ),
+            driven: None,
             forces: SceneForces {
                 surfaces: &p.surfaces,
                 points: &p.points,
@@ -244,9 +248,7 @@ impl<'a> Runner<'a> {
     ) -> std::result::Result<(), u64> {
         let (model, scene) = (&self.p.model, &self.p.scene);
         for step in first..first + steps {
-            self.controller
-                .torques(step as f64 * dt, &mut self.hinge_torques);
-            self.forces.g[1..].copy_from_slice(&self.hinge_torques);
+            self.torques(step as f64 * dt);
             self.stepper
                 .step(model, state, dt, scene.integrator, &mut self.forces);
             if !state.is_finite() {
@@ -254,6 +256,37 @@ impl<'a> Runner<'a> {
             }
         }
         Ok(())
+    }
+
+    /// Sets the hinge torques (one per hinge, clamped componentwise to the
+    /// scene's torque limit) that stand in for the controller's from now
+    /// on, or hands control back to the controller (`None`).
+    pub fn drive(&mut self, g: Option<&[Vector3<f64>]>) {
+        let limit = self.p.scene.controller().torque_limit.get();
+        match g {
+            Some(g) => {
+                let driven = self.driven.get_or_insert_with(Vec::new);
+                driven.clear();
+                driven.extend(g.iter().map(|t| t.map(|x| x.clamp(-limit, limit))));
+            }
+            None => self.driven = None,
+        }
+    }
+
+    /// The hinge torques of the last step taken or frame observed (one per
+    /// hinge, after clamping).
+    pub fn hinge_torques(&self) -> &[Vector3<f64>] {
+        &self.hinge_torques
+    }
+
+    /// Puts the torques of time `t` into the forces: the driven ones, or
+    /// the controller's.
+    fn torques(&mut self, t: f64) {
+        match &self.driven {
+            Some(g) => self.hinge_torques.copy_from_slice(g),
+            None => self.controller.torques(t, &mut self.hinge_torques),
+        }
+        self.forces.g[1..].copy_from_slice(&self.hinge_torques);
     }
 
     /// Forgets what the integrator tracked, to step on from another state of
@@ -265,8 +298,7 @@ impl<'a> Runner<'a> {
     /// The frame of `state` at time `t`: its generalized state and variables.
     pub fn observe(&mut self, state: &State, t: f64, frame: &mut StateFrame) {
         let p = self.p;
-        self.controller.torques(t, &mut self.hinge_torques);
-        self.forces.g[1..].copy_from_slice(&self.hinge_torques);
+        self.torques(t);
         self.eval.run(&p.model, state, &mut self.forces);
         generalized_state(&p.model, state, &mut frame.state);
         p.variables.values(

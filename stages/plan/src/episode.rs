@@ -1,0 +1,216 @@
+//! One episode of model-predictive control in the true simulator: from a
+//! start state, every frame a policy chooses the hinge torques, the scene's
+//! own simulator (its integrator at its own step) executes them for one
+//! frame, and the task's cost of the frame reached is added up.
+//!
+//! Policies: zero torques and the scene's random controller (references),
+//! or a planner with a forward model and a budget (sequences per decision).
+
+use std::time::Instant;
+
+use alnlab_common::state_log::StateFrame;
+use alnlab_common::{Error, Result};
+use alnlab_physics::dynamics::State;
+use alnlab_physics::{Prepared, Runner};
+use nalgebra::Vector3;
+
+use crate::forward::{Model, copy_state};
+use crate::planner::Planner;
+use crate::task::Cost;
+
+/// What chooses the torques.
+pub enum Policy<'m> {
+    /// No torques.
+    Zero,
+    /// The scene's random controller: torques uniform in ±amplitude, held
+    /// for `hold` seconds, seeded by the episode.
+    Random,
+    /// A planner searching `sequences` sequences per decision with `model`.
+    Plan {
+        planner: &'m mut Planner,
+        model: &'m mut dyn Model,
+        sequences: usize,
+    },
+}
+
+/// One executed frame.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Step {
+    /// The frame reached (1 = one frame after the start).
+    pub frame: u32,
+    /// The torques executed on the way to it (hinge by hinge, x y z).
+    pub torques: Vec<f64>,
+    /// The task's cost of the frame reached.
+    pub cost: f64,
+    /// The planner's predicted cost of the sequence it chose (summed over
+    /// its horizon; NaN for the references).
+    pub predicted: f64,
+    /// Seconds the decision took (0 for the references).
+    pub seconds: f64,
+}
+
+/// Runs `frames` frames from `start`; hands each [`Step`] and the frame's
+/// variables to `on_step`; returns the summed cost. `seed` seeds the random
+/// reference's torques.
+pub fn run(
+    p: &Prepared,
+    start: &State,
+    frames: u32,
+    cost: &Cost,
+    policy: &mut Policy,
+    seed: u64,
+    mut on_step: impl FnMut(&Step, &[f64]),
+) -> Result<f64> {
+    let hinges = p.model.len() - 1;
+    let mut runner = Runner::new(p, seed, 0, 0);
+    let mut state = start.clone();
+    let mut frame = StateFrame {
+        time: 0.0,
+        run: 0,
+        frame: 0,
+        state: Vec::with_capacity(p.layout.state.len()),
+        variables: Vec::with_capacity(p.layout.variables.len()),
+    };
+    runner.observe(&state, 0.0, &mut frame);
+    let steps = p.scene.steps_per_frame();
+    let dt = p.scene.dt.get();
+    let mut action = vec![0.0; 3 * hinges];
+    let mut torques = vec![Vector3::zeros(); hinges];
+    let mut total = 0.0;
+    let mut step = Step {
+        frame: 0,
+        torques: vec![0.0; 3 * hinges],
+        cost: 0.0,
+        predicted: f64::NAN,
+        seconds: 0.0,
+    };
+    let mut now = State::rest(&p.model, Vector3::zeros());
+    for f in 0..frames {
+        match policy {
+            Policy::Zero => {
+                action.fill(0.0);
+                drive(&mut runner, &action, &mut torques);
+            }
+            Policy::Random => runner.drive(None),
+            Policy::Plan {
+                planner,
+                model,
+                sequences,
+            } => {
+                copy_state(&mut now, &state);
+                let clock = Instant::now();
+                model.start(&now, &frame.variables);
+                step.predicted = planner.decide(&mut **model, *sequences, &mut action);
+                step.seconds = clock.elapsed().as_secs_f64();
+                drive(&mut runner, &action, &mut torques);
+            }
+        }
+        let first = u64::from(f) * steps;
+        runner.advance(&mut state, first, steps, dt).map_err(|at| {
+            Error::Diverged(format!(
+                "scene `{}`: the episode blew up at step {at} (frame {f})",
+                p.scene.name
+            ))
+        })?;
+        // What was executed: the planner's torques as clamped, or the
+        // controller's.
+        for (out, g) in step.torques.chunks_mut(3).zip(runner.hinge_torques()) {
+            out.copy_from_slice(g.as_slice());
+        }
+        let t = (first + steps) as f64 * dt;
+        runner.observe(&state, t, &mut frame);
+        step.frame = f + 1;
+        step.cost = cost.of(&frame.variables);
+        total += step.cost;
+        on_step(&step, &frame.variables);
+    }
+    Ok(total)
+}
+
+/// Drives `runner` with `action` (hinge by hinge, x y z).
+fn drive(runner: &mut Runner, action: &[f64], torques: &mut [Vector3<f64>]) {
+    for (g, t) in torques.iter_mut().zip(action.chunks(3)) {
+        *g = Vector3::new(t[0], t[1], t[2]);
+    }
+    runner.drive(Some(torques));
+}
+
+#[cfg(test)]
+mod tests {
+    use std::collections::BTreeMap;
+
+    use alnlab_physics::Scene;
+    use alnlab_physics::controller::{ControllerKind, ControllerParams};
+    use rand::SeedableRng;
+    use rand_chacha::ChaCha8Rng;
+
+    use super::*;
+    use crate::forward::Simulator;
+    use crate::planner::{Bounds, CemSettings, PlannerKind};
+    use crate::task::Task;
+
+    fn worm() -> Prepared {
+        Prepared::new(&Scene {
+            controller: Some(ControllerParams {
+                kind: ControllerKind::Random,
+                amplitude: vec![[1.0, 10.0, 10.0]],
+                ..ControllerParams::default()
+            }),
+            ..Scene::default()
+        })
+    }
+
+    #[test]
+    fn planning_with_the_simulator_beats_zero_and_random_torques() {
+        let p = worm();
+        let task = Task::HoldAngles {
+            name: "bend".into(),
+            targets: BTreeMap::from([("pitch.2".into(), 0.6), ("pitch.3".into(), -0.6)]),
+        };
+        let cost = task.over(&p.layout.variables).unwrap();
+        let mut rng = ChaCha8Rng::seed_from_u64(5);
+        let start = p.scene.initial_state(&p.model, &mut rng);
+        let frames = 60;
+        let episode = |policy: &mut Policy| {
+            let mut steps = Vec::new();
+            let total = run(&p, &start, frames, &cost, policy, 9, |s, _| {
+                steps.push(s.clone())
+            })
+            .unwrap();
+            (total, steps)
+        };
+        let (zero, _) = episode(&mut Policy::Zero);
+        let (random, random_steps) = episode(&mut Policy::Random);
+        let bounds = Bounds {
+            low: vec![-1.0, -10.0, -10.0, -1.0, -10.0, -10.0],
+            high: vec![1.0, 10.0, 10.0, 1.0, 10.0, 10.0],
+        };
+        let cem = CemSettings {
+            iterations: 3,
+            elite: 0.1,
+        };
+        let mut planner = Planner::new(PlannerKind::Cem, cem, 10, bounds, 60, 1);
+        let mut model = Simulator::new(&p, p.scene.steps_per_frame(), cost.clone());
+        let (planned, steps) = episode(&mut Policy::Plan {
+            planner: &mut planner,
+            model: &mut model,
+            sequences: 60,
+        });
+        assert!(
+            planned < 0.5 * zero.min(random),
+            "planned {planned}, zero {zero}, random {random}"
+        );
+        assert_eq!(steps.len(), frames as usize);
+        assert!(
+            steps
+                .iter()
+                .all(|s| s.seconds > 0.0 && s.predicted.is_finite())
+        );
+        assert!(
+            random_steps
+                .iter()
+                .any(|s| s.torques.iter().any(|&g| g != 0.0))
+        );
+        assert!(random_steps.iter().all(|s| s.torques[0].abs() <= 1.0));
+    }
+}

@@ -1,0 +1,198 @@
+//! Tasks, declared in the manifest in the learned variables, and their cost
+//! per frame (summed over an episode):
+//!
+//! - `hold-angles`: reach and hold target hinge angles — for each
+//!   `roll.N`/`pitch.N` named in `targets` (rad), the squared angle to its
+//!   target, the difference taken on the circle (within ±π);
+//! - `spin`: spin about an axis at a target rate — the squared difference
+//!   of an angular velocity component (`omega.1.x`, the root link's long
+//!   axis) and `rate` (rad/s).
+
+use std::collections::BTreeMap;
+use std::f64::consts::{PI, TAU};
+
+use serde::{Deserialize, Serialize};
+
+/// One `[[plan.task]]` table.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, tag = "kind", rename_all = "kebab-case")]
+pub enum Task {
+    /// Reach and hold hinge angles.
+    HoldAngles {
+        /// The task's name in tables and the report.
+        name: String,
+        /// Target angle (rad) per `roll.N` or `pitch.N` variable.
+        targets: BTreeMap<String, f64>,
+    },
+    /// Spin at a rate.
+    Spin {
+        name: String,
+        /// An angular velocity component, e.g. `omega.1.x`.
+        variable: String,
+        /// Target rate (rad/s).
+        rate: f64,
+    },
+}
+
+impl Task {
+    /// The task's name.
+    pub fn name(&self) -> &str {
+        match self {
+            Task::HoldAngles { name, .. } | Task::Spin { name, .. } => name,
+        }
+    }
+
+    /// Checks the task on its own: targets named as angles, finite numbers.
+    /// On error, the field and the message.
+    pub fn validate(&self) -> Result<(), (&'static str, String)> {
+        match self {
+            Task::HoldAngles { targets, .. } => {
+                if targets.is_empty() {
+                    return Err(("targets", "expected at least one target angle".into()));
+                }
+                for (variable, target) in targets {
+                    if !(variable.starts_with("roll.") || variable.starts_with("pitch.")) {
+                        return Err((
+                            "targets",
+                            format!("`{variable}` is not a hinge angle (roll.N or pitch.N)"),
+                        ));
+                    }
+                    if !target.is_finite() {
+                        return Err(("targets", format!("`{variable}`: expected a finite angle")));
+                    }
+                }
+            }
+            Task::Spin { variable, rate, .. } => {
+                if !variable.starts_with("omega.") {
+                    return Err((
+                        "variable",
+                        format!("`{variable}` is not an angular velocity (omega.N.x|y|z)"),
+                    ));
+                }
+                if !rate.is_finite() {
+                    return Err(("rate", "expected a finite rate".into()));
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// The task over variables in the order of `names` (a scene's learned
+    /// or logged variables); an error names a variable the scene lacks.
+    pub fn over(&self, names: &[String]) -> Result<Cost, String> {
+        let index = |v: &str| {
+            names.iter().position(|n| n == v).ok_or_else(|| {
+                format!(
+                    "task `{}`: the scene has no variable `{v}` (it has {})",
+                    self.name(),
+                    names.join(", ")
+                )
+            })
+        };
+        let terms = match self {
+            Task::HoldAngles { targets, .. } => targets
+                .iter()
+                .map(|(v, &target)| Ok((index(v)?, target, true)))
+                .collect::<Result<_, String>>()?,
+            Task::Spin { variable, rate, .. } => vec![(index(variable)?, *rate, false)],
+        };
+        Ok(Cost { terms })
+    }
+}
+
+/// A task's cost per frame over a scene's variables.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Cost {
+    /// (variable index, target, whether the difference is an angle's).
+    terms: Vec<(usize, f64, bool)>,
+}
+
+impl Cost {
+    /// The cost of one frame's variable values (SI).
+    pub fn of(&self, values: &[f64]) -> f64 {
+        self.terms
+            .iter()
+            .map(|&(i, target, angle)| {
+                let d = if angle {
+                    on_circle(values[i] - target)
+                } else {
+                    values[i] - target
+                };
+                d * d
+            })
+            .sum()
+    }
+
+    /// The variables the cost reads.
+    pub fn variables(&self) -> impl Iterator<Item = usize> + '_ {
+        self.terms.iter().map(|t| t.0)
+    }
+}
+
+/// An angle difference brought within [−π, π).
+fn on_circle(d: f64) -> f64 {
+    (d + PI).rem_euclid(TAU) - PI
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn names() -> Vec<String> {
+        ["omega.1.x", "roll.2", "pitch.2", "v.1.x"]
+            .map(String::from)
+            .to_vec()
+    }
+
+    #[test]
+    fn hold_angles_costs_squared_angles_on_the_circle() {
+        let task = Task::HoldAngles {
+            name: "hold".into(),
+            targets: BTreeMap::from([("roll.2".into(), 0.5), ("pitch.2".into(), 3.0)]),
+        };
+        task.validate().unwrap();
+        let cost = task.over(&names()).unwrap();
+        // roll 0.5 on target; pitch −3.0 is 2π − 6 ≈ 0.283 from 3.0 the short way.
+        let c = cost.of(&[9.0, 0.5, -3.0, 1.0]);
+        let short = TAU - 6.0;
+        assert!((c - short * short).abs() < 1e-12, "{c}");
+        assert!((cost.of(&[0.0, 0.7, 3.0, 0.0]) - 0.04).abs() < 1e-12);
+        assert_eq!(
+            cost.variables().collect::<Vec<_>>(),
+            [2, 1],
+            "pitch.2 sorts first"
+        );
+    }
+
+    #[test]
+    fn spin_costs_the_squared_rate_error() {
+        let task = Task::Spin {
+            name: "spin".into(),
+            variable: "omega.1.x".into(),
+            rate: 3.0,
+        };
+        let cost = task.over(&names()).unwrap();
+        assert_eq!(cost.of(&[1.0, 0.0, 0.0, 0.0]), 4.0);
+        assert_eq!(cost.of(&[3.0, 9.0, 9.0, 9.0]), 0.0);
+    }
+
+    #[test]
+    fn bad_tasks_are_named() {
+        let wrong = Task::HoldAngles {
+            name: "h".into(),
+            targets: BTreeMap::from([("v.1.x".into(), 0.0)]),
+        };
+        assert_eq!(wrong.validate().unwrap_err().0, "targets");
+        let missing = Task::Spin {
+            name: "s".into(),
+            variable: "omega.4.x".into(),
+            rate: 1.0,
+        };
+        let e = missing.over(&names()).unwrap_err();
+        assert!(e.contains("no variable `omega.4.x`"), "{e}");
+        let parsed: Task =
+            toml::from_str("kind = \"spin\"\nname = \"s\"\nvariable = \"omega.1.x\"\nrate = 2.0")
+                .unwrap();
+        assert_eq!(parsed.name(), "s");
+    }
+}
