@@ -16,8 +16,10 @@
 
 mod compiled;
 pub mod forest;
+pub mod linear;
 pub mod model;
 pub mod output;
+pub mod runtime;
 pub mod shard;
 pub mod threshold;
 pub mod tree;

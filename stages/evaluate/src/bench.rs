@@ -11,10 +11,10 @@ use alnlab_codes::bits::encode_columns;
 use alnlab_common::{Error, Result};
 use serde::Serialize;
 
-use crate::predict::Aln;
 pub use crate::timing::Spread;
 use crate::timing::{measure, one_thread};
 use crate::{Data, resimulate, rollout};
+use alnlab_aln::runtime::Runtime;
 
 /// Where a bit-forest's batched time goes, on one thread (medians, ns per
 /// state): coding the input bits the trees read from the levels, the trees
@@ -62,7 +62,7 @@ pub fn on_data(
     let data = Data::read(model_path, codebook_path, levels_path)?;
     let test = data.test_rows()?;
     let states = test.rows.len();
-    let aln = Aln::new(&data.model, &data.codecs, &data.outputs);
+    let aln = Runtime::new(&data.model, &data.codecs, &data.outputs);
     let one_thread = one_thread();
     let predict = || {
         std::hint::black_box(aln.levels(&test.x, None));

@@ -17,7 +17,6 @@
 //! - `rollout.parquet`: the closed-loop errors ([`rollout`]) per model,
 //!   variable, horizon and start row.
 
-mod baseline;
 pub mod bench;
 mod predict;
 mod resimulate;
@@ -226,14 +225,15 @@ pub fn run(
 
     progress.start("test", 4, "steps");
     let windows = params.windows(codecs);
-    let predictor = predict::Aln::new(&data.model, codecs, &data.outputs);
+    let predictor = alnlab_aln::runtime::Runtime::new(&data.model, codecs, &data.outputs);
     let pool = timing::one_thread();
-    let (aln, aln_paths) = predictor.paths(&test.x, windows.as_deref(), &pool);
+    let (aln, aln_paths) = predict::paths(&predictor, &test.x, windows.as_deref(), &pool);
     progress.advance(1);
     let persistence = test.x.clone();
     progress.advance(1);
     let levels_of: Vec<usize> = codecs.iter().map(Codec::levels).collect();
-    let linear = baseline::Linear::fit(&select("x", &train_rows)?, &select("y", &train_rows)?);
+    let linear =
+        alnlab_aln::linear::Linear::fit(&select("x", &train_rows)?, &select("y", &train_rows)?);
     let (linear_levels, linear_path) = predict::linear(&linear, &test.x, &levels_of);
     progress.advance(1);
 
@@ -289,9 +289,7 @@ pub fn run(
         ),
         (
             "linear".to_string(),
-            rollout::roll(from, horizon, |x| {
-                predict::linear_levels(&linear, x, &levels_of)
-            }),
+            rollout::roll(from, horizon, |x| linear.levels(x, &levels_of)),
         ),
     ];
     let start_rows: Vec<rollout::Start> = truth.starts.iter().map(|&k| starts[k]).collect();

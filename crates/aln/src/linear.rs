@@ -1,7 +1,7 @@
-//! The baselines every prediction is scored against (DESIGN.md §6):
-//! `persistence` (the next level is the current one) and `linear` (least
-//! squares from all current levels to each next level, fitted on the
-//! training rows, then rounded and clamped to the levels).
+//! The linear baseline (DESIGN.md §6): least squares from all current
+//! levels to each next level, fitted on the training rows, then rounded and
+//! clamped to the levels. (The other baseline, persistence, needs no model:
+//! the next level is the current one.)
 
 use nalgebra::DMatrix;
 
@@ -39,6 +39,24 @@ impl Linear {
             }
             *value = sum.round().clamp(0.0, (levels[j] - 1) as f64) as u16;
         }
+    }
+
+    /// The predicted levels `[variable][row]` for the current levels `x`
+    /// (`[variable][row]`), one row at a time.
+    pub fn levels(&self, x: &[Vec<u16>], levels: &[usize]) -> Vec<Vec<u16>> {
+        let rows = x.first().map_or(0, Vec::len);
+        let mut out = vec![Vec::with_capacity(rows); x.len()];
+        let (mut row, mut predicted) = (vec![0u16; x.len()], vec![0u16; x.len()]);
+        for r in 0..rows {
+            for (v, column) in x.iter().enumerate() {
+                row[v] = column[r];
+            }
+            self.predict(&row, levels, &mut predicted);
+            for (v, &p) in predicted.iter().enumerate() {
+                out[v].push(p);
+            }
+        }
+        out
     }
 }
 
