@@ -112,7 +112,10 @@ fn cache_reuses_and_reruns_only_what_changed() {
     let dir = tempfile::tempdir().unwrap();
     write_manifest(dir.path(), "m.toml", MANIFEST);
     let first = run_ok(dir.path(), &["m.toml"]);
-    assert_eq!(cached(&first), [false, false, false, false, false, false]);
+    assert_eq!(
+        cached(&first),
+        [false, false, false, false, false, false, false]
+    );
     assert!(first.variants[0].artifacts.keys().eq([
         "codebook",
         "comparisons",
@@ -120,6 +123,8 @@ fn cache_reuses_and_reruns_only_what_changed() {
         "levels",
         "model",
         "pairs",
+        "plan",
+        "planning",
         "predictions",
         "rollout",
         "stats",
@@ -130,7 +135,7 @@ fn cache_reuses_and_reruns_only_what_changed() {
     ]));
 
     let second = run_ok(dir.path(), &["m.toml"]);
-    assert_eq!(cached(&second), [true, true, true, true, true, true]);
+    assert_eq!(cached(&second), [true, true, true, true, true, true, true]);
     assert_eq!(
         first.variants[0].artifacts["pairs"].sha256,
         second.variants[0].artifacts["pairs"].sha256
@@ -139,7 +144,10 @@ fn cache_reuses_and_reruns_only_what_changed() {
     // A stride parameter: simulate stays cached, stride re-runs.
     write_manifest(dir.path(), "m.toml", &MANIFEST.replace("n = 5", "n = 4"));
     let third = run_ok(dir.path(), &["m.toml"]);
-    assert_eq!(cached(&third), [true, false, false, false, false, false]);
+    assert_eq!(
+        cached(&third),
+        [true, false, false, false, false, false, false]
+    );
 
     // A simulate parameter: everything downstream re-runs too.
     write_manifest(
@@ -148,16 +156,22 @@ fn cache_reuses_and_reruns_only_what_changed() {
         &MANIFEST.replace("runs = 2", "runs = 3"),
     );
     let fourth = run_ok(dir.path(), &["m.toml"]);
-    assert_eq!(cached(&fourth), [false, false, false, false, false, false]);
+    assert_eq!(
+        cached(&fourth),
+        [false, false, false, false, false, false, false]
+    );
 
     // Going back to the first manifest finds its artifacts again.
     write_manifest(dir.path(), "m.toml", MANIFEST);
     let fifth = run_ok(dir.path(), &["m.toml"]);
-    assert_eq!(cached(&fifth), [true, true, true, true, true, true]);
+    assert_eq!(cached(&fifth), [true, true, true, true, true, true, true]);
 
     // --force re-runs all.
     let forced = run_ok(dir.path(), &["m.toml", "--force"]);
-    assert_eq!(cached(&forced), [false, false, false, false, false, false]);
+    assert_eq!(
+        cached(&forced),
+        [false, false, false, false, false, false, false]
+    );
 }
 
 #[test]

@@ -132,6 +132,9 @@ pub struct Stages {
     /// `[test]`
     #[serde(default)]
     pub test: alnlab_evaluate::Params,
+    /// `[plan]`
+    #[serde(default)]
+    pub plan: alnlab_plan::Params,
 }
 
 /// The whole document as deserialized (variants handled separately).
@@ -151,6 +154,8 @@ struct Document {
     train: alnlab_train::Params,
     #[serde(default)]
     test: alnlab_evaluate::Params,
+    #[serde(default)]
+    plan: alnlab_plan::Params,
 }
 
 /// An error in a manifest, located in the file.
@@ -369,6 +374,7 @@ fn split(document: Document) -> (Experiment, Option<Data>, Stages) {
         quantize: document.quantize,
         train: document.train,
         test: document.test,
+        plan: document.plan,
     };
     (document.experiment, document.data, stages)
 }

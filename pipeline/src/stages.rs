@@ -351,6 +351,59 @@ pub const STAGES: &[Stage] = &[
             holds_forest: false,
         },
     },
+    Stage {
+        name: "plan",
+        about: "Run the plan stage alone: model-predictive control of a scene in the simulator, \
+                torques chosen by random shooting or the cross-entropy method with the ALN, the \
+                linear baseline or the simulator as forward model, against zero and random \
+                torques, per task and budget",
+        format_version: alnlab_plan::FORMAT_VERSION,
+        inputs: &[
+            Input {
+                role: "trajectory",
+                from: "simulate",
+            },
+            Input {
+                role: "model",
+                from: "train",
+            },
+            Input {
+                role: "codebook",
+                from: "quantize",
+            },
+            Input {
+                role: "levels",
+                from: "quantize",
+            },
+        ],
+        outputs: &[
+            ("plan", alnlab_plan::PLAN_FILE),
+            ("planning", alnlab_plan::PLANNING_FILE),
+        ],
+        archived: Archived::Never,
+        params: |s| json(&s.plan),
+        validate: |s| s.plan.validate(),
+        run: |c| {
+            alnlab_plan::run(
+                &c.stages.plan,
+                c.seed,
+                c.input("trajectory"),
+                c.input("model"),
+                c.input("codebook"),
+                c.input("levels"),
+                c.provenance,
+                c.out_dir,
+                c.progress,
+            )
+        },
+        merge_shards: None,
+        hints: Hints {
+            threads: 1,
+            mem_mb: 2048,
+            runtime: 60,
+            holds_forest: true,
+        },
+    },
 ];
 
 /// The stage called `name`.

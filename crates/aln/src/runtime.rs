@@ -6,6 +6,9 @@
 //! row at a time. Every path decodes through the outputs' [`Output`], with
 //! optional rate limiting.
 
+use std::path::Path;
+
+use alnlab_codes::Codebook;
 use alnlab_codes::bits::{BitMatrix, Columns, encode, encode_columns};
 use alnlab_codes::codes::{Code, Codec};
 use rayon::prelude::*;
@@ -15,6 +18,57 @@ use crate::model::Model;
 use crate::threshold;
 use crate::tree::Tree;
 use crate::{ModelKind, Output};
+use alnlab_common::hash::sha256_file;
+use alnlab_common::{Error, Result};
+
+/// A trained model with the codebook it was trained with, checked to
+/// belong together: the codebook's hash is the one the model names, and
+/// the model predicts the codebook's learned variables in its codes.
+pub struct Trained {
+    pub model: Model,
+    pub codebook: Codebook,
+    /// The learned variables' codecs, in the model's variable order.
+    pub codecs: Vec<Codec>,
+    /// What decodes each learned variable from its trees' bits.
+    pub outputs: Vec<Output>,
+}
+
+impl Trained {
+    /// Reads `model.aln` and `codebook.parquet`; an error names the file
+    /// that does not fit.
+    pub fn read(model_path: &Path, codebook_path: &Path) -> Result<Trained> {
+        let model = Model::read(model_path)?;
+        if model.header.codebook_sha256 != sha256_file(codebook_path)? {
+            return Err(Error::bad_file(
+                model_path,
+                format!(
+                    "was trained with another codebook than {}",
+                    codebook_path.display()
+                ),
+            ));
+        }
+        let codebook = Codebook::read(codebook_path)?;
+        let codecs = codebook.learned_codecs(codebook_path)?;
+        let learned: Vec<_> = codebook.learned().collect();
+        let outputs = model.header.outputs_for(&learned).map_err(|m| {
+            Error::bad_file(
+                model_path,
+                format!("does not fit the codebook {}: {m}", codebook_path.display()),
+            )
+        })?;
+        Ok(Trained {
+            model,
+            codebook,
+            codecs,
+            outputs,
+        })
+    }
+
+    /// The runtime that predicts with it.
+    pub fn runtime(&self) -> Runtime<'_> {
+        Runtime::new(&self.model, &self.codecs, &self.outputs)
+    }
+}
 
 /// A trained model made ready to predict: a bit-forest compiled once, or a
 /// threshold model's voters with the codes of its candidate levels; and its

@@ -28,9 +28,9 @@ use std::sync::Arc;
 
 use alnlab_aln::Output;
 use alnlab_aln::model::Model;
+use alnlab_aln::runtime::Trained;
 use alnlab_codes::codes::Codec;
 use alnlab_codes::{Codebook, Entry, level_column, split_rows};
-use alnlab_common::hash::sha256_file;
 use alnlab_common::params::{self, Count, Fraction, ParamError};
 use alnlab_common::state_log::StateLog;
 use alnlab_common::table::{self, Table};
@@ -125,25 +125,12 @@ pub(crate) struct Data {
 impl Data {
     /// Reads the three files, checking that they belong together.
     pub fn read(model_path: &Path, codebook_path: &Path, levels_path: &Path) -> Result<Data> {
-        let model = Model::read(model_path)?;
-        if model.header.codebook_sha256 != sha256_file(codebook_path)? {
-            return Err(Error::bad_file(
-                model_path,
-                format!(
-                    "was trained with another codebook than {}",
-                    codebook_path.display()
-                ),
-            ));
-        }
-        let codebook = Codebook::read(codebook_path)?;
-        let codecs = codebook.learned_codecs(codebook_path)?;
-        let learned: Vec<_> = codebook.learned().collect();
-        let outputs = model.header.outputs_for(&learned).map_err(|m| {
-            Error::bad_file(
-                model_path,
-                format!("does not fit the codebook {}: {m}", codebook_path.display()),
-            )
-        })?;
+        let Trained {
+            model,
+            codebook,
+            codecs,
+            outputs,
+        } = Trained::read(model_path, codebook_path)?;
         Ok(Data {
             model,
             codecs,

@@ -96,13 +96,13 @@ pub fn linear<'s>(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use alnlab_aln::model::Header;
     use alnlab_aln::model::Model;
+    use alnlab_aln::shard::Shard;
+    use alnlab_aln::tree::TreeSpec;
     use alnlab_aln::{ModelKind, Output, Target};
     use alnlab_codes::bits::{Columns, encode};
     use alnlab_codes::codes::{Code, Codec};
-    use alnlab_aln::model::Header;
-    use alnlab_aln::shard::Shard;
-    use alnlab_aln::tree::TreeSpec;
     use alnlab_codes::walk::WalkSpec;
     use alnlab_train::forest;
 

@@ -6,7 +6,13 @@
 //! - [`Simulator`]: the simulator itself at k integration steps per frame
 //!   (k = the scene's own steps per frame is the true model; smaller k is
 //!   cheaper and wronger). A candidate that blows up costs +∞.
+//! - [`Learned`]: a model of levels — the trained ALN ([`Runtime`]) or the
+//!   linear baseline ([`LinearStep`]) — fed the planner's torques as the
+//!   hinge torque variables' levels and its own predictions after that.
 
+use alnlab_aln::linear::Linear;
+use alnlab_aln::runtime::Runtime;
+use alnlab_codes::Entry;
 use alnlab_common::state_log::StateFrame;
 use alnlab_physics::dynamics::State;
 use alnlab_physics::{Prepared, Runner};
@@ -100,4 +106,237 @@ pub(crate) fn copy_state(to: &mut State, from: &State) {
     to.root_v = from.root_v;
     to.orient.clone_from(&from.orient);
     to.rates.clone_from(&from.rates);
+}
+
+/// A model of the next levels from the current ones, both `[variable][row]`
+/// over a codebook's learned variables: the trained ALN or the linear
+/// baseline.
+pub trait LevelStep {
+    fn next(&self, x: &[Vec<u16>]) -> Vec<Vec<u16>>;
+}
+
+impl LevelStep for Runtime<'_> {
+    fn next(&self, x: &[Vec<u16>]) -> Vec<Vec<u16>> {
+        self.levels(x, None)
+    }
+}
+
+/// The linear baseline with the level counts it clamps to.
+pub struct LinearStep<'a> {
+    pub linear: &'a Linear,
+    pub levels: &'a [usize],
+}
+
+impl LevelStep for LinearStep<'_> {
+    fn next(&self, x: &[Vec<u16>]) -> Vec<Vec<u16>> {
+        self.linear.levels(x, self.levels)
+    }
+}
+
+/// A forward model in levels: the true state quantized by the codebook,
+/// each frame's torques set as the hinge torque variables' levels (`g.N.x`
+/// … of hinge N − 1), the next levels predicted for every candidate at once
+/// (the ALN bit-sliced), fed back, and the task's variables read back at
+/// their levels' values to cost.
+pub struct Learned<'a, S: LevelStep> {
+    step: S,
+    entries: Vec<&'a Entry>,
+    /// Per learned variable, its index among the scene's variables.
+    in_scene: Vec<usize>,
+    /// (torque component in an action, learned variable) pairs.
+    torques: Vec<(usize, usize)>,
+    /// (learned variable, scene variable) of the variables the cost reads.
+    costed: Vec<(usize, usize)>,
+    cost: Cost,
+    start: Vec<u16>,
+    values: Vec<f64>,
+}
+
+impl<'a, S: LevelStep> Learned<'a, S> {
+    /// `step` over the `learned` codebook entries, in scene `p`, costing
+    /// with `cost`. An error names a task variable or a hinge torque the
+    /// codebook does not learn.
+    pub fn new(
+        step: S,
+        learned: Vec<&'a Entry>,
+        p: &Prepared,
+        cost: Cost,
+    ) -> Result<Learned<'a, S>, String> {
+        let names = &p.layout.variables;
+        let in_scene = learned
+            .iter()
+            .map(|e| {
+                names.iter().position(|n| *n == e.variable).ok_or_else(|| {
+                    format!("scene `{}` has no variable `{}`", p.scene.name, e.variable)
+                })
+            })
+            .collect::<Result<Vec<_>, String>>()?;
+        let find = |name: &str| learned.iter().position(|e| e.variable == name);
+        let hinges = p.model.len() - 1;
+        let torques = (0..3 * hinges)
+            .filter_map(|k| {
+                let name = format!("g.{}.{}", k / 3 + 2, ["x", "y", "z"][k % 3]);
+                find(&name).map(|v| (k, v))
+            })
+            .collect::<Vec<_>>();
+        if torques.is_empty() {
+            return Err(format!(
+                "the model learns no hinge torque (g.N.x|y|z) of scene `{}`: it cannot be told \
+                 the planner's torques",
+                p.scene.name
+            ));
+        }
+        let costed = cost
+            .variables()
+            .map(|s| {
+                let v = in_scene.iter().position(|&i| i == s).ok_or_else(|| {
+                    format!(
+                        "the model does not learn `{}`, which the task reads",
+                        names[s]
+                    )
+                })?;
+                Ok((v, s))
+            })
+            .collect::<Result<Vec<_>, String>>()?;
+        Ok(Learned {
+            step,
+            start: vec![0; learned.len()],
+            entries: learned,
+            in_scene,
+            torques,
+            costed,
+            cost,
+            values: vec![0.0; names.len()],
+        })
+    }
+}
+
+impl<S: LevelStep> Model for Learned<'_, S> {
+    fn start(&mut self, _state: &State, variables: &[f64]) {
+        for ((level, entry), &s) in self.start.iter_mut().zip(&self.entries).zip(&self.in_scene) {
+            *level = entry.quantizer.level(variables[s]).0;
+        }
+    }
+}
+
+impl<S: LevelStep> Forward for Learned<'_, S> {
+    fn costs(&mut self, actions: &[f64], horizon: usize, costs: &mut [f64]) {
+        let n = costs.len();
+        let len = actions.len() / n.max(1);
+        let d = len / horizon.max(1);
+        let mut x: Vec<Vec<u16>> = self.start.iter().map(|&l| vec![l; n]).collect();
+        costs.fill(0.0);
+        for h in 0..horizon {
+            for &(k, v) in &self.torques {
+                let q = &self.entries[v].quantizer;
+                for (i, level) in x[v].iter_mut().enumerate() {
+                    *level = q.level(actions[i * len + h * d + k]).0;
+                }
+            }
+            x = self.step.next(&x);
+            for (i, cost) in costs.iter_mut().enumerate() {
+                for &(v, s) in &self.costed {
+                    self.values[s] = self.entries[v].quantizer.value(usize::from(x[v][i]));
+                }
+                *cost += self.cost.of(&self.values);
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use std::collections::BTreeMap;
+
+    use alnlab_codes::Code;
+    use alnlab_codes::codebook::Quantizer;
+    use alnlab_physics::Scene;
+    use alnlab_physics::controller::{ControllerKind, ControllerParams};
+
+    use super::*;
+    use crate::task::Task;
+
+    fn entry(variable: &str, min: f64, max: f64, levels: usize) -> Entry {
+        Entry {
+            variable: variable.into(),
+            learned: true,
+            note: String::new(),
+            quantizer: Quantizer { min, max, levels },
+            code: Code::Gray,
+            width: 0,
+            walk_step: 1,
+            walk_span: 1,
+            seed: 0,
+            clamped: 0,
+        }
+    }
+
+    /// pitch.2 (learned variable 0) moves by g.2.y's level − 10 per frame.
+    struct Nudge;
+
+    impl LevelStep for Nudge {
+        fn next(&self, x: &[Vec<u16>]) -> Vec<Vec<u16>> {
+            let pitch = x[0]
+                .iter()
+                .zip(&x[1])
+                .map(|(&p, &g)| (i32::from(p) + i32::from(g) - 10).clamp(0, 40) as u16)
+                .collect();
+            vec![pitch, x[1].clone()]
+        }
+    }
+
+    #[test]
+    fn learned_models_take_torques_as_levels_and_cost_their_predictions() {
+        let p = Prepared::new(&Scene {
+            controller: Some(ControllerParams {
+                kind: ControllerKind::Random,
+                ..ControllerParams::default()
+            }),
+            ..Scene::default()
+        });
+        // pitch.2 in 41 levels over [−2, 2] (0.1 rad each); g.2.y in 21
+        // levels over [−10, 10] (1 N m each).
+        let entries = [
+            entry("pitch.2", -2.0, 2.0, 41),
+            entry("g.2.y", -10.0, 10.0, 21),
+        ];
+        let task = Task::HoldAngles {
+            name: "hold".into(),
+            targets: BTreeMap::from([("pitch.2".into(), 0.5)]),
+        };
+        let cost = task.over(&p.layout.variables).unwrap();
+        let mut model = Learned::new(Nudge, entries.iter().collect(), &p, cost.clone()).unwrap();
+        let mut variables = vec![0.0; p.layout.variables.len()];
+        let pitch = p
+            .layout
+            .variables
+            .iter()
+            .position(|n| n == "pitch.2")
+            .unwrap();
+        variables[pitch] = 0.0; // level 20
+        let rest = State::rest(&p.model, Vector3::zeros());
+        model.start(&rest, &variables);
+        // Two candidates over 2 frames, 6 torque components each (2 hinges):
+        // g.2.y = +2 N m (level 12: +2 levels, +0.2 rad per frame), or 0.
+        let d = 6;
+        let mut actions = vec![0.0; 2 * 2 * d];
+        actions[1] = 2.0;
+        actions[d + 1] = 2.0;
+        let mut costs = [0.0; 2];
+        model.costs(&actions, 2, &mut costs);
+        // Pushed: pitch 0.2 then 0.4 → (0.3² + 0.1²); left alone: 0.5² twice.
+        assert!((costs[0] - (0.09 + 0.01)).abs() < 1e-9, "{costs:?}");
+        assert!((costs[1] - 0.5).abs() < 1e-9, "{costs:?}");
+
+        // A task variable the model does not learn is refused by name.
+        let other = Task::HoldAngles {
+            name: "h".into(),
+            targets: BTreeMap::from([("roll.3".into(), 0.0)]),
+        };
+        let cost = other.over(&p.layout.variables).unwrap();
+        let e = Learned::new(Nudge, entries.iter().collect(), &p, cost)
+            .err()
+            .unwrap();
+        assert!(e.contains("does not learn `roll.3`"), "{e}");
+    }
 }

@@ -2,14 +2,562 @@
 //! prediction of what would happen given certain applied torques …, the
 //! torques etc. can be changed until the predicted solution is
 //! satisfactory"): model-predictive control of a scene in the true
-//! simulator, with a forward model — the trained ALN, the linear baseline,
-//! or the simulator itself at a coarser step — searched by a sampling
-//! planner ([`planner`]).
+//! simulator. Every frame a planner ([`planner`]: random shooting or the
+//! cross-entropy method) searches torque sequences over a horizon with a
+//! forward model ([`forward`]: the trained ALN, the linear baseline, or the
+//! simulator at k steps per frame), the scene's own simulator executes the
+//! first frame's torques, and the task's cost ([`task`]) of the frame
+//! reached is added up ([`episode`]). Zero torques and the scene's random
+//! controller are the references.
 //!
-//! State of this crate: the planners; the tasks, forward models, episodes
-//! and the stage's files follow.
+//! For every task, model, planner and budget (sequences per decision), the
+//! same episodes — the same start states, taken from the trajectory log —
+//! are run, one thread, one after another, so that decision times are one
+//! thread's and episodes pair across models. Writes
+//! - `plan.parquet`: per task, model, planner, budget, episode and frame,
+//!   the torques executed, the task's cost of the frame reached and the
+//!   cost the planner predicted for it;
+//! - `planning.parquet`: per task, model, planner, budget and episode, the
+//!   summed cost, the evaluations per decision, and the decision time in ms
+//!   (median and range over the episode's decisions — measured, the one
+//!   thing that differs between equal runs).
 
 pub mod episode;
 pub mod forward;
 pub mod planner;
 pub mod task;
+
+use std::path::Path;
+use std::sync::Arc;
+
+use alnlab_aln::linear::Linear;
+use alnlab_aln::runtime::Trained;
+use alnlab_codes::{level_column, split_rows};
+use alnlab_common::hash::mix_seed;
+use alnlab_common::params::{self, Count, Fraction, ParamError};
+use alnlab_common::state_log::StateLog;
+use alnlab_common::table::{self, Table};
+use alnlab_common::{Error, Progress, Provenance, Result};
+use alnlab_physics::controller::ControllerKind;
+use alnlab_physics::dynamics::State;
+use alnlab_physics::replay::SceneReplay;
+use alnlab_physics::{Prepared, state_from_generalized};
+use arrow_array::types::Float64Type;
+use arrow_array::{Array, Float64Array, ListArray, StringArray, UInt32Array, UInt64Array};
+use rand::{RngExt, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use serde::{Deserialize, Serialize};
+
+use crate::episode::Policy;
+use crate::forward::{Learned, LinearStep, Model, Simulator};
+use crate::planner::{Bounds, CemSettings, Planner, PlannerKind};
+use crate::task::{Cost, Task};
+
+/// Version of what this stage writes (part of every cache key).
+pub const FORMAT_VERSION: u32 = 1;
+/// File name of the per-frame table.
+pub const PLAN_FILE: &str = "plan.parquet";
+/// File name of the per-episode table.
+pub const PLANNING_FILE: &str = "planning.parquet";
+
+/// A forward model learned from the data.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum LearnedKind {
+    /// The trained model of the train stage.
+    Aln,
+    /// The linear baseline, fitted on the training rows.
+    Linear,
+}
+
+/// The `[plan]` table of a manifest.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct Params {
+    /// The tasks (`[[plan.task]]`); none: the stage plans nothing and
+    /// writes empty tables.
+    pub task: Vec<Task>,
+    /// The scene of the trajectory log to control (default: its first).
+    pub scene: Option<String>,
+    /// The planners.
+    pub planners: Vec<PlannerKind>,
+    /// The learned forward models.
+    pub models: Vec<LearnedKind>,
+    /// The simulator as forward model at these integration steps per frame
+    /// (the scene's own is the true model).
+    pub simulator_steps: Vec<Count>,
+    /// Frames a plan looks ahead.
+    pub horizon: Count,
+    /// Candidate sequences per decision, each budget in turn (a decision
+    /// costs budget × horizon model evaluations).
+    pub budgets: Vec<Count>,
+    /// Episodes per task, each from another logged state.
+    pub episodes: Count,
+    /// Frames per episode (one decision each).
+    pub frames: Count,
+    /// The cross-entropy method's rounds per decision.
+    pub cem_iterations: Count,
+    /// … and the fraction of a round's sequences it refits to.
+    pub cem_elite: Fraction,
+}
+
+impl Default for Params {
+    fn default() -> Self {
+        Params {
+            task: Vec::new(),
+            scene: None,
+            planners: vec![PlannerKind::RandomShooting, PlannerKind::Cem],
+            models: vec![LearnedKind::Aln, LearnedKind::Linear],
+            simulator_steps: vec![Count(10), Count(2)],
+            horizon: Count(10),
+            budgets: vec![Count(8), Count(32), Count(128)],
+            episodes: Count(3),
+            frames: Count(100),
+            cem_iterations: Count(3),
+            cem_elite: Fraction(0.1),
+        }
+    }
+}
+
+impl Params {
+    /// Checks the tasks and the lists.
+    pub fn validate(&self) -> std::result::Result<(), ParamError> {
+        for (i, task) in self.task.iter().enumerate() {
+            task.validate()
+                .map_err(|(field, m)| (format!("task.{i}.{field}"), m))?;
+            if self.task[..i].iter().any(|t| t.name() == task.name()) {
+                return Err((
+                    format!("task.{i}.name"),
+                    format!("two tasks are named `{}`", task.name()),
+                ));
+            }
+        }
+        if !self.task.is_empty() && self.planners.is_empty() {
+            return Err(("planners".into(), "expected at least one planner".into()));
+        }
+        if !self.task.is_empty() && self.budgets.is_empty() {
+            return Err(("budgets".into(), "expected at least one budget".into()));
+        }
+        Ok(())
+    }
+}
+
+/// One row of `planning.parquet`: an episode's summed cost.
+struct EpisodeRow {
+    task: String,
+    model: String,
+    planner: &'static str,
+    budget: u32,
+    episode: u32,
+    evaluations: u64,
+    cost: f64,
+    ms: (f64, f64, f64),
+}
+
+/// The per-frame rows of `plan.parquet`, column by column.
+#[derive(Default)]
+struct FrameRows {
+    task: Vec<String>,
+    model: Vec<String>,
+    planner: Vec<&'static str>,
+    budget: Vec<u32>,
+    episode: Vec<u32>,
+    frame: Vec<u32>,
+    torques: Vec<Vec<f64>>,
+    cost: Vec<f64>,
+    predicted: Vec<f64>,
+}
+
+/// Plans every task with every model, planner and budget, and writes the
+/// two tables.
+#[allow(clippy::too_many_arguments)]
+pub fn run(
+    params: &Params,
+    seed: u64,
+    trajectory_path: &Path,
+    model_path: &Path,
+    codebook_path: &Path,
+    levels_path: &Path,
+    provenance: &Provenance,
+    out_dir: &Path,
+    progress: &dyn Progress,
+) -> Result<()> {
+    params.validate().map_err(|e| params::invalid("plan", e))?;
+    let mut frames = FrameRows::default();
+    let mut episodes = Vec::new();
+    if !params.task.is_empty() {
+        let log = StateLog::read(trajectory_path)?;
+        let replays =
+            SceneReplay::from_log(&log).map_err(|m| Error::bad_file(trajectory_path, m))?;
+        let scene_name = match &params.scene {
+            Some(name) => name.clone(),
+            None => log
+                .scenes
+                .first()
+                .map(|s| s.layout.scene.clone())
+                .ok_or_else(|| Error::bad_file(trajectory_path, "holds no scene"))?,
+        };
+        let replay = replays.get(&scene_name).ok_or_else(|| {
+            Error::Invalid(format!(
+                "[plan] scene: the trajectory log has no scene `{scene_name}` (it has {})",
+                replays.keys().cloned().collect::<Vec<_>>().join(", ")
+            ))
+        })?;
+        let p = &replay.prepared;
+        let bounds = bounds_of(p)?;
+        let logged = &log
+            .scenes
+            .iter()
+            .find(|s| s.layout.scene == scene_name)
+            .expect("a replay per logged scene")
+            .frames;
+        let starts = start_states(p, logged, params, seed, trajectory_path)?;
+        let trained = Trained::read(model_path, codebook_path)?;
+        let levels = Table::read(levels_path)?;
+        let learned: Vec<_> = trained.codebook.learned().collect();
+        let train_rows = split_rows(&levels, "train")?;
+        let select = |side: &str| -> Result<Vec<Vec<u16>>> {
+            learned
+                .iter()
+                .map(|e| {
+                    let column = level_column(&levels, side, e)?;
+                    Ok(train_rows.iter().map(|&r| column[r]).collect())
+                })
+                .collect()
+        };
+        let linear = Linear::fit(&select("x")?, &select("y")?);
+        let level_counts: Vec<usize> = trained.codecs.iter().map(|c| c.levels()).collect();
+
+        let models = params.models.len() + params.simulator_steps.len();
+        let per_task = 2 + params.planners.len() * models * params.budgets.len();
+        progress.start(
+            "plan",
+            (params.task.len() * per_task * params.episodes.get()) as u64,
+            "episodes",
+        );
+        // One thread: decision times are one thread's, whatever the machine.
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(1)
+            .build()
+            .expect("a thread pool of one thread");
+        let context = Context {
+            p,
+            starts: &starts,
+            params,
+            seed,
+            progress,
+        };
+        pool.install(|| -> Result<()> {
+            for (t, task) in params.task.iter().enumerate() {
+                let cost = task.over(&p.layout.variables).map_err(Error::Invalid)?;
+                let task_run = TaskRun {
+                    context: &context,
+                    task: task.name(),
+                    index: t,
+                    cost: &cost,
+                };
+                let mut out = (&mut frames, &mut episodes);
+                task_run.reference("zero", &mut Policy::Zero, &mut out)?;
+                task_run.reference("random", &mut Policy::Random, &mut out)?;
+                for &kind in &params.models {
+                    let (name, model): (&str, Box<dyn Model>) = match kind {
+                        LearnedKind::Aln => (
+                            "aln",
+                            Box::new(
+                                Learned::new(trained.runtime(), learned.clone(), p, cost.clone())
+                                    .map_err(|m| Error::Invalid(format!("[plan] aln: {m}")))?,
+                            ),
+                        ),
+                        LearnedKind::Linear => (
+                            "linear",
+                            Box::new(
+                                Learned::new(
+                                    LinearStep {
+                                        linear: &linear,
+                                        levels: &level_counts,
+                                    },
+                                    learned.clone(),
+                                    p,
+                                    cost.clone(),
+                                )
+                                .map_err(|m| Error::Invalid(format!("[plan] linear: {m}")))?,
+                            ),
+                        ),
+                    };
+                    task_run.planned(name, model, &bounds, &mut out)?;
+                }
+                for steps in &params.simulator_steps {
+                    let name = format!("simulator@{}", steps.get());
+                    let model = Box::new(Simulator::new(p, steps.get() as u64, cost.clone()));
+                    task_run.planned(&name, model, &bounds, &mut out)?;
+                }
+            }
+            Ok(())
+        })?;
+    }
+    write_frames(&out_dir.join(PLAN_FILE), &frames, provenance)?;
+    write_episodes(&out_dir.join(PLANNING_FILE), &episodes, provenance)
+}
+
+/// What every episode of a run shares.
+struct Context<'a> {
+    p: &'a Prepared,
+    starts: &'a [State],
+    params: &'a Params,
+    seed: u64,
+    progress: &'a dyn Progress,
+}
+
+/// One task's episodes.
+struct TaskRun<'a> {
+    context: &'a Context<'a>,
+    task: &'a str,
+    index: usize,
+    cost: &'a Cost,
+}
+
+type Out<'o> = (&'o mut FrameRows, &'o mut Vec<EpisodeRow>);
+
+impl TaskRun<'_> {
+    /// Every episode under a reference policy.
+    fn reference(&self, name: &str, policy: &mut Policy, out: &mut Out) -> Result<()> {
+        for e in 0..self.context.starts.len() {
+            self.episode(name, "", 0, e, policy, out)?;
+        }
+        Ok(())
+    }
+
+    /// Every episode with `model`, for every planner and budget.
+    fn planned(
+        &self,
+        name: &str,
+        mut model: Box<dyn Model + '_>,
+        bounds: &Bounds,
+        out: &mut Out,
+    ) -> Result<()> {
+        let params = self.context.params;
+        let cem = CemSettings {
+            iterations: params.cem_iterations.get(),
+            elite: params.cem_elite.get(),
+        };
+        for &kind in &params.planners {
+            for budget in &params.budgets {
+                for e in 0..self.context.starts.len() {
+                    let seed = mix_seed(
+                        self.context.seed,
+                        (self.index as u64) << 40 ^ (budget.get() as u64) << 20 ^ e as u64,
+                    );
+                    let mut planner = Planner::new(
+                        kind,
+                        cem,
+                        params.horizon.get(),
+                        bounds.clone(),
+                        budget.get(),
+                        seed,
+                    );
+                    let mut policy = Policy::Plan {
+                        planner: &mut planner,
+                        model: &mut *model,
+                        sequences: budget.get(),
+                    };
+                    self.episode(name, kind.name(), budget.get() as u32, e, &mut policy, out)?;
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// One episode from start state `e`, recorded.
+    fn episode(
+        &self,
+        model: &str,
+        planner: &'static str,
+        budget: u32,
+        e: usize,
+        policy: &mut Policy,
+        (frames, episodes): &mut Out,
+    ) -> Result<()> {
+        let c = self.context;
+        let mut times = Vec::with_capacity(c.params.frames.get());
+        let seed = mix_seed(c.seed, e as u64);
+        let total = episode::run(
+            c.p,
+            &c.starts[e],
+            c.params.frames.get() as u32,
+            self.cost,
+            policy,
+            seed,
+            |step, _| {
+                frames.task.push(self.task.to_string());
+                frames.model.push(model.to_string());
+                frames.planner.push(planner);
+                frames.budget.push(budget);
+                frames.episode.push(e as u32);
+                frames.frame.push(step.frame);
+                frames.torques.push(step.torques.clone());
+                frames.cost.push(step.cost);
+                frames.predicted.push(step.predicted);
+                times.push(step.seconds * 1e3);
+            },
+        )
+        .map_err(|err| {
+            err.context(&format!(
+                "task `{}`, {model} {planner} budget {budget}, episode {e}",
+                self.task
+            ))
+        })?;
+        times.sort_by(f64::total_cmp);
+        let ms = match times.as_slice() {
+            [] => (0.0, 0.0, 0.0),
+            t => (t[t.len() / 2], t[0], t[t.len() - 1]),
+        };
+        episodes.push(EpisodeRow {
+            task: self.task.to_string(),
+            model: model.to_string(),
+            planner,
+            budget,
+            episode: e as u32,
+            evaluations: u64::from(budget) * c.params.horizon.get() as u64,
+            cost: total,
+            ms,
+        });
+        c.progress.advance(1);
+        Ok(())
+    }
+}
+
+/// The box the planner searches: each hinge's torque within the scene's
+/// controller amplitude (the range its training data saw), clamped to the
+/// torque limit.
+fn bounds_of(p: &Prepared) -> Result<Bounds> {
+    let controller = p.scene.controller();
+    if controller.kind == ControllerKind::None {
+        return Err(Error::Invalid(format!(
+            "[plan]: scene `{}` has no controller, so no torques to plan (give it one, e.g. \
+             controller = {{ kind = \"random\" }})",
+            p.scene.name
+        )));
+    }
+    let limit = controller.torque_limit.get();
+    let hinges = p.model.len() - 1;
+    let high: Vec<f64> = (0..3 * hinges)
+        .map(|k| {
+            let a = &controller.amplitude;
+            let amplitude = a[if a.len() == 1 { 0 } else { k / 3 }][k % 3];
+            amplitude.abs().min(limit)
+        })
+        .collect();
+    Ok(Bounds {
+        low: high.iter().map(|h| -h).collect(),
+        high,
+    })
+}
+
+/// The episodes' start states: logged frames drawn (seeded) from the runs
+/// of the scene, each far enough from its run's end to matter not.
+fn start_states(
+    p: &Prepared,
+    logged: &[alnlab_common::state_log::StateFrame],
+    params: &Params,
+    seed: u64,
+    path: &Path,
+) -> Result<Vec<State>> {
+    if logged.is_empty() {
+        return Err(Error::bad_file(
+            path,
+            format!("scene `{}` has no frames", p.scene.name),
+        ));
+    }
+    let mut rng = ChaCha8Rng::seed_from_u64(mix_seed(seed, 0x504C_414E));
+    (0..params.episodes.get())
+        .map(|_| {
+            let frame = &logged[rng.random_range(0..logged.len())];
+            state_from_generalized(&p.model, &frame.state).ok_or_else(|| {
+                Error::bad_file(
+                    path,
+                    format!(
+                        "scene `{}`, run {}, frame {}: the state does not fit the model",
+                        p.scene.name, frame.run, frame.frame
+                    ),
+                )
+            })
+        })
+        .collect()
+}
+
+fn write_frames(path: &Path, rows: &FrameRows, provenance: &Provenance) -> Result<()> {
+    let batch = table::batch(vec![
+        (
+            "task",
+            Arc::new(StringArray::from_iter_values(&rows.task)) as Arc<dyn Array>,
+        ),
+        (
+            "model",
+            Arc::new(StringArray::from_iter_values(&rows.model)),
+        ),
+        (
+            "planner",
+            Arc::new(StringArray::from_iter_values(&rows.planner)),
+        ),
+        ("budget", Arc::new(UInt32Array::from(rows.budget.clone()))),
+        ("episode", Arc::new(UInt32Array::from(rows.episode.clone()))),
+        ("frame", Arc::new(UInt32Array::from(rows.frame.clone()))),
+        (
+            "torques",
+            Arc::new(ListArray::from_iter_primitive::<Float64Type, _, _>(
+                rows.torques
+                    .iter()
+                    .map(|t| Some(t.iter().map(|&x| Some(x)))),
+            )),
+        ),
+        ("cost", Arc::new(Float64Array::from(rows.cost.clone()))),
+        (
+            "predicted",
+            Arc::new(Float64Array::from(rows.predicted.clone())),
+        ),
+    ]);
+    table::write_parquet(path, &batch, provenance)
+}
+
+fn write_episodes(path: &Path, rows: &[EpisodeRow], provenance: &Provenance) -> Result<()> {
+    let f = |g: fn(&EpisodeRow) -> f64| -> Arc<dyn Array> {
+        Arc::new(Float64Array::from_iter_values(rows.iter().map(g)))
+    };
+    let batch = table::batch(vec![
+        (
+            "task",
+            Arc::new(StringArray::from_iter_values(rows.iter().map(|r| &r.task))) as Arc<dyn Array>,
+        ),
+        (
+            "model",
+            Arc::new(StringArray::from_iter_values(rows.iter().map(|r| &r.model))),
+        ),
+        (
+            "planner",
+            Arc::new(StringArray::from_iter_values(
+                rows.iter().map(|r| r.planner),
+            )),
+        ),
+        (
+            "budget",
+            Arc::new(UInt32Array::from_iter_values(rows.iter().map(|r| r.budget))),
+        ),
+        (
+            "episode",
+            Arc::new(UInt32Array::from_iter_values(
+                rows.iter().map(|r| r.episode),
+            )),
+        ),
+        (
+            "evaluations",
+            Arc::new(UInt64Array::from_iter_values(
+                rows.iter().map(|r| r.evaluations),
+            )),
+        ),
+        ("cost", f(|r| r.cost)),
+        ("ms_per_decision", f(|r| r.ms.0)),
+        ("ms_min", f(|r| r.ms.1)),
+        ("ms_max", f(|r| r.ms.2)),
+    ]);
+    table::write_parquet(path, &batch, provenance)
+}
