@@ -100,9 +100,10 @@ pub fn run_ok(dir: &Path, args: &[&str]) -> RunRecord {
 }
 
 /// Bytes of every artifact file of the first variant, by role; the training
-/// log as its columns less `seconds` and the timings less `ns_per_state`,
-/// `ns_min`, `ns_max` and `ns_runs` (measurements, the only values in artifacts that
-/// differ between equal runs).
+/// log as its columns less `seconds`, the timings less `ns_per_state`,
+/// `ns_min`, `ns_max` and `ns_runs`, and the planning table less its
+/// decision times (measurements, the only values in artifacts that differ
+/// between equal runs).
 pub fn artifact_bytes(dir: &Path, record: &RunRecord) -> Vec<(String, Vec<u8>)> {
     record.variants[0]
         .artifacts
@@ -112,6 +113,7 @@ pub fn artifact_bytes(dir: &Path, record: &RunRecord) -> Vec<(String, Vec<u8>)> 
             let bytes = match role.as_str() {
                 "training" => table_without(&path, &["seconds"]),
                 "timings" => table_without(&path, &["ns_per_state", "ns_min", "ns_max", "ns_runs"]),
+                "planning" => table_without(&path, &["ms_per_decision", "ms_min", "ms_max"]),
                 _ => std::fs::read(&path).unwrap(),
             };
             (role.clone(), bytes)
