@@ -99,6 +99,20 @@ fn the_plan_stage_plans_every_task_model_planner_and_budget_reproducibly() {
         assert_eq!(evaluations.value(i), u64::from(budgets.value(i)) * 3, "N·H");
     }
 
+    // The report has the planning section, a chart per task.
+    let report = std::fs::read_to_string(dir.path().join("runs/planned/report/report.md")).unwrap();
+    assert!(
+        report.contains("### Planning with the predictor"),
+        "{report}"
+    );
+    for task in ["bend", "spin"] {
+        assert!(report.contains(&format!("#### Task `{task}`")));
+        let chart = dir
+            .path()
+            .join(format!("runs/planned/report/base-plan-{task}.svg"));
+        assert!(chart.is_file(), "{}", chart.display());
+    }
+
     // Again, forced: the same bytes but for the measured decision times.
     let measured = ["ms_per_decision", "ms_min", "ms_max"];
     let (plan_bytes, planning_columns) = (

@@ -63,6 +63,7 @@ pub fn render(record: &RunRecord, dir: &Path) -> Result<PathBuf> {
                 training: artifact("training")?,
                 model: artifact("model")?,
                 codebook: artifact("codebook")?,
+                planning: v.artifacts.get("planning").map(|a| PathBuf::from(&a.path)),
                 replicates,
             })
         })

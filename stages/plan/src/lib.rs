@@ -18,9 +18,10 @@
 //!   the torques executed, the task's cost of the frame reached and the
 //!   cost the planner predicted for it;
 //! - `planning.parquet`: per task, model, planner, budget and episode, the
-//!   summed cost, the evaluations per decision, and the decision time in ms
+//!   summed cost, the evaluations per decision, the decision time in ms
 //!   (median and range over the episode's decisions — measured, the one
-//!   thing that differs between equal runs).
+//!   thing that differs between equal runs) and real time (the simulated
+//!   time a decision stands for: one frame).
 
 pub mod episode;
 pub mod forward;
@@ -54,7 +55,7 @@ use crate::planner::{Bounds, CemSettings, Planner, PlannerKind};
 use crate::task::{Cost, Task};
 
 /// Version of what this stage writes (part of every cache key).
-pub const FORMAT_VERSION: u32 = 1;
+pub const FORMAT_VERSION: u32 = 2;
 /// File name of the per-frame table.
 pub const PLAN_FILE: &str = "plan.parquet";
 /// File name of the per-episode table.
@@ -152,6 +153,8 @@ struct EpisodeRow {
     evaluations: u64,
     cost: f64,
     ms: (f64, f64, f64),
+    /// Simulated time per decision (one frame), in ms: real time.
+    real_time_ms: f64,
 }
 
 /// The per-frame rows of `plan.parquet`, column by column.
@@ -420,6 +423,7 @@ impl TaskRun<'_> {
             evaluations: u64::from(budget) * c.params.horizon.get() as u64,
             cost: total,
             ms,
+            real_time_ms: c.p.scene.frame_dt.get() * 1e3,
         });
         c.progress.advance(1);
         Ok(())
@@ -558,6 +562,7 @@ fn write_episodes(path: &Path, rows: &[EpisodeRow], provenance: &Provenance) -> 
         ("ms_per_decision", f(|r| r.ms.0)),
         ("ms_min", f(|r| r.ms.1)),
         ("ms_max", f(|r| r.ms.2)),
+        ("real_time_ms", f(|r| r.real_time_ms)),
     ]);
     table::write_parquet(path, &batch, provenance)
 }

@@ -56,6 +56,9 @@ const VARIANT_MARKERS: [Marker; 4] = [
 const PERSISTENCE: RGBColor = RGBColor(0, 0, 0);
 const LINEAR: RGBColor = RGBColor(0x77, 0x77, 0x77);
 const SIMULATOR: RGBColor = RGBColor(0x99, 0x66, 0x33);
+/// The planning references: the random controller, and the real-time line.
+const RANDOM_TORQUES: RGBColor = RGBColor(0xDD, 0x44, 0x00);
+const REAL_TIME: RGBColor = RGBColor(0xAA, 0xAA, 0xAA);
 
 /// A marker's shape.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -87,7 +90,10 @@ pub fn style_of(model: &str, variant: usize) -> Style {
         dashed: true,
     };
     match model {
-        "persistence" => dashed(PERSISTENCE, Marker::Square),
+        // Doing nothing looks the same whether it predicts or controls.
+        "persistence" | "zero torques" => dashed(PERSISTENCE, Marker::Square),
+        "random torques" => dashed(RANDOM_TORQUES, Marker::Cross),
+        "real time" => dashed(REAL_TIME, Marker::Plus),
         "linear" => dashed(LINEAR, Marker::Triangle),
         _ => match simulator_steps(model) {
             Some(steps) => dashed(
@@ -800,6 +806,8 @@ mod tests {
             "simulator@2/frame",
             "simulator@5/frame",
             "simulator@10/frame",
+            "random torques",
+            "real time",
         ] {
             assert_eq!(style_of(model, 0), style_of(model, 7), "{model}");
             seen.push(style_of(model, 0));

@@ -15,6 +15,7 @@ mod findings;
 pub mod format;
 mod glossary;
 pub mod html;
+mod plan;
 mod replicates;
 mod variant;
 
@@ -75,6 +76,8 @@ pub struct VariantInfo {
     pub model: PathBuf,
     /// The codebook: which variables were learned, and why not the others.
     pub codebook: PathBuf,
+    /// The plan stage's per-episode table, if the run had one.
+    pub planning: Option<PathBuf>,
     /// Every replicate of the variant (the first is the one above), when
     /// the experiment runs more than one.
     pub replicates: Vec<Replicate>,
@@ -277,6 +280,11 @@ pub fn render(run: &RunInfo, dir: &Path) -> Result<PathBuf> {
     let n = variants.len();
     for (k, v) in variants.iter().enumerate() {
         variant::section(&mut md, v, (k, n), shared, dir, run.compare_with_paper)?;
+        if let Some(path) = &v.info.planning {
+            plan::section(&mut md, path, dir, |chart| {
+                variant::file_name(&v.info.name, chart)
+            })?;
+        }
     }
     glossary::section(&mut md, &variants);
     reproducibility(&mut md, run, &variants);

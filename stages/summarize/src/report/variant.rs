@@ -17,7 +17,7 @@ use crate::charts::{self, Axis, Plot, Series, style_of};
 use crate::stats::{HISTOGRAM_BINS, histogram_bin_name};
 
 /// A chart's file name: the variant's name, made safe, and the chart's.
-fn file_name(variant: &str, chart: &str) -> String {
+pub(super) fn file_name(variant: &str, chart: &str) -> String {
     let safe: String = variant
         .chars()
         .map(|c| {
