@@ -14,7 +14,7 @@ use alnlab_physics::dynamics::State;
 use alnlab_physics::{Prepared, Runner};
 use nalgebra::Vector3;
 
-use crate::forward::{Model, copy_state};
+use crate::forward::Model;
 use crate::planner::Planner;
 use crate::task::Cost;
 
@@ -84,7 +84,6 @@ pub fn run(
         predicted: f64::NAN,
         seconds: 0.0,
     };
-    let mut now = State::rest(&p.model, Vector3::zeros());
     for f in 0..frames {
         match policy {
             Policy::Zero => {
@@ -97,9 +96,8 @@ pub fn run(
                 model,
                 sequences,
             } => {
-                copy_state(&mut now, &state);
                 let clock = Instant::now();
-                model.start(&now, &frame.variables);
+                model.start(&state, &frame.variables);
                 step.predicted = planner.decide(&mut **model, *sequences, &mut action);
                 step.seconds = clock.elapsed().as_secs_f64();
                 drive(&mut runner, &action, &mut torques);

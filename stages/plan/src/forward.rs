@@ -101,7 +101,7 @@ impl Forward for Simulator<'_> {
 }
 
 /// `*to = from.clone()` without allocating (a derived `clone_from` would).
-pub(crate) fn copy_state(to: &mut State, from: &State) {
+fn copy_state(to: &mut State, from: &State) {
     to.root_p = from.root_p;
     to.root_v = from.root_v;
     to.orient.clone_from(&from.orient);
