@@ -103,6 +103,28 @@ pub struct VariantRecord {
     pub metrics: Option<Metrics>,
 }
 
+impl VariantRecord {
+    /// The variant's headline metrics read from its artifacts, each found by
+    /// `file` (its recorded path, or where the cache holds it now).
+    pub fn read_metrics(&self, file: impl Fn(&ArtifactRef) -> Option<PathBuf>) -> Result<Metrics> {
+        let path = |role: &str| {
+            self.artifacts.get(role).and_then(&file).ok_or_else(|| {
+                Error::Invalid(format!(
+                    "variant `{}`: no `{role}` artifact to read its metrics from",
+                    self.name
+                ))
+            })
+        };
+        alnlab_summarize::metrics::read(&alnlab_summarize::metrics::Sources {
+            summary: &path("summary")?,
+            comparisons: &path("comparisons")?,
+            horizons: &path("horizons")?,
+            timings: &path("timings")?,
+            training: &path("training")?,
+        })
+    }
+}
+
 /// One artifact file.
 #[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct ArtifactRef {

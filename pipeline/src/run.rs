@@ -173,7 +173,7 @@ pub fn run(manifest: &Manifest, options: &RunOptions) -> Result<RunRecord> {
     }
     if options.until.is_none() {
         for record in &mut records {
-            record.metrics = Some(metrics_of(record)?);
+            record.metrics = Some(record.read_metrics(|a| Some(PathBuf::from(&a.path)))?);
         }
     }
     let record = RunRecord {
@@ -201,30 +201,6 @@ pub fn run(manifest: &Manifest, options: &RunOptions) -> Result<RunRecord> {
         records::store(&options.out, &record)?;
     }
     Ok(record)
-}
-
-/// A variant's headline metrics, from the artifacts it has just made or
-/// found.
-fn metrics_of(record: &VariantRecord) -> Result<alnlab_summarize::metrics::Metrics> {
-    let path = |role: &str| {
-        record
-            .artifacts
-            .get(role)
-            .map(|a| PathBuf::from(&a.path))
-            .ok_or_else(|| {
-                Error::Invalid(format!(
-                    "variant `{}` made no `{role}` artifact",
-                    record.name
-                ))
-            })
-    };
-    alnlab_summarize::metrics::read(&alnlab_summarize::metrics::Sources {
-        summary: &path("summary")?,
-        comparisons: &path("comparisons")?,
-        horizons: &path("horizons")?,
-        timings: &path("timings")?,
-        training: &path("training")?,
-    })
 }
 
 /// One variant's walk through the stages.

@@ -6,7 +6,7 @@ use std::collections::BTreeMap;
 use std::path::Path;
 
 use alnlab_common::{Error, Result};
-use alnlab_summarize::metrics::{self, Metrics};
+use alnlab_summarize::metrics::Metrics;
 use alnlab_summarize::paired::Interval;
 use serde::Serialize;
 
@@ -81,7 +81,12 @@ impl<'a> VariantRun<'a> {
             run.variants.iter().filter(|v| v.name == name).collect();
         let metrics = replicates
             .iter()
-            .map(|v| v.metrics.clone().or_else(|| from_artifacts(out, v)))
+            .map(|v| {
+                // A format-1 record's, from its artifacts while the cache holds them.
+                v.metrics
+                    .clone()
+                    .or_else(|| v.read_metrics(|a| records::locate(out, a)).ok())
+            })
             .collect();
         VariantRun {
             run,
@@ -149,20 +154,6 @@ impl<'a> VariantRun<'a> {
             .iter()
             .all(|f| self.parameters().get(&f.key).is_some_and(|v| f.accepts(v)))
     }
-}
-
-/// A format-1 record's metrics, read from its artifacts if the cache still
-/// holds them all.
-fn from_artifacts(out: &Path, variant: &VariantRecord) -> Option<Metrics> {
-    let path = |role: &str| records::locate(out, variant.artifacts.get(role)?);
-    metrics::read(&metrics::Sources {
-        summary: &path("summary")?,
-        comparisons: &path("comparisons")?,
-        horizons: &path("horizons")?,
-        timings: &path("timings")?,
-        training: &path("training")?,
-    })
-    .ok()
 }
 
 /// A `--where KEY=VALUE` filter on a variant's parameters: numbers compare

@@ -65,6 +65,24 @@ pub fn split_rows(levels: &Table, split: &str) -> Result<Vec<usize>> {
     Ok(rows)
 }
 
+/// The levels of `entries`' variables on one side of `rows` of
+/// `levels.parquet`, `[variable][row]`, each column checked as
+/// [`level_column`] checks it.
+pub fn level_rows(
+    levels: &Table,
+    side: &str,
+    entries: &[&Entry],
+    rows: &[usize],
+) -> Result<Vec<Vec<u16>>> {
+    entries
+        .iter()
+        .map(|e| {
+            let column = level_column(levels, side, e)?;
+            Ok(rows.iter().map(|&r| column[r]).collect())
+        })
+        .collect()
+}
+
 /// The levels of `entry`'s variable in `levels.parquet` on one side of the
 /// pairs (`x`, the current frame, or `y`, the next), checked against the
 /// codebook: no nulls, every level below the entry's level count.

@@ -19,7 +19,7 @@ pub mod residual;
 pub mod walk;
 
 pub use codebook::{
-    Codebook, Entry, GROUPS, Quantizer, group_of, level_column, split_rows, unit_of,
+    Codebook, Entry, GROUPS, Quantizer, group_of, level_column, level_rows, split_rows, unit_of,
 };
 pub use codes::{Code, Codec};
 pub use residual::{DeltaSpec, Residual};

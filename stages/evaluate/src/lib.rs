@@ -30,7 +30,7 @@ use alnlab_aln::Output;
 use alnlab_aln::model::Model;
 use alnlab_aln::runtime::Trained;
 use alnlab_codes::codes::Codec;
-use alnlab_codes::{Codebook, Entry, level_column, split_rows};
+use alnlab_codes::{Codebook, Entry, level_rows, split_rows};
 use alnlab_common::params::{self, Count, Fraction, ParamError};
 use alnlab_common::state_log::StateLog;
 use alnlab_common::table::{self, Table};
@@ -148,13 +148,7 @@ impl Data {
 
     /// The levels of side `x` or `y` of `rows`, `[variable][row]`.
     pub fn select(&self, side: &str, rows: &[usize]) -> Result<Vec<Vec<u16>>> {
-        self.learned()
-            .iter()
-            .map(|e| {
-                let levels = level_column(&self.levels, side, e)?;
-                Ok(rows.iter().map(|&r| levels[r]).collect())
-            })
-            .collect()
+        level_rows(&self.levels, side, &self.learned(), rows)
     }
 
     /// The test rows (at least one).

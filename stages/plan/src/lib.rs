@@ -33,7 +33,7 @@ use std::sync::Arc;
 
 use alnlab_aln::linear::Linear;
 use alnlab_aln::runtime::Trained;
-use alnlab_codes::{level_column, split_rows};
+use alnlab_codes::{level_rows, split_rows};
 use alnlab_common::hash::mix_seed;
 use alnlab_common::params::{self, Count, Fraction, ParamError};
 use alnlab_common::state_log::StateLog;
@@ -219,16 +219,10 @@ pub fn run(
         let levels = Table::read(levels_path)?;
         let learned: Vec<_> = trained.codebook.learned().collect();
         let train_rows = split_rows(&levels, "train")?;
-        let select = |side: &str| -> Result<Vec<Vec<u16>>> {
-            learned
-                .iter()
-                .map(|e| {
-                    let column = level_column(&levels, side, e)?;
-                    Ok(train_rows.iter().map(|&r| column[r]).collect())
-                })
-                .collect()
-        };
-        let linear = Linear::fit(&select("x")?, &select("y")?);
+        let linear = Linear::fit(
+            &level_rows(&levels, "x", &learned, &train_rows)?,
+            &level_rows(&levels, "y", &learned, &train_rows)?,
+        );
         let level_counts: Vec<usize> = trained.codecs.iter().map(|c| c.levels()).collect();
 
         let models = params.models.len() + params.simulator_steps.len();

@@ -15,7 +15,7 @@ use arrow_array::{UInt32Array, UInt64Array};
 
 use super::format::{Align, MdTable, estimate, interval, sig3};
 use crate::charts::{self, Axis, Plot, Point, Series, style_of};
-use crate::paired::{Interval, Verdict};
+use crate::paired::Interval;
 
 /// One row of `planning.parquet`.
 struct Episode {
@@ -173,12 +173,7 @@ pub(super) fn section(
                 let diffs: Vec<f64> = costs.iter().zip(&zero_costs).map(|(a, z)| a - z).collect();
                 match Interval::of(&diffs) {
                     Some(d) if diffs.len() > 1 => {
-                        let word = match d.verdict() {
-                            Verdict::Lower => "lower",
-                            Verdict::Higher => "higher",
-                            Verdict::Indistinguishable => "indistinguishable",
-                            Verdict::Tied => "tied",
-                        };
+                        let word = d.verdict().as_str();
                         format!("{word}: {}", interval(d.mean, d.low, d.high))
                     }
                     _ => "— (one episode)".into(),
