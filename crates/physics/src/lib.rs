@@ -11,6 +11,7 @@
 //! - [`scene`]: a manifest scene, its kind's defaults and initial states.
 //! - [`variables`]: the paper's variables a scene has, names and values.
 //! - [`runner`]: one scene's runs, frame by frame.
+//! - [`foxglove`]: a scene's motion as Foxglove messages, to watch a log.
 //! - [`replay`]: re-simulating a log's frames from its scene records.
 //!
 //! [`Stepper`]: integrate::Stepper
@@ -18,6 +19,7 @@
 pub mod contact;
 pub mod controller;
 pub mod dynamics;
+pub mod foxglove;
 pub mod integrate;
 pub mod model;
 #[cfg(test)]

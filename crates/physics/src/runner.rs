@@ -279,6 +279,11 @@ impl<'a> Runner<'a> {
         &self.hinge_torques
     }
 
+    /// The link poses of the last frame observed.
+    pub fn kinematics(&self) -> &Kinematics {
+        &self.eval.kin
+    }
+
     /// Puts the torques of time `t` into the forces: the driven ones, or
     /// the controller's.
     fn torques(&mut self, t: f64) {

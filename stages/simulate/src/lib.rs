@@ -12,7 +12,6 @@
 //! this stage runs a manifest's scenes with it and writes what it saw.
 
 pub mod bench;
-mod foxglove;
 mod stats;
 #[cfg(test)]
 mod tests;
@@ -23,8 +22,8 @@ use alnlab_common::params::{self, ParamError, Positive};
 use alnlab_common::state_log::{StateLayout, StateLogWriter};
 use alnlab_common::{Progress, Provenance, Result};
 use alnlab_physics::model::Root;
-use alnlab_physics::replay;
 use alnlab_physics::{Prepared, simulate_run};
+use alnlab_physics::{foxglove, replay};
 use serde::{Deserialize, Serialize};
 
 pub use alnlab_physics::replay::SCENE_RECORD;

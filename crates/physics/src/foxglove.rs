@@ -1,5 +1,6 @@
-//! The viewing channels of the trajectory log, in Foxglove's well-known
-//! schemas (JSON encoding): `/tf` carries a `foxglove.FrameTransforms` with
+//! The viewing channels of a trajectory log (the simulate stage's runs, the
+//! plan stage's executed episodes), in Foxglove's well-known schemas (JSON
+//! encoding): `/tf` carries a `foxglove.FrameTransforms` with
 //! every link's frame at the viewing rate, and `/scene` a
 //! `foxglove.SceneUpdate` at the start of each run drawing the floor, the
 //! arena wall and the links in their frames, so the motion can be watched in
@@ -8,9 +9,9 @@
 use nalgebra::{UnitQuaternion, Vector3};
 use serde_json::{Value, json};
 
-use alnlab_physics::dynamics::Kinematics;
-use alnlab_physics::model::Model;
-use alnlab_physics::scene::{Scene, SceneKind};
+use crate::dynamics::Kinematics;
+use crate::model::Model;
+use crate::scene::{Scene, SceneKind};
 
 /// Topic of the frame transforms.
 pub const TF_TOPIC: &str = "/tf";
