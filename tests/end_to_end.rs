@@ -630,7 +630,8 @@ fn the_report_renders_with_its_charts_and_renders_again_the_same() {
 }
 
 /// A committed manifest, shrunk to test size: its structure kept, its sizes
-/// (runs, durations, rows, tree sizes, epochs, rollouts) cut down.
+/// (runs, durations, rows, tree sizes, epochs, rollouts, planning episodes,
+/// frames and budgets) cut down.
 fn cut_down(text: &str) -> String {
     fn shrink(table: &mut toml::Table) {
         let cap = |table: &mut toml::Table, key: &str, most: i64| {
@@ -654,6 +655,15 @@ fn cut_down(text: &str) -> String {
         cap(table, "leaves", 64);
         cap(table, "epochs", 2);
         cap(table, "rollout_starts", 10);
+        cap(table, "episodes", 2);
+        cap(table, "frames", 5);
+        if let Some(toml::Value::Array(budgets)) = table.get_mut("budgets") {
+            for b in budgets.iter_mut() {
+                if let toml::Value::Integer(v) = b {
+                    *v = (*v).min(8);
+                }
+            }
+        }
         for (_, value) in table.iter_mut() {
             match value {
                 toml::Value::Table(inner) => shrink(inner),

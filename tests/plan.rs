@@ -4,7 +4,12 @@
 
 mod common;
 
-use std::path::Path;
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+use alnlab_common::state_log::StateLog;
+use alnlab_common::table::Table;
+use arrow_array::{Array, Float64Array, ListArray, UInt32Array};
 
 use common::{alnlab, stderr, table_without, write_manifest};
 
@@ -57,7 +62,7 @@ variable = "omega.1.x"
 rate = 1.0
 "#;
 
-fn planned(dir: &Path, args: &[&str]) -> (std::path::PathBuf, std::path::PathBuf) {
+fn planned(dir: &Path, args: &[&str]) -> [PathBuf; 3] {
     let mut full = vec!["-q", "run", "planned.toml"];
     full.extend_from_slice(args);
     let out = alnlab(dir, &full);
@@ -71,19 +76,19 @@ fn planned(dir: &Path, args: &[&str]) -> (std::path::PathBuf, std::path::PathBuf
                 .unwrap(),
         )
     };
-    (path("plan"), path("planning"))
+    [path("plan"), path("planning"), path("episodes")]
 }
 
 #[test]
 fn the_plan_stage_plans_every_task_model_planner_and_budget_reproducibly() {
     let dir = tempfile::tempdir().unwrap();
     write_manifest(dir.path(), "planned.toml", PLANNED);
-    let (plan, planning) = planned(dir.path(), &[]);
-    let episodes = alnlab_common::table::Table::read(&planning).unwrap();
+    let [plan, planning, view] = planned(dir.path(), &[]);
+    let episodes = Table::read(&planning).unwrap();
     // Per task: zero and random, then 2 planners × 3 models × 2 budgets;
     // each 2 episodes.
     assert_eq!(episodes.num_rows(), 2 * (2 + 2 * 3 * 2) * 2);
-    let frames = alnlab_common::table::Table::read(&plan).unwrap();
+    let frames = Table::read(&plan).unwrap();
     assert_eq!(frames.num_rows(), episodes.num_rows() * 6);
     let models = episodes.strings("model").unwrap();
     for model in ["zero", "random", "aln", "linear", "simulator@10"] {
@@ -97,6 +102,105 @@ fn the_plan_stage_plans_every_task_model_planner_and_budget_reproducibly() {
         .unwrap();
     for i in 0..episodes.num_rows() {
         assert_eq!(evaluations.value(i), u64::from(budgets.value(i)) * 3, "N·H");
+    }
+
+    // Beside each frame reached, the model's prediction of the task's
+    // variables for the torques chosen: the simulator at the scene's own
+    // steps predicts exactly what happens; the references predict nothing.
+    let variables = frames.column::<ListArray>("variables").unwrap();
+    let reached = frames.column::<ListArray>("reached").unwrap();
+    let expected = frames.column::<ListArray>("expected").unwrap();
+    let f64s = |list: &ListArray, i: usize| -> Vec<f64> {
+        let values = list.value(i);
+        let values = values.as_any().downcast_ref::<Float64Array>().unwrap();
+        values.values().to_vec()
+    };
+    let tasks = frames.strings("task").unwrap();
+    let frame_models = frames.strings("model").unwrap();
+    for i in 0..frames.num_rows() {
+        let names = variables.value(i);
+        let names = names
+            .as_any()
+            .downcast_ref::<arrow_array::StringArray>()
+            .unwrap();
+        let want: &[&str] = if tasks[i] == "bend" {
+            &["pitch.2", "pitch.3"]
+        } else {
+            &["omega.1.x"]
+        };
+        assert_eq!(names.iter().flatten().collect::<Vec<_>>(), want);
+        let (r, e) = (f64s(reached, i), f64s(expected, i));
+        assert_eq!(r.len(), want.len());
+        match frame_models[i].as_str() {
+            "zero" | "random" => assert!(e.iter().all(|x| x.is_nan())),
+            "simulator@10" => {
+                for (e, r) in e.iter().zip(&r) {
+                    assert!((e - r).abs() <= 1e-9 * r.abs().max(1.0), "row {i}: {e} {r}");
+                }
+            }
+            _ => assert!(e.iter().all(|x| x.is_finite()), "row {i}: {e:?}"),
+        }
+    }
+    let rms = episodes.f64_column("prediction_rms").unwrap();
+    for (model, &rms) in models.iter().zip(rms.values()) {
+        match model.as_str() {
+            "zero" | "random" => assert!(rms.is_nan()),
+            "simulator@10" => assert!(rms < 1e-9, "{rms}"),
+            _ => assert!(rms > 0.0, "{model}: {rms}"),
+        }
+    }
+
+    // The first episode of every policy as a run of the trajectory log, its
+    // frames those of the table.
+    let log = StateLog::read(&view).unwrap();
+    assert_eq!(log.scenes.len(), 1);
+    let scene = &log.scenes[0];
+    let per_task = 2 + 2 * 3 * 2;
+    assert_eq!(
+        scene.frames.len(),
+        2 * per_task * 7,
+        "frames 0 to 6 per run"
+    );
+    let bytes = std::fs::read(&view).unwrap();
+    let mut runs = BTreeMap::new();
+    let mut tf = 0;
+    for record in mcap::read::LinearReader::new(&bytes).unwrap() {
+        match record.unwrap() {
+            mcap::records::Record::Metadata(m) if m.name == "alnlab.plan.episode" => {
+                runs.insert(m.metadata["run"].parse::<u32>().unwrap(), m.metadata);
+            }
+            mcap::records::Record::Channel(c) if c.topic == "/tf" => tf += 1,
+            _ => {}
+        }
+    }
+    assert_eq!(runs.len(), 2 * per_task);
+    assert_eq!(tf, 1, "one /tf channel");
+    let column = |name: &str| frames.column::<UInt32Array>(name).unwrap().clone();
+    let (budget, episode, frame) = (column("budget"), column("episode"), column("frame"));
+    let planners = frames.strings("planner").unwrap();
+    let pitch = scene
+        .layout
+        .variables
+        .iter()
+        .position(|v| v == "pitch.2")
+        .unwrap();
+    for logged in &scene.frames {
+        let run = &runs[&logged.run];
+        assert_eq!(run["episode"], "0");
+        if logged.frame == 0 || run["task"] != "bend" {
+            continue;
+        }
+        let row = (0..frames.num_rows())
+            .find(|&i| {
+                tasks[i] == run["task"]
+                    && frame_models[i] == run["model"]
+                    && planners[i] == run["planner"]
+                    && budget.value(i).to_string() == run["budget"]
+                    && episode.value(i) == 0
+                    && frame.value(i) == logged.frame
+            })
+            .unwrap();
+        assert_eq!(logged.variables[pitch], f64s(reached, row)[0]);
     }
 
     // The report has the planning section, a chart per task.
@@ -119,7 +223,9 @@ fn the_plan_stage_plans_every_task_model_planner_and_budget_reproducibly() {
         std::fs::read(&plan).unwrap(),
         table_without(&planning, &measured),
     );
-    let (plan_again, planning_again) = planned(dir.path(), &["--force"]);
+    let view_bytes = std::fs::read(&view).unwrap();
+    let [plan_again, planning_again, view_again] = planned(dir.path(), &["--force"]);
     assert_eq!(plan_bytes, std::fs::read(&plan_again).unwrap());
     assert_eq!(planning_columns, table_without(&planning_again, &measured));
+    assert_eq!(view_bytes, std::fs::read(&view_again).unwrap());
 }

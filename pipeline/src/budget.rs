@@ -5,7 +5,7 @@
 //! The estimates are upper bounds made from the parameters alone (no data
 //! yet): integration steps simulated, bytes of trajectory log, training
 //! rows, tree-node evaluations in training, simulator steps and predictions
-//! in the test stage. The limits are [`Budget`]'s defaults — at least a hundred
+//! in the test stage, forward-model evaluations in the plan stage. The limits are [`Budget`]'s defaults — at least a hundred
 //! times what the committed experiments ask for, and for the trees' memory
 //! about what a large workstation holds — and a manifest may raise them in
 //! `[experiment.budget]`.
@@ -40,6 +40,11 @@ pub struct Budget {
     /// horizon × variables) (default 1e10).
     #[serde(default = "default_test_work")]
     pub test_work: Positive,
+    /// Forward-model evaluations of the plan stage: tasks × episodes ×
+    /// frames × planners × Σ budgets × horizon × (learned models + Σ the
+    /// simulator's steps per frame) (default 1e11).
+    #[serde(default = "default_plan_work")]
+    pub plan_work: Positive,
 }
 
 fn default_steps() -> Positive {
@@ -57,6 +62,9 @@ fn default_model_bytes() -> Positive {
 fn default_test_work() -> Positive {
     Positive(1e10)
 }
+fn default_plan_work() -> Positive {
+    Positive(1e11)
+}
 
 impl Default for Budget {
     fn default() -> Budget {
@@ -66,6 +74,7 @@ impl Default for Budget {
             node_updates: default_node_updates(),
             model_bytes: default_model_bytes(),
             test_work: default_test_work(),
+            plan_work: default_plan_work(),
         }
     }
 }
@@ -87,6 +96,8 @@ pub struct Estimate {
     pub model_bytes: f64,
     /// Test-stage steps and predictions.
     pub test_work: f64,
+    /// Plan-stage forward-model evaluations (a simulator's counted in steps).
+    pub plan_work: f64,
 }
 
 /// An upper estimate of the learned variables of a scene of `links` links:
@@ -128,6 +139,16 @@ impl Estimate {
         let test = &stages.test;
         let resimulated: f64 = test.resimulate_steps.iter().map(|s| s.0 as f64).sum();
         let closed_loop = test.rollout_starts.0 as f64 * test.horizon.0 as f64 * vars;
+        let plan = &stages.plan;
+        let decisions = plan.task.len() as f64 * plan.episodes.0 as f64 * plan.frames.0 as f64;
+        let sequences: f64 = plan.budgets.iter().map(|b| b.0 as f64).sum();
+        let per_evaluation =
+            plan.models.len() as f64 + plan.simulator_steps.iter().map(|k| k.0 as f64).sum::<f64>();
+        let plan_work = decisions
+            * plan.planners.len() as f64
+            * sequences
+            * plan.horizon.0 as f64
+            * per_evaluation;
         Estimate {
             steps,
             frames,
@@ -136,6 +157,7 @@ impl Estimate {
             node_updates,
             model_bytes: trees * t.leaves.0 as f64 * 16.0,
             test_work: resimulated * test_rows + closed_loop,
+            plan_work,
         }
     }
 
@@ -183,6 +205,15 @@ impl Estimate {
                 "test_work",
                 "fewer resimulate_steps, rollout_starts, a shorter horizon or fewer test rows",
             ),
+            (
+                "plan",
+                "forward-model evaluations",
+                self.plan_work,
+                budget.plan_work,
+                "plan_work",
+                "fewer tasks, episodes, frames, planners or models, smaller budgets or a shorter \
+                 horizon",
+            ),
         ];
         over.into_iter()
             .find(|o| o.2 > o.3.get())
@@ -223,9 +254,39 @@ mod tests {
                     node_updates: Positive(d.node_updates.get() / 5.0),
                     model_bytes: Positive(d.model_bytes.get() / 2.0),
                     test_work: Positive(d.test_work.get() / 5.0),
+                    plan_work: Positive(d.plan_work.get() / 5.0),
                 };
                 assert_eq!(e.exceeds(&tight), None, "{}: {e:?}", path.display());
             }
         }
+    }
+
+    #[test]
+    fn a_plan_too_large_is_refused_naming_its_table_and_key() {
+        let text = r#"
+            [experiment]
+            name = "huge"
+            seed = 1
+            [plan]
+            episodes = 1000
+            frames = 1000
+            budgets = [100000]
+            [[plan.task]]
+            kind = "spin"
+            name = "spin"
+            variable = "omega.1.x"
+            rate = 1.0
+        "#;
+        // 1000 × 1000 decisions × 2 planners × 1e5 sequences × 10 frames ×
+        // (aln + linear + 10 + 2 steps) = 2.8e13: refused before anything runs.
+        let error = Manifest::parse(text, Path::new("huge.toml"))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            error.contains("huge.toml")
+                && error.contains("2.80e13 forward-model evaluations")
+                && error.contains("plan_work"),
+            "{error}"
+        );
     }
 }

@@ -379,6 +379,7 @@ pub const STAGES: &[Stage] = &[
         outputs: &[
             ("plan", alnlab_plan::PLAN_FILE),
             ("planning", alnlab_plan::PLANNING_FILE),
+            ("episodes", alnlab_plan::EPISODES_FILE),
         ],
         archived: Archived::Never,
         params: |s| json(&s.plan),

@@ -10,7 +10,7 @@ use std::time::Instant;
 
 use alnlab_common::state_log::StateFrame;
 use alnlab_common::{Error, Result};
-use alnlab_physics::dynamics::State;
+use alnlab_physics::dynamics::{Kinematics, State};
 use alnlab_physics::{Prepared, Runner};
 use nalgebra::Vector3;
 
@@ -47,10 +47,16 @@ pub struct Step {
     pub predicted: f64,
     /// Seconds the decision took (0 for the references).
     pub seconds: f64,
+    /// The task's variables (in the order of [`Cost::variables`]) in the
+    /// frame reached …
+    pub reached: Vec<f64>,
+    /// … and as the planner's model predicted them for the torques chosen
+    /// (NaN for the references).
+    pub expected: Vec<f64>,
 }
 
-/// Runs `frames` frames from `start`; hands each [`Step`] and the frame's
-/// variables to `on_step`; returns the summed cost. `seed` seeds the random
+/// Runs `frames` frames from `start`; hands each [`Step`], the frame
+/// reached and its link poses to `on_step`; returns the summed cost. `seed` seeds the random
 /// reference's torques.
 pub fn run(
     p: &Prepared,
@@ -59,7 +65,7 @@ pub fn run(
     cost: &Cost,
     policy: &mut Policy,
     seed: u64,
-    mut on_step: impl FnMut(&Step, &[f64]),
+    mut on_step: impl FnMut(&Step, &StateFrame, &Kinematics) -> Result<()>,
 ) -> Result<f64> {
     let hinges = p.model.len() - 1;
     let mut runner = Runner::new(p, seed, 0, 0);
@@ -83,6 +89,8 @@ pub fn run(
         cost: 0.0,
         predicted: f64::NAN,
         seconds: 0.0,
+        reached: vec![0.0; cost.variables().count()],
+        expected: vec![f64::NAN; cost.variables().count()],
     };
     for f in 0..frames {
         match policy {
@@ -100,6 +108,7 @@ pub fn run(
                 model.start(&state, &frame.variables);
                 step.predicted = planner.decide(&mut **model, *sequences, &mut action);
                 step.seconds = clock.elapsed().as_secs_f64();
+                model.predict(&action, &mut step.expected);
                 drive(&mut runner, &action, &mut torques);
             }
         }
@@ -119,8 +128,11 @@ pub fn run(
         runner.observe(&state, t, &mut frame);
         step.frame = f + 1;
         step.cost = cost.of(&frame.variables);
+        for (r, s) in step.reached.iter_mut().zip(cost.variables()) {
+            *r = frame.variables[s];
+        }
         total += step.cost;
-        on_step(&step, &frame.variables);
+        on_step(&step, &frame, runner.kinematics())?;
     }
     Ok(total)
 }
@@ -171,8 +183,9 @@ mod tests {
         let frames = 60;
         let episode = |policy: &mut Policy| {
             let mut steps = Vec::new();
-            let total = run(&p, &start, frames, &cost, policy, 9, |s, _| {
-                steps.push(s.clone())
+            let total = run(&p, &start, frames, &cost, policy, 9, |s, _, _| {
+                steps.push(s.clone());
+                Ok(())
             })
             .unwrap();
             (total, steps)
@@ -203,6 +216,21 @@ mod tests {
             steps
                 .iter()
                 .all(|s| s.seconds > 0.0 && s.predicted.is_finite())
+        );
+        // The true model predicts the frame the simulator then reaches.
+        for s in &steps {
+            for (e, r) in s.expected.iter().zip(&s.reached) {
+                assert!(
+                    (e - r).abs() <= 1e-9 * r.abs().max(1.0),
+                    "frame {}: {e} {r}",
+                    s.frame
+                );
+            }
+        }
+        assert!(
+            random_steps
+                .iter()
+                .all(|s| s.expected.iter().all(|e| e.is_nan()))
         );
         assert!(
             random_steps

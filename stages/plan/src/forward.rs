@@ -27,6 +27,13 @@ pub trait Model: Forward {
     /// Starts the next predictions from `state` (whose variables, in the
     /// scene's layout order, are `variables`).
     fn start(&mut self, state: &State, variables: &[f64]);
+
+    /// The next frame's values of the task's variables (in the order of
+    /// [`Cost::variables`]) predicted from the started state under one
+    /// frame of `action` (D torques): what the model expects the executed
+    /// torques to do, to set beside what the simulator then does. NaN where
+    /// the prediction blew up.
+    fn predict(&mut self, action: &[f64], out: &mut [f64]);
 }
 
 /// The simulator at `steps` integration steps per frame.
@@ -66,34 +73,58 @@ impl<'a> Simulator<'a> {
     }
 }
 
+impl Simulator<'_> {
+    /// Steps `self.state` one frame under `action`'s torques and observes
+    /// the frame reached; false if it blew up.
+    fn frame(&mut self, action: &[f64]) -> bool {
+        for (g, t) in self.torques.iter_mut().zip(action.chunks(3)) {
+            *g = Vector3::new(t[0], t[1], t[2]);
+        }
+        self.runner.drive(Some(&self.torques));
+        let dt = self.p.scene.frame_dt.get() / self.steps as f64;
+        if self
+            .runner
+            .advance(&mut self.state, 0, self.steps, dt)
+            .is_err()
+        {
+            return false;
+        }
+        self.runner.observe(&self.state, 0.0, &mut self.frame);
+        true
+    }
+}
+
 impl Model for Simulator<'_> {
     fn start(&mut self, state: &State, _variables: &[f64]) {
         copy_state(&mut self.start, state);
+    }
+
+    fn predict(&mut self, action: &[f64], out: &mut [f64]) {
+        copy_state(&mut self.state, &self.start);
+        self.runner.restart();
+        let reached = self.frame(action);
+        for (o, s) in out.iter_mut().zip(self.cost.variables()) {
+            *o = if reached {
+                self.frame.variables[s]
+            } else {
+                f64::NAN
+            };
+        }
     }
 }
 
 impl Forward for Simulator<'_> {
     fn costs(&mut self, actions: &[f64], horizon: usize, costs: &mut [f64]) {
         let d = 3 * self.torques.len();
-        let dt = self.p.scene.frame_dt.get() / self.steps as f64;
         for (sequence, cost) in actions.chunks(horizon * d).zip(costs.iter_mut()) {
             copy_state(&mut self.state, &self.start);
             self.runner.restart();
             *cost = 0.0;
             for frame in sequence.chunks(d) {
-                for (g, t) in self.torques.iter_mut().zip(frame.chunks(3)) {
-                    *g = Vector3::new(t[0], t[1], t[2]);
-                }
-                self.runner.drive(Some(&self.torques));
-                if self
-                    .runner
-                    .advance(&mut self.state, 0, self.steps, dt)
-                    .is_err()
-                {
+                if !self.frame(frame) {
                     *cost = f64::INFINITY;
                     break;
                 }
-                self.runner.observe(&self.state, 0.0, &mut self.frame);
                 *cost += self.cost.of(&self.frame.variables);
             }
         }
@@ -211,10 +242,32 @@ impl<'a, S: LevelStep> Learned<'a, S> {
     }
 }
 
+impl<S: LevelStep> Learned<'_, S> {
+    /// Sets frame `h` of each of the `x[0].len()` sequences in `actions`
+    /// (each `len` values, D per frame) as the torque variables' levels.
+    fn set_torques(&self, x: &mut [Vec<u16>], actions: &[f64], len: usize, at: usize) {
+        for &(k, v) in &self.torques {
+            let q = &self.entries[v].quantizer;
+            for (i, level) in x[v].iter_mut().enumerate() {
+                *level = q.level(actions[i * len + at + k]).0;
+            }
+        }
+    }
+}
+
 impl<S: LevelStep> Model for Learned<'_, S> {
     fn start(&mut self, _state: &State, variables: &[f64]) {
         for ((level, entry), &s) in self.start.iter_mut().zip(&self.entries).zip(&self.in_scene) {
             *level = entry.quantizer.level(variables[s]).0;
+        }
+    }
+
+    fn predict(&mut self, action: &[f64], out: &mut [f64]) {
+        let mut x: Vec<Vec<u16>> = self.start.iter().map(|&l| vec![l]).collect();
+        self.set_torques(&mut x, action, action.len(), 0);
+        let y = self.step.next(&x);
+        for (o, &(v, _)) in out.iter_mut().zip(&self.costed) {
+            *o = self.entries[v].quantizer.value(usize::from(y[v][0]));
         }
     }
 }
@@ -227,12 +280,7 @@ impl<S: LevelStep> Forward for Learned<'_, S> {
         let mut x: Vec<Vec<u16>> = self.start.iter().map(|&l| vec![l; n]).collect();
         costs.fill(0.0);
         for h in 0..horizon {
-            for &(k, v) in &self.torques {
-                let q = &self.entries[v].quantizer;
-                for (i, level) in x[v].iter_mut().enumerate() {
-                    *level = q.level(actions[i * len + h * d + k]).0;
-                }
-            }
+            self.set_torques(&mut x, actions, len, h * d);
             x = self.step.next(&x);
             for (i, cost) in costs.iter_mut().enumerate() {
                 for &(v, s) in &self.costed {

@@ -15,19 +15,26 @@
 //! are run, one thread, one after another, so that decision times are one
 //! thread's and episodes pair across models. Writes
 //! - `plan.parquet`: per task, model, planner, budget, episode and frame,
-//!   the torques executed, the task's cost of the frame reached and the
-//!   cost the planner predicted for it;
+//!   the torques executed, the task's cost of the frame reached, the cost
+//!   the planner predicted for its plan, and the task's variables in the
+//!   frame reached beside those its model predicted for the torques chosen;
 //! - `planning.parquet`: per task, model, planner, budget and episode, the
 //!   summed cost, the evaluations per decision, the decision time in ms
 //!   (median and range over the episode's decisions — measured, the one
 //!   thing that differs between equal runs) and real time (the simulated
-//!   time a decision stands for: one frame).
+//!   time a decision stands for: one frame), and the model's one-step
+//!   error on the task's variables over the episode;
+//! - `episodes.mcap`: the first `view_episodes` episodes of every policy as
+//!   a trajectory log (`/state`, and `/tf` and `/scene` to watch them in
+//!   Foxglove), one run each, an `alnlab.plan.episode` metadata record per
+//!   run saying which.
 
 pub mod episode;
 pub mod forward;
 pub mod planner;
 pub mod task;
 
+use std::collections::BTreeMap;
 use std::path::Path;
 use std::sync::Arc;
 
@@ -36,13 +43,14 @@ use alnlab_aln::runtime::Trained;
 use alnlab_codes::{level_rows, split_rows};
 use alnlab_common::hash::mix_seed;
 use alnlab_common::params::{self, Count, Fraction, ParamError};
-use alnlab_common::state_log::StateLog;
+use alnlab_common::state_log::{StateFrame, StateLayout, StateLog, StateLogWriter};
 use alnlab_common::table::{self, Table};
 use alnlab_common::{Error, Progress, Provenance, Result};
 use alnlab_physics::controller::ControllerKind;
-use alnlab_physics::dynamics::State;
+use alnlab_physics::dynamics::{Kinematics, State};
 use alnlab_physics::replay::SceneReplay;
-use alnlab_physics::{Prepared, state_from_generalized};
+use alnlab_physics::{Prepared, Runner, foxglove, state_from_generalized};
+use arrow_array::builder::{ListBuilder, StringBuilder};
 use arrow_array::types::Float64Type;
 use arrow_array::{Array, Float64Array, ListArray, StringArray, UInt32Array, UInt64Array};
 use rand::{RngExt, SeedableRng};
@@ -55,11 +63,16 @@ use crate::planner::{Bounds, CemSettings, Planner, PlannerKind};
 use crate::task::{Cost, Task};
 
 /// Version of what this stage writes (part of every cache key).
-pub const FORMAT_VERSION: u32 = 2;
+pub const FORMAT_VERSION: u32 = 3;
 /// File name of the per-frame table.
 pub const PLAN_FILE: &str = "plan.parquet";
 /// File name of the per-episode table.
 pub const PLANNING_FILE: &str = "planning.parquet";
+/// File name of the executed episodes' trajectory log.
+pub const EPISODES_FILE: &str = "episodes.mcap";
+/// Name of the metadata record that says which policy and episode a run of
+/// `episodes.mcap` is.
+pub const EPISODE_RECORD: &str = "alnlab.plan.episode";
 
 /// A forward model learned from the data.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
@@ -100,6 +113,8 @@ pub struct Params {
     pub cem_iterations: Count,
     /// … and the fraction of a round's sequences it refits to.
     pub cem_elite: Fraction,
+    /// Episodes per policy written to `episodes.mcap` (the first ones).
+    pub view_episodes: usize,
 }
 
 impl Default for Params {
@@ -116,6 +131,7 @@ impl Default for Params {
             frames: Count(100),
             cem_iterations: Count(3),
             cem_elite: Fraction(0.1),
+            view_episodes: 1,
         }
     }
 }
@@ -155,6 +171,8 @@ struct EpisodeRow {
     ms: (f64, f64, f64),
     /// Simulated time per decision (one frame), in ms: real time.
     real_time_ms: f64,
+    /// RMS over frames of the model's one-step error on the task's variables.
+    prediction_rms: f64,
 }
 
 /// The per-frame rows of `plan.parquet`, column by column.
@@ -169,6 +187,96 @@ struct FrameRows {
     torques: Vec<Vec<f64>>,
     cost: Vec<f64>,
     predicted: Vec<f64>,
+    variables: Vec<Vec<String>>,
+    reached: Vec<Vec<f64>>,
+    expected: Vec<Vec<f64>>,
+}
+
+/// Everything the stage writes, filled episode by episode.
+struct Outputs {
+    frames: FrameRows,
+    episodes: Vec<EpisodeRow>,
+    view: View,
+}
+
+/// The executed episodes as a trajectory log to watch.
+struct View {
+    log: StateLogWriter,
+    tf: u16,
+    scene: u16,
+    /// Runs written so far.
+    runs: u32,
+    log_time_ns: u64,
+    frame: StateFrame,
+}
+
+impl View {
+    fn create(path: &Path, layouts: &[StateLayout]) -> Result<View> {
+        let mut log = StateLogWriter::create(path, layouts)?;
+        let tf = log.add_json_channel(
+            foxglove::TF_TOPIC,
+            foxglove::TF_SCHEMA,
+            &foxglove::tf_schema(),
+        )?;
+        let scene = log.add_json_channel(
+            foxglove::SCENE_TOPIC,
+            foxglove::SCENE_SCHEMA,
+            &foxglove::scene_schema(),
+        )?;
+        Ok(View {
+            log,
+            tf,
+            scene,
+            runs: 0,
+            log_time_ns: 0,
+            frame: StateFrame {
+                time: 0.0,
+                run: 0,
+                frame: 0,
+                state: Vec::new(),
+                variables: Vec::new(),
+            },
+        })
+    }
+
+    /// Starts the next run: its record, the scene's drawing and the start
+    /// frame `start`.
+    fn start_run(
+        &mut self,
+        p: &Prepared,
+        record: BTreeMap<String, String>,
+        start: &State,
+    ) -> Result<()> {
+        let run = self.runs;
+        self.runs += 1;
+        let mut record = record;
+        record.insert("run".into(), run.to_string());
+        self.log.metadata(EPISODE_RECORD, record)?;
+        self.log.write_json(
+            self.scene,
+            self.log_time_ns,
+            &foxglove::scene_update(&p.scene, &p.model, run, self.log_time_ns),
+        )?;
+        let mut runner = Runner::new(p, 0, 0, 0);
+        runner.observe(start, 0.0, &mut self.frame);
+        self.write(p, 0, runner.kinematics())
+    }
+
+    /// Writes frame `index` of the current run (in `self.frame`).
+    fn write(&mut self, p: &Prepared, index: u32, kin: &Kinematics) -> Result<()> {
+        let run = self.runs - 1;
+        self.frame.run = run;
+        self.frame.frame = index;
+        self.frame.time = f64::from(index) * p.scene.frame_dt.get();
+        self.log.write(0, self.log_time_ns, &self.frame)?;
+        self.log.write_json(
+            self.tf,
+            self.log_time_ns,
+            &foxglove::transforms(&p.scene.name, run, kin, self.log_time_ns),
+        )?;
+        self.log_time_ns += (p.scene.frame_dt.get() * 1e9).round() as u64;
+        Ok(())
+    }
 }
 
 /// Plans every task with every model, planner and budget, and writes the
@@ -186,9 +294,14 @@ pub fn run(
     progress: &dyn Progress,
 ) -> Result<()> {
     params.validate().map_err(|e| params::invalid("plan", e))?;
-    let mut frames = FrameRows::default();
-    let mut episodes = Vec::new();
-    if !params.task.is_empty() {
+    let view_path = out_dir.join(EPISODES_FILE);
+    let out = if params.task.is_empty() {
+        Outputs {
+            frames: FrameRows::default(),
+            episodes: Vec::new(),
+            view: View::create(&view_path, &[])?,
+        }
+    } else {
         let log = StateLog::read(trajectory_path)?;
         let replays =
             SceneReplay::from_log(&log).map_err(|m| Error::bad_file(trajectory_path, m))?;
@@ -208,6 +321,11 @@ pub fn run(
         })?;
         let p = &replay.prepared;
         let bounds = bounds_of(p)?;
+        let mut out = Outputs {
+            frames: FrameRows::default(),
+            episodes: Vec::new(),
+            view: View::create(&view_path, std::slice::from_ref(&p.layout))?,
+        };
         let logged = &log
             .scenes
             .iter()
@@ -251,9 +369,12 @@ pub fn run(
                     context: &context,
                     task: task.name(),
                     index: t,
+                    variables: cost
+                        .variables()
+                        .map(|s| p.layout.variables[s].clone())
+                        .collect(),
                     cost: &cost,
                 };
-                let mut out = (&mut frames, &mut episodes);
                 task_run.reference("zero", &mut Policy::Zero, &mut out)?;
                 task_run.reference("random", &mut Policy::Random, &mut out)?;
                 for &kind in &params.models {
@@ -291,9 +412,11 @@ pub fn run(
             }
             Ok(())
         })?;
-    }
-    write_frames(&out_dir.join(PLAN_FILE), &frames, provenance)?;
-    write_episodes(&out_dir.join(PLANNING_FILE), &episodes, provenance)
+        out
+    };
+    write_frames(&out_dir.join(PLAN_FILE), &out.frames, provenance)?;
+    write_episodes(&out_dir.join(PLANNING_FILE), &out.episodes, provenance)?;
+    out.view.log.finish(provenance)
 }
 
 /// What every episode of a run shares.
@@ -310,14 +433,14 @@ struct TaskRun<'a> {
     context: &'a Context<'a>,
     task: &'a str,
     index: usize,
+    /// The names of the task's variables, in the order of [`Cost::variables`].
+    variables: Vec<String>,
     cost: &'a Cost,
 }
 
-type Out<'o> = (&'o mut FrameRows, &'o mut Vec<EpisodeRow>);
-
 impl TaskRun<'_> {
     /// Every episode under a reference policy.
-    fn reference(&self, name: &str, policy: &mut Policy, out: &mut Out) -> Result<()> {
+    fn reference(&self, name: &str, policy: &mut Policy, out: &mut Outputs) -> Result<()> {
         for e in 0..self.context.starts.len() {
             self.episode(name, "", 0, e, policy, out)?;
         }
@@ -330,7 +453,7 @@ impl TaskRun<'_> {
         name: &str,
         mut model: Box<dyn Model + '_>,
         bounds: &Bounds,
-        out: &mut Out,
+        out: &mut Outputs,
     ) -> Result<()> {
         let params = self.context.params;
         let cem = CemSettings {
@@ -372,11 +495,24 @@ impl TaskRun<'_> {
         budget: u32,
         e: usize,
         policy: &mut Policy,
-        (frames, episodes): &mut Out,
+        out: &mut Outputs,
     ) -> Result<()> {
         let c = self.context;
         let mut times = Vec::with_capacity(c.params.frames.get());
+        let mut squared_error = 0.0;
         let seed = mix_seed(c.seed, e as u64);
+        let viewed = e < c.params.view_episodes;
+        if viewed {
+            let record = BTreeMap::from([
+                ("task".to_string(), self.task.to_string()),
+                ("model".to_string(), model.to_string()),
+                ("planner".to_string(), planner.to_string()),
+                ("budget".to_string(), budget.to_string()),
+                ("episode".to_string(), e.to_string()),
+            ]);
+            out.view.start_run(c.p, record, &c.starts[e])?;
+        }
+        let Outputs { frames, view, .. } = out;
         let total = episode::run(
             c.p,
             &c.starts[e],
@@ -384,7 +520,7 @@ impl TaskRun<'_> {
             self.cost,
             policy,
             seed,
-            |step, _| {
+            |step, frame, kin| {
                 frames.task.push(self.task.to_string());
                 frames.model.push(model.to_string());
                 frames.planner.push(planner);
@@ -394,7 +530,16 @@ impl TaskRun<'_> {
                 frames.torques.push(step.torques.clone());
                 frames.cost.push(step.cost);
                 frames.predicted.push(step.predicted);
+                frames.variables.push(self.variables.clone());
+                frames.reached.push(step.reached.clone());
+                frames.expected.push(step.expected.clone());
+                squared_error += self.cost.distance(&step.expected, &step.reached).powi(2);
                 times.push(step.seconds * 1e3);
+                if viewed {
+                    view.frame.clone_from(frame);
+                    view.write(c.p, step.frame, kin)?;
+                }
+                Ok(())
             },
         )
         .map_err(|err| {
@@ -408,7 +553,8 @@ impl TaskRun<'_> {
             [] => (0.0, 0.0, 0.0),
             t => (t[t.len() / 2], t[0], t[t.len() - 1]),
         };
-        episodes.push(EpisodeRow {
+        let frames_run = c.params.frames.get() as f64;
+        out.episodes.push(EpisodeRow {
             task: self.task.to_string(),
             model: model.to_string(),
             planner,
@@ -418,6 +564,7 @@ impl TaskRun<'_> {
             cost: total,
             ms,
             real_time_ms: c.p.scene.frame_dt.get() * 1e3,
+            prediction_rms: (squared_error / frames_run).sqrt(),
         });
         c.progress.advance(1);
         Ok(())
@@ -455,7 +602,7 @@ fn bounds_of(p: &Prepared) -> Result<Bounds> {
 /// of the scene, each far enough from its run's end to matter not.
 fn start_states(
     p: &Prepared,
-    logged: &[alnlab_common::state_log::StateFrame],
+    logged: &[StateFrame],
     params: &Params,
     seed: u64,
     path: &Path,
@@ -500,19 +647,15 @@ fn write_frames(path: &Path, rows: &FrameRows, provenance: &Provenance) -> Resul
         ("budget", Arc::new(UInt32Array::from(rows.budget.clone()))),
         ("episode", Arc::new(UInt32Array::from(rows.episode.clone()))),
         ("frame", Arc::new(UInt32Array::from(rows.frame.clone()))),
-        (
-            "torques",
-            Arc::new(ListArray::from_iter_primitive::<Float64Type, _, _>(
-                rows.torques
-                    .iter()
-                    .map(|t| Some(t.iter().map(|&x| Some(x)))),
-            )),
-        ),
+        ("torques", Arc::new(f64_lists(&rows.torques))),
         ("cost", Arc::new(Float64Array::from(rows.cost.clone()))),
         (
             "predicted",
             Arc::new(Float64Array::from(rows.predicted.clone())),
         ),
+        ("variables", Arc::new(string_lists(&rows.variables))),
+        ("reached", Arc::new(f64_lists(&rows.reached))),
+        ("expected", Arc::new(f64_lists(&rows.expected))),
     ]);
     table::write_parquet(path, &batch, provenance)
 }
@@ -557,6 +700,24 @@ fn write_episodes(path: &Path, rows: &[EpisodeRow], provenance: &Provenance) -> 
         ("ms_min", f(|r| r.ms.1)),
         ("ms_max", f(|r| r.ms.2)),
         ("real_time_ms", f(|r| r.real_time_ms)),
+        ("prediction_rms", f(|r| r.prediction_rms)),
     ]);
     table::write_parquet(path, &batch, provenance)
+}
+
+fn f64_lists(rows: &[Vec<f64>]) -> ListArray {
+    ListArray::from_iter_primitive::<Float64Type, _, _>(
+        rows.iter().map(|t| Some(t.iter().map(|&x| Some(x)))),
+    )
+}
+
+fn string_lists(rows: &[Vec<String>]) -> ListArray {
+    let mut lists = ListBuilder::new(StringBuilder::new());
+    for row in rows {
+        for s in row {
+            lists.values().append_value(s);
+        }
+        lists.append(true);
+    }
+    lists.finish()
 }

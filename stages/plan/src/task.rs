@@ -5,8 +5,9 @@
 //!   `roll.N`/`pitch.N` named in `targets` (rad), the squared angle to its
 //!   target, the difference taken on the circle (within ±π);
 //! - `spin`: spin about an axis at a target rate — the squared difference
-//!   of an angular velocity component (`omega.1.x`, the root link's long
-//!   axis) and `rate` (rad/s).
+//!   of an angular velocity component and `rate` (rad/s); components are in
+//!   the link's own frame, so `omega.3.x` is the third link's spin about its
+//!   long axis.
 
 use std::collections::BTreeMap;
 use std::f64::consts::{PI, TAU};
@@ -126,6 +127,22 @@ impl Cost {
     /// The variables the cost reads.
     pub fn variables(&self) -> impl Iterator<Item = usize> + '_ {
         self.terms.iter().map(|t| t.0)
+    }
+
+    /// The RMS distance of two sets of the task's variables' values (each in
+    /// the order of [`Cost::variables`]), angles on the circle: how far a
+    /// prediction is from what happened, in the task's own terms.
+    pub fn distance(&self, a: &[f64], b: &[f64]) -> f64 {
+        let squares: f64 = self
+            .terms
+            .iter()
+            .zip(a.iter().zip(b))
+            .map(|(&(_, _, angle), (x, y))| {
+                let d = if angle { on_circle(x - y) } else { x - y };
+                d * d
+            })
+            .sum();
+        (squares / self.terms.len().max(1) as f64).sqrt()
     }
 }
 

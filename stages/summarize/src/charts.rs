@@ -204,7 +204,7 @@ pub struct Series {
     pub points: Vec<Point>,
     /// Points joined by a line (a curve), or markers alone.
     pub joined: bool,
-    /// Markers outlined rather than filled.
+    /// Markers outlined rather than filled (crosses and pluses ringed).
     pub hollow: bool,
 }
 
@@ -508,6 +508,10 @@ where
             };
             for arm in arms {
                 area.draw(&PathElement::new(arm.to_vec(), colour.stroke_width(2)))?;
+            }
+            // A cross has no inside to leave empty: hollow ones are ringed.
+            if hollow {
+                area.draw(&Circle::new((x, y), r + 3, colour.stroke_width(1)))?;
             }
         }
     }

@@ -14,7 +14,7 @@ use alnlab_common::{Result, atomic};
 use arrow_array::{UInt32Array, UInt64Array};
 
 use super::format::{Align, MdTable, estimate, interval, sig3};
-use crate::charts::{self, Axis, Plot, Point, Series, style_of};
+use crate::charts::{self, Axis, Marker, Plot, Point, Series, style_of};
 use crate::paired::Interval;
 
 /// One row of `planning.parquet`.
@@ -28,6 +28,7 @@ struct Episode {
     cost: f64,
     ms: f64,
     real_time_ms: f64,
+    prediction_rms: f64,
 }
 
 fn read(path: &Path) -> Result<Vec<Episode>> {
@@ -43,6 +44,7 @@ fn read(path: &Path) -> Result<Vec<Episode>> {
     let cost = t.f64_column("cost")?.values();
     let ms = t.f64_column("ms_per_decision")?.values();
     let real = t.f64_column("real_time_ms")?.values();
+    let rms = t.f64_column("prediction_rms")?.values();
     Ok((0..t.num_rows())
         .map(|i| Episode {
             task: task[i].clone(),
@@ -54,6 +56,7 @@ fn read(path: &Path) -> Result<Vec<Episode>> {
             cost: cost[i],
             ms: ms[i],
             real_time_ms: real[i],
+            prediction_rms: rms[i],
         })
         .collect())
 }
@@ -77,6 +80,35 @@ impl Policy<'_> {
         let mut ms: Vec<f64> = self.episodes.iter().map(|e| e.ms).collect();
         ms.sort_by(f64::total_cmp);
         ms[ms.len() / 2]
+    }
+
+    /// The mean over episodes of the model's one-step error.
+    fn prediction_rms(&self) -> f64 {
+        let sum: f64 = self.episodes.iter().map(|e| e.prediction_rms).sum();
+        sum / self.episodes.len() as f64
+    }
+
+    /// Whether a planner chose the torques (not a reference).
+    fn planned(&self) -> bool {
+        !self.planner.is_empty()
+    }
+
+    /// The paired difference of this policy's episode costs from `other`'s
+    /// with the verdict its interval allows, as a table cell.
+    fn against(&self, other: &Policy) -> String {
+        let diffs: Vec<f64> = self
+            .episodes
+            .iter()
+            .zip(&other.episodes)
+            .map(|(a, b)| a.cost - b.cost)
+            .collect();
+        match Interval::of(&diffs) {
+            Some(d) if diffs.len() > 1 => {
+                let word = d.verdict().as_str();
+                format!("{word}: {}", interval(d.mean, d.low, d.high))
+            }
+            _ => "— (one episode)".into(),
+        }
     }
 
     fn label(&self) -> String {
@@ -147,18 +179,26 @@ pub(super) fn section(
     );
     for task in tasks {
         let policies = policies(&rows, task);
-        let Some(zero) = policies.iter().find(|p| p.model == "zero") else {
+        let (Some(zero), Some(random)) = (
+            policies.iter().find(|p| p.model == "zero"),
+            policies.iter().find(|p| p.model == "random"),
+        ) else {
             continue;
         };
-        let zero_costs = zero.costs();
         let real_time = rows
             .iter()
             .find(|e| e.task == task)
             .map_or(0.0, |e| e.real_time_ms);
         let _ = writeln!(md, "#### Task `{task}`\n");
         let mut table = MdTable::new(&["model", "planner", "budget"])
-            .numbers(&["evaluations / decision", "cost", "ms / decision"])
-            .column("against zero torques", Align::Left);
+            .numbers(&[
+                "evaluations / decision",
+                "cost",
+                "ms / decision",
+                "one-step error",
+            ])
+            .column("against zero torques", Align::Left)
+            .column("against random torques", Align::Left);
         for p in &policies {
             let costs = p.costs();
             let mean = Interval::of(&costs).expect("a policy has episodes");
@@ -167,19 +207,14 @@ pub(super) fn section(
             } else {
                 sig3(mean.mean)
             };
-            let against = if p.model == "zero" {
-                "—".to_string()
-            } else {
-                let diffs: Vec<f64> = costs.iter().zip(&zero_costs).map(|(a, z)| a - z).collect();
-                match Interval::of(&diffs) {
-                    Some(d) if diffs.len() > 1 => {
-                        let word = d.verdict().as_str();
-                        format!("{word}: {}", interval(d.mean, d.low, d.high))
-                    }
-                    _ => "— (one episode)".into(),
+            let against = |reference: &Policy| {
+                if p.model == reference.model {
+                    "—".to_string()
+                } else {
+                    p.against(reference)
                 }
             };
-            let planned = !p.planner.is_empty();
+            let planned = p.planned();
             table.row(vec![
                 p.model.to_string(),
                 if planned {
@@ -199,14 +234,27 @@ pub(super) fn section(
                 },
                 cost,
                 if planned { sig3(p.ms()) } else { "—".into() },
-                against,
+                if planned {
+                    sig3(p.prediction_rms())
+                } else {
+                    "—".into()
+                },
+                against(zero),
+                against(random),
             ]);
         }
         table.write(md);
+        let _ = writeln!(
+            md,
+            "One-step error: the RMS over frames (mean over episodes) of the model's prediction \
+             of the task's variables one frame ahead under the torques chosen, against what the \
+             simulator then did, in the variables' units (angles on the circle).\n"
+        );
+        at_equal_time(md, &policies, zero, random, real_time);
 
         // Cost against time per decision, one curve per model and planner.
         let mut series: Vec<Series> = Vec::new();
-        let planned: Vec<&Policy> = policies.iter().filter(|p| !p.planner.is_empty()).collect();
+        let planned: Vec<&Policy> = policies.iter().filter(|p| p.planned()).collect();
         let xs: Vec<f64> = planned.iter().map(|p| p.ms()).chain([real_time]).collect();
         let (x_lo, x_hi) = xs
             .iter()
@@ -240,14 +288,16 @@ pub(super) fn section(
         let (y_lo, y_hi) = costs
             .iter()
             .fold((f64::MAX, 0f64), |(lo, hi), &y| (lo.min(y), hi.max(y)));
-        for p in policies.iter().filter(|p| p.planner.is_empty()) {
+        for p in policies.iter().filter(|p| !p.planned()) {
             let mean = Interval::of(&p.costs()).map_or(0.0, |i| i.mean);
             series.push(Series {
                 name: p.label(),
                 style: style_of(&p.label(), 0),
                 points: vec![Point::at(x_lo, mean), Point::at(x_hi, mean)],
                 joined: true,
-                hollow: true,
+                // Hollow means random shooting here: only the square of
+                // zero torques is drawn outlined, as persistence is.
+                hollow: style_of(&p.label(), 0).marker == Marker::Square,
             });
         }
         if real_time > 0.0 {
@@ -259,7 +309,7 @@ pub(super) fn section(
                     Point::at(real_time, y_hi),
                 ],
                 joined: true,
-                hollow: true,
+                hollow: false,
             });
         }
         let chart = charts::plot(&Plot {
@@ -281,4 +331,96 @@ pub(super) fn section(
         );
     }
     Ok(())
+}
+
+/// The answer at equal wall time: for time limits from a tenth of real time
+/// to ten times it, each model and planner at its largest budget whose
+/// decisions fit the limit (a rule fixed before any cost is seen, not the
+/// best of its budgets), the one with the lowest mean cost, its paired
+/// difference from the lowest of every other forward model, and the ALN's
+/// standing against zero and random torques.
+fn at_equal_time(
+    md: &mut String,
+    policies: &[Policy],
+    zero: &Policy,
+    random: &Policy,
+    real_time: f64,
+) {
+    if real_time <= 0.0 {
+        return;
+    }
+    let mut methods: Vec<(&str, &str)> = policies
+        .iter()
+        .filter(|p| p.planned())
+        .map(|p| (p.model, p.planner))
+        .collect();
+    methods.dedup();
+    let mut table = MdTable::new(&["ms / decision at most"])
+        .column("lowest cost", Align::Left)
+        .numbers(&["cost"])
+        .column("against the next forward model's lowest", Align::Left)
+        .column("the ALN's lowest", Align::Left)
+        .column("ALN against zero torques", Align::Left)
+        .column("ALN against random torques", Align::Left);
+    let mut rows = 0;
+    for factor in [0.1, 0.3, 1.0, 3.0, 10.0] {
+        let limit = factor * real_time;
+        // Each method at its largest budget within the limit.
+        let fitting: Vec<&Policy> = methods
+            .iter()
+            .filter_map(|&(model, planner)| {
+                policies
+                    .iter()
+                    .filter(|p| p.model == model && p.planner == planner && p.ms() <= limit)
+                    .max_by_key(|p| p.budget)
+            })
+            .collect();
+        let mean = |p: &Policy| Interval::of(&p.costs()).map_or(f64::INFINITY, |i| i.mean);
+        let lowest_of = |keep: &dyn Fn(&Policy) -> bool| {
+            fitting
+                .iter()
+                .copied()
+                .filter(|p| keep(p))
+                .min_by(|a, b| mean(a).total_cmp(&mean(b)))
+        };
+        let Some(best) = lowest_of(&|_| true) else {
+            continue;
+        };
+        let name = |p: &Policy| format!("{} {} ({})", p.model, p.planner, p.budget);
+        let next = match lowest_of(&|p| p.model != best.model) {
+            Some(next) => format!("{}, vs {}", best.against(next), name(next)),
+            None => "— (no other model fits)".into(),
+        };
+        let aln = lowest_of(&|p| p.model == "aln");
+        let costs = best.costs();
+        let i = Interval::of(&costs).expect("episodes");
+        table.row(vec![
+            format!("{} ({factor}× real time)", sig3(limit)),
+            name(best),
+            if costs.len() > 1 {
+                estimate(i.mean, i.low, i.high)
+            } else {
+                sig3(i.mean)
+            },
+            next,
+            aln.map_or("— (none fits)".into(), |a| {
+                let c = Interval::of(&a.costs()).expect("episodes");
+                format!("{}: {}", name(a), estimate(c.mean, c.low, c.high))
+            }),
+            aln.map_or("—".into(), |a| a.against(zero)),
+            aln.map_or("—".into(), |a| a.against(random)),
+        ]);
+        rows += 1;
+    }
+    if rows == 0 {
+        return;
+    }
+    let _ = writeln!(
+        md,
+        "**At equal time per decision.** For each limit, every model and planner at its \
+         largest budget whose median decision fits it (the budget fixed by the limit, not \
+         picked by cost); the lowest mean cost among them, and its difference from the \
+         lowest of every other forward model, paired by episode.\n"
+    );
+    table.write(md);
 }
