@@ -119,6 +119,7 @@ fn cache_reuses_and_reruns_only_what_changed() {
     assert!(first.variants[0].artifacts.keys().eq([
         "codebook",
         "comparisons",
+        "episodes",
         "horizons",
         "levels",
         "model",

@@ -6,6 +6,8 @@
 //! arena wall and the links in their frames, so the motion can be watched in
 //! Foxglove.
 
+use alnlab_common::Result;
+use alnlab_common::state_log::StateLogWriter;
 use nalgebra::{UnitQuaternion, Vector3};
 use serde_json::{Value, json};
 
@@ -117,6 +119,13 @@ pub fn scene_update(scene: &Scene, model: &Model, run: u32, log_time_ns: u64) ->
         entities.push(entity);
     }
     serde_json::to_vec(&json!({ "deletions": [], "entities": entities })).expect("JSON serializes")
+}
+
+/// Adds the `/tf` and `/scene` channels to a trajectory log; their ids.
+pub fn add_channels(log: &mut StateLogWriter) -> Result<(u16, u16)> {
+    let tf = log.add_json_channel(TF_TOPIC, TF_SCHEMA, &tf_schema())?;
+    let scene = log.add_json_channel(SCENE_TOPIC, SCENE_SCHEMA, &scene_schema())?;
+    Ok((tf, scene))
 }
 
 /// JSON schema of `foxglove.FrameTransforms` (the fields alnlab writes).

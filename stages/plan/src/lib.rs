@@ -213,16 +213,7 @@ struct View {
 impl View {
     fn create(path: &Path, layouts: &[StateLayout]) -> Result<View> {
         let mut log = StateLogWriter::create(path, layouts)?;
-        let tf = log.add_json_channel(
-            foxglove::TF_TOPIC,
-            foxglove::TF_SCHEMA,
-            &foxglove::tf_schema(),
-        )?;
-        let scene = log.add_json_channel(
-            foxglove::SCENE_TOPIC,
-            foxglove::SCENE_SCHEMA,
-            &foxglove::scene_schema(),
-        )?;
+        let (tf, scene) = foxglove::add_channels(&mut log)?;
         Ok(View {
             log,
             tf,

@@ -139,16 +139,7 @@ pub fn run(
     progress.start("simulate", total_steps, "steps");
 
     let mut log = StateLogWriter::create(&out_dir.join(TRAJECTORY_FILE), &layouts)?;
-    let tf = log.add_json_channel(
-        foxglove::TF_TOPIC,
-        foxglove::TF_SCHEMA,
-        &foxglove::tf_schema(),
-    )?;
-    let scene_channel = log.add_json_channel(
-        foxglove::SCENE_TOPIC,
-        foxglove::SCENE_SCHEMA,
-        &foxglove::scene_schema(),
-    )?;
+    let (tf, scene_channel) = foxglove::add_channels(&mut log)?;
     let mut stats = stats::VariableStats::default();
     let mut log_time_ns = 0u64;
     for (scene_index, p) in prepared.iter().enumerate() {
