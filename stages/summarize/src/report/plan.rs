@@ -82,6 +82,18 @@ impl Policy<'_> {
         ms[ms.len() / 2]
     }
 
+    /// The cost as a table cell: the mean [95% interval] across episodes,
+    /// or the one episode's cost.
+    fn cost_cell(&self) -> String {
+        let costs = self.costs();
+        let i = Interval::of(&costs).expect("a policy has episodes");
+        if costs.len() > 1 {
+            estimate(i.mean, i.low, i.high)
+        } else {
+            sig3(i.mean)
+        }
+    }
+
     /// The mean over episodes of the model's one-step error.
     fn prediction_rms(&self) -> f64 {
         let sum: f64 = self.episodes.iter().map(|e| e.prediction_rms).sum();
@@ -200,13 +212,7 @@ pub(super) fn section(
             .column("against zero torques", Align::Left)
             .column("against random torques", Align::Left);
         for p in &policies {
-            let costs = p.costs();
-            let mean = Interval::of(&costs).expect("a policy has episodes");
-            let cost = if costs.len() > 1 {
-                estimate(mean.mean, mean.low, mean.high)
-            } else {
-                sig3(mean.mean)
-            };
+            let cost = p.cost_cell();
             let against = |reference: &Policy| {
                 if p.model == reference.model {
                     "—".to_string()
@@ -392,16 +398,10 @@ fn at_equal_time(
             None => "— (no other model fits)".into(),
         };
         let aln = lowest_of(&|p| p.model == "aln");
-        let costs = best.costs();
-        let i = Interval::of(&costs).expect("episodes");
         table.row(vec![
             format!("{} ({factor}× real time)", sig3(limit)),
             name(best),
-            if costs.len() > 1 {
-                estimate(i.mean, i.low, i.high)
-            } else {
-                sig3(i.mean)
-            },
+            best.cost_cell(),
             next,
             aln.map_or("— (none fits)".into(), |a| {
                 let c = Interval::of(&a.costs()).expect("episodes");
