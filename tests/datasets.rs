@@ -92,7 +92,15 @@ fn a_run_from_an_archived_dataset_gives_the_same_bytes() {
         .collect();
     assert_eq!(
         stages,
-        ["dataset", "quantize", "train", "test", "summarize", "plan"]
+        [
+            "dataset",
+            "quantize",
+            "train",
+            "test",
+            "summarize",
+            "plan",
+            "circuit"
+        ]
     );
     let named = again.dataset.as_ref().unwrap();
     assert_eq!(named.dataset, "box@1");
@@ -109,7 +117,10 @@ fn a_run_from_an_archived_dataset_gives_the_same_bytes() {
         .iter()
         .map(|s| s.stage.as_str())
         .collect();
-    assert_eq!(stages, ["dataset", "train", "test", "summarize", "plan"]);
+    assert_eq!(
+        stages,
+        ["dataset", "train", "test", "summarize", "plan", "circuit"]
+    );
     write_manifest(dir.path(), "lq.toml", &from_dataset("box-levels@1", true));
     let out = alnlab(dir.path(), &["run", "lq.toml"]);
     assert_eq!(out.status.code(), Some(2));

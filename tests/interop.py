@@ -18,6 +18,7 @@ SVG the report shows as XML. Exits non-zero on any mismatch.
 import csv
 import json
 import math
+import os
 import re
 import sys
 import xml.etree.ElementTree as ET
@@ -236,6 +237,28 @@ def check_report(report_dir):
     return len(charts)
 
 
+def check_circuit(artifacts: dict, report_dir: str) -> int:
+    """The circuit stage's figures: three parts per learned variable, every
+    test row simulated equal, and the longest path the report gives
+    recomputed (the deepest variable's trees + votes + decoding)."""
+    if "circuit" not in artifacts:
+        return 0
+    rows = pq.read_table(artifacts["circuit"]["path"]).to_pylist()
+    if not rows:
+        return 0
+    codebook = pq.read_table(artifacts["codebook"]["path"]).to_pylist()
+    learned = [e["variable"] for e in codebook if e["learned"]]
+    assert [r["variable"] for r in rows[::3]] == learned, "one variable per learned one"
+    assert [r["part"] for r in rows] == ["trees", "votes", "decode"] * len(learned)
+    levels = pq.read_table(artifacts["levels"]["path"], columns=["split"]).column("split").to_pylist()
+    test = sum(1 for s in levels if s in ("test", "both"))
+    assert all(r["rows_equal"] == test for r in rows), (rows[0]["rows_equal"], test)
+    depth = max(sum(r["depth"] for r in rows[i:i + 3]) for i in range(0, len(rows), 3))
+    report = open(os.path.join(report_dir, "report.md")).read()
+    assert f"**{depth} gate levels**" in report, depth
+    return len(rows)
+
+
 def main(run_json: str, report_dir: str) -> int:
     record = json.load(open(run_json))
     checked = 0
@@ -247,7 +270,8 @@ def main(run_json: str, report_dir: str) -> int:
                 table = pq.read_table(path)
                 meta = pq.read_metadata(path).metadata
                 # The plan stage plans nothing without [[plan.task]].
-                assert table.num_rows > 0 or role in ("plan", "planning"), f"{path}: no rows"
+                # The circuit stage measures nothing without `synthesize`.
+                assert table.num_rows > 0 or role in ("plan", "planning", "circuit"), f"{path}: no rows"
                 assert meta[b"alnlab.stage"], f"{path}: no provenance"
                 assert json.loads(meta[b"alnlab.params"])["seed"] == variant.get("seed", record["seed"]), path
                 checked += 1
@@ -293,7 +317,8 @@ def main(run_json: str, report_dir: str) -> int:
         compared = check_comparisons(artifacts["predictions"]["path"], artifacts["comparisons"]["path"])
         rolled = check_rollout(artifacts["predictions"]["path"], artifacts["rollout"]["path"])
         metrics = check_metrics(variant)
-        print(f"{variant['name']}: {len(frames)} /state messages decoded, "
+        circuit = check_circuit(artifacts, report_dir)
+        print(f"{variant['name']}: {len(frames)} /state messages decoded, {circuit} circuit rows checked, "
               f"{len(pairs)} pair rows match, {checked} Parquet files read, "
               f"{summaries} summary rows recomputed, {compared} paired comparisons recomputed, "
               f"{rolled} first rollout steps match, {metrics} record metrics recomputed")

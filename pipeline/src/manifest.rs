@@ -135,6 +135,9 @@ pub struct Stages {
     /// `[plan]`
     #[serde(default)]
     pub plan: alnlab_plan::Params,
+    /// `[circuit]`
+    #[serde(default)]
+    pub circuit: alnlab_circuit::Params,
 }
 
 /// The whole document as deserialized (variants handled separately).
@@ -156,6 +159,8 @@ struct Document {
     test: alnlab_evaluate::Params,
     #[serde(default)]
     plan: alnlab_plan::Params,
+    #[serde(default)]
+    circuit: alnlab_circuit::Params,
 }
 
 /// An error in a manifest, located in the file.
@@ -375,6 +380,7 @@ fn split(document: Document) -> (Experiment, Option<Data>, Stages) {
         train: document.train,
         test: document.test,
         plan: document.plan,
+        circuit: document.circuit,
     };
     (document.experiment, document.data, stages)
 }

@@ -64,6 +64,7 @@ pub fn render(record: &RunRecord, dir: &Path) -> Result<PathBuf> {
                 model: artifact("model")?,
                 codebook: artifact("codebook")?,
                 planning: v.artifacts.get("planning").map(|a| PathBuf::from(&a.path)),
+                circuit: v.artifacts.get("circuit").map(|a| PathBuf::from(&a.path)),
                 replicates,
             })
         })

@@ -236,6 +236,12 @@ impl Graph<'_> {
         for (j, stage) in STAGES.iter().enumerate() {
             self.overall
                 .at(&self.place, (j + 1, STAGES.len()), stage.name);
+            if self.record.replicate > 0 && !stage.every_replicate {
+                if self.options.until.as_deref() == Some(stage.name) {
+                    break;
+                }
+                continue;
+            }
             let from_archive = archived
                 .as_ref()
                 .filter(|(_, entry)| stage.archived.holds(entry.has_levels()));

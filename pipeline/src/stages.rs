@@ -31,6 +31,10 @@ pub struct Stage {
     pub outputs: &'static [(&'static str, &'static str)],
     /// Whether an archived dataset stands for it.
     pub archived: Archived,
+    /// Whether it runs for every replicate, or for the first only (a
+    /// measurement of one model that takes long and that the replicates'
+    /// intervals do not use).
+    pub every_replicate: bool,
     /// Its resolved parameter table, as it enters the cache key (`null` for
     /// a stage without parameters).
     pub params: fn(&Stages) -> serde_json::Value,
@@ -130,6 +134,7 @@ pub const STAGES: &[Stage] = &[
             ("stats", alnlab_simulate::STATS_FILE),
         ],
         archived: Archived::Always,
+        every_replicate: true,
         params: |s| json(&s.simulate),
         validate: |s| s.simulate.validate(),
         run: |c| {
@@ -154,6 +159,7 @@ pub const STAGES: &[Stage] = &[
         }],
         outputs: &[("pairs", alnlab_stride::PAIRS_FILE)],
         archived: Archived::Always,
+        every_replicate: true,
         params: |s| json(&s.stride),
         validate: |s| s.stride.validate(),
         run: |c| {
@@ -195,6 +201,7 @@ pub const STAGES: &[Stage] = &[
             ("levels", alnlab_quantize::LEVELS_FILE),
         ],
         archived: Archived::WithLevels,
+        every_replicate: true,
         params: |s| json(&s.quantize),
         validate: |s| s.quantize.validate(),
         run: |c| {
@@ -235,6 +242,7 @@ pub const STAGES: &[Stage] = &[
             ("training", alnlab_train::TRAINING_FILE),
         ],
         archived: Archived::Never,
+        every_replicate: true,
         params: |s| json(&s.train),
         validate: |s| s.train.validate(),
         run: |c| {
@@ -287,6 +295,7 @@ pub const STAGES: &[Stage] = &[
             ("rollout", alnlab_evaluate::ROLLOUT_FILE),
         ],
         archived: Archived::Never,
+        every_replicate: true,
         params: |s| json(&s.test),
         validate: |s| s.test.validate(),
         run: |c| {
@@ -331,6 +340,7 @@ pub const STAGES: &[Stage] = &[
             ("horizons", alnlab_summarize::HORIZONS_FILE),
         ],
         archived: Archived::Never,
+        every_replicate: true,
         // Summarizing has no parameters of its own.
         params: |_| serde_json::Value::Null,
         validate: |_| Ok(()),
@@ -382,6 +392,7 @@ pub const STAGES: &[Stage] = &[
             ("episodes", alnlab_plan::EPISODES_FILE),
         ],
         archived: Archived::Never,
+        every_replicate: true,
         params: |s| json(&s.plan),
         validate: |s| s.plan.validate(),
         run: |c| {
@@ -402,6 +413,51 @@ pub const STAGES: &[Stage] = &[
             threads: 1,
             mem_mb: 2048,
             runtime: 60,
+            holds_forest: true,
+        },
+    },
+    Stage {
+        name: "circuit",
+        about: "Run the circuit stage alone: the trained bit-forest as Verilog, synthesized by \
+                Yosys into two-input gates (gates and depth in gate levels of its trees, votes \
+                and decoders) and simulated by Icarus Verilog on the test rows, equal to the \
+                software's levels on every row ([circuit] synthesize = true)",
+        format_version: alnlab_circuit::FORMAT_VERSION,
+        inputs: &[
+            Input {
+                role: "model",
+                from: "train",
+            },
+            Input {
+                role: "codebook",
+                from: "quantize",
+            },
+            Input {
+                role: "levels",
+                from: "quantize",
+            },
+        ],
+        outputs: &[("circuit", alnlab_circuit::CIRCUIT_FILE)],
+        archived: Archived::Never,
+        every_replicate: false,
+        params: |s| json(&s.circuit),
+        validate: |s| s.circuit.validate(),
+        run: |c| {
+            alnlab_circuit::run(
+                &c.stages.circuit,
+                c.input("model"),
+                c.input("codebook"),
+                c.input("levels"),
+                c.provenance,
+                c.out_dir,
+                c.progress,
+            )
+        },
+        merge_shards: None,
+        hints: Hints {
+            threads: 2,
+            mem_mb: 4096,
+            runtime: 120,
             holds_forest: true,
         },
     },

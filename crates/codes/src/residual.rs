@@ -100,6 +100,11 @@ impl Residual {
         self.spec
     }
 
+    /// The levels L of the variable the change is applied to.
+    pub fn levels(&self) -> usize {
+        self.levels
+    }
+
     /// The code of Δ + k.
     pub fn codec(&self) -> &Codec {
         &self.codec

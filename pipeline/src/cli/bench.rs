@@ -84,6 +84,30 @@ pub enum Bench {
         #[arg(long)]
         json: bool,
     },
+    /// Measure a run's model as a circuit: export it as Verilog, synthesize
+    /// it with Yosys into two-input gates, simulate the Verilog and the
+    /// netlist with Icarus Verilog on the test rows (each must equal the
+    /// software's levels) and give gates and depth in gate levels — trees,
+    /// votes, decoding — beside the paper's estimate of 59, and how long it
+    /// took. Needs `yosys` and `iverilog` (Debian: apt-get install yosys
+    /// iverilog).
+    #[command(after_help = "Examples:
+  alnlab bench circuit --run runs/quickstart --variant gray --json
+  alnlab bench circuit --run runs/paper --rows 500")]
+    Circuit {
+        /// A run's folder (holding run.json) whose model to measure.
+        #[arg(long, default_value = "runs/quickstart")]
+        run: PathBuf,
+        /// The run's variant (default: the only one).
+        #[arg(long)]
+        variant: Option<String>,
+        /// Simulate only the first ROWS test rows (default: all).
+        #[arg(long, value_parser = clap::value_parser!(u64).range(1..))]
+        rows: Option<u64>,
+        /// Print one JSON object.
+        #[arg(long)]
+        json: bool,
+    },
     /// Time sharded training: the manifest's forest trained in one process
     /// (all cores) against SHARDS processes of `train --shard K/N` side by
     /// side (each given its share of the cores) and the merge; checks the
@@ -198,37 +222,71 @@ pub fn execute(bench: Bench, quiet: bool) -> Result<()> {
             }
             Ok(())
         }
+        Bench::Circuit {
+            run: run_dir,
+            variant,
+            rows,
+            json,
+        } => {
+            let (name, [model, codebook, levels]) = run_artifacts(
+                &run_dir,
+                variant.as_deref(),
+                ["model", "codebook", "levels"],
+            )?;
+            let bar = crate::progress::Bar::new("circuit", quiet);
+            let f = alnlab_circuit::bench::on_run(
+                &model,
+                &codebook,
+                &levels,
+                rows.map(|r| r as usize),
+                &bar,
+            )?;
+            drop(bar);
+            print_figures(&f, json, |f| {
+                let [trees, votes, decode] = f.deepest_parts;
+                println!(
+                    "{name}: {} variables, {} test rows simulated, every level equal to the software's",
+                    f.figures.variables.len(),
+                    f.rows
+                );
+                println!(
+                    "longest path: {} gate levels (`{}`: trees {trees}, votes {votes}, decoding {decode}); the paper's estimate: {}",
+                    f.depth, f.deepest, f.paper_estimate
+                );
+                for (part, p) in [
+                    ("trees", f.trees),
+                    ("votes", f.votes),
+                    ("decoding", f.decode),
+                ] {
+                    println!(
+                        "{part:9} {:>10} gates ({} inverters), {} levels deep",
+                        p.cells, p.inverters, p.depth
+                    );
+                }
+                println!("all       {:>10} gates; {}", f.cells, f.figures.library);
+                println!(
+                    "{:.1} s to synthesize and simulate on {} threads ({})",
+                    f.seconds, f.threads, f.figures.tools
+                );
+            });
+            Ok(())
+        }
         Bench::Predict {
             run: Some(run_dir),
             variant,
             repeat,
             json,
         } => {
-            let roles = ["model", "codebook", "levels", "trajectory"];
-            let record = crate::records::read_record(&run_dir)?;
-            let chosen = super::dataset::pick_variant(
-                &record.variants,
-                variant.as_deref(),
-                &roles,
+            let (name, [model, codebook, levels, trajectory]) = run_artifacts(
                 &run_dir,
+                variant.as_deref(),
+                ["model", "codebook", "levels", "trajectory"],
             )?;
-            let artifact = |role: &str| {
-                chosen
-                    .artifacts
-                    .get(role)
-                    .map(|a| PathBuf::from(&a.path))
-                    .ok_or_else(|| {
-                        Error::bad_file(
-                            &run_dir.join("run.json"),
-                            format!("variant `{}` has no `{role}` artifact", chosen.name),
-                        )
-                    })
-            };
             let figures = alnlab_evaluate::bench::on_data(
-                &artifact("model")?,
-                &artifact("codebook")?,
-                &artifact("levels")?,
-                &artifact("trajectory")?,
+                &model,
+                &codebook,
+                &levels,
+                &trajectory,
                 repeat as usize,
             )?;
             print_figures(&figures, json, |f| {
@@ -237,7 +295,7 @@ pub fn execute(bench: Bench, quiet: bool) -> Result<()> {
                 };
                 println!(
                     "{} ({}, {} target, {} trees) on {} test states, medians of {} runs:",
-                    chosen.name, f.model, f.target, f.trees, f.states, f.repeats
+                    name, f.model, f.target, f.trees, f.states, f.repeats
                 );
                 println!(
                     "ALN batched, 1 thread:        {}",
@@ -328,6 +386,33 @@ pub fn execute(bench: Bench, quiet: bool) -> Result<()> {
             Ok(())
         }
     }
+}
+
+/// The variant of the run in `run_dir` (the only one, or `variant`) and
+/// the paths of its artifacts `roles`.
+fn run_artifacts<const N: usize>(
+    run_dir: &Path,
+    variant: Option<&str>,
+    roles: [&str; N],
+) -> Result<(String, [PathBuf; N])> {
+    let record = crate::records::read_record(run_dir)?;
+    let chosen = super::dataset::pick_variant(&record.variants, variant, &roles, run_dir)?;
+    let mut paths = Vec::with_capacity(N);
+    for role in roles {
+        let path = chosen
+            .artifacts
+            .get(role)
+            .map(|a| PathBuf::from(&a.path))
+            .ok_or_else(|| {
+                Error::bad_file(
+                    &run_dir.join("run.json"),
+                    format!("variant `{}` has no `{role}` artifact", chosen.name),
+                )
+            })?;
+        paths.push(path);
+    }
+    let paths: [PathBuf; N] = paths.try_into().expect("one path per role");
+    Ok((chosen.name.clone(), paths))
 }
 
 /// Prints a benchmark's figures: one JSON object with `--json`, else as

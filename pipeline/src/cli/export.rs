@@ -70,6 +70,27 @@ pub enum ExportCommand {
         #[arg(long)]
         experiment: Option<String>,
     },
+    /// Write a trained bit-forest as synthesizable Verilog: one module per
+    /// pruned tree (ports named after the variables and their code bits:
+    /// `roll_2_b5` is bit 5 of `roll.2`'s code), one per learned variable
+    /// (its trees, their majority votes and its decoder, from the code bits
+    /// to the level in binary), and `predict_state` in top.v for the whole
+    /// state. `alnlab bench circuit` synthesizes and simulates it.
+    #[command(after_help = "Examples:
+  alnlab export verilog runs/cache/train/<key>/model.aln \\
+      --codebook runs/cache/quantize/<key>/codebook.parquet -o verilog
+  yosys -p 'read_verilog verilog/*.v; synth -top predict_state; stat'")]
+    Verilog {
+        /// The model.aln written by train (a bit-forest).
+        model: PathBuf,
+        /// The codebook.parquet it was trained with.
+        #[arg(long)]
+        codebook: PathBuf,
+        /// Folder to write the Verilog files into (made; it must not hold
+        /// files already).
+        #[arg(short, long)]
+        output: PathBuf,
+    },
 }
 
 /// Runs one `alnlab export` subcommand.
@@ -111,7 +132,50 @@ pub fn execute(command: ExportCommand) -> Result<()> {
             out,
             experiment,
         } => export_mlflow(&run, &tracking_uri, &out, experiment),
+        ExportCommand::Verilog {
+            model,
+            codebook,
+            output,
+        } => export_verilog(&model, &codebook, &output),
     }
+}
+
+/// `alnlab export verilog`: the files are written into a hidden folder
+/// beside `output`, which becomes `output` when all are written.
+fn export_verilog(model: &Path, codebook: &Path, output: &Path) -> Result<()> {
+    let trained = alnlab_aln::runtime::Trained::read(model, codebook)?;
+    let circuit = alnlab_circuit::circuit_of(&trained, model)?;
+    if output.read_dir().is_ok_and(|mut d| d.next().is_some()) {
+        return Err(Error::Invalid(format!(
+            "{}: holds files already; name a new folder",
+            output.display()
+        )));
+    }
+    let parent = match output.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p,
+        _ => Path::new("."),
+    };
+    std::fs::create_dir_all(parent).map_err(|e| Error::io(parent, e))?;
+    let staging = tempfile::Builder::new()
+        .prefix(".verilog-")
+        .tempdir_in(parent)
+        .map_err(|e| Error::io(parent, e))?;
+    alnlab_circuit::check::write_files(&circuit, staging.path())?;
+    if output.exists() {
+        std::fs::remove_dir(output).map_err(|e| Error::io(output, e))?;
+    }
+    let staged = staging.keep();
+    std::fs::rename(&staged, output).map_err(|e| Error::io(output, e))?;
+    let trees: usize = circuit.variables.iter().map(|v| v.trees.len()).sum();
+    println!(
+        "{}: {} files — {trees} tree modules, {} variable modules, top module `{}` in {}",
+        output.display(),
+        circuit.files.len(),
+        circuit.variables.len(),
+        alnlab_circuit::verilog::TOP,
+        alnlab_circuit::verilog::TOP_FILE
+    );
+    Ok(())
 }
 
 /// `alnlab export mlflow`: the report is rendered from the record into a

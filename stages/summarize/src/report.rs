@@ -11,6 +11,7 @@
 //! a reproducibility block.
 
 mod across;
+mod circuit;
 mod findings;
 pub mod format;
 mod glossary;
@@ -23,6 +24,7 @@ use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
 use alnlab_aln::model::{Header, Model};
+use alnlab_aln::tree::Gate;
 use alnlab_aln::{ModelKind, Target};
 use alnlab_codes::{Codebook, unit_of};
 use alnlab_common::table::Table;
@@ -78,6 +80,8 @@ pub struct VariantInfo {
     pub codebook: PathBuf,
     /// The plan stage's per-episode table, if the run had one.
     pub planning: Option<PathBuf>,
+    /// The circuit stage's figures, if the run had them.
+    pub circuit: Option<PathBuf>,
     /// Every replicate of the variant (the first is the one above), when
     /// the experiment runs more than one.
     pub replicates: Vec<Replicate>,
@@ -149,6 +153,9 @@ struct Loaded<'a> {
     /// Mean training errors per tree, per epoch (1-based).
     training: Vec<(f64, f64)>,
     hardware: Hardware,
+    /// The synthesized circuit's figures, when the circuit stage measured
+    /// them.
+    circuit: Option<circuit::Measured>,
     coverage: Coverage,
     /// Bytes the trees take in memory while training: two counters per
     /// internal node, a literal per leaf.
@@ -248,6 +255,8 @@ struct Hardware {
     kind: ModelKind,
     max_depth: u32,
     mean_depth: f64,
+    /// AND/OR gates of all pruned trees.
+    pruned_gates: u64,
     max_width: usize,
     levels_steps: u32,
 }
@@ -361,7 +370,17 @@ fn load(info: &VariantInfo) -> Result<Loaded<'_>> {
     let training = read_training(&info.training)?;
 
     let model = Model::read(&info.model)?;
-    let depths: Vec<u32> = model.trees.iter().map(|(_, t)| t.prune().depth()).collect();
+    let pruned: Vec<_> = model.trees.iter().map(|(_, t)| t.prune()).collect();
+    let depths: Vec<u32> = pruned.iter().map(|p| p.depth()).collect();
+    let pruned_gates = pruned
+        .iter()
+        .map(|p| {
+            p.nodes
+                .iter()
+                .filter(|g| !matches!(g, Gate::Leaf(_)))
+                .count() as u64
+        })
+        .sum();
     let max_width = model
         .header
         .outputs
@@ -373,6 +392,7 @@ fn load(info: &VariantInfo) -> Result<Loaded<'_>> {
         kind: model.header.model,
         max_depth: depths.iter().copied().max().unwrap_or(0),
         mean_depth: depths.iter().map(|&d| f64::from(d)).sum::<f64>() / depths.len().max(1) as f64,
+        pruned_gates,
         max_width,
         // A thermometer of w bits has w + 1 levels: ⌈log₂(w + 1)⌉ steps.
         levels_steps: (max_width + 1).next_power_of_two().trailing_zeros(),
@@ -458,6 +478,10 @@ fn load(info: &VariantInfo) -> Result<Loaded<'_>> {
         timings,
         training,
         hardware,
+        circuit: match &info.circuit {
+            Some(path) => circuit::read(path)?,
+            None => None,
+        },
         coverage,
         tree_bytes,
     })

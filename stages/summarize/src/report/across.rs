@@ -387,13 +387,15 @@ pub(super) fn side_by_side(md: &mut String, variants: &[Loaded], shared: bool) {
     let _ = writeln!(
         md,
         "Cost: time per predicted state on one thread (median of the timed runs), the §5 \
-         hardware estimate, training time as computed (also when the stage was cached) and the \
+         hardware estimate and, where the circuit stage measured it, the synthesized circuit's longest \
+         path, training time as computed (also when the stage was cached) and the \
          trees' memory while training.\n"
     );
     let mut table = MdTable::new(&["variant"]).numbers(&[
         "ALN batched",
         "ALN one at a time",
         "hardware (gate delays)",
+        "circuit (gate levels)",
         "training (s)",
         "trees (MiB)",
     ]);
@@ -404,6 +406,9 @@ pub(super) fn side_by_side(md: &mut String, variants: &[Loaded], shared: bool) {
             time(v.ns("aln", "batched")),
             time(v.aln_single().map(|t| t.ns_per_state)),
             v.hardware.delays().to_string(),
+            v.circuit
+                .as_ref()
+                .map_or("—".into(), |c| c.depth.to_string()),
             v.info
                 .stages
                 .iter()

@@ -376,6 +376,20 @@ fn hardware(md: &mut String, v: &Loaded) {
             h.delays()
         ),
     };
+    match (&v.circuit, h.kind) {
+        (Some(measured), _) => {
+            super::circuit::section(md, measured, (h.pruned_gates, h.max_depth), h.delays())
+        }
+        (None, ModelKind::Threshold) if v.info.circuit.is_some() => {
+            let _ = writeln!(
+                md,
+                "Not measured as a circuit: a threshold model's binary search evaluates its trees \
+                 once per step, in sequence — a sequential circuit, which the circuit stage does \
+                 not export.\n"
+            );
+        }
+        _ => {}
+    }
 }
 
 #[cfg(test)]

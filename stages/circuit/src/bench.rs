@@ -1,0 +1,94 @@
+//! `alnlab bench circuit`: a run's model measured as a circuit — the
+//! stage's measurement on its test rows, with the totals a reader compares
+//! with the paper's estimate, and how long synthesis and simulation took.
+
+use std::path::Path;
+use std::time::Instant;
+
+use alnlab_aln::runtime::Trained;
+use alnlab_codes::{Entry, level_rows, split_rows};
+use alnlab_common::table::Table;
+use alnlab_common::{Error, Progress, Result};
+use serde::Serialize;
+
+use crate::synth::{Figures, Part};
+use crate::{check, circuit_of};
+
+/// The paper's estimate (§5): 13 + 23·2 gate delays.
+pub const PAPER_DELAYS: u32 = 59;
+
+/// The figures of `alnlab bench circuit`.
+#[derive(Debug, Serialize)]
+pub struct Bench {
+    /// Test rows simulated, every variable equal to the software on each.
+    pub rows: usize,
+    /// The longest path from input bits to a level, in gate levels.
+    pub depth: u32,
+    /// … in which variable, split into its trees, votes and decoding.
+    pub deepest: String,
+    pub deepest_parts: [u32; 3],
+    /// The paper's estimate, for comparison.
+    pub paper_estimate: u32,
+    /// All gates.
+    pub cells: u64,
+    /// Per part, over all variables (depth: the deepest).
+    pub trees: Part,
+    pub votes: Part,
+    pub decode: Part,
+    /// Wall time of export, synthesis and both simulations (all threads).
+    pub seconds: f64,
+    pub threads: usize,
+    /// Per variable.
+    pub figures: Figures,
+}
+
+/// Measures the model at `model` (trained with `codebook`) on the first
+/// `rows` test rows of `levels` (all when none).
+pub fn on_run(
+    model: &Path,
+    codebook: &Path,
+    levels: &Path,
+    rows: Option<usize>,
+    progress: &dyn Progress,
+) -> Result<Bench> {
+    let trained = Trained::read(model, codebook)?;
+    let circuit = circuit_of(&trained, model)?;
+    let table = Table::read(levels)?;
+    let mut test = split_rows(&table, "test")?;
+    if let Some(n) = rows {
+        test.truncate(n);
+    }
+    let learned: Vec<&Entry> = trained.codebook.learned().collect();
+    let x = level_rows(&table, "x", &learned, &test)?;
+    let expected = trained.runtime().levels(&x, None);
+    let scratch = tempfile::tempdir().map_err(|e| Error::io(&std::env::temp_dir(), e))?;
+    let start = Instant::now();
+    let figures = check::measure(
+        &circuit,
+        &trained.codecs,
+        &x,
+        &expected,
+        scratch.path(),
+        progress,
+    )?;
+    let seconds = start.elapsed().as_secs_f64();
+    let deepest = figures.deepest().expect("a model predicts a variable");
+    Ok(Bench {
+        rows: test.len(),
+        depth: figures.depth(),
+        deepest: deepest.variable.clone(),
+        deepest_parts: [
+            deepest.trees.depth,
+            deepest.votes.depth,
+            deepest.decode.depth,
+        ],
+        paper_estimate: PAPER_DELAYS,
+        cells: figures.cells(),
+        trees: figures.part(|v| v.trees),
+        votes: figures.part(|v| v.votes),
+        decode: figures.part(|v| v.decode),
+        seconds,
+        threads: rayon::current_num_threads(),
+        figures,
+    })
+}

@@ -1,0 +1,182 @@
+//! The circuit stage: a trained bit-forest as a combinational circuit
+//! (paper §5, abstract), where the claim that a trained ALN predicts a state
+//! "in a few tens of logic gate propagation delays" is measured.
+//!
+//! - [`verilog`]: the model's pruned trees as synthesizable Verilog — one
+//!   module per tree, per variable (its trees, their majority votes, its
+//!   decoder) and one for the whole state — with ports named after the
+//!   variables and their code bits (`alnlab export verilog` writes it).
+//! - [`synth`]: synthesis by Yosys to two-input gates and inverters; cell
+//!   counts and the longest path in gate levels, split into trees, votes and
+//!   decoding.
+//! - [`simulate`]: the circuit run by Icarus Verilog on rows of levels.
+//! - [`bench`]: a run's model measured, for `alnlab bench circuit`.
+//! - [`check`]: all of it — write, synthesize, simulate both the exported
+//!   Verilog and the synthesized netlist, and hold them to the software's
+//!   predictions row by row.
+//!
+//! The stage ([`run`]) measures the model of its variant on the test rows
+//! into `circuit.parquet` when `[circuit] synthesize = true`; Yosys and
+//! Icarus Verilog are external programs (Debian: `apt-get install yosys
+//! iverilog`), which [`tools`] finds and names when they are missing.
+
+pub mod bench;
+pub mod check;
+pub mod simulate;
+pub mod synth;
+pub mod tools;
+pub mod verilog;
+
+use std::path::Path;
+use std::sync::Arc;
+
+use alnlab_aln::ModelKind;
+use alnlab_aln::runtime::Trained;
+use alnlab_codes::{Entry, level_rows, split_rows};
+use alnlab_common::params::{Count, ParamError};
+use alnlab_common::table::{self, Table};
+use alnlab_common::{Error, Progress, Provenance, Result, params};
+use arrow_array::{Array, StringArray, UInt32Array, UInt64Array};
+use serde::{Deserialize, Serialize};
+
+pub use synth::{Figures, Part, VariableFigures};
+pub use verilog::Circuit;
+
+/// Version of what this stage writes (part of every cache key).
+pub const FORMAT_VERSION: u32 = 1;
+/// File name of the measured figures.
+pub const CIRCUIT_FILE: &str = "circuit.parquet";
+
+/// The `[circuit]` table of a manifest.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct Params {
+    /// Export the model as Verilog, synthesize it with Yosys and simulate it
+    /// with Icarus Verilog on the test rows. Off (the default), the stage
+    /// writes an empty table and needs neither program.
+    pub synthesize: bool,
+    /// The test rows to simulate, the first ones (default: all).
+    pub rows: Option<Count>,
+}
+
+impl Params {
+    /// Nothing relates the parameters; kept for the stage table's shape.
+    pub fn validate(&self) -> std::result::Result<(), ParamError> {
+        Ok(())
+    }
+}
+
+/// Measures the circuit of the model (`model_path`, trained with
+/// `codebook_path`) on the test rows of `levels_path` into
+/// `out_dir/circuit.parquet`: per learned variable and part (`trees`,
+/// `votes`, `decode`), gates, inverters and depth in gate levels, and the
+/// rows on which both the exported Verilog and the synthesized netlist put
+/// out the software's levels (all simulated rows, or the stage fails).
+/// Without `synthesize`, or for a threshold model (whose binary search is
+/// sequential, not one combinational circuit), the table is empty.
+pub fn run(
+    params: &Params,
+    model_path: &Path,
+    codebook_path: &Path,
+    levels_path: &Path,
+    provenance: &Provenance,
+    out_dir: &Path,
+    progress: &dyn Progress,
+) -> Result<()> {
+    params
+        .validate()
+        .map_err(|e| params::invalid("circuit", e))?;
+    let path = out_dir.join(CIRCUIT_FILE);
+    if !params.synthesize {
+        return write(&path, None, provenance);
+    }
+    let trained = Trained::read(model_path, codebook_path)?;
+    if trained.model.header.model == ModelKind::Threshold {
+        return write(&path, None, provenance);
+    }
+    let levels = Table::read(levels_path)?;
+    let mut rows = split_rows(&levels, "test")?;
+    if let Some(n) = params.rows {
+        rows.truncate(n.get());
+    }
+    let learned: Vec<&Entry> = trained.codebook.learned().collect();
+    let x = level_rows(&levels, "x", &learned, &rows)?;
+    let expected = trained.runtime().levels(&x, None);
+    let circuit = circuit_of(&trained, model_path)?;
+    let scratch = tempfile::tempdir().map_err(|e| Error::io(&std::env::temp_dir(), e))?;
+    let figures = check::measure(
+        &circuit,
+        &trained.codecs,
+        &x,
+        &expected,
+        scratch.path(),
+        progress,
+    )?;
+    write(&path, Some((&figures, rows.len() as u64)), provenance)
+}
+
+/// The circuit of `trained` (read from `model_path`); an error says why a
+/// model cannot be one.
+pub fn circuit_of(trained: &Trained, model_path: &Path) -> Result<Circuit> {
+    let names: Vec<String> = trained
+        .codebook
+        .learned()
+        .map(|e| e.variable.clone())
+        .collect();
+    Circuit::new(&trained.model, &names, &trained.codecs, &trained.outputs)
+        .map_err(|m| Error::bad_file(model_path, m))
+}
+
+/// Writes `circuit.parquet`: three rows per variable (trees, votes,
+/// decode), or none.
+fn write(path: &Path, figures: Option<(&Figures, u64)>, provenance: &Provenance) -> Result<()> {
+    let mut rows: Vec<(&str, &str, Part)> = Vec::new();
+    if let Some((f, _)) = figures {
+        for v in &f.variables {
+            for (part, figures) in [("trees", v.trees), ("votes", v.votes), ("decode", v.decode)] {
+                rows.push((&v.variable, part, figures));
+            }
+        }
+    }
+    let each = |s: &str| -> Arc<dyn Array> {
+        Arc::new(StringArray::from_iter_values(rows.iter().map(|_| s)))
+    };
+    let (tools, library, equal) = figures.map_or(("", "", 0), |(f, n)| {
+        (f.tools.as_str(), f.library.as_str(), n)
+    });
+    let batch = table::batch(vec![
+        (
+            "variable",
+            Arc::new(StringArray::from_iter_values(rows.iter().map(|r| r.0))) as Arc<dyn Array>,
+        ),
+        (
+            "part",
+            Arc::new(StringArray::from_iter_values(rows.iter().map(|r| r.1))),
+        ),
+        (
+            "cells",
+            Arc::new(UInt64Array::from_iter_values(
+                rows.iter().map(|r| r.2.cells),
+            )),
+        ),
+        (
+            "inverters",
+            Arc::new(UInt64Array::from_iter_values(
+                rows.iter().map(|r| r.2.inverters),
+            )),
+        ),
+        (
+            "depth",
+            Arc::new(UInt32Array::from_iter_values(
+                rows.iter().map(|r| r.2.depth),
+            )),
+        ),
+        (
+            "rows_equal",
+            Arc::new(UInt64Array::from_iter_values(rows.iter().map(|_| equal))),
+        ),
+        ("tools", each(tools)),
+        ("library", each(library)),
+    ]);
+    table::write_parquet(path, &batch, provenance)
+}

@@ -1,0 +1,53 @@
+//! The external programs: Yosys (synthesis) and Icarus Verilog (`iverilog`,
+//! `vvp`: simulation). A missing program is an error that says how to
+//! install it; a failing one, an error with the end of what it printed.
+
+use std::path::Path;
+use std::process::Command;
+
+use alnlab_common::{Error, Result};
+
+/// How to install the programs, for error messages.
+const INSTALL: &str = "the circuit check needs Yosys and Icarus Verilog on PATH (Debian, Ubuntu: \
+                       `apt-get install yosys iverilog`)";
+
+/// Runs `program` with `args` in `dir`; its standard output on success.
+pub fn run(program: &str, args: &[&str], dir: &Path) -> Result<String> {
+    let output = Command::new(program)
+        .args(args)
+        .current_dir(dir)
+        .output()
+        .map_err(|e| match e.kind() {
+            std::io::ErrorKind::NotFound => {
+                Error::Invalid(format!("`{program}` was not found: {INSTALL}"))
+            }
+            _ => Error::io(Path::new(program), e),
+        })?;
+    if !output.status.success() {
+        let mut said = String::from_utf8_lossy(&output.stdout).into_owned();
+        said.push_str(&String::from_utf8_lossy(&output.stderr));
+        let tail: Vec<&str> = said.lines().rev().take(12).collect();
+        let tail: Vec<&str> = tail.into_iter().rev().collect();
+        return Err(Error::Corrupt(format!(
+            "`{program} {}` in {} failed ({}):\n{}",
+            args.join(" "),
+            dir.display(),
+            output.status,
+            tail.join("\n")
+        )));
+    }
+    Ok(String::from_utf8_lossy(&output.stdout).into_owned())
+}
+
+/// The versions of Yosys and Icarus Verilog, as they print them (their
+/// figures depend on them); an error when either is missing.
+pub fn versions() -> Result<String> {
+    let here = Path::new(".");
+    let yosys = run("yosys", &["-V"], here)?;
+    let iverilog = run("iverilog", &["-V"], here)?;
+    Ok(format!(
+        "{}; {}",
+        yosys.trim(),
+        iverilog.lines().next().unwrap_or("").trim()
+    ))
+}
