@@ -6,13 +6,11 @@ use std::path::Path;
 use std::time::Instant;
 
 use alnlab_aln::runtime::Trained;
-use alnlab_codes::{Entry, level_rows, split_rows};
-use alnlab_common::table::Table;
-use alnlab_common::{Error, Progress, Result};
+use alnlab_common::{Progress, Result};
 use serde::Serialize;
 
+use crate::measure_test_rows;
 use crate::synth::{Figures, Part};
-use crate::{check, circuit_of};
 
 /// The paper's estimate (§5): 13 + 23·2 gate delays.
 pub const PAPER_DELAYS: u32 = 59;
@@ -35,7 +33,8 @@ pub struct Bench {
     pub trees: Part,
     pub votes: Part,
     pub decode: Part,
-    /// Wall time of export, synthesis and both simulations (all threads).
+    /// Wall time of reading the rows, export, synthesis and both
+    /// simulations (all threads).
     pub seconds: f64,
     pub threads: usize,
     /// Per variable.
@@ -52,29 +51,12 @@ pub fn on_run(
     progress: &dyn Progress,
 ) -> Result<Bench> {
     let trained = Trained::read(model, codebook)?;
-    let circuit = circuit_of(&trained, model)?;
-    let table = Table::read(levels)?;
-    let mut test = split_rows(&table, "test")?;
-    if let Some(n) = rows {
-        test.truncate(n);
-    }
-    let learned: Vec<&Entry> = trained.codebook.learned().collect();
-    let x = level_rows(&table, "x", &learned, &test)?;
-    let expected = trained.runtime().levels(&x, None);
-    let scratch = tempfile::tempdir().map_err(|e| Error::io(&std::env::temp_dir(), e))?;
     let start = Instant::now();
-    let figures = check::measure(
-        &circuit,
-        &trained.codecs,
-        &x,
-        &expected,
-        scratch.path(),
-        progress,
-    )?;
+    let (figures, rows) = measure_test_rows(&trained, model, levels, rows, progress)?;
     let seconds = start.elapsed().as_secs_f64();
     let deepest = figures.deepest().expect("a model predicts a variable");
     Ok(Bench {
-        rows: test.len(),
+        rows,
         depth: figures.depth(),
         deepest: deepest.variable.clone(),
         deepest_parts: [

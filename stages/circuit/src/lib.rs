@@ -94,15 +94,35 @@ pub fn run(
     if trained.model.header.model == ModelKind::Threshold {
         return write(&path, None, provenance);
     }
+    let (figures, rows) = measure_test_rows(
+        &trained,
+        model_path,
+        levels_path,
+        params.rows.map(Count::get),
+        progress,
+    )?;
+    write(&path, Some((&figures, rows as u64)), provenance)
+}
+
+/// `trained` (read from `model_path`) measured as a circuit on the first
+/// `rows` test rows of `levels_path` (all when none), in a scratch folder
+/// ([`check::measure`]): its figures and the rows simulated.
+pub fn measure_test_rows(
+    trained: &Trained,
+    model_path: &Path,
+    levels_path: &Path,
+    rows: Option<usize>,
+    progress: &dyn Progress,
+) -> Result<(Figures, usize)> {
+    let circuit = circuit_of(trained, model_path)?;
     let levels = Table::read(levels_path)?;
-    let mut rows = split_rows(&levels, "test")?;
-    if let Some(n) = params.rows {
-        rows.truncate(n.get());
+    let mut test = split_rows(&levels, "test")?;
+    if let Some(n) = rows {
+        test.truncate(n);
     }
     let learned: Vec<&Entry> = trained.codebook.learned().collect();
-    let x = level_rows(&levels, "x", &learned, &rows)?;
+    let x = level_rows(&levels, "x", &learned, &test)?;
     let expected = trained.runtime().levels(&x, None);
-    let circuit = circuit_of(&trained, model_path)?;
     let scratch = tempfile::tempdir().map_err(|e| Error::io(&std::env::temp_dir(), e))?;
     let figures = check::measure(
         &circuit,
@@ -112,7 +132,7 @@ pub fn run(
         scratch.path(),
         progress,
     )?;
-    write(&path, Some((&figures, rows.len() as u64)), provenance)
+    Ok((figures, test.len()))
 }
 
 /// The circuit of `trained` (read from `model_path`); an error says why a
