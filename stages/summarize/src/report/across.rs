@@ -384,38 +384,49 @@ pub(super) fn side_by_side(md: &mut String, variants: &[Loaded], shared: bool) {
     }
     table.write(md);
 
+    // The measured circuit's column only when the circuit stage measured one.
+    let measured = variants.iter().any(|v| v.circuit.is_some());
     let _ = writeln!(
         md,
         "Cost: time per predicted state on one thread (median of the timed runs), the §5 \
-         hardware estimate and, where the circuit stage measured it, the synthesized circuit's longest \
-         path, training time as computed (also when the stage was cached) and the \
-         trees' memory while training.\n"
+         hardware estimate{}, training time as computed (also when the stage was cached) and the \
+         trees' memory while training.\n",
+        if measured {
+            " and the synthesized circuit's longest path in gate levels (the circuit stage)"
+        } else {
+            ""
+        }
     );
-    let mut table = MdTable::new(&["variant"]).numbers(&[
-        "ALN batched",
-        "ALN one at a time",
-        "hardware (gate delays)",
-        "circuit (gate levels)",
-        "training (s)",
-        "trees (MiB)",
-    ]);
+    let mut columns = vec!["ALN batched", "ALN one at a time", "hardware (gate delays)"];
+    if measured {
+        columns.push("circuit (gate levels)");
+    }
+    columns.extend(["training (s)", "trees (MiB)"]);
+    let mut table = MdTable::new(&["variant"]).numbers(&columns);
     for v in variants {
         let time = |t: Option<f64>| t.map_or("—".into(), micros);
-        table.row(vec![
+        let mut row = vec![
             format!("`{}`", v.info.name),
             time(v.ns("aln", "batched")),
             time(v.aln_single().map(|t| t.ns_per_state)),
             v.hardware.delays().to_string(),
-            v.circuit
-                .as_ref()
-                .map_or("—".into(), |c| c.depth.to_string()),
+        ];
+        if measured {
+            row.push(
+                v.circuit
+                    .as_ref()
+                    .map_or("—".into(), |c| c.depth.to_string()),
+            );
+        }
+        row.push(
             v.info
                 .stages
                 .iter()
                 .find(|s| s.stage == "train")
                 .map_or("—".into(), |s| sig3(s.compute_seconds)),
-            sig3(v.tree_bytes as f64 / (1024.0 * 1024.0)),
-        ]);
+        );
+        row.push(sig3(v.tree_bytes as f64 / (1024.0 * 1024.0)));
+        table.row(row);
     }
     table.write(md);
 

@@ -148,7 +148,7 @@ pub(super) fn section(md: &mut String, m: &Measured, pruned: (u64, u32), estimat
     let (variable, trees, votes, decode) = &m.deepest;
     let _ = write!(
         md,
-        "\nThe longest path from the input bits to a predicted level is **{} gate levels** (`{}`: \
+        "The longest path from the input bits to a predicted level is **{} gate levels** (`{}`: \
          trees {}, votes {}, decoding {}), beside the paper's estimate of {PAPER_DELAYS} and this \
          model's of {estimate}. ",
         m.depth, variable, trees, votes, decode
