@@ -35,6 +35,17 @@ pub struct Part {
     pub depth: u32,
 }
 
+impl Part {
+    /// Two parts side by side: their gates added, the deeper one's depth.
+    fn beside(self, other: Part) -> Part {
+        Part {
+            cells: self.cells + other.cells,
+            inverters: self.inverters + other.inverters,
+            depth: self.depth.max(other.depth),
+        }
+    }
+}
+
 /// One learned variable's synthesized circuit, by part.
 #[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
 pub struct VariableFigures {
@@ -77,11 +88,7 @@ impl Figures {
         self.variables
             .iter()
             .map(part)
-            .fold(Part::default(), |a, p| Part {
-                cells: a.cells + p.cells,
-                inverters: a.inverters + p.inverters,
-                depth: a.depth.max(p.depth),
-            })
+            .fold(Part::default(), Part::beside)
     }
 
     /// The state's depth: the deepest variable's.
@@ -147,11 +154,7 @@ pub fn synthesize(circuit: &Circuit, v: usize, dir: &Path) -> Result<VariableFig
         .trees
         .iter()
         .map(|t| part(t, 1))
-        .fold(Part::default(), |a, p| Part {
-            cells: a.cells + p.cells,
-            inverters: a.inverters + p.inverters,
-            depth: a.depth.max(p.depth),
-        });
+        .fold(Part::default(), Part::beside);
     let votes = c
         .majority
         .as_ref()

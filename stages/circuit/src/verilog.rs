@@ -221,16 +221,6 @@ impl Circuit {
     pub fn input_bits(&self) -> usize {
         self.inputs.iter().map(|b| b.width).sum()
     }
-
-    /// The text of file `name`.
-    pub fn file(&self, name: &str) -> &str {
-        &self
-            .files
-            .iter()
-            .find(|(n, _)| n == name)
-            .expect("a file of the circuit")
-            .1
-    }
 }
 
 /// The levels of variable `v`'s prediction: its codec's (a level target)
