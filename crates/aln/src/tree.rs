@@ -320,6 +320,14 @@ pub struct Pruned {
 }
 
 impl Pruned {
+    /// Number of AND/OR gates (its nodes but the leaves).
+    pub fn gates(&self) -> usize {
+        self.nodes
+            .iter()
+            .filter(|g| !matches!(g, Gate::Leaf(_)))
+            .count()
+    }
+
     /// Depth in gate delays: the longest chain of AND/OR gates.
     pub fn depth(&self) -> u32 {
         let mut depth = vec![0u32; self.nodes.len()];

@@ -146,16 +146,15 @@ impl Circuit {
             })
             .collect();
         let vote = model.header.vote as usize;
-        let mut files = vec![(COMMON_FILE.to_string(), String::new())];
+        let mut files = vec![(COMMON_FILE.to_string(), common(vote))];
         let mut variables = Vec::new();
-        let mut majorities = BTreeSet::new();
         let mut trees = model.trees.iter();
         for (v, output) in outputs.iter().enumerate() {
             let width = output.codec().width() as usize;
             let mut text = String::new();
             let mut tree_modules = Vec::new();
             let mut reads = BTreeSet::new();
-            let mut pruned_of = Vec::new();
+            let mut ports_of = Vec::new();
             for bit in 0..width {
                 for voter in 0..vote {
                     let (id, tree) = trees.next().ok_or("the model has too few trees")?;
@@ -178,17 +177,14 @@ impl Circuit {
                         &inputs,
                         &ports,
                     );
-                    pruned_of.push(ports);
+                    ports_of.push(ports);
                     tree_modules.push(name);
                 }
             }
             let level_bits = binary_width(output_levels(output));
             let decoder = format!("decode_{}", idents[v]);
             write_decoder(&mut text, &decoder, &names[v], output, level_bits);
-            let majority = (vote > 1).then(|| {
-                majorities.insert(vote);
-                (format!("majority{vote}"), width)
-            });
+            let majority = (vote > 1).then(|| (format!("majority{vote}"), width));
             let circuit = VariableCircuit {
                 variable: names[v].clone(),
                 ident: idents[v].clone(),
@@ -201,14 +197,13 @@ impl Circuit {
                 takes_current: matches!(output, Output::Delta(_)),
                 level_bits,
             };
-            write_variable(&mut text, &circuit, &inputs, &pruned_of, vote, width);
+            write_variable(&mut text, &circuit, &inputs, &ports_of, vote, width);
             files.push((circuit.file.clone(), text));
             variables.push(circuit);
         }
         if trees.next().is_some() {
             return Err("the model has more trees than its outputs' bits and voters".into());
         }
-        files[0].1 = common(&majorities);
         files.push((TOP_FILE.to_string(), top(&inputs, &variables)));
         Ok(Circuit {
             files,
@@ -223,8 +218,8 @@ impl Circuit {
     }
 }
 
-/// The levels of variable `v`'s prediction: its codec's (a level target)
-/// or the variable's own (a change target, whose codec codes the change).
+/// The levels of an output's prediction: its codec's (a level target) or
+/// the variable's own (a change target, whose codec codes the change).
 fn output_levels(output: &Output) -> usize {
     match output {
         Output::Level(codec) => codec.levels(),
@@ -273,11 +268,7 @@ fn write_tree(
     inputs: &[InputBus],
     ports: &[(usize, usize)],
 ) {
-    let gates = tree
-        .nodes
-        .iter()
-        .filter(|g| !matches!(g, Gate::Leaf(_)))
-        .count();
+    let gates = tree.gates();
     let _ = writeln!(
         text,
         "// `{variable}`, code bit {bit}, voter {voter}: {leaves} leaves pruned to {gates} \
@@ -564,10 +555,10 @@ fn write_variable(
     );
 }
 
-/// The majority gates of `votes` inputs each.
-fn common(votes: &BTreeSet<usize>) -> String {
+/// The majority gate of `n` votes (none for one voter).
+fn common(n: usize) -> String {
     let mut text = String::from("// The majority gates of the votes (paper §4.3).\n");
-    for &n in votes {
+    if n > 1 {
         let ones: Vec<String> = (0..n).map(|i| format!("votes[{i}]")).collect();
         let _ = writeln!(
             text,

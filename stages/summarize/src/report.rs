@@ -24,7 +24,6 @@ use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
 use alnlab_aln::model::{Header, Model};
-use alnlab_aln::tree::Gate;
 use alnlab_aln::{ModelKind, Target};
 use alnlab_codes::{Codebook, unit_of};
 use alnlab_common::table::Table;
@@ -372,15 +371,7 @@ fn load(info: &VariantInfo) -> Result<Loaded<'_>> {
     let model = Model::read(&info.model)?;
     let pruned: Vec<_> = model.trees.iter().map(|(_, t)| t.prune()).collect();
     let depths: Vec<u32> = pruned.iter().map(|p| p.depth()).collect();
-    let pruned_gates = pruned
-        .iter()
-        .map(|p| {
-            p.nodes
-                .iter()
-                .filter(|g| !matches!(g, Gate::Leaf(_)))
-                .count() as u64
-        })
-        .sum();
+    let pruned_gates = pruned.iter().map(|p| p.gates() as u64).sum();
     let max_width = model
         .header
         .outputs
