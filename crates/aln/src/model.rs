@@ -219,7 +219,7 @@ impl RawModel {
             let (body, stored) = bytes.split_at(bytes.len() - 4);
             // Fuzzing explores the parser behind the checksum.
             if crc32fast::hash(body) != u32_of(stored) && !cfg!(fuzzing) {
-                return Err(bad("damaged: its CRC-32 does not match its bytes".into()));
+                return Err(Error::damaged(path, "its CRC-32 does not match its bytes"));
             }
         }
         let bytes = &bytes[..bytes.len().saturating_sub(4)];

@@ -14,9 +14,14 @@ pub enum Error {
         #[source]
         source: std::io::Error,
     },
-    /// A file exists but is not what it should be (truncated, corrupt, wrong schema).
+    /// A file exists but is not what it should be (another kind of file, a
+    /// wrong schema, values out of range): the user gave the wrong file.
     #[error("{}: {what}", path.display())]
     BadFile { path: PathBuf, what: String },
+    /// A file of the right kind whose bytes fail its own checks (a
+    /// checksum, a CRC, an end too early): damaged data.
+    #[error("{}: damaged: {what}", path.display())]
+    Damaged { path: PathBuf, what: String },
     /// A parameter or an input value the user can correct.
     #[error("{0}")]
     Invalid(String),
@@ -46,6 +51,14 @@ impl Error {
         }
     }
 
+    /// A damaged file at `path`: `what` says which check its bytes fail.
+    pub fn damaged(path: &Path, what: impl std::fmt::Display) -> Self {
+        Error::Damaged {
+            path: path.to_path_buf(),
+            what: what.to_string(),
+        }
+    }
+
     /// The same error with `context` (e.g. `variant `x`, stage simulate`)
     /// put before its message.
     pub fn context(self, context: &str) -> Self {
@@ -58,8 +71,9 @@ impl Error {
     }
 
     /// The process exit code for this error: 2 for what the user can fix
-    /// (a missing or unreadable input, bad files, bad parameters, an unstable
-    /// scene), 1 otherwise (e.g. a full disk, corrupt stored data).
+    /// (a missing or unreadable input, the wrong file, bad parameters, an
+    /// unstable scene), 1 otherwise (a damaged file, corrupt stored data, a
+    /// full disk).
     pub fn exit_code(&self) -> i32 {
         use std::io::ErrorKind::{IsADirectory, NotADirectory, NotFound, PermissionDenied};
         match self {
@@ -68,7 +82,7 @@ impl Error {
                 _ => 1,
             },
             Error::BadFile { .. } | Error::Invalid(_) | Error::Diverged(_) => 2,
-            Error::Corrupt(_) => 1,
+            Error::Damaged { .. } | Error::Corrupt(_) => 1,
         }
     }
 }

@@ -373,7 +373,15 @@ impl StateLog {
         use mcap::sans_io::{LinearReadEvent, LinearReader, LinearReaderOptions};
 
         let bad = |what: String| Error::bad_file(path, what);
-        let corrupt = |e: mcap::McapError| bad(format!("not an intact MCAP file ({e})"));
+        // A file that starts as MCAP does and then fails is damaged; one
+        // that does not is another kind of file.
+        let corrupt = |e: mcap::McapError| {
+            if bytes.starts_with(mcap::MAGIC) {
+                Error::damaged(path, format!("not an intact MCAP file ({e})"))
+            } else {
+                bad(format!("not an MCAP file ({e})"))
+            }
+        };
         // Fuzzing explores the parser behind the CRCs.
         let check = !cfg!(fuzzing);
         let mut reader = LinearReader::new_with_options(

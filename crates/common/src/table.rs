@@ -60,6 +60,9 @@ fn contained<T>(decode: impl FnOnce() -> T) -> std::result::Result<T, String> {
     })
 }
 
+/// The four bytes every Parquet file starts (and ends) with.
+const PARQUET_MAGIC: &[u8] = b"PAR1";
+
 /// The key-value metadata key holding the file's checksum.
 pub const CHECKSUM_KEY: &str = "alnlab.crc32";
 /// The checksum's value while it is computed.
@@ -137,10 +140,10 @@ fn verify_checksum(path: &Path, bytes: &[u8]) -> Result<bool> {
     hasher.update(&bytes[at + 8..]);
     let computed = hasher.finalize();
     if stored != Some(computed) {
-        return Err(Error::bad_file(
+        return Err(Error::damaged(
             path,
             format!(
-                "damaged: its checksum ({CHECKSUM_KEY}) does not match its bytes \
+                "its checksum ({CHECKSUM_KEY}) does not match its bytes \
                  (stored {}, computed {computed:08x})",
                 String::from_utf8_lossy(&bytes[at..at + 8])
             ),
@@ -182,19 +185,27 @@ impl Table {
     /// verified before anything in it is decoded.
     pub fn from_bytes(path: &Path, bytes: Vec<u8>, columns: Option<&[&str]>) -> Result<Table> {
         let checksummed = verify_checksum(path, &bytes)?;
+        // A file that starts as Parquet does and then cannot be decoded is
+        // damaged; one that does not is another kind of file.
+        let parquet = bytes.starts_with(PARQUET_MAGIC);
+        let undecodable = |what: String| {
+            if parquet {
+                Error::damaged(path, what)
+            } else {
+                Error::bad_file(path, format!("not a Parquet file ({what})"))
+            }
+        };
         let mut builder = ParquetRecordBatchReaderBuilder::try_new(bytes::Bytes::from(bytes))
-            .map_err(|e| Error::bad_file(path, format!("not a readable Parquet file ({e})")))?;
+            .map_err(|e| undecodable(format!("its footer cannot be read ({e})")))?;
         let written_with_checksum = builder
             .metadata()
             .file_metadata()
             .created_by()
             .is_some_and(|c| c == created_by());
         if written_with_checksum && !checksummed {
-            return Err(Error::bad_file(
+            return Err(Error::damaged(
                 path,
-                format!(
-                    "damaged: alnlab wrote it with a checksum, but its `{CHECKSUM_KEY}` is gone"
-                ),
+                format!("alnlab wrote it with a checksum, but its `{CHECKSUM_KEY}` is gone"),
             ));
         }
         if let Some(columns) = columns {
@@ -216,10 +227,10 @@ impl Table {
         let reader = builder
             .with_batch_size(rows)
             .build()
-            .map_err(|e| Error::bad_file(path, e))?;
+            .map_err(|e| undecodable(e.to_string()))?;
         let batches = contained(|| reader.collect::<std::result::Result<Vec<_>, _>>())
-            .map_err(|panic| Error::bad_file(path, format!("corrupt Parquet data ({panic})")))?
-            .map_err(|e| Error::bad_file(path, format!("corrupt Parquet data ({e})")))?;
+            .map_err(|panic| undecodable(format!("its data cannot be decoded ({panic})")))?
+            .map_err(|e| undecodable(format!("its data cannot be decoded ({e})")))?;
         let batch = match batches.len() {
             0 => RecordBatch::new_empty(schema),
             1 => batches.into_iter().next().expect("one batch"),
@@ -435,18 +446,24 @@ mod tests {
         let path = dir.path().join("t.parquet");
         write_parquet(&path, &sample(), &provenance()).unwrap();
         let bytes = std::fs::read(&path).unwrap();
-        for cut in [0, 4, bytes.len() / 2, bytes.len() - 1] {
+        // Empty: no Parquet file at all (the user's to fix); cut short after
+        // its magic: a damaged one.
+        for (cut, code) in [(0, 2), (4, 1), (bytes.len() / 2, 1), (bytes.len() - 1, 1)] {
             std::fs::write(&path, &bytes[..cut]).unwrap();
             let err = Table::read(&path).unwrap_err();
             assert!(err.to_string().contains("t.parquet"), "{err}");
-            assert_eq!(err.exit_code(), 2);
+            assert_eq!(err.exit_code(), code, "cut at {cut}: {err}");
         }
+        std::fs::write(&path, b"name,n\na,1\n").unwrap();
+        let err = Table::read(&path).unwrap_err();
+        assert!(err.to_string().contains("not a Parquet file"), "{err}");
+        assert_eq!(err.exit_code(), 2);
         // Corrupt the middle (the data pages) but keep the footer intact.
         let mut bad = bytes.clone();
         for b in &mut bad[8..bytes.len() / 3] {
             *b ^= 0x5a;
         }
         std::fs::write(&path, &bad).unwrap();
-        assert!(Table::read(&path).is_err());
+        assert_eq!(Table::read(&path).unwrap_err().exit_code(), 1);
     }
 }
