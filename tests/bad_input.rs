@@ -6,7 +6,6 @@
 //! output folder without a finished file.
 
 use std::path::{Path, PathBuf};
-use std::process::Output;
 use std::sync::Arc;
 
 use alnlab::records::RunRecord;
@@ -15,70 +14,7 @@ use alnlab_common::table::{Table, batch, write_parquet};
 use arrow_array::{Array, Float64Array, RecordBatch, StringArray, UInt16Array};
 
 mod common;
-use common::{TINY, alnlab, stderr};
-
-/// One bad input: the command, and what its error must mention.
-struct Case {
-    name: String,
-    args: Vec<String>,
-    mentions: Vec<String>,
-    /// The folder that must hold no finished file afterwards.
-    out: Option<PathBuf>,
-}
-
-fn case(name: &str, args: &[&str], mentions: &[&str], out: Option<&Path>) -> Case {
-    Case {
-        name: name.into(),
-        args: args.iter().map(|s| s.to_string()).collect(),
-        mentions: mentions.iter().map(|s| s.to_string()).collect(),
-        out: out.map(Path::to_path_buf),
-    }
-}
-
-/// Runs every case, collecting every failure before reporting them.
-fn check_all(dir: &Path, cases: &[Case]) {
-    let mut failures = Vec::new();
-    for c in cases {
-        let args: Vec<&str> = c.args.iter().map(String::as_str).collect();
-        let out: Output = alnlab(dir, &args);
-        let err = stderr(&out);
-        let code = out.status.code();
-        if !matches!(code, Some(1 | 2)) {
-            failures.push(format!("{}: exit {code:?} (want 1 or 2): {err}", c.name));
-            continue;
-        }
-        if err.contains("panicked") {
-            failures.push(format!("{}: panicked: {err}", c.name));
-        }
-        for m in &c.mentions {
-            if !err.contains(m.as_str()) {
-                failures.push(format!(
-                    "{}: the error does not mention `{m}`: {err}",
-                    c.name
-                ));
-            }
-        }
-        if let Some(folder) = &c.out {
-            let finished: Vec<String> = std::fs::read_dir(folder)
-                .into_iter()
-                .flatten()
-                .flatten()
-                .map(|e| e.file_name().to_string_lossy().into_owned())
-                .collect();
-            if !finished.is_empty() {
-                failures.push(format!("{}: left {finished:?} in its output", c.name));
-            }
-        }
-    }
-    assert!(
-        failures.is_empty(),
-        "{} of {} cases failed:\n{}",
-        failures.len(),
-        cases.len(),
-        failures.join("\n")
-    );
-    assert!(!cases.is_empty());
-}
+use common::{TINY, alnlab, case, check_all, stderr};
 
 /// The tiny experiment's artifacts, by role.
 fn tiny_run(dir: &Path) -> RunRecord {

@@ -550,7 +550,7 @@ fn validate(
         ));
     }
     let failure = STAGES.iter().filter(|s| !archived(s)).find_map(|stage| {
-        let check = (stage.validate)(stages);
+        let check = (stage.validate)(stages, !from_dataset);
         check.err().map(|(key, message)| (stage.name, key, message))
     });
     match failure {

@@ -41,14 +41,22 @@ pub struct Client {
     base: String,
     agent: ureq::Agent,
     authorization: Option<String>,
+    /// How long one request may take.
+    timeout: Duration,
 }
+
+/// How often a request that is safe to repeat (GET, and PUT of an artifact)
+/// is tried when the server does not answer or answers 5xx; the waits
+/// between tries are 1 s, 2 s, ….
+const ATTEMPTS: u32 = 3;
 
 impl Client {
     /// A client of the server at `uri` (`http://host:port`, or https),
     /// authenticated as MLflow's own clients are when the environment says
     /// so: `MLFLOW_TRACKING_TOKEN` (bearer), or `MLFLOW_TRACKING_USERNAME`
-    /// and `MLFLOW_TRACKING_PASSWORD` (basic).
-    pub fn new(uri: &str) -> Result<Client> {
+    /// and `MLFLOW_TRACKING_PASSWORD` (basic). A request that takes longer
+    /// than `timeout` fails.
+    pub fn new(uri: &str, timeout: Duration) -> Result<Client> {
         if !(uri.starts_with("http://") || uri.starts_with("https://")) {
             return Err(Error::Invalid(format!(
                 "--tracking-uri {uri}: expected the address of an MLflow tracking server, \
@@ -71,14 +79,38 @@ impl Client {
         };
         let agent = ureq::Agent::config_builder()
             .http_status_as_error(false)
-            .timeout_global(Some(Duration::from_secs(120)))
+            .timeout_global(Some(timeout))
             .build()
             .into();
         Ok(Client {
             base: uri.trim_end_matches('/').to_string(),
             agent,
             authorization,
+            timeout,
         })
+    }
+
+    /// `request` tried up to [`ATTEMPTS`] times while the server does not
+    /// answer or answers with a server error; for requests safe to repeat.
+    fn retried(&self, url: &str, request: impl Fn() -> Answer) -> Answer {
+        let mut attempt = 1;
+        loop {
+            let failure = match request() {
+                Err(Failure::Unreachable(why)) => why,
+                Err(Failure::Refused {
+                    status, message, ..
+                }) if status >= 500 => {
+                    format!("HTTP {status}: {message}")
+                }
+                answer => return answer,
+            };
+            if attempt == ATTEMPTS {
+                return request_failed(url, attempt, failure);
+            }
+            eprintln!("warning: {url}: {failure}; trying again in {attempt} s");
+            std::thread::sleep(Duration::from_secs(u64::from(attempt)));
+            attempt += 1;
+        }
     }
 
     /// `POST /api/2.0/mlflow/<endpoint>` with a JSON body.
@@ -91,27 +123,33 @@ impl Client {
         self.answer(&url, request.send_json(body))
     }
 
-    /// `GET /api/2.0/mlflow/<endpoint>?<query>`.
+    /// `GET /api/2.0/mlflow/<endpoint>?<query>`, retried.
     fn get(&self, endpoint: &str, query: &[(&str, &str)]) -> Answer {
         let url = format!("{}/api/2.0/mlflow/{endpoint}", self.base);
-        let mut request = self.agent.get(&url);
-        for (k, v) in query {
-            request = request.query(*k, *v);
-        }
-        if let Some(auth) = &self.authorization {
-            request = request.header("Authorization", auth);
-        }
-        self.answer(&url, request.call())
+        self.retried(&url, || {
+            let mut request = self.agent.get(&url);
+            for (k, v) in query {
+                request = request.query(*k, *v);
+            }
+            if let Some(auth) = &self.authorization {
+                request = request.header("Authorization", auth);
+            }
+            self.answer(&url, request.call())
+        })
     }
 
-    /// Uploads `bytes` as the artifact at `path` (under the proxied store).
+    /// Uploads `bytes` as the artifact at `path` (under the proxied store),
+    /// retried: a second upload replaces the first.
     fn put(&self, path: &str, bytes: &[u8]) -> std::result::Result<(), Failure> {
         let url = format!("{}/api/2.0/mlflow-artifacts/artifacts/{path}", self.base);
-        let mut request = self.agent.put(&url);
-        if let Some(auth) = &self.authorization {
-            request = request.header("Authorization", auth);
-        }
-        self.answer(&url, request.send(bytes)).map(|_| ())
+        self.retried(&url, || {
+            let mut request = self.agent.put(&url);
+            if let Some(auth) = &self.authorization {
+                request = request.header("Authorization", auth);
+            }
+            self.answer(&url, request.send(bytes))
+        })
+        .map(|_| ())
     }
 
     /// The JSON of a 2xx answer, or an error naming the request and what
@@ -122,10 +160,18 @@ impl Client {
         response: std::result::Result<ureq::http::Response<ureq::Body>, ureq::Error>,
     ) -> Answer {
         let mut response = response.map_err(|e| {
-            Failure::Unreachable(format!(
-                "cannot reach the MLflow server at {} ({e}); is `mlflow server` running there?",
-                self.base
-            ))
+            Failure::Unreachable(match e {
+                ureq::Error::Timeout(_) => format!(
+                    "the MLflow server at {} did not answer within {} s (--timeout)",
+                    self.base,
+                    self.timeout.as_secs_f64()
+                ),
+                e => format!(
+                    "cannot reach the MLflow server at {} ({e}); is `mlflow server` running \
+                     there?",
+                    self.base
+                ),
+            })
         })?;
         let status = response.status().as_u16();
         let text = response
@@ -153,6 +199,14 @@ impl Client {
             url: url.to_string(),
         })
     }
+}
+
+/// The failure of a request tried `attempts` times, the last failure's
+/// reason given.
+fn request_failed(url: &str, attempts: u32, why: String) -> Answer {
+    Err(Failure::Unreachable(format!(
+        "{url}: gave up after {attempts} tries: {why}"
+    )))
 }
 
 /// A request's JSON answer, or why there is none.

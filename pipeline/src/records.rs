@@ -201,7 +201,13 @@ pub fn read_record(run_dir: &Path) -> Result<RunRecord> {
 /// folder.
 pub fn read(path: &Path) -> Result<RunRecord> {
     let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
-    let value: serde_json::Value = serde_json::from_slice(&bytes)
+    from_bytes(path, &bytes)
+}
+
+/// A record from the bytes of the file at `path` (named in errors), checked
+/// as [`read`] checks it.
+pub fn from_bytes(path: &Path, bytes: &[u8]) -> Result<RunRecord> {
+    let value: serde_json::Value = serde_json::from_slice(bytes)
         .map_err(|e| Error::bad_file(path, format!("not a run record ({e})")))?;
     let format = match value.get("format") {
         None => 1,
@@ -222,7 +228,7 @@ pub fn read(path: &Path) -> Result<RunRecord> {
     let mut record: RunRecord = serde_json::from_value(value)
         .map_err(|e| Error::bad_file(path, format!("not a run record ({e})")))?;
     if record.format < 2 {
-        record.id = legacy_id(&record.started, &bytes);
+        record.id = legacy_id(&record.started, bytes);
     }
     let names = std::iter::once(("experiment", &record.experiment))
         .chain(record.variants.iter().map(|v| ("variant", &v.name)));
@@ -359,13 +365,25 @@ pub fn find(out: &Path, reference: &str) -> Result<(Stored, Option<String>)> {
                 let mut experiments: Vec<&str> =
                     runs.iter().map(|s| s.record.experiment.as_str()).collect();
                 experiments.dedup();
-                let unreadable = match damaged.first() {
-                    Some(first) => format!(
-                        "; {} record{} could not be read: {first}",
-                        damaged.len(),
-                        if damaged.len() == 1 { "" } else { "s" }
+                // Record files are named by their run's id: the one asked
+                // for, if it is among the unreadable, is named alone.
+                let asked: Vec<String> = damaged
+                    .iter()
+                    .map(ToString::to_string)
+                    .filter(|e| e.contains(&format!("/{run}")))
+                    .collect();
+                let shown = if asked.is_empty() {
+                    damaged.iter().map(ToString::to_string).collect()
+                } else {
+                    asked
+                };
+                let unreadable = match shown.len() {
+                    0 => String::new(),
+                    n => format!(
+                        "; {n} record{} could not be read: {}",
+                        if n == 1 { "" } else { "s" },
+                        shown.join("; ")
                     ),
-                    None => String::new(),
                 };
                 return Err(Error::Invalid(format!(
                     "no run `{run}` under {}: give a run id (see `alnlab runs list --out {}`) \

@@ -39,7 +39,9 @@ pub struct Stage {
     /// a stage without parameters).
     pub params: fn(&Stages) -> serde_json::Value,
     /// Checks relations between its parameters; an error names the key.
-    pub validate: fn(&Stages) -> std::result::Result<(), ParamError>,
+    /// The flag says whether the simulate stage's parameters describe the
+    /// data (false where an archived dataset stands for it).
+    pub validate: fn(&Stages, bool) -> std::result::Result<(), ParamError>,
     /// Runs it.
     pub run: fn(&Call) -> Result<()>,
     /// For a stage that can run in shards: joins a complete set of shard
@@ -136,7 +138,7 @@ pub const STAGES: &[Stage] = &[
         archived: Archived::Always,
         every_replicate: true,
         params: |s| json(&s.simulate),
-        validate: |s| s.simulate.validate(),
+        validate: |s, _| s.simulate.validate(),
         run: |c| {
             let params = &c.stages.simulate;
             alnlab_simulate::run(params, c.seed, c.provenance, c.out_dir, c.progress)
@@ -161,7 +163,7 @@ pub const STAGES: &[Stage] = &[
         archived: Archived::Always,
         every_replicate: true,
         params: |s| json(&s.stride),
-        validate: |s| s.stride.validate(),
+        validate: |s, _| s.stride.validate(),
         run: |c| {
             let trajectory = c.input("trajectory");
             let params = &c.stages.stride;
@@ -203,7 +205,7 @@ pub const STAGES: &[Stage] = &[
         archived: Archived::WithLevels,
         every_replicate: true,
         params: |s| json(&s.quantize),
-        validate: |s| s.quantize.validate(),
+        validate: |s, _| s.quantize.validate(),
         run: |c| {
             alnlab_quantize::run(
                 &c.stages.quantize,
@@ -244,7 +246,7 @@ pub const STAGES: &[Stage] = &[
         archived: Archived::Never,
         every_replicate: true,
         params: |s| json(&s.train),
-        validate: |s| s.train.validate(),
+        validate: |s, _| s.train.validate(),
         run: |c| {
             alnlab_train::run(
                 &c.stages.train,
@@ -297,7 +299,7 @@ pub const STAGES: &[Stage] = &[
         archived: Archived::Never,
         every_replicate: true,
         params: |s| json(&s.test),
-        validate: |s| s.test.validate(),
+        validate: |s, _| s.test.validate(),
         run: |c| {
             alnlab_evaluate::run(
                 &c.stages.test,
@@ -343,7 +345,7 @@ pub const STAGES: &[Stage] = &[
         every_replicate: true,
         // Summarizing has no parameters of its own.
         params: |_| serde_json::Value::Null,
-        validate: |_| Ok(()),
+        validate: |_, _| Ok(()),
         run: |c| {
             alnlab_summarize::run(
                 c.input("predictions"),
@@ -394,7 +396,7 @@ pub const STAGES: &[Stage] = &[
         archived: Archived::Never,
         every_replicate: true,
         params: |s| json(&s.plan),
-        validate: |s| s.plan.validate(),
+        validate: |s, simulated| s.plan.validate(simulated.then_some(&s.simulate.scene[..])),
         run: |c| {
             alnlab_plan::run(
                 &c.stages.plan,
@@ -441,7 +443,7 @@ pub const STAGES: &[Stage] = &[
         archived: Archived::Never,
         every_replicate: false,
         params: |s| json(&s.circuit),
-        validate: |s| s.circuit.validate(),
+        validate: |s, _| s.circuit.validate(),
         run: |c| {
             alnlab_circuit::run(
                 &c.stages.circuit,

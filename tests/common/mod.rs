@@ -136,3 +136,86 @@ pub fn table_without(path: &Path, measured: &[&str]) -> Vec<u8> {
     }
     text.into_bytes()
 }
+
+/// One bad input: the command, and what its error must mention.
+pub struct Case {
+    pub name: String,
+    pub args: Vec<String>,
+    pub mentions: Vec<String>,
+    /// The folder that must hold no finished file afterwards.
+    pub out: Option<PathBuf>,
+    /// The exit code it must have: 2 (the user's to fix) or 1 (damaged
+    /// data); `None`: either.
+    pub exit: Option<i32>,
+}
+
+pub fn case(name: &str, args: &[&str], mentions: &[&str], out: Option<&Path>) -> Case {
+    Case {
+        name: name.into(),
+        args: args.iter().map(|s| s.to_string()).collect(),
+        mentions: mentions.iter().map(|s| s.to_string()).collect(),
+        out: out.map(Path::to_path_buf),
+        exit: None,
+    }
+}
+
+impl Case {
+    /// The same case, which must exit with `code`.
+    pub fn exits(self, code: i32) -> Case {
+        Case {
+            exit: Some(code),
+            ..self
+        }
+    }
+}
+
+/// Runs every case, collecting every failure before reporting them: each
+/// must exit with its code (1 or 2), without a panic, its error mentioning
+/// what it should, its output folder empty.
+pub fn check_all(dir: &Path, cases: &[Case]) {
+    let mut failures = Vec::new();
+    for c in cases {
+        let args: Vec<&str> = c.args.iter().map(String::as_str).collect();
+        let out: Output = alnlab(dir, &args);
+        let err = stderr(&out);
+        let code = out.status.code();
+        let wanted = c
+            .exit
+            .map_or(matches!(code, Some(1 | 2)), |e| code == Some(e));
+        if !wanted {
+            let want = c.exit.map_or("1 or 2".to_string(), |e| e.to_string());
+            failures.push(format!("{}: exit {code:?} (want {want}): {err}", c.name));
+            continue;
+        }
+        if err.contains("panicked") {
+            failures.push(format!("{}: panicked: {err}", c.name));
+        }
+        for m in &c.mentions {
+            if !err.contains(m.as_str()) {
+                failures.push(format!(
+                    "{}: the error does not mention `{m}`: {err}",
+                    c.name
+                ));
+            }
+        }
+        if let Some(folder) = &c.out {
+            let finished: Vec<String> = std::fs::read_dir(folder)
+                .into_iter()
+                .flatten()
+                .flatten()
+                .map(|e| e.file_name().to_string_lossy().into_owned())
+                .collect();
+            if !finished.is_empty() {
+                failures.push(format!("{}: left {finished:?} in its output", c.name));
+            }
+        }
+    }
+    assert!(
+        failures.is_empty(),
+        "{} of {} cases failed:\n{}",
+        failures.len(),
+        cases.len(),
+        failures.join("\n")
+    );
+    assert!(!cases.is_empty());
+}

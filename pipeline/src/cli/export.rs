@@ -2,6 +2,7 @@
 //! recorded run to an experiment tracker.
 
 use std::path::{Path, PathBuf};
+use std::time::Duration;
 
 use alnlab_common::{Error, Result};
 use clap::Subcommand;
@@ -54,7 +55,8 @@ pub enum ExportCommand {
     #[command(after_help = "Examples:
   mlflow server --backend-store-uri sqlite:///mlflow.db --host 127.0.0.1 --port 5000 &
   alnlab export mlflow quickstart --tracking-uri http://127.0.0.1:5000
-  alnlab export mlflow 20261123-152818-0ef52a --out /scratch/runs --experiment worm-codes")]
+  alnlab export mlflow 20261123-152818-0ef52a --out /scratch/runs --experiment worm-codes
+  alnlab export mlflow quickstart --tracking-uri https://mlflow.example.org --timeout 300")]
     Mlflow {
         /// The run: an id (or a unique prefix), an experiment's name (its
         /// latest run) or NAME~N, as `alnlab runs list` shows them.
@@ -69,6 +71,10 @@ pub enum ExportCommand {
         /// experiment's name).
         #[arg(long)]
         experiment: Option<String>,
+        /// Seconds one request may take; a request safe to repeat (a read,
+        /// an artifact's upload) is tried three times.
+        #[arg(long, default_value_t = 60.0, value_parser = positive_seconds)]
+        timeout: f64,
     },
     /// Write a trained bit-forest as synthesizable Verilog: one module per
     /// pruned tree (ports named after the variables and their code bits:
@@ -131,7 +137,14 @@ pub fn execute(command: ExportCommand) -> Result<()> {
             tracking_uri,
             out,
             experiment,
-        } => export_mlflow(&run, &tracking_uri, &out, experiment),
+            timeout,
+        } => export_mlflow(
+            &run,
+            &tracking_uri,
+            &out,
+            experiment,
+            Duration::from_secs_f64(timeout),
+        ),
         ExportCommand::Verilog {
             model,
             codebook,
@@ -145,6 +158,12 @@ pub fn execute(command: ExportCommand) -> Result<()> {
 fn export_verilog(model: &Path, codebook: &Path, output: &Path) -> Result<()> {
     let trained = alnlab_aln::runtime::Trained::read(model, codebook)?;
     let circuit = alnlab_circuit::circuit_of(&trained, model)?;
+    if output.exists() && !output.is_dir() {
+        return Err(Error::Invalid(format!(
+            "{}: is a file; name a new folder for the Verilog",
+            output.display()
+        )));
+    }
     if output.read_dir().is_ok_and(|mut d| d.next().is_some()) {
         return Err(Error::Invalid(format!(
             "{}: holds files already; name a new folder",
@@ -186,10 +205,11 @@ fn export_mlflow(
     tracking_uri: &str,
     out: &Path,
     experiment: Option<String>,
+    timeout: Duration,
 ) -> Result<()> {
     let (stored, _) = records::find(out, reference)?;
     let record = &stored.record;
-    let client = mlflow::Client::new(tracking_uri)?;
+    let client = mlflow::Client::new(tracking_uri, timeout)?;
     let staging = tempfile::tempdir().map_err(|e| Error::io(&std::env::temp_dir(), e))?;
     let report = match crate::report::render(record, staging.path()) {
         Ok(_) => Some(staging.path()),
@@ -220,4 +240,12 @@ fn export_mlflow(
             }
         }
     })
+}
+
+/// A number of seconds > 0 (and at most a day), for `--timeout`.
+fn positive_seconds(text: &str) -> std::result::Result<f64, String> {
+    match text.parse::<f64>() {
+        Ok(s) if s > 0.0 && s <= 86_400.0 => Ok(s),
+        _ => Err(format!("expected seconds > 0 and ≤ 86400, found `{text}`")),
+    }
 }

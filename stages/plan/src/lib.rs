@@ -49,7 +49,7 @@ use alnlab_common::{Error, Progress, Provenance, Result};
 use alnlab_physics::controller::ControllerKind;
 use alnlab_physics::dynamics::{Kinematics, State};
 use alnlab_physics::replay::SceneReplay;
-use alnlab_physics::{Prepared, Runner, foxglove, state_from_generalized};
+use alnlab_physics::{Prepared, Runner, Scene, foxglove, state_from_generalized};
 use arrow_array::builder::{ListBuilder, StringBuilder};
 use arrow_array::types::Float64Type;
 use arrow_array::{Array, Float64Array, ListArray, StringArray, UInt32Array, UInt64Array};
@@ -137,11 +137,21 @@ impl Default for Params {
 }
 
 impl Params {
-    /// Checks the tasks and the lists.
-    pub fn validate(&self) -> std::result::Result<(), ParamError> {
+    /// Checks the tasks and the lists, and, given the scenes the simulate
+    /// stage makes (`None` where an archived dataset holds the data), that
+    /// the scene to control is one of them and has every variable a task
+    /// names.
+    pub fn validate(&self, scenes: Option<&[Scene]>) -> std::result::Result<(), ParamError> {
+        let variables = match scenes {
+            Some(scenes) if !self.task.is_empty() => Some(self.variables_of(scenes)?),
+            _ => None,
+        };
         for (i, task) in self.task.iter().enumerate() {
             task.validate()
                 .map_err(|(field, m)| (format!("task.{i}.{field}"), m))?;
+            if let Some(names) = &variables {
+                task.over(names).map_err(|m| (format!("task.{i}"), m))?;
+            }
             if self.task[..i].iter().any(|t| t.name() == task.name()) {
                 return Err((
                     format!("task.{i}.name"),
@@ -156,6 +166,28 @@ impl Params {
             return Err(("budgets".into(), "expected at least one budget".into()));
         }
         Ok(())
+    }
+}
+
+impl Params {
+    /// The variable names of the scene to control, among `scenes`.
+    fn variables_of(&self, scenes: &[Scene]) -> std::result::Result<Vec<String>, ParamError> {
+        let scene = match &self.scene {
+            None => scenes.first(),
+            Some(name) => scenes.iter().find(|s| &s.name == name),
+        };
+        let scene = scene.ok_or_else(|| {
+            let names: Vec<&str> = scenes.iter().map(|s| s.name.as_str()).collect();
+            (
+                "scene".to_string(),
+                format!(
+                    "no scene `{}` is simulated (the scenes are {})",
+                    self.scene.as_deref().unwrap_or_default(),
+                    names.join(", ")
+                ),
+            )
+        })?;
+        Ok(Prepared::new(scene).variables.names())
     }
 }
 
@@ -284,7 +316,9 @@ pub fn run(
     out_dir: &Path,
     progress: &dyn Progress,
 ) -> Result<()> {
-    params.validate().map_err(|e| params::invalid("plan", e))?;
+    params
+        .validate(None)
+        .map_err(|e| params::invalid("plan", e))?;
     let view_path = out_dir.join(EPISODES_FILE);
     let out = if params.task.is_empty() {
         Outputs {
