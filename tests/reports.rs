@@ -180,7 +180,10 @@ fn every_committed_report_opens_in_a_browser_with_every_chart() {
                 .output()
                 .is_ok_and(|o| o.status.success())
         })
-        .expect("a headless browser: install Debian's chromium (apt-get install chromium)");
+        .expect(
+            "a headless browser: install Debian's chromium (`apt-get install chromium`, or `cargo \
+             xtask test`, which installs what the suite needs)",
+        );
     for dir in committed_reports() {
         let markdown = std::fs::read_to_string(dir.join("report.md")).unwrap();
         let charts = charts_of(&markdown);

@@ -1,0 +1,317 @@
+//! The whole suite, step by step: what `cargo test` covers, then what needs
+//! the real binary and outside programs together — standard readers on a
+//! real run, both quickstart forests as circuits, a real MLflow server, a
+//! real Snakemake workflow. Every step writes under `target/xtask/`.
+
+use std::io::{Read, Write};
+use std::net::{TcpListener, TcpStream};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+use crate::{Failure, root, target_dir};
+
+/// What the steps share: the interpreter of the suite's environment and
+/// where their files go.
+struct Suite {
+    python: PathBuf,
+    /// `target/xtask`.
+    work: PathBuf,
+}
+
+/// One step: its name and what it does.
+type Step = (&'static str, fn(&Suite) -> Result<(), String>);
+
+const STEPS: &[Step] = &[
+    ("cargo test --workspace", cargo_test),
+    (
+        "the quickstart read by standard readers",
+        quickstart_interop,
+    ),
+    ("both quickstart forests as circuits", quickstart_circuits),
+    (
+        "three replicates, their figures recomputed",
+        replicates_interop,
+    ),
+    (
+        "MLflow: runs exported to a real server and read back",
+        mlflow_round_trip,
+    ),
+    (
+        "Snakemake: the exported workflow, sharded, failing, resumed",
+        snakemake,
+    ),
+];
+
+/// Runs every step in order, stopping at the first that fails; prints each
+/// step's wall time, then a closing line of passed and failed steps.
+pub fn run(python: &Path) -> Result<(), Failure> {
+    let suite = Suite {
+        python: python.to_path_buf(),
+        work: target_dir().join("xtask"),
+    };
+    let mut times = Vec::new();
+    let mut failure = None;
+    for (name, step) in STEPS {
+        println!("== {name}");
+        let start = Instant::now();
+        let result = step(&suite);
+        times.push((*name, start.elapsed()));
+        if let Err(message) = result {
+            failure = Some(format!("{name}: {message}"));
+            break;
+        }
+    }
+    println!("\nwall time per step:");
+    for (name, time) in &times {
+        println!("  {:>7.1} s  {name}", time.as_secs_f64());
+    }
+    let total: f64 = times.iter().map(|(_, t)| t.as_secs_f64()).sum();
+    println!("  {total:>7.1} s  in all");
+    let failed = usize::from(failure.is_some());
+    println!("steps: {} passed, {failed} failed", times.len() - failed);
+    failure.map_or(Ok(()), |f| Err(Failure::Step(f)))
+}
+
+fn cargo_test(_: &Suite) -> Result<(), String> {
+    run_in_root(cargo().args(["test", "--workspace"]))
+}
+
+/// The runs of the interop steps.
+fn runs(suite: &Suite) -> PathBuf {
+    suite.work.join("runs")
+}
+
+fn reports(suite: &Suite) -> PathBuf {
+    suite.work.join("reports")
+}
+
+fn quickstart_interop(suite: &Suite) -> Result<(), String> {
+    let _ = std::fs::remove_dir_all(runs(suite));
+    let _ = std::fs::remove_dir_all(reports(suite));
+    run_in_root(
+        alnlab()
+            .args(["--quiet", "run", "experiments/quickstart.toml", "--out"])
+            .arg(runs(suite))
+            .arg("--reports")
+            .arg(reports(suite)),
+    )?;
+    interop(
+        suite,
+        &runs(suite).join("quickstart/run.json"),
+        &reports(suite).join("quickstart"),
+    )
+}
+
+/// Exported, synthesized by Yosys and simulated by Icarus Verilog on every
+/// test row (the Verilog and the netlist), each level equal to the
+/// software's or the command fails.
+fn quickstart_circuits(suite: &Suite) -> Result<(), String> {
+    for variant in ["walk", "gray"] {
+        run_in_root(
+            alnlab()
+                .args(["-q", "bench", "circuit", "--run"])
+                .arg(runs(suite).join("quickstart"))
+                .args(["--variant", variant]),
+        )?;
+    }
+    Ok(())
+}
+
+/// The quickstart with three replicates: the figures across replicates,
+/// recomputed.
+fn replicates_interop(suite: &Suite) -> Result<(), String> {
+    let quickstart = std::fs::read_to_string(root().join("experiments/quickstart.toml"))
+        .map_err(|e| format!("experiments/quickstart.toml: {e}"))?;
+    let seed = quickstart
+        .lines()
+        .find(|l| l.starts_with("seed = "))
+        .ok_or("experiments/quickstart.toml has no `seed = ` line")?;
+    let manifest = suite.work.join("replicates.toml");
+    std::fs::write(
+        &manifest,
+        quickstart.replacen(seed, &format!("{seed}\nreplicates = 3"), 1),
+    )
+    .map_err(|e| format!("{}: {e}", manifest.display()))?;
+    let reports = reports(suite).join("replicates");
+    run_in_root(
+        alnlab()
+            .args(["--quiet", "run"])
+            .arg(&manifest)
+            .arg("--out")
+            .arg(runs(suite))
+            .arg("--reports")
+            .arg(&reports),
+    )?;
+    interop(
+        suite,
+        &runs(suite).join("quickstart/run.json"),
+        &reports.join("quickstart"),
+    )
+}
+
+fn interop(suite: &Suite, record: &Path, report: &Path) -> Result<(), String> {
+    run_in_root(
+        Command::new(&suite.python)
+            .arg("tests/interop.py")
+            .arg(record)
+            .arg(report),
+    )
+}
+
+/// Both quickstart runs (one replicate, then three) exported to an MLflow
+/// server on loopback, the first twice (which must add nothing), and every
+/// record read back with MLflow's own client.
+fn mlflow_round_trip(suite: &Suite) -> Result<(), String> {
+    let dir = suite.work.join("mlflow");
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+    let server = MlflowServer::start(&suite.python, &dir)?;
+    let uri = format!("http://127.0.0.1:{}", server.port);
+    for run in ["quickstart~1", "quickstart~1", "quickstart"] {
+        run_in_root(
+            alnlab()
+                .args(["export", "mlflow", run, "--out"])
+                .arg(runs(suite))
+                .args(["--tracking-uri", &uri]),
+        )?;
+    }
+    let listed = alnlab()
+        .args(["runs", "list", "--json", "--out"])
+        .arg(runs(suite))
+        .current_dir(root())
+        .output()
+        .map_err(|e| format!("alnlab runs list: {e}"))?;
+    if !listed.status.success() {
+        return Err(format!(
+            "alnlab runs list: {}",
+            String::from_utf8_lossy(&listed.stderr)
+        ));
+    }
+    let listed: serde_json::Value = serde_json::from_slice(&listed.stdout)
+        .map_err(|e| format!("alnlab runs list --json: {e}"))?;
+    let records: Vec<&str> = listed
+        .as_array()
+        .into_iter()
+        .flatten()
+        .filter_map(|r| r["record"].as_str())
+        .collect();
+    if records.len() < 2 {
+        return Err(format!("expected two recorded runs, listed {records:?}"));
+    }
+    for record in records {
+        run_in_root(
+            Command::new(&suite.python)
+                .arg("tests/mlflow_check.py")
+                .arg(record)
+                .arg(&uri),
+        )?;
+    }
+    Ok(())
+}
+
+fn snakemake(suite: &Suite) -> Result<(), String> {
+    let bin = suite.python.parent().expect("the venv's bin folder");
+    run_in_root(
+        Command::new("bash")
+            .arg("tests/snakemake.sh")
+            .arg(target_dir().join("debug/alnlab"))
+            .arg(bin.join("snakemake"))
+            .arg(&suite.python)
+            .arg(suite.work.join("snakemake")),
+    )
+}
+
+/// An MLflow tracking server on a free loopback port, stopped when dropped.
+struct MlflowServer {
+    child: Child,
+    port: u16,
+}
+
+impl MlflowServer {
+    /// Starts the server with its store in `dir` and waits (up to two
+    /// minutes) until it answers `/health`.
+    fn start(python: &Path, dir: &Path) -> Result<MlflowServer, String> {
+        let port = TcpListener::bind("127.0.0.1:0")
+            .and_then(|l| l.local_addr())
+            .map_err(|e| format!("no free loopback port: {e}"))?
+            .port();
+        let log = dir.join("server.log");
+        let log_file =
+            std::fs::File::create(&log).map_err(|e| format!("{}: {e}", log.display()))?;
+        let child = Command::new(python.parent().expect("venv bin").join("mlflow"))
+            .arg("server")
+            .arg("--backend-store-uri")
+            .arg(format!("sqlite:///{}", dir.join("mlflow.db").display()))
+            .arg("--artifacts-destination")
+            .arg(dir.join("artifacts"))
+            .args(["--host", "127.0.0.1", "--port", &port.to_string()])
+            .args(["--workers", "1"])
+            .stdout(log_file.try_clone().map_err(|e| e.to_string())?)
+            .stderr(log_file)
+            .spawn()
+            .map_err(|e| format!("mlflow server: {e}"))?;
+        let server = MlflowServer { child, port };
+        let deadline = Instant::now() + Duration::from_secs(120);
+        while Instant::now() < deadline {
+            if healthy(port) {
+                return Ok(server);
+            }
+            std::thread::sleep(Duration::from_millis(500));
+        }
+        Err(format!(
+            "the MLflow server did not answer /health within two minutes; its log:\n{}",
+            std::fs::read_to_string(&log).unwrap_or_default()
+        ))
+    }
+}
+
+impl Drop for MlflowServer {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+/// Whether an HTTP server on the loopback port answers `GET /health` 200.
+fn healthy(port: u16) -> bool {
+    let Ok(mut stream) = TcpStream::connect(("127.0.0.1", port)) else {
+        return false;
+    };
+    let _ = stream.set_read_timeout(Some(Duration::from_secs(2)));
+    let request = "GET /health HTTP/1.0\r\nHost: 127.0.0.1\r\n\r\n";
+    if stream.write_all(request.as_bytes()).is_err() {
+        return false;
+    }
+    let mut answer = [0u8; 32];
+    let n = stream.read(&mut answer).unwrap_or(0);
+    let status_line = String::from_utf8_lossy(&answer[..n]);
+    status_line.starts_with("HTTP/") && status_line.contains(" 200")
+}
+
+fn cargo() -> Command {
+    Command::new(std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into()))
+}
+
+/// The alnlab binary (debug, as `cargo test` builds it).
+fn alnlab() -> Command {
+    let mut command = cargo();
+    command.args(["run", "--quiet", "--bin", "alnlab", "--"]);
+    command
+}
+
+/// Runs `command` in the workspace's root, its output passed through; an
+/// error names the command and its exit status.
+fn run_in_root(command: &mut Command) -> Result<(), String> {
+    let shown = format!("{command:?}");
+    let status = command
+        .current_dir(root())
+        .stdin(Stdio::null())
+        .status()
+        .map_err(|e| format!("{shown} could not start: {e}"))?;
+    if status.success() {
+        Ok(())
+    } else {
+        Err(format!("{shown} failed ({status})"))
+    }
+}
