@@ -13,12 +13,15 @@
 //! - [`output`]: what the trees learn per variable (its next level or its
 //!   change) and how their bits decode to the next level.
 //! - [`shard`]: which trees a partial model holds.
+//! - [`pwl`]: piecewise-linear ALNs — MIN/MAX trees over affine pieces —
+//!   evaluated fully, lazily with cut-offs, or compiled over input boxes.
 
 mod compiled;
 pub mod forest;
 pub mod linear;
 pub mod model;
 pub mod output;
+pub mod pwl;
 pub mod runtime;
 pub mod shard;
 pub mod threshold;

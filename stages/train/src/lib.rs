@@ -12,6 +12,7 @@
 pub mod bench;
 pub mod forest;
 pub mod learn;
+pub mod pwl;
 pub mod select;
 pub mod shard;
 mod threshold;

@@ -1,0 +1,533 @@
+//! Training a piecewise-linear ALN ([`alnlab_aln::pwl::Tree`]) as its
+//! authors describe it (shared/notes/piecewise-linear-aln.md §2–4):
+//!
+//! - **Responsibility.** Each sample is credited to the one piece whose
+//!   value reaches the root (ties: the first child).
+//! - **The update** of that piece alone: a normalised LMS step in centroid
+//!   form. The piece is kept as y = c_out + Σ wᵢ(xᵢ − cᵢ): the centroid c
+//!   and c_out move toward the sample, each input's variance Dᵢ about the
+//!   centroid is tracked, the weights step by −α·e·(xᵢ − cᵢ)/Dᵢ within
+//!   bounds, and the bias is derived from the centroid again (for numerical
+//!   accuracy). `e` is the piece's error; the robust option steps by a
+//!   clipped error (Huber's), since the metric is absolute error and
+//!   redraws and contacts make outliers.
+//! - **Growth.** After each round of epochs every piece whose error over
+//!   its samples is larger than the noise allows — an F-test of its sum of
+//!   squared errors against the noise of its samples, estimated from
+//!   nearest-neighbour differences of the training rows (halved: a
+//!   difference of two noisy values has twice the variance), or a declared
+//!   tolerance — splits into a MAX or a MIN of two copies of itself: a MAX
+//!   where the data lie above the piece far from its centroid (its
+//!   convexity statistic below zero), else a MIN. A piece with too few
+//!   samples, or one that fits, stops splitting. Growth ends when a round
+//!   splits nothing or the cap on pieces is reached; final epochs at a
+//!   lower rate polish the pieces.
+//!
+//! The copies of a split piece are tilted apart by a hair along the input
+//! whose squared distance from the centroid goes most with the piece's
+//! error — a V (MAX) or Λ (MIN) too shallow to change any figure — so that
+//! the tie rule does not leave the second copy idle (the authors' fillets
+//! break the tie the same way). Every choice is seeded or fixed: the same
+//! data and seed give the same tree, bit for bit.
+
+use alnlab_aln::pwl::Tree;
+use rand::SeedableRng;
+use rand::seq::SliceRandom;
+use rand_chacha::ChaCha8Rng;
+use rayon::prelude::*;
+use statrs::distribution::{ContinuousCDF, FisherSnedecor};
+
+/// How a tree is trained.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Settings {
+    /// Epochs per round, between split passes.
+    pub epochs_per_round: usize,
+    /// Rounds at most.
+    pub rounds: usize,
+    /// Learning rate while growing.
+    pub rate: f64,
+    /// Learning rate of the final polishing epochs.
+    pub polish_rate: f64,
+    /// Polishing epochs after growth ends.
+    pub polish_epochs: usize,
+    /// Pieces at most.
+    pub max_pieces: usize,
+    /// The target's noise, declared (a standard deviation): a piece splits
+    /// when its mean squared error exceeds its square. `None`: estimated
+    /// from nearest-neighbour differences, with an F-test.
+    pub tolerance: Option<f64>,
+    /// The F-test's level: a piece splits when its error exceeds the noise
+    /// by more than this quantile of the F distribution.
+    pub confidence: f64,
+    /// Huber's step: errors larger than this many noise standard
+    /// deviations count as this many (`None`: plain least squares).
+    pub huber: Option<f64>,
+    /// Each weight is bounded by this many target spreads per input spread.
+    pub weight_bound: f64,
+    /// Seeds the order of samples in every epoch.
+    pub seed: u64,
+}
+
+impl Default for Settings {
+    fn default() -> Self {
+        Settings {
+            epochs_per_round: 20,
+            rounds: 100,
+            rate: 0.2,
+            polish_rate: 0.05,
+            polish_epochs: 20,
+            max_pieces: 256,
+            tolerance: None,
+            confidence: 0.75,
+            huber: None,
+            weight_bound: 100.0,
+            seed: 0,
+        }
+    }
+}
+
+/// What one round did: the tree's size and error after it.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Round {
+    /// Pieces after the round's splits.
+    pub pieces: usize,
+    /// Pieces split at its end.
+    pub splits: usize,
+    /// Root-mean-square error over the training rows before the splits.
+    pub rms: f64,
+    /// Mean absolute error likewise.
+    pub mean_absolute: f64,
+}
+
+/// A piece's training state beside its coefficients.
+#[derive(Clone, Debug)]
+struct PieceState {
+    /// The centroid of its samples' inputs, and of their targets.
+    centroid: Vec<f64>,
+    out: f64,
+    /// Per input, the smoothed variance about the centroid.
+    variance: Vec<f64>,
+    /// The smoothed error of samples far from the centroid: below zero,
+    /// the data lie above the piece there (convex: split into a MAX).
+    convexity: f64,
+    /// Its weights (the tree holds them too, with the derived bias).
+    weights: Vec<f64>,
+}
+
+/// Training data: `rows` samples of `inputs` numbers, and their targets.
+pub struct Samples<'a> {
+    pub x: &'a [f64],
+    pub y: &'a [f64],
+    pub inputs: usize,
+}
+
+impl Samples<'_> {
+    fn rows(&self) -> usize {
+        self.y.len()
+    }
+
+    fn row(&self, r: usize) -> &[f64] {
+        &self.x[r * self.inputs..(r + 1) * self.inputs]
+    }
+}
+
+/// Trains a tree on the samples; returns it and what each round did.
+pub fn train(samples: &Samples, settings: &Settings) -> (Tree, Vec<Round>) {
+    let n = samples.inputs;
+    let rows = samples.rows();
+    assert_eq!(samples.x.len(), rows * n, "x holds rows × inputs numbers");
+    assert!(rows > 0, "training needs samples");
+    let mean = |v: &dyn Fn(usize) -> f64| (0..rows).map(v).sum::<f64>() / rows as f64;
+    let y_mean = mean(&|r| samples.y[r]);
+    let y_spread = mean(&|r| (samples.y[r] - y_mean).powi(2)).sqrt().max(1e-12);
+    let x_mean: Vec<f64> = (0..n).map(|i| mean(&|r| samples.row(r)[i])).collect();
+    let x_variance: Vec<f64> = (0..n)
+        .map(|i| mean(&|r| (samples.row(r)[i] - x_mean[i]).powi(2)).max(1e-24))
+        .collect();
+    // The least variance a piece tracks per input: a piece over few
+    // samples must not divide by a vanishing spread.
+    let floor: Vec<f64> = x_variance.iter().map(|v| v * 1e-6).collect();
+    let bound: Vec<f64> = x_variance
+        .iter()
+        .map(|v| settings.weight_bound * y_spread / v.sqrt())
+        .collect();
+    let noise = match settings.tolerance {
+        Some(_) => vec![0.0; rows],
+        None => neighbour_noise(samples),
+    };
+    let noise_spread = (noise.iter().sum::<f64>() / rows as f64).sqrt().max(1e-12);
+    let huber = settings.huber.map(|k| {
+        k * settings
+            .tolerance
+            .unwrap_or(noise_spread)
+            .max(1e-9 * y_spread)
+    });
+
+    let mut tree = Tree::affine(y_mean, &vec![0.0; n]);
+    let mut states = vec![PieceState {
+        centroid: x_mean.clone(),
+        out: y_mean,
+        variance: x_variance.clone(),
+        convexity: 0.0,
+        weights: vec![0.0; n],
+    }];
+    let mut rng = ChaCha8Rng::seed_from_u64(settings.seed);
+    let mut order: Vec<usize> = (0..rows).collect();
+    let mut log = Vec::new();
+    let mut epoch = |tree: &mut Tree, states: &mut [PieceState], rate: f64| {
+        order.shuffle(&mut rng);
+        for &r in &order {
+            let x = samples.row(r);
+            let (value, p) = tree.responsible(x);
+            let mut e = value - samples.y[r];
+            if let Some(h) = huber {
+                e = e.clamp(-h, h);
+            }
+            adapt(
+                tree,
+                &mut states[p],
+                p,
+                x,
+                samples.y[r],
+                e,
+                rate,
+                &floor,
+                &bound,
+            );
+        }
+    };
+    for _ in 0..settings.rounds {
+        for _ in 0..settings.epochs_per_round {
+            epoch(&mut tree, &mut states, settings.rate);
+        }
+        let (rms, mean_absolute, splits) =
+            split_pass(&mut tree, &mut states, samples, &noise, settings, y_spread);
+        log.push(Round {
+            pieces: tree.pieces(),
+            splits,
+            rms,
+            mean_absolute,
+        });
+        if splits == 0 {
+            break;
+        }
+    }
+    for _ in 0..settings.polish_epochs {
+        epoch(&mut tree, &mut states, settings.polish_rate);
+    }
+    (tree, log)
+}
+
+/// One normalised LMS step of piece `p` toward a sample `(x, y)` it answers
+/// for with error `e` (the piece's value − y, clipped for robustness).
+#[allow(clippy::too_many_arguments)]
+fn adapt(
+    tree: &mut Tree,
+    s: &mut PieceState,
+    p: usize,
+    x: &[f64],
+    y: f64,
+    e: f64,
+    rate: f64,
+    floor: &[f64],
+    bound: &[f64],
+) {
+    let n = x.len();
+    let alpha = rate / (2 * (n + 1) - 1) as f64;
+    s.out += alpha * (y - s.out);
+    let mut far = 0.0;
+    for i in 0..n {
+        let d = x[i] - s.centroid[i];
+        s.variance[i] = (s.variance[i] + rate * (d * d - s.variance[i])).max(floor[i]);
+        s.centroid[i] += alpha * d;
+        let d = x[i] - s.centroid[i];
+        s.weights[i] = (s.weights[i] - alpha * e * d / s.variance[i]).clamp(-bound[i], bound[i]);
+        far += d * d / s.variance[i];
+    }
+    // Far from the centroid: outside the ellipse of one spread per input.
+    if far >= n as f64 {
+        s.convexity += rate * (e - s.convexity);
+    }
+    let bias = s.out
+        - s.weights
+            .iter()
+            .zip(&s.centroid)
+            .map(|(w, c)| w * c)
+            .sum::<f64>();
+    tree.set_piece(p, bias, &s.weights);
+}
+
+/// Evaluates every sample, splits the pieces whose error the noise does
+/// not explain (the largest excess first, up to the cap on pieces), and
+/// returns the RMS and mean absolute error before the splits and how many
+/// pieces split.
+fn split_pass(
+    tree: &mut Tree,
+    states: &mut Vec<PieceState>,
+    samples: &Samples,
+    noise: &[f64],
+    settings: &Settings,
+    y_spread: f64,
+) -> (f64, f64, usize) {
+    let n = samples.inputs;
+    let pieces = tree.pieces();
+    let mut count = vec![0usize; pieces];
+    let mut squared = vec![0.0f64; pieces];
+    let mut noise_sum = vec![0.0f64; pieces];
+    // Per piece and input: Σ e·(xᵢ − cᵢ)², which input's distance goes
+    // with the error (the direction to tilt the copies apart along).
+    let mut spread_error = vec![0.0f64; pieces * n];
+    let (mut total_squared, mut total_absolute) = (0.0, 0.0);
+    for (r, (&y, &noise)) in samples.y.iter().zip(noise).enumerate() {
+        let x = samples.row(r);
+        let (value, p) = tree.responsible(x);
+        let e = value - y;
+        count[p] += 1;
+        squared[p] += e * e;
+        noise_sum[p] += noise;
+        total_squared += e * e;
+        total_absolute += e.abs();
+        for i in 0..n {
+            let d = x[i] - states[p].centroid[i];
+            spread_error[p * n + i] += e * d * d / states[p].variance[i];
+        }
+    }
+    let rows = samples.rows() as f64;
+    let (rms, mean_absolute) = ((total_squared / rows).sqrt(), total_absolute / rows);
+    // A piece needs more samples than coefficients to be judged.
+    let least = (1.2 * (n + 1) as f64).ceil() as usize + 1;
+    let mut candidates: Vec<(f64, usize)> = (0..pieces)
+        .filter(|&p| count[p] > least)
+        .filter_map(|p| {
+            let allowed = match settings.tolerance {
+                Some(t) => count[p] as f64 * t * t,
+                None => {
+                    let dof = (count[p] - n - 1).max(1) as f64;
+                    let f = FisherSnedecor::new(dof, count[p] as f64)
+                        .map(|d| d.inverse_cdf(settings.confidence))
+                        .unwrap_or(f64::INFINITY);
+                    noise_sum[p] * f
+                }
+            };
+            (squared[p] > allowed).then_some((squared[p] - allowed, p))
+        })
+        .collect();
+    candidates.sort_by(|a, b| b.0.total_cmp(&a.0).then(a.1.cmp(&b.1)));
+    let room = settings.max_pieces.saturating_sub(pieces);
+    let mut splits = 0;
+    for &(_, p) in candidates.iter().take(room) {
+        let max = states[p].convexity < 0.0;
+        let copy = tree.split(p, max);
+        let mut state = states[p].clone();
+        // The input whose squared distance goes most with the error.
+        let axis = (0..n)
+            .max_by(|&a, &b| {
+                spread_error[p * n + a]
+                    .abs()
+                    .total_cmp(&spread_error[p * n + b].abs())
+                    .then(b.cmp(&a))
+            })
+            .unwrap_or(0);
+        if n > 0 {
+            let tilt = 1e-6 * y_spread / states[p].variance[axis].sqrt();
+            states[p].weights[axis] += tilt;
+            state.weights[axis] -= tilt;
+        }
+        states[p].convexity = 0.0;
+        state.convexity = 0.0;
+        for (piece, s) in [(p, &states[p]), (copy, &state)] {
+            let bias = s.out
+                - s.weights
+                    .iter()
+                    .zip(&s.centroid)
+                    .map(|(w, c)| w * c)
+                    .sum::<f64>();
+            tree.set_piece(piece, bias, &s.weights);
+        }
+        states.push(state);
+        splits += 1;
+    }
+    (rms, mean_absolute, splits)
+}
+
+/// Per row, half the squared difference of its target and its nearest
+/// neighbour's (L1 distance over the inputs; ties: the lower row): an
+/// estimate of the target's noise variance there that needs no model.
+pub fn neighbour_noise(samples: &Samples) -> Vec<f64> {
+    let rows = samples.rows();
+    (0..rows)
+        .into_par_iter()
+        .map(|r| {
+            let x = samples.row(r);
+            let mut best = (f64::INFINITY, usize::MAX);
+            for other in (0..rows).filter(|&o| o != r) {
+                let distance: f64 = x
+                    .iter()
+                    .zip(samples.row(other))
+                    .map(|(a, b)| (a - b).abs())
+                    .sum();
+                if distance < best.0 {
+                    best = (distance, other);
+                }
+            }
+            match best.1 {
+                usize::MAX => 0.0,
+                o => (samples.y[r] - samples.y[o]).powi(2) / 2.0,
+            }
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::RngExt;
+
+    /// `rows` points uniform in [−1, 1]^inputs, and f at each plus noise.
+    fn data(
+        rows: usize,
+        inputs: usize,
+        noise: f64,
+        seed: u64,
+        f: impl Fn(&[f64]) -> f64,
+    ) -> (Vec<f64>, Vec<f64>) {
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        let x: Vec<f64> = (0..rows * inputs)
+            .map(|_| rng.random::<f64>() * 2.0 - 1.0)
+            .collect();
+        let y = x
+            .chunks_exact(inputs)
+            .map(|row| f(row) + noise * (rng.random::<f64>() * 2.0 - 1.0) * 3f64.sqrt())
+            .collect();
+        (x, y)
+    }
+
+    fn rms(tree: &Tree, x: &[f64], y: &[f64], inputs: usize) -> f64 {
+        let sum: f64 = x
+            .chunks_exact(inputs)
+            .zip(y)
+            .map(|(row, t)| (tree.value(row) - t).powi(2))
+            .sum();
+        (sum / y.len() as f64).sqrt()
+    }
+
+    #[test]
+    fn learns_a_min_of_maxes_of_planes() {
+        // min(max(x + y, 1 − 2x), max(0.5 − y, 2x − 1)): spread about 1.
+        let f = |v: &[f64]| {
+            let (x, y) = (v[0], v[1]);
+            (x + y).max(1.0 - 2.0 * x).min((0.5 - y).max(2.0 * x - 1.0))
+        };
+        let (x, y) = data(2000, 2, 0.0, 1, f);
+        let samples = Samples {
+            x: &x,
+            y: &y,
+            inputs: 2,
+        };
+        let settings = Settings {
+            tolerance: Some(0.01),
+            ..Settings::default()
+        };
+        let (tree, log) = train(&samples, &settings);
+        let (tx, ty) = data(1000, 2, 0.0, 2, f);
+        let error = rms(&tree, &tx, &ty, 2);
+        assert!(
+            error < 0.03,
+            "held-out RMS {error} with {} pieces; rounds {log:?}",
+            tree.pieces()
+        );
+    }
+
+    #[test]
+    fn a_convex_target_grows_max_nodes_only() {
+        // |x| + |y|/2 + x²: convex.
+        let f = |v: &[f64]| v[0].abs() + v[1].abs() / 2.0 + v[0] * v[0];
+        let (x, y) = data(2000, 2, 0.0, 3, f);
+        let samples = Samples {
+            x: &x,
+            y: &y,
+            inputs: 2,
+        };
+        let settings = Settings {
+            tolerance: Some(0.02),
+            ..Settings::default()
+        };
+        let (tree, _) = train(&samples, &settings);
+        let (mins, maxes) = tree.operators();
+        assert!(maxes >= 3, "{maxes} MAX nodes");
+        assert_eq!(mins, 0, "{mins} MIN nodes beside {maxes} MAX");
+        assert!(rms(&tree, &x, &y, 2) < 0.05);
+    }
+
+    #[test]
+    fn on_pure_noise_growth_stops_by_the_f_test() {
+        let (x, y) = data(1000, 3, 0.5, 4, |_| 0.0);
+        let samples = Samples {
+            x: &x,
+            y: &y,
+            inputs: 3,
+        };
+        let (tree, log) = train(&samples, &Settings::default());
+        assert!(
+            tree.pieces() <= 2,
+            "{} pieces on noise: {log:?}",
+            tree.pieces()
+        );
+        // A linear target under the same noise: one piece, fitted.
+        let (x, y) = data(1000, 3, 0.5, 5, |v| 2.0 * v[0] - v[2]);
+        let samples = Samples {
+            x: &x,
+            y: &y,
+            inputs: 3,
+        };
+        let (tree, _) = train(&samples, &Settings::default());
+        assert!(tree.pieces() <= 2, "{} pieces on a plane", tree.pieces());
+        let (_, w) = tree.piece(0);
+        assert!(
+            (w[0] - 2.0).abs() < 0.2 && (w[2] + 1.0).abs() < 0.2,
+            "{w:?}"
+        );
+    }
+
+    #[test]
+    fn the_noise_estimate_is_the_noise_variance() {
+        // A smooth target under uniform noise of spread 0.1: the halved
+        // squared neighbour differences average about 0.01.
+        let (x, y) = data(2000, 2, 0.1, 6, |v| v[0] + v[1]);
+        let samples = Samples {
+            x: &x,
+            y: &y,
+            inputs: 2,
+        };
+        let noise = neighbour_noise(&samples);
+        let mean = noise.iter().sum::<f64>() / noise.len() as f64;
+        assert!((mean - 0.01).abs() < 0.002, "{mean}");
+    }
+
+    #[test]
+    fn the_same_seed_gives_the_same_tree_on_any_thread_count() {
+        let f = |v: &[f64]| (v[0] - v[1]).abs() + v[2];
+        let (x, y) = data(600, 3, 0.05, 7, f);
+        let samples = Samples {
+            x: &x,
+            y: &y,
+            inputs: 3,
+        };
+        let settings = Settings {
+            seed: 11,
+            ..Settings::default()
+        };
+        let one = rayon::ThreadPoolBuilder::new()
+            .num_threads(1)
+            .build()
+            .unwrap()
+            .install(|| train(&samples, &settings).0);
+        let two = rayon::ThreadPoolBuilder::new()
+            .num_threads(2)
+            .build()
+            .unwrap()
+            .install(|| train(&samples, &settings).0);
+        assert_eq!(one, two);
+        assert!(one.pieces() > 1);
+    }
+}
