@@ -101,7 +101,7 @@ fn bad_invocations_exit_with_2_and_say_why() {
     );
     assert_eq!(out.status.code(), Some(2));
     assert!(
-        stderr(&out).contains("broken.mcap: not an intact MCAP file"),
+        stderr(&out).contains("broken.mcap: not an MCAP file"),
         "{}",
         stderr(&out)
     );
