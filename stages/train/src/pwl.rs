@@ -133,6 +133,16 @@ impl Samples<'_> {
 
 /// Trains a tree on the samples; returns it and what each round did.
 pub fn train(samples: &Samples, settings: &Settings) -> (Tree, Vec<Round>) {
+    train_from(samples, settings, None)
+}
+
+/// [`train`] from a first piece `bias + weights·x` (a fitted linear
+/// model) instead of the targets' mean.
+pub fn train_from(
+    samples: &Samples,
+    settings: &Settings,
+    start: Option<(f64, &[f64])>,
+) -> (Tree, Vec<Round>) {
     let n = samples.inputs;
     let rows = samples.rows();
     assert_eq!(samples.x.len(), rows * n, "x holds rows × inputs numbers");
@@ -163,13 +173,17 @@ pub fn train(samples: &Samples, settings: &Settings) -> (Tree, Vec<Round>) {
             .max(1e-9 * y_spread)
     });
 
-    let mut tree = Tree::affine(y_mean, &vec![0.0; n]);
+    let zeros = vec![0.0; n];
+    let (bias, weights) = start.unwrap_or((y_mean, &zeros));
+    let tree_start = Tree::affine(bias, weights);
+    let out = tree_start.piece_value(0, &x_mean);
+    let mut tree = tree_start;
     let mut states = vec![PieceState {
         centroid: x_mean.clone(),
-        out: y_mean,
+        out,
         variance: x_variance.clone(),
         convexity: 0.0,
-        weights: vec![0.0; n],
+        weights: weights.to_vec(),
     }];
     let mut rng = ChaCha8Rng::seed_from_u64(settings.seed);
     let mut order: Vec<usize> = (0..rows).collect();
@@ -486,6 +500,27 @@ mod tests {
         assert!(
             (w[0] - 2.0).abs() < 0.2 && (w[2] + 1.0).abs() < 0.2,
             "{w:?}"
+        );
+    }
+
+    #[test]
+    fn a_fitted_plane_as_the_first_piece_stays_one_piece() {
+        let (x, y) = data(800, 3, 0.3, 8, |v| 1.5 * v[0] - 0.5 * v[1] + 0.25);
+        let samples = Samples {
+            x: &x,
+            y: &y,
+            inputs: 3,
+        };
+        let (tree, log) = train_from(
+            &samples,
+            &Settings::default(),
+            Some((0.25, &[1.5, -0.5, 0.0])),
+        );
+        assert_eq!(tree.pieces(), 1, "{log:?}");
+        let (bias, w) = tree.piece(0);
+        assert!(
+            (bias - 0.25).abs() < 0.1 && (w[0] - 1.5).abs() < 0.15,
+            "{bias} {w:?}"
         );
     }
 
