@@ -441,6 +441,18 @@ mod tests {
     }
 
     #[test]
+    fn fuzzings_slow_foreign_table_is_refused_as_damaged() {
+        // A table the fuzzer made (fuzz/README.md): without alnlab's
+        // checksum it reaches parquet's decoder, whose Thrift skipping
+        // takes about a second over its crafted page headers, then fails.
+        let bytes = include_bytes!("../tests/data/fuzz-slow-thrift.parquet").to_vec();
+        let path = Path::new("fuzz-slow-thrift.parquet");
+        let err = Table::from_bytes(path, bytes, None).unwrap_err();
+        assert_eq!(err.exit_code(), 1, "{err}");
+        assert!(err.to_string().contains("damaged"), "{err}");
+    }
+
+    #[test]
     fn truncated_and_garbage_files_are_errors_naming_the_file() {
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("t.parquet");
