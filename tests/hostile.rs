@@ -183,6 +183,15 @@ fn plan_tasks_that_cannot_run_are_refused_at_check() {
     check_all(dir.path(), &cases);
 }
 
+/// A folder holding the tiny experiment, run once.
+fn tiny_run() -> tempfile::TempDir {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(dir.path().join("tiny.toml"), TINY).unwrap();
+    let out = alnlab(dir.path(), &["-q", "run", "tiny.toml"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    dir
+}
+
 /// Two tiny runs; their record files, oldest first.
 fn two_tiny_runs(dir: &Path) -> Vec<std::path::PathBuf> {
     std::fs::write(dir.join("tiny.toml"), TINY).unwrap();
@@ -371,11 +380,8 @@ const SERVER_ERROR: &str = "HTTP/1.1 500 Internal Server Error\r\nContent-Type: 
 
 #[test]
 fn mlflow_servers_that_fail_give_clear_errors() {
-    let dir = tempfile::tempdir().unwrap();
+    let dir = tiny_run();
     let d = dir.path();
-    std::fs::write(d.join("tiny.toml"), TINY).unwrap();
-    let out = alnlab(d, &["-q", "run", "tiny.toml"]);
-    assert!(out.status.success(), "{}", stderr(&out));
 
     // Nothing listening: a port just freed.
     let closed = {
@@ -478,11 +484,8 @@ fn mlflow_servers_that_fail_give_clear_errors() {
 
 #[test]
 fn verilog_export_refuses_what_it_cannot_write_or_trust() {
-    let dir = tempfile::tempdir().unwrap();
+    let dir = tiny_run();
     let d = dir.path();
-    std::fs::write(d.join("tiny.toml"), TINY).unwrap();
-    let out = alnlab(d, &["-q", "run", "tiny.toml"]);
-    assert!(out.status.success(), "{}", stderr(&out));
     // Another run's codebook: two levels more, another code.
     let other = TINY
         .replace("name = \"tiny\"", "name = \"other\"")

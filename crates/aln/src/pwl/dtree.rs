@@ -252,40 +252,30 @@ fn prune(tree: &Tree, node: usize, lo: &[f64], hi: &[f64], out: &mut Vec<Node>) 
                 hi: h,
             }
         }
-        Node::Min(a, b) => {
+        Node::Min(a, b) | Node::Max(a, b) => {
+            let min = matches!(tree.nodes()[node], Node::Min(..));
             let (a, b) = (
                 prune(tree, a as usize, lo, hi, out),
                 prune(tree, b as usize, lo, hi, out),
             );
+            // Where one child is never below the other, a MIN is the
+            // lower child and a MAX the upper.
             if a.lo >= b.hi {
-                return b;
+                return if min { b } else { a };
             }
             if b.lo >= a.hi {
-                return a;
+                return if min { a } else { b };
             }
-            out.push(Node::Min(a.node, b.node));
+            let (join, pick): (Node, fn(f64, f64) -> f64) = if min {
+                (Node::Min(a.node, b.node), f64::min)
+            } else {
+                (Node::Max(a.node, b.node), f64::max)
+            };
+            out.push(join);
             Bounded {
                 node: out.len() as u32 - 1,
-                lo: a.lo.min(b.lo),
-                hi: a.hi.min(b.hi),
-            }
-        }
-        Node::Max(a, b) => {
-            let (a, b) = (
-                prune(tree, a as usize, lo, hi, out),
-                prune(tree, b as usize, lo, hi, out),
-            );
-            if a.lo >= b.hi {
-                return a;
-            }
-            if b.lo >= a.hi {
-                return b;
-            }
-            out.push(Node::Max(a.node, b.node));
-            Bounded {
-                node: out.len() as u32 - 1,
-                lo: a.lo.max(b.lo),
-                hi: a.hi.max(b.hi),
+                lo: pick(a.lo, b.lo),
+                hi: pick(a.hi, b.hi),
             }
         }
     }
