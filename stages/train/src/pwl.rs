@@ -416,6 +416,23 @@ mod tests {
         (x, y)
     }
 
+    /// A tree trained on `rows` samples of `f` (from [`data`]), with the
+    /// samples.
+    fn fitted(
+        (rows, inputs, noise, seed): (usize, usize, f64, u64),
+        f: impl Fn(&[f64]) -> f64,
+        settings: &Settings,
+    ) -> (Tree, Vec<Round>, Vec<f64>, Vec<f64>) {
+        let (x, y) = data(rows, inputs, noise, seed, f);
+        let samples = Samples {
+            x: &x,
+            y: &y,
+            inputs,
+        };
+        let (tree, log) = train(&samples, settings);
+        (tree, log, x, y)
+    }
+
     fn rms(tree: &Tree, x: &[f64], y: &[f64], inputs: usize) -> f64 {
         let sum: f64 = x
             .chunks_exact(inputs)
@@ -432,17 +449,11 @@ mod tests {
             let (x, y) = (v[0], v[1]);
             (x + y).max(1.0 - 2.0 * x).min((0.5 - y).max(2.0 * x - 1.0))
         };
-        let (x, y) = data(2000, 2, 0.0, 1, f);
-        let samples = Samples {
-            x: &x,
-            y: &y,
-            inputs: 2,
-        };
         let settings = Settings {
             tolerance: Some(0.01),
             ..Settings::default()
         };
-        let (tree, log) = train(&samples, &settings);
+        let (tree, log, _, _) = fitted((2000, 2, 0.0, 1), f, &settings);
         let (tx, ty) = data(1000, 2, 0.0, 2, f);
         let error = rms(&tree, &tx, &ty, 2);
         assert!(
@@ -456,17 +467,11 @@ mod tests {
     fn a_convex_target_grows_max_nodes_only() {
         // |x| + |y|/2 + x²: convex.
         let f = |v: &[f64]| v[0].abs() + v[1].abs() / 2.0 + v[0] * v[0];
-        let (x, y) = data(2000, 2, 0.0, 3, f);
-        let samples = Samples {
-            x: &x,
-            y: &y,
-            inputs: 2,
-        };
         let settings = Settings {
             tolerance: Some(0.02),
             ..Settings::default()
         };
-        let (tree, _) = train(&samples, &settings);
+        let (tree, _, x, y) = fitted((2000, 2, 0.0, 3), f, &settings);
         let (mins, maxes) = tree.operators();
         assert!(maxes >= 3, "{maxes} MAX nodes");
         assert_eq!(mins, 0, "{mins} MIN nodes beside {maxes} MAX");
@@ -475,26 +480,15 @@ mod tests {
 
     #[test]
     fn on_pure_noise_growth_stops_by_the_f_test() {
-        let (x, y) = data(1000, 3, 0.5, 4, |_| 0.0);
-        let samples = Samples {
-            x: &x,
-            y: &y,
-            inputs: 3,
-        };
-        let (tree, log) = train(&samples, &Settings::default());
+        let (tree, log, _, _) = fitted((1000, 3, 0.5, 4), |_| 0.0, &Settings::default());
         assert!(
             tree.pieces() <= 2,
             "{} pieces on noise: {log:?}",
             tree.pieces()
         );
         // A linear target under the same noise: one piece, fitted.
-        let (x, y) = data(1000, 3, 0.5, 5, |v| 2.0 * v[0] - v[2]);
-        let samples = Samples {
-            x: &x,
-            y: &y,
-            inputs: 3,
-        };
-        let (tree, _) = train(&samples, &Settings::default());
+        let plane = |v: &[f64]| 2.0 * v[0] - v[2];
+        let (tree, _, _, _) = fitted((1000, 3, 0.5, 5), plane, &Settings::default());
         assert!(tree.pieces() <= 2, "{} pieces on a plane", tree.pieces());
         let (_, w) = tree.piece(0);
         assert!(
