@@ -105,7 +105,9 @@ impl Client {
                 answer => return answer,
             };
             if attempt == ATTEMPTS {
-                return request_failed(url, attempt, failure);
+                return Err(Failure::Unreachable(format!(
+                    "{url}: gave up after {attempt} tries: {failure}"
+                )));
             }
             eprintln!("warning: {url}: {failure}; trying again in {attempt} s");
             std::thread::sleep(Duration::from_secs(u64::from(attempt)));
@@ -199,14 +201,6 @@ impl Client {
             url: url.to_string(),
         })
     }
-}
-
-/// The failure of a request tried `attempts` times, the last failure's
-/// reason given.
-fn request_failed(url: &str, attempts: u32, why: String) -> Answer {
-    Err(Failure::Unreachable(format!(
-        "{url}: gave up after {attempts} tries: {why}"
-    )))
 }
 
 /// A request's JSON answer, or why there is none.
