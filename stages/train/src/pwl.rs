@@ -23,12 +23,14 @@
 //!   splits nothing or the cap on pieces is reached; final epochs at a
 //!   lower rate polish the pieces.
 //!
-//! The copies of a split piece are tilted apart by a hair along the input
-//! whose squared distance from the centroid goes most with the piece's
-//! error — a V (MAX) or Λ (MIN) too shallow to change any figure — so that
-//! the tie rule does not leave the second copy idle (the authors' fillets
-//! break the tie the same way). Every choice is seeded or fixed: the same
-//! data and seed give the same tree, bit for bit.
+//! The copies of a split piece (the authors' [`Split::Copy`]) are tilted
+//! apart by a hair along the input whose squared distance from the
+//! centroid goes most with the piece's error — a V (MAX) or Λ (MIN) too
+//! shallow to change any figure — so that the tie rule does not leave the
+//! second copy idle (the authors' fillets break the tie the same way).
+//! [`Split::Hinge`] instead fits the kink at once, by least squares on the
+//! piece's residuals. Every choice is seeded or fixed: the same data and
+//! seed give the same tree, bit for bit.
 
 use alnlab_aln::pwl::Tree;
 use rand::SeedableRng;
@@ -36,6 +38,20 @@ use rand::seq::SliceRandom;
 use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
 use statrs::distribution::{ContinuousCDF, FisherSnedecor};
+
+/// How a piece that the noise does not explain is split.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Split {
+    /// The authors' way: a MAX (convex) or MIN of two copies of the piece,
+    /// which the LMS steps then pull apart.
+    #[default]
+    Copy,
+    /// A hinge fitted at once: p becomes p + c·max(0, ±(xᵢ − t)) — the MAX
+    /// (c > 0) or MIN (c < 0) of p and p + c·(±(xᵢ − t)) — with the input
+    /// i, the knot t (a quantile of the piece's samples), the side and c
+    /// that most reduce the squared error of the samples it answers for.
+    Hinge,
+}
 
 /// How a tree is trained.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -66,6 +82,8 @@ pub struct Settings {
     pub weight_bound: f64,
     /// Seeds the order of samples in every epoch.
     pub seed: u64,
+    /// How a piece splits.
+    pub split: Split,
 }
 
 impl Default for Settings {
@@ -82,6 +100,7 @@ impl Default for Settings {
             huber: None,
             weight_bound: 100.0,
             seed: 0,
+            split: Split::Copy,
         }
     }
 }
@@ -292,10 +311,15 @@ fn split_pass(
     // with the error (the direction to tilt the copies apart along).
     let mut spread_error = vec![0.0f64; pieces * n];
     let (mut total_squared, mut total_absolute) = (0.0, 0.0);
+    // Each piece's rows and every row's residual, for hinges.
+    let mut members: Vec<Vec<usize>> = vec![Vec::new(); pieces];
+    let mut residual = vec![0.0f64; samples.rows()];
     for (r, (&y, &noise)) in samples.y.iter().zip(noise).enumerate() {
         let x = samples.row(r);
         let (value, p) = tree.responsible(x);
         let e = value - y;
+        members[p].push(r);
+        residual[r] = -e;
         count[p] += 1;
         squared[p] += e * e;
         noise_sum[p] += noise;
@@ -330,23 +354,36 @@ fn split_pass(
     let room = settings.max_pieces.saturating_sub(pieces);
     let mut splits = 0;
     for &(_, p) in candidates.iter().take(room) {
-        let max = states[p].convexity < 0.0;
-        let copy = tree.split(p, max);
         let mut state = states[p].clone();
-        // The input whose squared distance goes most with the error.
-        let axis = (0..n)
-            .max_by(|&a, &b| {
-                spread_error[p * n + a]
-                    .abs()
-                    .total_cmp(&spread_error[p * n + b].abs())
-                    .then(b.cmp(&a))
-            })
-            .unwrap_or(0);
-        if n > 0 {
-            let tilt = 1e-6 * y_spread / states[p].variance[axis].sqrt();
-            states[p].weights[axis] += tilt;
-            state.weights[axis] -= tilt;
-        }
+        let hinge = match settings.split {
+            Split::Hinge => best_hinge(samples, &members[p], &residual),
+            Split::Copy => None,
+        };
+        let max = match hinge {
+            Some((axis, knot, slope)) => {
+                state.weights[axis] += slope;
+                state.out += slope * (state.centroid[axis] - knot);
+                slope > 0.0
+            }
+            None => {
+                // The input whose squared distance goes most with the error.
+                let axis = (0..n)
+                    .max_by(|&a, &b| {
+                        spread_error[p * n + a]
+                            .abs()
+                            .total_cmp(&spread_error[p * n + b].abs())
+                            .then(b.cmp(&a))
+                    })
+                    .unwrap_or(0);
+                if n > 0 {
+                    let tilt = 1e-6 * y_spread / states[p].variance[axis].sqrt();
+                    states[p].weights[axis] += tilt;
+                    state.weights[axis] -= tilt;
+                }
+                states[p].convexity < 0.0
+            }
+        };
+        let copy = tree.split(p, max);
         states[p].convexity = 0.0;
         state.convexity = 0.0;
         for (piece, s) in [(p, &states[p]), (copy, &state)] {
@@ -362,6 +399,40 @@ fn split_pass(
         splits += 1;
     }
     (rms, mean_absolute, splits)
+}
+
+/// The hinge that most reduces the squared residuals of `rows`: per input,
+/// a knot at five quantiles of the rows' values and both sides; the input,
+/// the knot and the slope c·(±1) of the new piece along the input. `None`
+/// where no hinge has a row on its sloped side.
+fn best_hinge(samples: &Samples, rows: &[usize], residual: &[f64]) -> Option<(usize, f64, f64)> {
+    let n = samples.inputs;
+    let mut best: Option<(f64, usize, f64, f64)> = None;
+    let mut values: Vec<f64> = Vec::with_capacity(rows.len());
+    for axis in 0..n {
+        values.clear();
+        values.extend(rows.iter().map(|&r| samples.row(r)[axis]));
+        values.sort_by(f64::total_cmp);
+        for q in [0.2, 0.35, 0.5, 0.65, 0.8] {
+            let knot = values[((values.len() - 1) as f64 * q) as usize];
+            for side in [1.0, -1.0] {
+                let (mut rh, mut hh) = (0.0, 0.0);
+                for &r in rows {
+                    let h = (side * (samples.row(r)[axis] - knot)).max(0.0);
+                    rh += residual[r] * h;
+                    hh += h * h;
+                }
+                if hh <= 0.0 {
+                    continue;
+                }
+                let gain = rh * rh / hh;
+                if best.is_none_or(|(g, ..)| gain > g) {
+                    best = Some((gain, axis, knot, side * rh / hh));
+                }
+            }
+        }
+    }
+    best.map(|(_, axis, knot, slope)| (axis, knot, slope))
 }
 
 /// Per row, half the squared difference of its target and its nearest
@@ -516,6 +587,27 @@ mod tests {
             (bias - 0.25).abs() < 0.1 && (w[0] - 1.5).abs() < 0.15,
             "{bias} {w:?}"
         );
+    }
+
+    #[test]
+    fn a_hinge_split_finds_a_kink_at_once() {
+        // 0.5x + max(0, 2(x − 0.3)); y does not matter.
+        let f = |v: &[f64]| 0.5 * v[0] + (2.0 * (v[0] - 0.3)).max(0.0);
+        let settings = Settings {
+            tolerance: Some(0.005),
+            split: Split::Hinge,
+            ..Settings::default()
+        };
+        let (tree, log, _, _) = fitted((2000, 2, 0.0, 9), f, &settings);
+        let (tx, ty) = data(1000, 2, 0.0, 10, f);
+        let error = rms(&tree, &tx, &ty, 2);
+        assert!(
+            error < 0.01,
+            "RMS {error}, {} pieces: {log:?}",
+            tree.pieces()
+        );
+        assert_eq!(tree.operators().0, 0, "a convex kink: MAX nodes only");
+        assert!(tree.pieces() <= 4, "{} pieces: {log:?}", tree.pieces());
     }
 
     #[test]
