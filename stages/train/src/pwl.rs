@@ -134,6 +134,21 @@ struct PieceState {
     weights: Vec<f64>,
 }
 
+impl PieceState {
+    /// Sets piece `p` of the tree to this state: its weights, and the bias
+    /// derived from the centroid (y = c_out + Σ wᵢ(xᵢ − cᵢ)).
+    fn store(&self, tree: &mut Tree, p: usize) {
+        let bias = self.out
+            - self
+                .weights
+                .iter()
+                .zip(&self.centroid)
+                .map(|(w, c)| w * c)
+                .sum::<f64>();
+        tree.set_piece(p, bias, &self.weights);
+    }
+}
+
 /// Training data: `rows` samples of `inputs` numbers, and their targets.
 pub struct Samples<'a> {
     pub x: &'a [f64],
@@ -282,13 +297,7 @@ fn adapt(
     if far >= n as f64 {
         s.convexity += rate * (e - s.convexity);
     }
-    let bias = s.out
-        - s.weights
-            .iter()
-            .zip(&s.centroid)
-            .map(|(w, c)| w * c)
-            .sum::<f64>();
-    tree.set_piece(p, bias, &s.weights);
+    s.store(tree, p);
 }
 
 /// Evaluates every sample, splits the pieces whose error the noise does
@@ -392,15 +401,8 @@ fn split_pass(
         let copy = tree.split(p, max);
         states[p].convexity = 0.0;
         state.convexity = 0.0;
-        for (piece, s) in [(p, &states[p]), (copy, &state)] {
-            let bias = s.out
-                - s.weights
-                    .iter()
-                    .zip(&s.centroid)
-                    .map(|(w, c)| w * c)
-                    .sum::<f64>();
-            tree.set_piece(piece, bias, &s.weights);
-        }
+        states[p].store(tree, p);
+        state.store(tree, copy);
         states.push(state);
         splits += 1;
     }
