@@ -55,12 +55,17 @@ pub fn machine(install: bool) -> Result<PathBuf, Failure> {
 /// allowed and possible.
 fn programs(install: bool) -> Result<(), Failure> {
     let missing: Vec<&Program> = PROGRAMS.iter().filter(|p| !on_path(p.command)).collect();
-    let mut packages: Vec<&str> = missing.iter().map(|p| p.package).collect();
+    let mut packages: Vec<&str> = Vec::new();
+    for p in &missing {
+        // Several programs can come in one package (iverilog, vvp).
+        if !packages.contains(&p.package) {
+            packages.push(p.package);
+        }
+    }
     // Debian's python3 comes without venv; the environment needs it.
     if on_path("python3") && !python_has_venv() {
         packages.push("python3-venv");
     }
-    packages.dedup();
     if packages.is_empty() {
         return Ok(());
     }
@@ -211,9 +216,11 @@ fn quiet(command: &mut Command, log: &Path, line: &str) -> Result<(), Failure> {
     }
     let mut said = output.stdout;
     said.extend_from_slice(&output.stderr);
-    let mut previous = std::fs::read(log).unwrap_or_default();
-    previous.extend_from_slice(&said);
-    let _ = std::fs::write(log, previous);
+    let _ = std::fs::OpenOptions::new()
+        .create(true)
+        .append(true)
+        .open(log)
+        .and_then(|mut file| std::io::Write::write_all(&mut file, &said));
     if output.status.success() {
         return Ok(());
     }
