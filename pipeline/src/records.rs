@@ -262,11 +262,14 @@ pub struct Stored {
     pub path: PathBuf,
 }
 
+/// A record file that could not be read, and why.
+pub type Unreadable = (PathBuf, Error);
+
 /// Every run recorded under `out`, oldest first (by start, then id): each
 /// experiment folder's `records/`, and its `run.json` when that is a
 /// format-1 record no file of `records/` holds. Files that cannot be read
-/// are returned beside, as errors, for the caller to report.
-pub fn all(out: &Path) -> Result<(Vec<Stored>, Vec<Error>)> {
+/// are returned beside, each with its error, for the caller to report.
+pub fn all(out: &Path) -> Result<(Vec<Stored>, Vec<Unreadable>)> {
     let mut found = Vec::new();
     let mut damaged = Vec::new();
     let folders = match std::fs::read_dir(out) {
@@ -301,7 +304,7 @@ pub fn all(out: &Path) -> Result<(Vec<Stored>, Vec<Error>)> {
                         ids.push(record.id.clone());
                         found.push(Stored { record, path });
                     }
-                    Err(e) => damaged.push(e),
+                    Err(e) => damaged.push((path, e)),
                 }
             }
         }
@@ -313,7 +316,7 @@ pub fn all(out: &Path) -> Result<(Vec<Stored>, Vec<Error>)> {
                     path: latest,
                 }),
                 Ok(_) => {}
-                Err(e) => damaged.push(e),
+                Err(e) => damaged.push((latest, e)),
             }
         }
     }
@@ -367,16 +370,16 @@ pub fn find(out: &Path, reference: &str) -> Result<(Stored, Option<String>)> {
                 experiments.dedup();
                 // Record files are named by their run's id: the one asked
                 // for, if it is among the unreadable, is named alone.
-                let asked: Vec<String> = damaged
-                    .iter()
-                    .map(ToString::to_string)
-                    .filter(|e| e.contains(&format!("/{run}")))
-                    .collect();
-                let shown = if asked.is_empty() {
-                    damaged.iter().map(ToString::to_string).collect()
-                } else {
-                    asked
+                let named = |path: &PathBuf| {
+                    path.file_stem()
+                        .is_some_and(|stem| stem.to_string_lossy().starts_with(run))
                 };
+                let asked = damaged.iter().any(|(path, _)| named(path));
+                let shown: Vec<String> = damaged
+                    .iter()
+                    .filter(|(path, _)| !asked || named(path))
+                    .map(|(_, e)| e.to_string())
+                    .collect();
                 let unreadable = match shown.len() {
                     0 => String::new(),
                     n => format!(

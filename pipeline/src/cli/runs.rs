@@ -124,7 +124,7 @@ pub fn execute(args: RunsArgs) -> Result<()> {
 /// Reads every record under `out`, naming on stderr the files it skips.
 fn read_all(out: &Path) -> Result<Vec<Stored>> {
     let (runs, damaged) = records::all(out)?;
-    for error in damaged {
+    for (_, error) in damaged {
         eprintln!("warning: skipped {error}");
     }
     Ok(runs)
