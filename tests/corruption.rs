@@ -76,8 +76,19 @@ fn every_flipped_byte_is_refused_or_remade() {
         ("trajectory", "stride", vec![]),
         ("pairs", "quantize", vec![("stats", s(&path("stats")))]),
         ("stats", "quantize", vec![("pairs", s(&path("pairs")))]),
-        ("levels", "train", vec![("codebook", s(&path("codebook")))]),
-        ("codebook", "train", vec![("levels", s(&path("levels")))]),
+        (
+            "levels",
+            "train",
+            vec![
+                ("codebook", s(&path("codebook"))),
+                ("pairs", s(&path("pairs"))),
+            ],
+        ),
+        (
+            "codebook",
+            "train",
+            vec![("levels", s(&path("levels"))), ("pairs", s(&path("pairs")))],
+        ),
         (
             "model",
             "test",
@@ -85,6 +96,7 @@ fn every_flipped_byte_is_refused_or_remade() {
                 ("trajectory", s(&path("trajectory"))),
                 ("codebook", s(&path("codebook"))),
                 ("levels", s(&path("levels"))),
+                ("pairs", s(&path("pairs"))),
             ],
         ),
         (
@@ -94,6 +106,7 @@ fn every_flipped_byte_is_refused_or_remade() {
                 ("model", s(&path("model"))),
                 ("codebook", s(&path("codebook"))),
                 ("levels", s(&path("levels"))),
+                ("pairs", s(&path("pairs"))),
             ],
         ),
         (

@@ -366,7 +366,7 @@ fn stages_run_alone_on_explicit_files_match_the_pipeline() {
         path.display().to_string()
     };
     let (model, codebook, levels) = (artifact("model"), artifact("codebook"), artifact("levels"));
-    let trajectory = artifact("trajectory");
+    let (trajectory, pairs) = (artifact("trajectory"), artifact("pairs"));
     let out = alnlab(
         dir.path(),
         &[
@@ -382,6 +382,8 @@ fn stages_run_alone_on_explicit_files_match_the_pipeline() {
             &codebook,
             "--levels",
             &levels,
+            "--pairs",
+            &pairs,
             "--out",
             "alone",
         ],

@@ -101,6 +101,7 @@ pub fn shards(manifest_path: &Path, variant: &str, shards: u32) -> Result<ShardB
         Shard::ALL,
         codebook,
         levels,
+        &inputs["pairs"],
         &provenance,
         &whole,
         &alnlab_common::progress::Silent,

@@ -238,6 +238,10 @@ pub const STAGES: &[Stage] = &[
                 role: "levels",
                 from: "quantize",
             },
+            Input {
+                role: "pairs",
+                from: "stride",
+            },
         ],
         outputs: &[
             ("model", alnlab_train::MODEL_FILE),
@@ -254,6 +258,7 @@ pub const STAGES: &[Stage] = &[
                 c.shard,
                 c.input("codebook"),
                 c.input("levels"),
+                c.input("pairs"),
                 c.provenance,
                 c.out_dir,
                 c.progress,
@@ -290,6 +295,10 @@ pub const STAGES: &[Stage] = &[
                 role: "levels",
                 from: "quantize",
             },
+            Input {
+                role: "pairs",
+                from: "stride",
+            },
         ],
         outputs: &[
             ("predictions", alnlab_evaluate::PREDICTIONS_FILE),
@@ -307,6 +316,7 @@ pub const STAGES: &[Stage] = &[
                 c.input("model"),
                 c.input("codebook"),
                 c.input("levels"),
+                c.input("pairs"),
                 c.provenance,
                 c.out_dir,
                 c.progress,
@@ -443,7 +453,18 @@ pub const STAGES: &[Stage] = &[
         archived: Archived::Never,
         every_replicate: false,
         params: |s| json(&s.circuit),
-        validate: |s, _| s.circuit.validate(),
+        validate: |s, _| {
+            s.circuit.validate()?;
+            if s.circuit.synthesize && s.train.model == alnlab_aln::ModelKind::PiecewiseLinear {
+                return Err((
+                    "synthesize".into(),
+                    "a piecewise-linear model computes with real numbers (affine pieces under \
+                     MIN and MAX), not AND/OR gates: synthesize only bit-forests"
+                        .into(),
+                ));
+            }
+            Ok(())
+        },
         run: |c| {
             alnlab_circuit::run(
                 &c.stages.circuit,

@@ -7,14 +7,19 @@
 //! The header says which model the trees make up (`bit-forest`: one tree
 //! per output bit and voter, over the input bits; `threshold`: one tree per
 //! output variable and voter, over the input bits and the candidate level's
-//! thermometer code) and what they learn (the [`Target`]: each variable's
-//! next level, or its change with each change's code).
+//! thermometer code; `piecewise-linear`: one MIN/MAX tree of affine pieces
+//! per output variable over the real inputs) and what they learn (the
+//! [`Target`]: each variable's next level, or its change with each change's
+//! code, or — piecewise-linear — its real change in level spacings).
 //!
 //! Layout (little endian): magic `ALNLAB-MODEL\0\0\0\0` (16 bytes), format
 //! version (u32), header length (u32), header (JSON), then per tree:
 //! variable, bit, voter, leaves (4 × u32), the leaves' literals (leaves ×
 //! u32), the functions of the leaves − 1 internal nodes (2 bits each, node i
-//! in bits 2(i % 4).. of byte i / 4; 0 AND, 1 LEFT, 2 RIGHT, 3 OR).
+//! in bits 2(i % 4).. of byte i / 4; 0 AND, 1 LEFT, 2 RIGHT, 3 OR). A
+//! piecewise-linear model holds instead, per output: its inputs, nodes and
+//! pieces (3 × u32), each node as 3 × u32 (0 piece p; 1 MIN, 2 MAX of
+//! children a, b), then each piece's bias and weights (f64).
 
 use std::io::Write;
 use std::path::Path;
@@ -39,12 +44,28 @@ pub enum ModelKind {
     /// One tree per output variable computing [y < f(x)] over the inputs
     /// and a thermometer-coded candidate y; y found by binary search (§6).
     Threshold,
+    /// One MIN/MAX tree of affine pieces per output variable over the
+    /// current state's real values, computing the variable's change (§6 as
+    /// its authors built it next).
+    PiecewiseLinear,
+}
+
+impl ModelKind {
+    /// The kind's manifest name.
+    pub fn name(self) -> &'static str {
+        match self {
+            ModelKind::BitForest => "bit-forest",
+            ModelKind::Threshold => "threshold",
+            ModelKind::PiecewiseLinear => "piecewise-linear",
+        }
+    }
 }
 
 /// The file's magic bytes.
 pub const MAGIC: &[u8; 16] = b"ALNLAB-MODEL\0\0\0\0";
-/// The model file format version (4: the file ends with its CRC-32).
-pub const MODEL_FORMAT: u32 = 4;
+/// The model file format version (4: the file ends with its CRC-32; 5:
+/// piecewise-linear models).
+pub const MODEL_FORMAT: u32 = 5;
 /// Bytes of the smallest tree record: its id and leaf count (16), two
 /// literals (8) and one byte of node functions.
 const SMALLEST_TREE: usize = 25;
@@ -61,11 +82,14 @@ pub struct Header {
     /// What they learn: each variable's next level or its change.
     pub target: Target,
     /// Input bits per sample (for the threshold model, before the
-    /// candidate's bits).
+    /// candidate's bits; for a piecewise-linear model, the input variables:
+    /// the codebook's learned ones).
     pub inputs: usize,
     /// The learned output variables, in tree order, with the widths of
     /// their targets' codes (for the threshold model, the width of the
-    /// candidate's thermometer code: levels − 1).
+    /// candidate's thermometer code: levels − 1; for a piecewise-linear
+    /// model, its tree's pieces). A piecewise-linear model may predict
+    /// fewer variables than it reads (the controls given).
     pub outputs: Vec<(String, usize)>,
     /// For each output, the input variables its trees read, when they do
     /// not read every input (chosen by the train stage). Absent when they do.
@@ -90,6 +114,9 @@ impl Header {
     /// that code's thermometer, levels − 1 (a threshold model's candidate).
     /// On a mismatch, what differs.
     pub fn outputs_for(&self, learned: &[&Entry]) -> std::result::Result<Vec<Output>, String> {
+        if self.model == ModelKind::PiecewiseLinear {
+            return Err("a piecewise-linear model has no bit outputs".into());
+        }
         let names: Vec<&str> = learned.iter().map(|e| e.variable.as_str()).collect();
         let outputs: Vec<&str> = self.outputs.iter().map(|(n, _)| n.as_str()).collect();
         if names != outputs {
@@ -110,6 +137,7 @@ impl Header {
             let expected = match self.model {
                 ModelKind::BitForest => codec.width() as usize,
                 ModelKind::Threshold => codec.levels() - 1,
+                ModelKind::PiecewiseLinear => unreachable!("refused above"),
             };
             if *width != expected {
                 return Err(format!(
@@ -123,13 +151,65 @@ impl Header {
         }
         Ok(decoders)
     }
+
+    /// For a piecewise-linear model evaluated with `learned` (the
+    /// codebook's learned entries, in order): per output, its variable's
+    /// index among them and the indices of the variables its tree reads.
+    /// On a mismatch, what differs.
+    pub fn piecewise_for(&self, learned: &[&Entry]) -> std::result::Result<Vec<Reads>, String> {
+        let index = |name: &str| {
+            learned
+                .iter()
+                .position(|e| e.variable == name)
+                .ok_or_else(|| {
+                    format!("reads or predicts `{name}`, which the codebook does not learn")
+                })
+        };
+        if self.inputs != learned.len() {
+            return Err(format!(
+                "reads {} variables, but the codebook learns {}",
+                self.inputs,
+                learned.len()
+            ));
+        }
+        if self.reads.len() != self.outputs.len() {
+            return Err(format!(
+                "names the inputs of {} outputs, but has {}",
+                self.reads.len(),
+                self.outputs.len()
+            ));
+        }
+        self.outputs
+            .iter()
+            .zip(&self.reads)
+            .map(|((name, _), reads)| {
+                Ok(Reads {
+                    variable: index(name)?,
+                    inputs: reads.iter().map(|r| index(r)).collect::<Result<_, _>>()?,
+                })
+            })
+            .collect()
+    }
+}
+
+/// Which learned variable a piecewise-linear output predicts, and which it
+/// reads (indices among the codebook's learned variables, in the order of
+/// the tree's inputs).
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Reads {
+    pub variable: usize,
+    pub inputs: Vec<usize>,
 }
 
 /// A model: its header and its trees.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Model {
     pub header: Header,
+    /// A bit-forest's or threshold model's trees (none for a
+    /// piecewise-linear model).
     pub trees: Vec<(TreeId, Tree)>,
+    /// A piecewise-linear model's trees, one per output (none otherwise).
+    pub pieces: Vec<crate::pwl::Tree>,
 }
 
 fn function_code(f: Function) -> u8 {
@@ -259,7 +339,7 @@ impl RawModel {
                 .outputs
                 .iter()
                 .try_fold(0usize, |sum, &(_, width)| sum.checked_add(width)),
-            ModelKind::Threshold => Some(header.outputs.len()),
+            ModelKind::Threshold | ModelKind::PiecewiseLinear => Some(header.outputs.len()),
         };
         trees_per_vote
             .and_then(|n| n.checked_mul(vote))
@@ -270,6 +350,34 @@ impl RawModel {
                     bytes.len()
                 ))
             })?;
+        if header.model == ModelKind::PiecewiseLinear {
+            let mut records = Vec::with_capacity(header.outputs.len());
+            for o in 0..header.outputs.len() {
+                let what = format!("the tree of output {o}");
+                let head = take(12, &what)?;
+                let [inputs, nodes, pieces] = [0, 4, 8].map(|i| u32_of(&head[i..i + 4]) as usize);
+                let body = nodes
+                    .checked_mul(12)
+                    .zip(pieces.checked_mul(inputs.saturating_add(1)))
+                    .and_then(|(n, c)| c.checked_mul(8).and_then(|c| c.checked_add(n)))
+                    .ok_or_else(|| bad(format!("{what}: its sizes overflow")))?;
+                let mut record = head.to_vec();
+                record.extend_from_slice(take(body, &what)?);
+                let id = TreeId {
+                    variable: o as u32,
+                    bit: 0,
+                    vote: 0,
+                };
+                records.push((id, record));
+            }
+            if at != bytes.len() {
+                return Err(bad(format!(
+                    "{} bytes after the last tree",
+                    bytes.len() - at
+                )));
+            }
+            return Ok((RawModel { header, records }, Vec::new()));
+        }
         let all_inputs: Vec<usize> = match header.model {
             ModelKind::BitForest => header
                 .outputs
@@ -281,6 +389,7 @@ impl RawModel {
                 .iter()
                 .flat_map(|&(_, width)| std::iter::repeat_n(header.inputs + width, vote))
                 .collect(),
+            ModelKind::PiecewiseLinear => unreachable!("read above"),
         };
         let shard = header.shard.unwrap_or(Shard::ALL);
         let tree_inputs: Vec<usize> = all_inputs
@@ -333,15 +442,68 @@ impl RawModel {
     }
 }
 
+/// The bytes of one piecewise-linear tree's record.
+fn piecewise_record(tree: &crate::pwl::Tree) -> Vec<u8> {
+    use crate::pwl::Node;
+    let (nodes, pieces) = (tree.nodes(), tree.pieces());
+    let mut bytes = Vec::with_capacity(12 * (1 + nodes.len()) + 8 * pieces * (tree.inputs() + 1));
+    for x in [tree.inputs(), nodes.len(), pieces] {
+        bytes.extend_from_slice(&(x as u32).to_le_bytes());
+    }
+    for node in nodes {
+        let fields = match *node {
+            Node::Piece(p) => [0, p, 0],
+            Node::Min(a, b) => [1, a, b],
+            Node::Max(a, b) => [2, a, b],
+        };
+        for x in fields {
+            bytes.extend_from_slice(&x.to_le_bytes());
+        }
+    }
+    for p in 0..pieces {
+        let (bias, weights) = tree.piece(p);
+        for c in std::iter::once(&bias).chain(weights) {
+            bytes.extend_from_slice(&c.to_le_bytes());
+        }
+    }
+    bytes
+}
+
+/// A piecewise-linear tree from its record (as [`RawModel`] split it).
+fn piecewise_tree(record: &[u8]) -> std::result::Result<crate::pwl::Tree, String> {
+    use crate::pwl::Node;
+    let [inputs, nodes, _] = [0, 4, 8].map(|i| u32_of(&record[i..i + 4]) as usize);
+    let node_bytes = &record[12..12 + 12 * nodes];
+    let nodes = node_bytes
+        .chunks_exact(12)
+        .map(|n| {
+            let [tag, a, b] = [0, 4, 8].map(|i| u32_of(&n[i..i + 4]));
+            match tag {
+                0 => Ok(Node::Piece(a)),
+                1 => Ok(Node::Min(a, b)),
+                2 => Ok(Node::Max(a, b)),
+                _ => Err(format!("node kind {tag} is none of piece, MIN, MAX")),
+            }
+        })
+        .collect::<std::result::Result<Vec<_>, _>>()?;
+    let coefficients = record[12 + node_bytes.len()..]
+        .chunks_exact(8)
+        .map(|c| f64::from_le_bytes(c.try_into().expect("8 bytes")))
+        .collect();
+    crate::pwl::Tree::from_parts(inputs, nodes, coefficients).map_err(|m| m.0)
+}
+
 impl Model {
     /// Writes the model to `path` (atomically).
     pub fn write(&self, path: &Path) -> Result<()> {
+        let pieces = self.pieces.iter().map(|t| piecewise_record(t).into());
         write_file(
             path,
             &self.header,
             self.trees
                 .iter()
-                .map(|(id, tree)| tree_record(*id, tree).into()),
+                .map(|(id, tree)| tree_record(*id, tree).into())
+                .chain(pieces),
         )
     }
 
@@ -355,6 +517,21 @@ impl Model {
     pub fn from_bytes(path: &Path, bytes: &[u8]) -> Result<Model> {
         let (raw, tree_inputs) = RawModel::parse_checked(path, bytes)?;
         let bad = |what: String| Error::bad_file(path, what);
+        if raw.header.model == ModelKind::PiecewiseLinear {
+            let pieces = raw
+                .records
+                .iter()
+                .enumerate()
+                .map(|(o, (_, record))| {
+                    piecewise_tree(record).map_err(|m| bad(format!("the tree of output {o}: {m}")))
+                })
+                .collect::<Result<Vec<_>>>()?;
+            return Ok(Model {
+                header: raw.header,
+                trees: Vec::new(),
+                pieces,
+            });
+        }
         let mut trees = Vec::with_capacity(raw.records.len());
         for (t, ((id, record), inputs)) in raw.records.iter().zip(tree_inputs).enumerate() {
             let leaves = u32_of(&record[12..16]) as usize;
@@ -379,6 +556,7 @@ impl Model {
         Ok(Model {
             header: raw.header,
             trees,
+            pieces: Vec::new(),
         })
     }
 }
@@ -424,6 +602,7 @@ mod tests {
                 shard: None,
             },
             trees,
+            pieces: Vec::new(),
         }
     }
 

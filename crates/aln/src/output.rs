@@ -17,6 +17,10 @@ pub enum Target {
     Level,
     /// Each variable's change of level, per output in tree order.
     Delta(Vec<DeltaSpec>),
+    /// Each variable's change of its real value in level spacings,
+    /// unrounded (on the circle for angles that wrap): what a
+    /// piecewise-linear model computes. Not decoded from bits.
+    Change,
 }
 
 impl Target {
@@ -25,6 +29,7 @@ impl Target {
         match self {
             Target::Level => "level",
             Target::Delta(_) => "delta",
+            Target::Change => "change",
         }
     }
 }
@@ -74,6 +79,9 @@ impl Output {
                             .map_err(|m| format!("`{}`: {m}", e.variable))
                     })
                     .collect()
+            }
+            Target::Change => {
+                Err("a piecewise-linear model's change is computed, not decoded from bits".into())
             }
         }
     }

@@ -14,7 +14,7 @@ use alnlab_codes::codes::{Code, Codec};
 use rayon::prelude::*;
 
 use crate::forest::Predictor;
-use crate::model::Model;
+use crate::model::{Model, Reads};
 use crate::threshold;
 use crate::tree::Tree;
 use crate::{ModelKind, Output};
@@ -29,8 +29,12 @@ pub struct Trained {
     pub codebook: Codebook,
     /// The learned variables' codecs, in the model's variable order.
     pub codecs: Vec<Codec>,
-    /// What decodes each learned variable from its trees' bits.
+    /// What decodes each learned variable from its trees' bits (none for
+    /// a piecewise-linear model).
     pub outputs: Vec<Output>,
+    /// A piecewise-linear model's outputs: which variable each predicts and
+    /// which it reads (none for other models).
+    pub reads: Vec<Reads>,
 }
 
 impl Trained {
@@ -50,21 +54,44 @@ impl Trained {
         let codebook = Codebook::read(codebook_path)?;
         let codecs = codebook.learned_codecs(codebook_path)?;
         let learned: Vec<_> = codebook.learned().collect();
-        let outputs = model.header.outputs_for(&learned).map_err(|m| {
+        let misfit = |m: String| {
             Error::bad_file(
                 model_path,
                 format!("does not fit the codebook {}: {m}", codebook_path.display()),
             )
-        })?;
+        };
+        let (outputs, reads) = if model.header.model == ModelKind::PiecewiseLinear {
+            let reads = model.header.piecewise_for(&learned).map_err(misfit)?;
+            for (o, (r, tree)) in reads.iter().zip(&model.pieces).enumerate() {
+                if r.inputs.len() != tree.inputs() {
+                    return Err(Error::bad_file(
+                        model_path,
+                        format!(
+                            "output {o}'s tree reads {} inputs, its header names {}",
+                            tree.inputs(),
+                            r.inputs.len()
+                        ),
+                    ));
+                }
+            }
+            (Vec::new(), reads)
+        } else {
+            (
+                model.header.outputs_for(&learned).map_err(misfit)?,
+                Vec::new(),
+            )
+        };
         Ok(Trained {
             model,
             codebook,
             codecs,
             outputs,
+            reads,
         })
     }
 
-    /// The runtime that predicts with it.
+    /// The runtime that predicts with a bit-forest or threshold model
+    /// (see [`Runtime::new`]).
     pub fn runtime(&self) -> Runtime<'_> {
         Runtime::new(&self.model, &self.codecs, &self.outputs)
     }
@@ -92,6 +119,10 @@ enum Compiled<'a> {
 impl<'a> Runtime<'a> {
     /// Prepares `model`, whose inputs are coded by `codecs` and whose
     /// trees' bits `outputs` decode.
+    ///
+    /// # Panics
+    /// On a piecewise-linear model, which predicts from real values with
+    /// [`crate::pwl::predict::Predictor`]: callers dispatch on the kind.
     pub fn new(model: &'a Model, codecs: &'a [Codec], outputs: &'a [Output]) -> Runtime<'a> {
         let compiled = match model.header.model {
             ModelKind::BitForest => {
@@ -114,6 +145,9 @@ impl<'a> Runtime<'a> {
                         .collect(),
                     voters,
                 }
+            }
+            ModelKind::PiecewiseLinear => {
+                panic!("a piecewise-linear model predicts with pwl::predict::Predictor")
             }
         };
         Runtime {

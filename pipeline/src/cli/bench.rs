@@ -277,15 +277,16 @@ pub fn execute(bench: Bench, quiet: bool) -> Result<()> {
             repeat,
             json,
         } => {
-            let (name, [model, codebook, levels, trajectory]) = run_artifacts(
+            let (name, [model, codebook, levels, pairs, trajectory]) = run_artifacts(
                 &run_dir,
                 variant.as_deref(),
-                ["model", "codebook", "levels", "trajectory"],
+                ["model", "codebook", "levels", "pairs", "trajectory"],
             )?;
             let figures = alnlab_evaluate::bench::on_data(
                 &model,
                 &codebook,
                 &levels,
+                &pairs,
                 &trajectory,
                 repeat as usize,
             )?;
@@ -306,6 +307,14 @@ pub fn execute(bench: Bench, quiet: bool) -> Result<()> {
                     f.threads,
                     spread(&f.aln_batched_all_threads_ns)
                 );
+                for (path, s) in f.pwl_one_row_one_thread_ns.iter().flatten() {
+                    println!("ALN one row, {path:13} {}", spread(s));
+                }
+                if let (Some(pieces), Some(per_box)) = (f.pwl_pieces, f.pwl_pieces_per_box) {
+                    println!(
+                        "  {pieces} pieces in all; a compiled box leaves {per_box:.1} pieces of a tree on average"
+                    );
+                }
                 if let Some(p) = &f.aln_phases_one_thread_ns {
                     println!(
                         "  of which (1 thread): coding inputs {:.0} ns, trees {:.0} ns, decoding {:.0} ns",

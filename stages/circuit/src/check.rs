@@ -136,7 +136,11 @@ mod tests {
             counter_bound: 7,
             shard: None,
         };
-        Model { header, trees }
+        Model {
+            header,
+            trees,
+            pieces: Vec::new(),
+        }
     }
 
     /// Random rows, the circuit measured on them against the software.

@@ -94,6 +94,13 @@ pub fn run(
     if trained.model.header.model == ModelKind::Threshold {
         return write(&path, None, provenance);
     }
+    if trained.model.header.model == ModelKind::PiecewiseLinear {
+        return Err(Error::Invalid(format!(
+            "{}: circuit.synthesize needs a bit-forest; a piecewise-linear model computes with \
+             real numbers, not gates",
+            model_path.display()
+        )));
+    }
     let (figures, rows) = measure_test_rows(
         &trained,
         model_path,

@@ -120,6 +120,13 @@ impl Circuit {
                     .into(),
             );
         }
+        if model.header.model == ModelKind::PiecewiseLinear {
+            return Err(
+                "a piecewise-linear model computes with real numbers (affine pieces under MIN and \
+                 MAX), not AND/OR gates; only bit-forests are exported"
+                    .into(),
+            );
+        }
         let idents: Vec<String> = names.iter().map(|n| ident(n)).collect();
         let mut seen = BTreeSet::new();
         for (name, id) in names.iter().zip(&idents) {

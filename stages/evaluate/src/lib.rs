@@ -1,13 +1,15 @@
 //! The test stage (paper §4.5, §4.7; DESIGN.md §6–7): loads the model,
-//! predicts the next level of every learned variable for every test row of
-//! `levels.parquet`, and scores it beside the baselines ([`baseline`]) on
-//! the same rows. Writes
-//! - `predictions.parquet`: per model (`aln`, `persistence`, `linear`, and
-//!   `simulator@<steps>/frame` for each re-simulation step of
-//!   [`resimulate`]), variable and test row: the true level, the predicted
-//!   level and the absolute error in levels, and whether the row was held
-//!   out of training (with the paper's split, test rows include training
-//!   rows);
+//! predicts the next level of every variable it predicts (every learned
+//! variable, or — a piecewise-linear model given the controls — all but
+//! the controls) for every test row of `levels.parquet`, and scores it
+//! beside the baselines on the same rows and variables. Writes
+//! - `predictions.parquet`: per model (`aln`; `persistence`; `linear`, the
+//!   robust linear fit of each variable's change from the real values
+//!   the model reads, [`piecewise`]; and `simulator@<steps>/frame` for each
+//!   re-simulation step of [`resimulate`]), variable and test row: the
+//!   true level, the predicted level and the absolute error in levels, and
+//!   whether the row was held out of training (with the paper's split, test
+//!   rows include training rows);
 //! - `timings.parquet`: ns per predicted state for each model, evaluation
 //!   path and thread count — every model on one thread, the ALN's batches
 //!   also on all threads — as the median of 5 runs interleaved across the
@@ -18,6 +20,8 @@
 //!   variable, horizon and start row.
 
 pub mod bench;
+mod peer;
+mod piecewise;
 mod predict;
 mod resimulate;
 mod rollout;
@@ -26,9 +30,10 @@ pub mod timing;
 use std::path::Path;
 use std::sync::Arc;
 
-use alnlab_aln::Output;
-use alnlab_aln::model::Model;
-use alnlab_aln::runtime::Trained;
+use alnlab_aln::model::{Model, Reads};
+use alnlab_aln::pwl::predict::{Predictor, real_values, states};
+use alnlab_aln::runtime::{Runtime, Trained};
+use alnlab_aln::{ModelKind, Output};
 use alnlab_codes::codes::Codec;
 use alnlab_codes::{Codebook, Entry, level_rows, split_rows};
 use alnlab_common::params::{self, Count, Fraction, ParamError};
@@ -44,8 +49,9 @@ use serde::{Deserialize, Serialize};
 
 use crate::timing::Timing;
 
-/// Version of what this stage writes (part of every cache key).
-pub const FORMAT_VERSION: u32 = 4;
+/// Version of what this stage writes (part of every cache key; 5: the
+/// robust linear baseline of the change, piecewise-linear models).
+pub const FORMAT_VERSION: u32 = 5;
 
 /// File name of the predictions table.
 pub const PREDICTIONS_FILE: &str = "predictions.parquet";
@@ -60,6 +66,7 @@ pub const ROLLOUT_FILE: &str = "rollout.parquet";
 pub struct Params {
     /// Rate limiting (§4.7): each decoded variable moves at most this
     /// fraction of its levels from its current level. Off when absent.
+    /// (Bit models only: a piecewise-linear model's change is not decoded.)
     pub rate_limit: Option<Fraction>,
     /// Closed-loop rollouts run this many steps (frames).
     pub horizon: Count,
@@ -69,7 +76,14 @@ pub struct Params {
     /// this many integration steps per frame, for each number given (empty:
     /// no such baseline).
     pub resimulate_steps: Vec<Count>,
+    /// The learned peer beside the ALN: gradient-boosted trees fitted to
+    /// the same rows and target (`boosted`, [`peer`]; a minute or so of
+    /// fitting on the paper's data).
+    pub peer: bool,
 }
+
+/// The learned peer's model name.
+pub const PEER: &str = "boosted";
 
 impl Default for Params {
     fn default() -> Self {
@@ -78,6 +92,7 @@ impl Default for Params {
             horizon: Count(10),
             rollout_starts: Count(200),
             resimulate_steps: vec![Count(10), Count(5), Count(2), Count(1)],
+            peer: false,
         }
     }
 }
@@ -118,6 +133,8 @@ pub(crate) struct Data {
     pub codebook: Codebook,
     pub codecs: Vec<Codec>,
     pub outputs: Vec<Output>,
+    /// A piecewise-linear model's outputs (none for a bit model).
+    pub reads: Vec<Reads>,
     pub levels: Table,
     levels_path: std::path::PathBuf,
 }
@@ -130,11 +147,13 @@ impl Data {
             codebook,
             codecs,
             outputs,
+            reads,
         } = Trained::read(model_path, codebook_path)?;
         Ok(Data {
             model,
             codecs,
             outputs,
+            reads,
             levels: Table::read(levels_path)?,
             levels_path: levels_path.to_path_buf(),
             codebook,
@@ -183,7 +202,8 @@ impl Data {
     }
 }
 
-/// Reads the model, codebook and levels, predicts, writes both tables.
+/// Reads the model, codebook, levels and real values, predicts, writes the
+/// three tables.
 #[allow(clippy::too_many_arguments)]
 pub fn run(
     params: &Params,
@@ -191,31 +211,83 @@ pub fn run(
     model_path: &Path,
     codebook_path: &Path,
     levels_path: &Path,
+    pairs_path: &Path,
     provenance: &Provenance,
     out_dir: &Path,
     progress: &dyn Progress,
 ) -> Result<()> {
     params.validate().map_err(|e| params::invalid("test", e))?;
     let data = Data::read(model_path, codebook_path, levels_path)?;
+    let pairs = Table::read(pairs_path)?;
+    if pairs.num_rows() != data.levels.num_rows() {
+        return Err(Error::bad_file(
+            pairs_path,
+            format!(
+                "has {} rows, but the levels {} made from it have {}",
+                pairs.num_rows(),
+                levels_path.display(),
+                data.levels.num_rows()
+            ),
+        ));
+    }
     let codecs = &data.codecs;
     let learned = data.learned();
-    let names: Vec<&str> = learned.iter().map(|e| e.variable.as_str()).collect();
     let test = data.test_rows()?;
     let train_rows = split_rows(&data.levels, "train")?;
-    let select = |side: &str, rows: &[usize]| data.select(side, rows);
+    let (real_x, real_y) = (
+        real_values(&pairs, "x", &learned)?,
+        real_values(&pairs, "y", &learned)?,
+    );
+    let test_states = states(&real_x, &test.rows);
+    let test_columns = pick_rows(&real_x, &test.rows);
+    let test_columns: Vec<&[f64]> = test_columns.iter().map(Vec::as_slice).collect();
+    let train_states = states(&real_x, &train_rows);
+    let piecewise = data.model.header.model == ModelKind::PiecewiseLinear;
+    // Every model is scored on the variables the model predicts.
+    let scored: Vec<usize> = if piecewise {
+        data.reads.iter().map(|r| r.variable).collect()
+    } else {
+        (0..learned.len()).collect()
+    };
+    let names: Vec<&str> = scored
+        .iter()
+        .map(|&v| learned[v].variable.as_str())
+        .collect();
 
     progress.start("test", 4, "steps");
     let windows = params.windows(codecs);
-    let predictor = alnlab_aln::runtime::Runtime::new(&data.model, codecs, &data.outputs);
     let pool = timing::one_thread();
-    let (aln, aln_paths) = predict::paths(&predictor, &test.x, windows.as_deref(), &pool);
+    let aln_model = if piecewise {
+        Aln::Piecewise(Predictor::new(
+            &data.model.pieces,
+            &data.reads,
+            &learned,
+            &train_states,
+        ))
+    } else {
+        Aln::Bits(Runtime::new(&data.model, codecs, &data.outputs))
+    };
+    let (aln, aln_paths) = match &aln_model {
+        Aln::Piecewise(predictor) => {
+            piecewise::paths("aln", predictor, &test_columns, &test_states, &pool)
+        }
+        Aln::Bits(runtime) => predict::paths(runtime, &test.x, windows.as_deref(), &pool),
+    };
     progress.advance(1);
-    let persistence = test.x.clone();
+    let persistence = pick(&test.x, &scored);
     progress.advance(1);
-    let levels_of: Vec<usize> = codecs.iter().map(Codec::levels).collect();
-    let linear =
-        alnlab_aln::linear::Linear::fit(&select("x", &train_rows)?, &select("y", &train_rows)?);
-    let (linear_levels, linear_path) = predict::linear(&linear, &test.x, &levels_of);
+    let linear_reads = linear_inputs(&data, &learned, &scored)?;
+    let linear_trees =
+        piecewise::robust_linear(&learned, &linear_reads, &real_x, &real_y, &train_rows);
+    let linear = Predictor::new(&linear_trees, &linear_reads, &learned, &train_states);
+    let (linear_levels, linear_paths) =
+        piecewise::paths("linear", &linear, &test_columns, &test_states, &pool);
+    let peer = params
+        .peer
+        .then(|| peer::Peer::fit(&learned, &scored, &real_x, &real_y, &train_rows));
+    let peer_levels = peer
+        .as_ref()
+        .map(|p| p.levels(&learned, &real_x, &test.rows));
     progress.advance(1);
 
     // The simulator re-stepping each test row's logged frame.
@@ -233,17 +305,31 @@ pub fn run(
         })
         .collect::<Result<_>>()?;
     let timings = {
-        let mut paths = aln_paths;
-        paths.push(linear_path);
-        paths.extend(
+        let mut timed = aln_paths;
+        timed.extend(linear_paths.into_iter().filter(|p| p.path == "batched"));
+        if let Some(peer) = &peer {
+            let (learned, x, rows, pool) = (&learned, &real_x, &test.rows, &pool);
+            timed.push(timing::Path {
+                model: PEER.into(),
+                path: "batched",
+                threads: 1,
+                states: rows.len(),
+                failed: 0,
+                run: Box::new(move || {
+                    std::hint::black_box(pool.install(|| peer.levels(learned, x, rows)));
+                }),
+            });
+        }
+        timed.extend(
             resimulated
                 .iter()
                 .map(|r| resimulate::path(r, &frames, &replays, &learned, &starts, &test.y)),
         );
-        timing::in_rounds(paths, timing::REPEATS)
+        timing::in_rounds(timed, timing::REPEATS)
     };
 
-    // Closed loop, from the true levels of spread-out test rows.
+    // Closed loop, from the true levels (real values) of spread-out test
+    // rows.
     let horizon = params.horizon.get();
     let truth = rollout::truth(
         &frames,
@@ -257,23 +343,51 @@ pub fn run(
         .iter()
         .map(|x| truth.starts.iter().map(|&k| x[k]).collect())
         .collect();
+    let start_rows: Vec<rollout::Start> = truth.starts.iter().map(|&k| starts[k]).collect();
+    let start_states = pick_rows(
+        &real_x,
+        &truth
+            .starts
+            .iter()
+            .map(|&k| test.rows[k])
+            .collect::<Vec<_>>(),
+    );
+    let roll_real = |variables: &[usize], step: &mut piecewise::Step| {
+        piecewise::roll(
+            variables,
+            &frames,
+            &learned,
+            &start_rows,
+            start_states.clone(),
+            horizon,
+            step,
+        )
+    };
+    let each = |levels: Vec<Vec<Vec<u16>>>| -> Vec<Vec<Vec<u16>>> {
+        levels.iter().map(|h| pick(h, &scored)).collect()
+    };
+    let aln_rolled = match &aln_model {
+        Aln::Piecewise(predictor) => roll_real(&scored, &mut piecewise::step_of(predictor)),
+        Aln::Bits(runtime) => each(rollout::roll(from.clone(), horizon, |x| {
+            runtime.levels(x, windows.as_deref())
+        })),
+    };
     let mut rolled = vec![
-        (
-            "aln".to_string(),
-            rollout::roll(from.clone(), horizon, |x| {
-                predictor.levels(x, windows.as_deref())
-            }),
-        ),
+        ("aln".to_string(), aln_rolled),
         (
             "persistence".to_string(),
-            rollout::roll(from.clone(), horizon, |x| x.to_vec()),
+            each(rollout::roll(from, horizon, |x| x.to_vec())),
         ),
         (
             "linear".to_string(),
-            rollout::roll(from, horizon, |x| linear.levels(x, &levels_of)),
+            roll_real(&scored, &mut piecewise::step_of(&linear)),
         ),
     ];
-    let start_rows: Vec<rollout::Start> = truth.starts.iter().map(|&k| starts[k]).collect();
+    if let Some(peer) = &peer {
+        let every: Vec<usize> = (0..start_rows.len()).collect();
+        let mut step = |state: &[Vec<f64>]| peer.next_values(&learned, state, &every);
+        rolled.push((PEER.to_string(), roll_real(&scored, &mut step)));
+    }
     for (steps, r) in params.resimulate_steps.iter().zip(&resimulated) {
         let levels = resimulate::rollout(
             &frames,
@@ -283,24 +397,46 @@ pub fn run(
             &truth.levels,
             steps.0,
         )?;
-        rolled.push((r.name.clone(), levels));
+        rolled.push((r.name.clone(), each(levels)));
     }
     progress.advance(1);
 
+    let resimulated_levels: Vec<Vec<Vec<u16>>> = resimulated
+        .iter()
+        .map(|r| pick(&r.levels, &scored))
+        .collect();
     let mut models: Vec<(&str, &Vec<Vec<u16>>)> = vec![
         ("aln", &aln),
         ("persistence", &persistence),
         ("linear", &linear_levels),
     ];
-    models.extend(resimulated.iter().map(|r| (r.name.as_str(), &r.levels)));
+    if let Some(levels) = &peer_levels {
+        models.push((PEER, levels));
+    }
+    models.extend(
+        resimulated
+            .iter()
+            .zip(&resimulated_levels)
+            .map(|(r, levels)| (r.name.as_str(), levels)),
+    );
+    let scored_test = TestRows {
+        rows: test.rows.clone(),
+        held_out: test.held_out.clone(),
+        x: Vec::new(),
+        y: pick(&test.y, &scored),
+    };
     write_predictions(
         &out_dir.join(PREDICTIONS_FILE),
         &names,
-        &test,
+        &scored_test,
         &models,
         provenance,
     )?;
     let start_rows: Vec<u32> = truth.starts.iter().map(|&k| test.rows[k] as u32).collect();
+    let truth = rollout::Truth {
+        levels: each(truth.levels),
+        starts: truth.starts,
+    };
     let rolled: Vec<(&str, &Vec<Vec<Vec<u16>>>)> = rolled
         .iter()
         .map(|(name, levels)| (name.as_str(), levels))
@@ -314,6 +450,54 @@ pub fn run(
         provenance,
     )?;
     write_timings(&out_dir.join(TIMINGS_FILE), &timings, provenance)
+}
+
+/// The model, made ready: a bit model's runtime, or a piecewise-linear
+/// model's predictor.
+enum Aln<'m> {
+    Bits(Runtime<'m>),
+    Piecewise(Predictor<'m>),
+}
+
+/// The rows `rows` of every column of `all`.
+fn pick_rows(all: &[Vec<f64>], rows: &[usize]) -> Vec<Vec<f64>> {
+    all.iter()
+        .map(|column| rows.iter().map(|&r| column[r]).collect())
+        .collect()
+}
+
+/// The columns `scored` of `all`, in that order.
+fn pick<T: Clone>(all: &[Vec<T>], scored: &[usize]) -> Vec<Vec<T>> {
+    scored.iter().map(|&v| all[v].clone()).collect()
+}
+
+/// What the robust linear baseline of each scored variable reads: what
+/// the model's tree for it reads (a piecewise-linear model), or the
+/// variables a bit model's trees for it read when it reads a few, or
+/// every learned variable — the variable itself always among them.
+fn linear_inputs(data: &Data, learned: &[&Entry], scored: &[usize]) -> Result<Vec<Reads>> {
+    if !data.reads.is_empty() {
+        return Ok(data.reads.clone());
+    }
+    let index = |name: &String| learned.iter().position(|e| e.variable == *name);
+    scored
+        .iter()
+        .enumerate()
+        .map(|(o, &v)| {
+            let mut inputs: Vec<usize> = match data.model.header.reads.get(o) {
+                Some(names) => names.iter().filter_map(index).collect(),
+                None => (0..learned.len()).collect(),
+            };
+            if !inputs.contains(&v) {
+                inputs.push(v);
+            }
+            inputs.sort_unstable();
+            Ok(Reads {
+                variable: v,
+                inputs,
+            })
+        })
+        .collect()
 }
 
 /// `rollout.parquet`: one row per model, variable, horizon and start.

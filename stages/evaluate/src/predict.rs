@@ -8,7 +8,6 @@
 //! levels: the trees, the votes and the decoding (with rate limiting, when
 //! on, as `decode_near` around the current level).
 
-use alnlab_aln::linear::Linear;
 use alnlab_aln::runtime::Runtime;
 
 use crate::timing::Path;
@@ -73,26 +72,6 @@ pub fn paths<'s>(
     (levels, paths)
 }
 
-/// The linear baseline's levels `[variable][row]`, and its one-row path
-/// to time.
-pub fn linear<'s>(
-    model: &'s Linear,
-    x: &'s [Vec<u16>],
-    levels: &'s [usize],
-) -> (Vec<Vec<u16>>, Path<'s>) {
-    let path = Path {
-        model: "linear".into(),
-        path: "single",
-        threads: 1,
-        states: x.first().map_or(0, Vec::len),
-        failed: 0,
-        run: Box::new(move || {
-            std::hint::black_box(model.levels(x, levels));
-        }),
-    };
-    (model.levels(x, levels), path)
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -152,7 +131,15 @@ mod tests {
             shard: None,
         };
         let trees = trained.into_iter().map(|t| (t.id, t.tree)).collect();
-        (Model { header, trees }, codec)
+        let pieces = Vec::new();
+        (
+            Model {
+                header,
+                trees,
+                pieces,
+            },
+            codec,
+        )
     }
 
     #[test]

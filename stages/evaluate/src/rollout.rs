@@ -62,8 +62,14 @@ impl<'a> LoggedFrames<'a> {
     /// The level of learned variable `v` in a frame of `scene`, if the scene
     /// has the variable.
     pub fn level(&self, scene: &str, frame: &StateFrame, v: usize, entry: &Entry) -> Option<u16> {
+        Some(entry.quantizer.level(self.value(scene, frame, v)?).0)
+    }
+
+    /// The real value of learned variable `v` in a frame of `scene`, if
+    /// the scene has the variable.
+    pub fn value(&self, scene: &str, frame: &StateFrame, v: usize) -> Option<f64> {
         let column = self.columns.get(scene)?[v]?;
-        Some(entry.quantizer.level(frame.variables[column]).0)
+        Some(frame.variables[column])
     }
 }
 

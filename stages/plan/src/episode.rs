@@ -45,6 +45,9 @@ pub struct Step {
     /// The planner's predicted cost of the sequence it chose (summed over
     /// its horizon; NaN for the references).
     pub predicted: f64,
+    /// The spread of the candidates' predicted costs at the decision (NaN
+    /// for the references): 0 when the model cannot tell torques apart.
+    pub spread: f64,
     /// Seconds the decision took (0 for the references).
     pub seconds: f64,
     /// The task's variables (in the order of [`Cost::variables`]) in the
@@ -88,6 +91,7 @@ pub fn run(
         torques: vec![0.0; 3 * hinges],
         cost: 0.0,
         predicted: f64::NAN,
+        spread: f64::NAN,
         seconds: 0.0,
         reached: vec![0.0; cost.variables().count()],
         expected: vec![f64::NAN; cost.variables().count()],
@@ -107,6 +111,7 @@ pub fn run(
                 let clock = Instant::now();
                 model.start(&state, &frame.variables);
                 step.predicted = planner.decide(&mut **model, *sequences, &mut action);
+                step.spread = planner.cost_spread();
                 step.seconds = clock.elapsed().as_secs_f64();
                 model.predict(&action, &mut step.expected);
                 drive(&mut runner, &action, &mut torques);

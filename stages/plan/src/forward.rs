@@ -9,8 +9,13 @@
 //! - [`Learned`]: a model of levels — the trained ALN ([`Runtime`]) or the
 //!   linear baseline ([`LinearStep`]) — fed the planner's torques as the
 //!   hinge torque variables' levels and its own predictions after that.
+//! - [`Piecewise`]: a piecewise-linear ALN, which reads real values: fed the
+//!   planner's torques as they are — so that its predictions move with
+//!   every torque, not only with a torque's level — and its own predicted
+//!   values after that; the cost read from those values directly.
 
 use alnlab_aln::linear::Linear;
+use alnlab_aln::pwl::predict::{Path, Predictor, Scratch};
 use alnlab_aln::runtime::Runtime;
 use alnlab_codes::Entry;
 use alnlab_common::state_log::StateFrame;
@@ -193,42 +198,8 @@ impl<'a, S: LevelStep> Learned<'a, S> {
         p: &Prepared,
         cost: Cost,
     ) -> Result<Learned<'a, S>, String> {
+        let (in_scene, torques, costed) = wiring(&learned, p, &cost)?;
         let names = &p.layout.variables;
-        let in_scene = learned
-            .iter()
-            .map(|e| {
-                names.iter().position(|n| *n == e.variable).ok_or_else(|| {
-                    format!("scene `{}` has no variable `{}`", p.scene.name, e.variable)
-                })
-            })
-            .collect::<Result<Vec<_>, String>>()?;
-        let find = |name: &str| learned.iter().position(|e| e.variable == name);
-        let hinges = p.model.len() - 1;
-        let torques = (0..3 * hinges)
-            .filter_map(|k| {
-                let name = format!("g.{}.{}", k / 3 + 2, ["x", "y", "z"][k % 3]);
-                find(&name).map(|v| (k, v))
-            })
-            .collect::<Vec<_>>();
-        if torques.is_empty() {
-            return Err(format!(
-                "the model learns no hinge torque (g.N.x|y|z) of scene `{}`: it cannot be told \
-                 the planner's torques",
-                p.scene.name
-            ));
-        }
-        let costed = cost
-            .variables()
-            .map(|s| {
-                let v = in_scene.iter().position(|&i| i == s).ok_or_else(|| {
-                    format!(
-                        "the model does not learn `{}`, which the task reads",
-                        names[s]
-                    )
-                })?;
-                Ok((v, s))
-            })
-            .collect::<Result<Vec<_>, String>>()?;
         Ok(Learned {
             step,
             start: vec![0; learned.len()],
@@ -285,6 +256,161 @@ impl<S: LevelStep> Forward for Learned<'_, S> {
             for (i, cost) in costs.iter_mut().enumerate() {
                 for &(v, s) in &self.costed {
                     self.values[s] = self.entries[v].quantizer.value(usize::from(x[v][i]));
+                }
+                *cost += self.cost.of(&self.values);
+            }
+        }
+    }
+}
+
+/// The learned variables' indices in the scene, the (torque component,
+/// learned variable) pairs that take the planner's torques, and the
+/// (learned variable, scene variable) pairs the cost reads; an error names
+/// what the model lacks.
+type Wiring = (Vec<usize>, Vec<(usize, usize)>, Vec<(usize, usize)>);
+
+fn wiring(learned: &[&Entry], p: &Prepared, cost: &Cost) -> Result<Wiring, String> {
+    let names = &p.layout.variables;
+    let in_scene = learned
+        .iter()
+        .map(|e| {
+            names
+                .iter()
+                .position(|n| *n == e.variable)
+                .ok_or_else(|| format!("scene `{}` has no variable `{}`", p.scene.name, e.variable))
+        })
+        .collect::<Result<Vec<_>, String>>()?;
+    let find = |name: &str| learned.iter().position(|e| e.variable == name);
+    let hinges = p.model.len() - 1;
+    let torques = (0..3 * hinges)
+        .filter_map(|k| {
+            let name = format!("g.{}.{}", k / 3 + 2, ["x", "y", "z"][k % 3]);
+            find(&name).map(|v| (k, v))
+        })
+        .collect::<Vec<_>>();
+    if torques.is_empty() {
+        return Err(format!(
+            "the model learns no hinge torque (g.N.x|y|z) of scene `{}`: it cannot be told \
+             the planner's torques",
+            p.scene.name
+        ));
+    }
+    let costed = cost
+        .variables()
+        .map(|s| {
+            let v = in_scene.iter().position(|&i| i == s).ok_or_else(|| {
+                format!(
+                    "the model does not learn `{}`, which the task reads",
+                    names[s]
+                )
+            })?;
+            Ok((v, s))
+        })
+        .collect::<Result<Vec<_>, String>>()?;
+    Ok((in_scene, torques, costed))
+}
+
+/// A piecewise-linear ALN as a forward model, in real values: the true
+/// state's learned variables, each frame's torques set as the hinge torque
+/// variables' values, the predicted variables advanced (compiled trees, one
+/// candidate at a time, nothing allocated), and the task's variables costed
+/// at the predicted values.
+pub struct Piecewise<'a> {
+    predictor: &'a Predictor<'a>,
+    scratch: Scratch<'a>,
+    /// Per learned variable, its index among the scene's variables.
+    in_scene: Vec<usize>,
+    torques: Vec<(usize, usize)>,
+    costed: Vec<(usize, usize)>,
+    /// The predicted variables' indices among the learned ones.
+    predicted: Vec<usize>,
+    cost: Cost,
+    start: Vec<f64>,
+    state: Vec<f64>,
+    next: Vec<f64>,
+    values: Vec<f64>,
+}
+
+impl<'a> Piecewise<'a> {
+    /// `predictor` over the `learned` codebook entries, in scene `p`,
+    /// costing with `cost`. An error names a task variable or a hinge
+    /// torque the model does not read.
+    pub fn new(
+        predictor: &'a Predictor<'a>,
+        learned: &[&Entry],
+        p: &Prepared,
+        cost: Cost,
+    ) -> Result<Piecewise<'a>, String> {
+        let (in_scene, torques, costed) = wiring(learned, p, &cost)?;
+        let predicted: Vec<usize> = predictor.variables().collect();
+        if let Some(&(_, s)) = costed
+            .iter()
+            .find(|(v, _)| !predicted.contains(v) && !torques.iter().any(|(_, t)| t == v))
+        {
+            return Err(format!(
+                "the model does not predict `{}`, which the task reads",
+                p.layout.variables[s]
+            ));
+        }
+        Ok(Piecewise {
+            scratch: predictor.scratch(),
+            next: vec![0.0; predicted.len()],
+            predicted,
+            predictor,
+            start: vec![0.0; learned.len()],
+            state: vec![0.0; learned.len()],
+            values: vec![0.0; p.layout.variables.len()],
+            in_scene,
+            torques,
+            costed,
+            cost,
+        })
+    }
+
+    /// One frame from `self.state` under the torques `frame` (D values).
+    fn step(&mut self, frame: &[f64]) {
+        for &(k, v) in &self.torques {
+            self.state[v] = frame[k];
+        }
+        self.predictor.next_values(
+            &self.state,
+            Path::Compiled,
+            &mut self.scratch,
+            &mut self.next,
+        );
+        for (&v, &x) in self.predicted.iter().zip(&self.next) {
+            self.state[v] = x;
+        }
+    }
+}
+
+impl Model for Piecewise<'_> {
+    fn start(&mut self, _state: &State, variables: &[f64]) {
+        for (value, &s) in self.start.iter_mut().zip(&self.in_scene) {
+            *value = variables[s];
+        }
+    }
+
+    fn predict(&mut self, action: &[f64], out: &mut [f64]) {
+        self.state.copy_from_slice(&self.start);
+        self.step(action);
+        for (o, &(v, _)) in out.iter_mut().zip(&self.costed) {
+            *o = self.state[v];
+        }
+    }
+}
+
+impl Forward for Piecewise<'_> {
+    fn costs(&mut self, actions: &[f64], horizon: usize, costs: &mut [f64]) {
+        let len = actions.len() / costs.len().max(1);
+        let d = len / horizon.max(1);
+        for (sequence, cost) in actions.chunks(len.max(1)).zip(costs.iter_mut()) {
+            self.state.copy_from_slice(&self.start);
+            *cost = 0.0;
+            for frame in sequence.chunks(d.max(1)).take(horizon) {
+                self.step(frame);
+                for &(v, s) in &self.costed {
+                    self.values[s] = self.state[v];
                 }
                 *cost += self.cost.of(&self.values);
             }

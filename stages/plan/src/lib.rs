@@ -16,7 +16,8 @@
 //! thread's and episodes pair across models. Writes
 //! - `plan.parquet`: per task, model, planner, budget, episode and frame,
 //!   the torques executed, the task's cost of the frame reached, the cost
-//!   the planner predicted for its plan, and the task's variables in the
+//!   the planner predicted for its plan and the spread of its candidates'
+//!   predicted costs (0: the model cannot tell torques apart), and the task's variables in the
 //!   frame reached beside those its model predicted for the torques chosen;
 //! - `planning.parquet`: per task, model, planner, budget and episode, the
 //!   summed cost, the evaluations per decision, the decision time in ms
@@ -38,7 +39,9 @@ use std::collections::BTreeMap;
 use std::path::Path;
 use std::sync::Arc;
 
+use alnlab_aln::ModelKind;
 use alnlab_aln::linear::Linear;
+use alnlab_aln::pwl::predict::Predictor;
 use alnlab_aln::runtime::Trained;
 use alnlab_codes::{level_rows, split_rows};
 use alnlab_common::hash::mix_seed;
@@ -58,12 +61,13 @@ use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
 use crate::episode::Policy;
-use crate::forward::{Learned, LinearStep, Model, Simulator};
+use crate::forward::{Learned, LinearStep, Model, Piecewise, Simulator};
 use crate::planner::{Bounds, CemSettings, Planner, PlannerKind};
 use crate::task::{Cost, Task};
 
-/// Version of what this stage writes (part of every cache key).
-pub const FORMAT_VERSION: u32 = 3;
+/// Version of what this stage writes (part of every cache key; 4: the
+/// spread of predicted costs).
+pub const FORMAT_VERSION: u32 = 4;
 /// File name of the per-frame table.
 pub const PLAN_FILE: &str = "plan.parquet";
 /// File name of the per-episode table.
@@ -219,6 +223,7 @@ struct FrameRows {
     torques: Vec<Vec<f64>>,
     cost: Vec<f64>,
     predicted: Vec<f64>,
+    spread: Vec<f64>,
     variables: Vec<Vec<String>>,
     reached: Vec<Vec<f64>>,
     expected: Vec<Vec<f64>>,
@@ -362,11 +367,23 @@ pub fn run(
         let levels = Table::read(levels_path)?;
         let learned: Vec<_> = trained.codebook.learned().collect();
         let train_rows = split_rows(&levels, "train")?;
-        let linear = Linear::fit(
-            &level_rows(&levels, "x", &learned, &train_rows)?,
-            &level_rows(&levels, "y", &learned, &train_rows)?,
-        );
+        let x_train = level_rows(&levels, "x", &learned, &train_rows)?;
+        let linear = Linear::fit(&x_train, &level_rows(&levels, "y", &learned, &train_rows)?);
         let level_counts: Vec<usize> = trained.codecs.iter().map(|c| c.levels()).collect();
+        // A piecewise-linear model reads real values; its compiled boxes
+        // are cut where the training rows lie (their levels' values: the
+        // cuts decide speed, never a prediction).
+        let piecewise = (trained.model.header.model == ModelKind::PiecewiseLinear).then(|| {
+            let points: Vec<f64> = (0..train_rows.len())
+                .flat_map(|r| {
+                    learned
+                        .iter()
+                        .zip(&x_train)
+                        .map(move |(e, column)| e.quantizer.value(usize::from(column[r])))
+                })
+                .collect();
+            Predictor::new(&trained.model.pieces, &trained.reads, &learned, &points)
+        });
 
         let models = params.models.len() + params.simulator_steps.len();
         let per_task = 2 + params.planners.len() * models * params.budgets.len();
@@ -406,10 +423,21 @@ pub fn run(
                     let (name, model): (&str, Box<dyn Model>) = match kind {
                         LearnedKind::Aln => (
                             "aln",
-                            Box::new(
-                                Learned::new(trained.runtime(), learned.clone(), p, cost.clone())
+                            match &piecewise {
+                                Some(predictor) => Box::new(
+                                    Piecewise::new(predictor, &learned, p, cost.clone())
+                                        .map_err(|m| Error::Invalid(format!("[plan] aln: {m}")))?,
+                                ),
+                                None => Box::new(
+                                    Learned::new(
+                                        trained.runtime(),
+                                        learned.clone(),
+                                        p,
+                                        cost.clone(),
+                                    )
                                     .map_err(|m| Error::Invalid(format!("[plan] aln: {m}")))?,
-                            ),
+                                ),
+                            },
                         ),
                         LearnedKind::Linear => (
                             "linear",
@@ -555,6 +583,7 @@ impl TaskRun<'_> {
                 frames.torques.push(step.torques.clone());
                 frames.cost.push(step.cost);
                 frames.predicted.push(step.predicted);
+                frames.spread.push(step.spread);
                 frames.variables.push(self.variables.clone());
                 frames.reached.push(step.reached.clone());
                 frames.expected.push(step.expected.clone());
@@ -677,6 +706,10 @@ fn write_frames(path: &Path, rows: &FrameRows, provenance: &Provenance) -> Resul
         (
             "predicted",
             Arc::new(Float64Array::from(rows.predicted.clone())),
+        ),
+        (
+            "predicted_spread",
+            Arc::new(Float64Array::from(rows.spread.clone())),
         ),
         ("variables", Arc::new(string_lists(&rows.variables))),
         ("reached", Arc::new(f64_lists(&rows.reached))),

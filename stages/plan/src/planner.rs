@@ -89,6 +89,10 @@ pub struct Planner {
     mean: Vec<f64>,
     spread: Vec<f64>,
     order: Vec<usize>,
+    /// The last decision's spread of predicted costs: the largest less the
+    /// least finite cost among its first candidates (0 when the model gives
+    /// every candidate the same cost).
+    cost_spread: f64,
 }
 
 impl Planner {
@@ -117,6 +121,7 @@ impl Planner {
             costs: vec![0.0; max_sequences.max(1)],
             mean: vec![0.0; horizon * d],
             spread: vec![0.0; horizon * d],
+            cost_spread: 0.0,
             order: Vec::with_capacity(max_sequences.max(1)),
             bounds,
         }
@@ -147,6 +152,7 @@ impl Planner {
                     self.horizon,
                     &mut self.costs[..n],
                 );
+                self.cost_spread = spread_of(&self.costs[..n]);
                 let i = argmin(&self.costs[..n]);
                 self.best
                     .copy_from_slice(&self.candidates[i * len..(i + 1) * len]);
@@ -172,7 +178,7 @@ impl Planner {
             *s = (self.bounds.high[c] - self.bounds.low[c]) / 2.0;
         }
         let mut best_cost = f64::INFINITY;
-        for _ in 0..rounds {
+        for round in 0..rounds {
             // The carried-over plan (first round) or the mean so far (later
             // rounds) is tried as it is; the rest are drawn around the mean.
             self.candidates[..len].copy_from_slice(&self.mean);
@@ -185,6 +191,9 @@ impl Planner {
             }
             let costs = &mut self.costs[..per_round];
             model.costs(&self.candidates[..per_round * len], self.horizon, costs);
+            if round == 0 {
+                self.cost_spread = spread_of(costs);
+            }
             self.order.clear();
             self.order.extend(0..per_round);
             let costs = &self.costs[..per_round];
@@ -209,6 +218,24 @@ impl Planner {
         }
         best_cost
     }
+}
+
+impl Planner {
+    /// The spread of predicted costs at the last decision: the largest
+    /// less the least finite cost of its first candidates (for the CEM, its
+    /// first round's, drawn over the whole range).
+    pub fn cost_spread(&self) -> f64 {
+        self.cost_spread
+    }
+}
+
+/// The largest less the least finite value (0 when none or one).
+fn spread_of(costs: &[f64]) -> f64 {
+    let finite = costs.iter().copied().filter(|c| c.is_finite());
+    let (lo, hi) = finite.fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), c| {
+        (lo.min(c), hi.max(c))
+    });
+    if hi >= lo { hi - lo } else { 0.0 }
 }
 
 /// The index of the lowest value (the first of equals).

@@ -56,6 +56,9 @@ const VARIANT_MARKERS: [Marker; 4] = [
 const PERSISTENCE: RGBColor = RGBColor(0, 0, 0);
 const LINEAR: RGBColor = RGBColor(0x77, 0x77, 0x77);
 const SIMULATOR: RGBColor = RGBColor(0x99, 0x66, 0x33);
+/// The learned peer (gradient-boosted trees): dark teal, dashed like a
+/// baseline.
+const BOOSTED: RGBColor = RGBColor(0x00, 0x66, 0x66);
 /// The planning references: the random controller, and the real-time line.
 const RANDOM_TORQUES: RGBColor = RGBColor(0xDD, 0x44, 0x00);
 const REAL_TIME: RGBColor = RGBColor(0xAA, 0xAA, 0xAA);
@@ -95,6 +98,7 @@ pub fn style_of(model: &str, variant: usize) -> Style {
         "random torques" => dashed(RANDOM_TORQUES, Marker::Cross),
         "real time" => dashed(REAL_TIME, Marker::Plus),
         "linear" => dashed(LINEAR, Marker::Triangle),
+        "boosted" => dashed(BOOSTED, Marker::Circle),
         _ => match simulator_steps(model) {
             Some(steps) => dashed(
                 SIMULATOR,

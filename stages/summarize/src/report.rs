@@ -268,6 +268,8 @@ impl Hardware {
         match self.kind {
             ModelKind::BitForest => u64::from(self.max_depth) + 2 * self.max_width as u64,
             ModelKind::Threshold => u64::from(self.max_depth) * u64::from(self.levels_steps),
+            // Arithmetic, not gates: no estimate in gate delays.
+            ModelKind::PiecewiseLinear => 0,
         }
     }
 }
@@ -400,7 +402,7 @@ fn load(info: &VariantInfo) -> Result<Loaded<'_>> {
     // bit, or those of the variables it reads), and a threshold tree's
     // candidate.
     let candidate = match model.header.model {
-        ModelKind::BitForest => 0,
+        ModelKind::BitForest | ModelKind::PiecewiseLinear => 0,
         ModelKind::Threshold => max_width,
     };
     let literals_of = |variable: usize| {
@@ -432,7 +434,10 @@ fn load(info: &VariantInfo) -> Result<Loaded<'_>> {
         .iter()
         .map(|(_, t)| 2 * (t.leaves() - 1) + std::mem::size_of_val(t.literals()))
         .sum();
-    let description = describe(&model.header, model.trees.len(), coverage.leaves);
+    let description = match model.header.model {
+        ModelKind::PiecewiseLinear => describe_piecewise(&model),
+        _ => describe(&model.header, model.trees.len(), coverage.leaves),
+    };
     let level_si = codebook
         .learned()
         .map(|e| {
@@ -515,6 +520,10 @@ pub(crate) fn read_timings(path: &Path) -> Result<Vec<Timing>> {
 /// (1-based).
 pub(crate) fn read_training(path: &Path) -> Result<Vec<(f64, f64)>> {
     let log = Table::read(path)?;
+    // A piecewise-linear model's log has rounds, not epochs of bit errors.
+    if log.column::<UInt32Array>("round").is_ok() {
+        return Ok(Vec::new());
+    }
     let epochs = log.column::<UInt32Array>("epoch")?.values();
     let errors = log.column::<UInt64Array>("errors")?.values();
     let mut per_epoch: Vec<(u64, u64)> = Vec::new();
@@ -547,6 +556,7 @@ fn describe(header: &Header, trees: usize, leaves: usize) -> String {
     let kind = match header.model {
         ModelKind::BitForest => "a bit-forest",
         ModelKind::Threshold => "a threshold-predicate model (§6)",
+        ModelKind::PiecewiseLinear => "a piecewise-linear ALN",
     };
     let mut text = format!("{kind} of {trees} trees of {leaves} leaves");
     if header.vote > 1 {
@@ -554,6 +564,7 @@ fn describe(header: &Header, trees: usize, leaves: usize) -> String {
     }
     match &header.target {
         Target::Level => text.push_str("; it learns each variable's next level"),
+        Target::Change => {}
         Target::Delta(specs) => {
             let ks = specs.iter().map(|s| s.k);
             let (lo, hi) = (ks.clone().min().unwrap_or(0), ks.max().unwrap_or(0));
@@ -576,6 +587,32 @@ fn describe(header: &Header, trees: usize, leaves: usize) -> String {
         );
     }
     text
+}
+
+/// What a piecewise-linear model is, in a sentence: its trees, their
+/// pieces and MIN/MAX nodes, what they learn and read.
+fn describe_piecewise(model: &Model) -> String {
+    let pieces: Vec<usize> = model.pieces.iter().map(|t| t.pieces()).collect();
+    let (mins, maxes) = model
+        .pieces
+        .iter()
+        .map(|t| t.operators())
+        .fold((0, 0), |(a, b), (m, x)| (a + m, b + x));
+    let most = model.header.reads.iter().map(Vec::len).max().unwrap_or(0);
+    format!(
+        "a piecewise-linear ALN: {} MIN/MAX trees over {} affine pieces in all (from {} to {} \
+         a tree; {mins} MIN and {maxes} MAX nodes); each learns its variable's change of real \
+         value in level spacings from at most {most} of the current state's real values{}",
+        pieces.len(),
+        pieces.iter().sum::<usize>(),
+        pieces.iter().min().unwrap_or(&0),
+        pieces.iter().max().unwrap_or(&0),
+        if model.header.outputs.len() < model.header.inputs {
+            "; the controller's torques are given, not predicted"
+        } else {
+            ""
+        }
+    )
 }
 
 /// (mean, 95th percentile) of a model's errors, averaged over the variables.

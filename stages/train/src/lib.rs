@@ -12,6 +12,7 @@
 pub mod bench;
 pub mod forest;
 pub mod learn;
+pub mod piecewise;
 pub mod pwl;
 pub mod select;
 pub mod shard;
@@ -37,8 +38,9 @@ use alnlab_aln::tree::TreeSpec;
 use alnlab_aln::{ModelKind, Output, Target};
 use alnlab_codes::bits::Columns;
 
-/// Version of what this stage writes (part of every cache key).
-pub const FORMAT_VERSION: u32 = 5;
+/// Version of what this stage writes (part of every cache key; 6: model
+/// format 5, piecewise-linear models).
+pub const FORMAT_VERSION: u32 = 6;
 /// File name of the model.
 pub const MODEL_FILE: &str = "model.aln";
 /// File name of the training log table.
@@ -48,7 +50,7 @@ pub const TRAINING_FILE: &str = "training.parquet";
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct Params {
-    /// `bit-forest` or `threshold`.
+    /// `bit-forest`, `threshold` or `piecewise-linear`.
     pub model: ModelKind,
     /// Leaves per tree, a power of two (paper: 8192).
     pub leaves: Count,
@@ -77,6 +79,23 @@ pub struct Params {
     /// the highest mutual information with its target on the training rows
     /// ([`select`]). Absent: every input.
     pub informative_inputs: Option<Count>,
+    /// Whether the controller's torques g are `learned` like every other
+    /// variable or `given`: read as inputs, never predicted (as a planner
+    /// gives them). `given` needs the piecewise-linear model.
+    pub controls: Controls,
+    /// How a piecewise-linear model's trees are trained.
+    pub pwl: piecewise::PwlParams,
+}
+
+/// Whether the controls are predicted (the `controls` key).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Controls {
+    /// Every learned variable is predicted, the controls too.
+    #[default]
+    Learned,
+    /// The controls are inputs only.
+    Given,
 }
 
 /// What the trees learn (the `target` key).
@@ -105,6 +124,8 @@ impl Default for Params {
             delta_code: Code::Gray,
             delta_quantile: Fraction(0.99),
             informative_inputs: None,
+            controls: Controls::Learned,
+            pwl: piecewise::PwlParams::default(),
         }
     }
 }
@@ -131,6 +152,17 @@ impl Params {
                 format!("expected at most 127, found {}", self.counter_bound.0),
             ));
         }
+        if self.controls == Controls::Given && self.model != ModelKind::PiecewiseLinear {
+            return Err((
+                "controls".into(),
+                format!(
+                    "`given` needs model = \"piecewise-linear\"; a {} predicts every learned \
+                     variable",
+                    self.model.name()
+                ),
+            ));
+        }
+        self.pwl.validate()?;
         if self.initial_spread.0 > self.counter_bound.0 {
             return Err((
                 "initial_spread".into(),
@@ -153,7 +185,8 @@ impl Params {
     }
 }
 
-/// Reads the codebook and levels, trains `shard`'s trees ([`Shard::ALL`]
+/// Reads the codebook and levels (and, for a piecewise-linear model, the
+/// real values in `pairs.parquet`), trains `shard`'s trees ([`Shard::ALL`]
 /// for the whole forest), writes the model (a partial one for a part) and
 /// the log.
 #[allow(clippy::too_many_arguments)]
@@ -163,6 +196,7 @@ pub fn run(
     shard: Shard,
     codebook_path: &Path,
     levels_path: &Path,
+    pairs_path: &Path,
     provenance: &Provenance,
     out_dir: &Path,
     progress: &dyn Progress,
@@ -181,6 +215,63 @@ pub fn run(
     let rows = split_rows(&levels, "train")?;
     if rows.is_empty() {
         return Err(Error::bad_file(levels_path, "has no training rows"));
+    }
+    if params.model == ModelKind::PiecewiseLinear {
+        if shard.is_part() {
+            return Err(Error::Invalid(
+                "a piecewise-linear model trains in one process: its trees are few; run \
+                 without --train-shard"
+                    .into(),
+            ));
+        }
+        let pairs = Table::read(pairs_path)?;
+        let predicted = learned
+            .iter()
+            .filter(|e| !(params.controls == Controls::Given && piecewise::is_control(&e.variable)))
+            .count();
+        progress.start("train", predicted as u64, "trees");
+        let tick = || progress.advance(1);
+        let trained = piecewise::train(
+            &params.pwl,
+            params.informative_inputs.map(|c| c.get()),
+            params.controls == Controls::Given,
+            seed,
+            &learned,
+            &levels,
+            &pairs,
+            pairs_path,
+            &rows,
+            &tick,
+        )?;
+        let model = Model {
+            header: Header {
+                codebook_sha256: sha256_file(codebook_path)?,
+                params: serde_json::to_value(params).expect("parameters serialize"),
+                model: params.model,
+                target: Target::Change,
+                inputs: learned.len(),
+                outputs: trained
+                    .iter()
+                    .map(|t| (learned[t.variable].variable.clone(), t.tree.pieces()))
+                    .collect(),
+                reads: trained
+                    .iter()
+                    .map(|t| {
+                        t.reads
+                            .iter()
+                            .map(|&u| learned[u].variable.clone())
+                            .collect()
+                    })
+                    .collect(),
+                vote: 1,
+                counter_bound: 0,
+                shard: None,
+            },
+            trees: Vec::new(),
+            pieces: trained.iter().map(|t| t.tree.clone()).collect(),
+        };
+        model.write(&out_dir.join(MODEL_FILE))?;
+        return write_rounds(&out_dir.join(TRAINING_FILE), &trained, &learned, provenance);
     }
     let x_columns: Vec<&[u16]> = learned
         .iter()
@@ -267,6 +358,7 @@ pub fn run(
             );
             (trained, widths)
         }
+        ModelKind::PiecewiseLinear => unreachable!("trained above"),
         ModelKind::Threshold => {
             // The training rows alone, in order, with their targets.
             let x_train = encode(
@@ -335,6 +427,7 @@ pub fn run(
             shard: shard.is_part().then_some(shard),
         },
         trees: trained.iter().map(|t| (t.id, t.tree.clone())).collect(),
+        pieces: Vec::new(),
     };
     model.write(&out_dir.join(MODEL_FILE))?;
     write_log(&out_dir.join(TRAINING_FILE), &trained, &learned, provenance)
@@ -395,6 +488,43 @@ fn write_log(
         ("errors", Arc::new(UInt64Array::from(errors))),
         ("updates", Arc::new(UInt64Array::from(updates))),
         ("seconds", Arc::new(Float64Array::from(seconds))),
+    ]);
+    table::write_parquet(path, &batch, provenance)
+}
+
+/// A piecewise-linear model's `training.parquet`: one row per tree per
+/// round — pieces after the round, pieces split, RMS and mean absolute
+/// error over the training rows (level spacings) before the splits.
+fn write_rounds(
+    path: &Path,
+    trained: &[piecewise::TrainedTree],
+    learned: &[&alnlab_codes::Entry],
+    provenance: &Provenance,
+) -> Result<()> {
+    let rows = trained
+        .iter()
+        .flat_map(|t| t.rounds.iter().enumerate().map(move |(k, r)| (t, k, r)));
+    let (mut variable, mut round, mut pieces, mut splits) =
+        (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+    let (mut rms, mut mean_absolute) = (Vec::new(), Vec::new());
+    for (t, k, r) in rows {
+        variable.push(learned[t.variable].variable.as_str());
+        round.push(k as u32 + 1);
+        pieces.push(r.pieces as u32);
+        splits.push(r.splits as u32);
+        rms.push(r.rms);
+        mean_absolute.push(r.mean_absolute);
+    }
+    let batch = table::batch(vec![
+        (
+            "variable",
+            Arc::new(StringArray::from(variable)) as Arc<dyn Array>,
+        ),
+        ("round", Arc::new(UInt32Array::from(round))),
+        ("pieces", Arc::new(UInt32Array::from(pieces))),
+        ("splits", Arc::new(UInt32Array::from(splits))),
+        ("rms", Arc::new(Float64Array::from(rms))),
+        ("mean_absolute", Arc::new(Float64Array::from(mean_absolute))),
     ]);
     table::write_parquet(path, &batch, provenance)
 }

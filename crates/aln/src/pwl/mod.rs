@@ -22,6 +22,7 @@
 
 pub mod dtree;
 pub mod lazy;
+pub mod predict;
 
 use serde::{Deserialize, Serialize};
 

@@ -350,6 +350,11 @@ fn hardware(md: &mut String, v: &Loaded) {
     let h = &v.hardware;
     let _ = writeln!(md, "### Hardware estimate (paper §5)\n");
     let _ = match h.kind {
+        ModelKind::PiecewiseLinear => writeln!(
+            md,
+            "No gate estimate: a piecewise-linear model computes with real numbers — affine \
+             pieces under MIN and MAX — not with AND/OR gates.\n"
+        ),
         ModelKind::BitForest => writeln!(
             md,
             "Pruned trees are at most {} gate delays deep (mean {}); decoding a {}-bit code takes \

@@ -1,0 +1,630 @@
+//! A piecewise-linear model made ready to predict: per output its tree,
+//! compiled over boxes of input space, and how the change it computes
+//! becomes the variable's next real value and level. The model reads the
+//! current state's real values (the codebook's learned variables, in
+//! order); each tree computes its variable's change in level spacings,
+//! which is added to the current value (on the circle for an angle that
+//! wraps) and quantized by the codebook.
+//!
+//! Three paths, one number: [`Path::Plain`] evaluates every piece,
+//! [`Path::Lazy`] cuts off what cannot answer, [`Path::Compiled`] goes
+//! through the [`DecisionTree`]; all agree to the bit (tested on real runs
+//! by the test stage). One row at a time, nothing is allocated.
+
+use alnlab_codes::{Entry, Quantizer};
+use alnlab_common::Result;
+use alnlab_common::table::Table;
+
+use super::dtree::{self, DecisionTree};
+use super::lazy::Lazy;
+use super::{Node, Tree};
+use crate::model::Reads;
+
+/// How a tree is evaluated.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Path {
+    /// Every piece, every node.
+    Plain,
+    /// MIN/MAX with cut-offs, children in the order of the last answer.
+    Lazy,
+    /// The decision tree over boxes, then the pieces left in the box.
+    Compiled,
+}
+
+impl Path {
+    /// Every path, the fastest last.
+    pub const ALL: [Path; 3] = [Path::Plain, Path::Lazy, Path::Compiled];
+
+    /// Its name in timing tables.
+    pub fn name(self) -> &'static str {
+        match self {
+            Path::Plain => "pwl-plain",
+            Path::Lazy => "pwl-lazy",
+            Path::Compiled => "pwl-compiled",
+        }
+    }
+}
+
+/// One output: its tree compiled, what it reads and how its change
+/// becomes a value.
+struct Output<'m> {
+    tree: &'m Tree,
+    compiled: DecisionTree,
+    /// The predicted variable's index in the state.
+    variable: usize,
+    /// The state indices the tree reads, in its input order.
+    inputs: Vec<usize>,
+    quantizer: Quantizer,
+    /// One level spacing in the variable's unit.
+    spacing: f64,
+    /// Whether the variable is an angle that wraps on the circle.
+    wraps: bool,
+    /// The pieces' coefficients transposed — the biases, then each input's
+    /// weights, piece by piece — for every piece of one row at once.
+    by_input: Vec<f64>,
+}
+
+/// A piecewise-linear model made ready to predict.
+pub struct Predictor<'m> {
+    outputs: Vec<Output<'m>>,
+    /// Inputs per state: the codebook's learned variables.
+    width: usize,
+    /// The most inputs any tree reads (the size of the row buffer).
+    most_inputs: usize,
+    /// The vector instructions this CPU has.
+    vectors: Vectors,
+}
+
+/// What prediction reuses: each tree's lazy evaluator (its child order), a
+/// buffer of one tree's inputs, and a block's inputs and node values for
+/// batches. Made once per thread.
+pub struct Scratch<'m> {
+    lazy: Vec<Lazy<'m>>,
+    row: Vec<f64>,
+    /// One row's piece values, and node values.
+    pieces: Vec<f64>,
+    nodes: Vec<f64>,
+    block_inputs: Vec<f64>,
+    block_nodes: Vec<f64>,
+}
+
+/// Rows a batch evaluates together: each piece's value for all of them in
+/// one loop the compiler turns into vector instructions.
+const BLOCK: usize = 32;
+
+impl<'m> Predictor<'m> {
+    /// Prepares `trees` (a model's, whose outputs read and predict
+    /// `reads`, indices among `learned`, the codebook's learned entries),
+    /// compiling each over the box of `points`: states, `learned.len()`
+    /// real values a row (the training rows; where the cuts fall decides
+    /// speed, never a value).
+    pub fn new(
+        trees: &'m [Tree],
+        reads: &[Reads],
+        learned: &[&Entry],
+        points: &[f64],
+    ) -> Predictor<'m> {
+        let width = learned.len();
+        let rows = points.len().checked_div(width).unwrap_or(0);
+        let outputs: Vec<Output> = trees
+            .iter()
+            .zip(reads)
+            .map(|(tree, r)| {
+                let own: Vec<f64> = (0..rows)
+                    .flat_map(|row| r.inputs.iter().map(move |&i| points[row * width + i]))
+                    .collect();
+                let entry = learned[r.variable];
+                let q = entry.quantizer;
+                let padded = padded_pieces(tree);
+                let mut by_input = vec![0.0; padded * (r.inputs.len() + 1)];
+                for p in 0..tree.pieces() {
+                    let (bias, weights) = tree.piece(p);
+                    for (i, &c) in std::iter::once(&bias).chain(weights).enumerate() {
+                        by_input[i * padded + p] = c;
+                    }
+                }
+                Output {
+                    tree,
+                    by_input,
+                    compiled: DecisionTree::build(tree, &own, dtree::Settings::default()),
+                    variable: r.variable,
+                    inputs: r.inputs.clone(),
+                    quantizer: q,
+                    spacing: (q.max - q.min) / (q.levels - 1) as f64,
+                    wraps: entry.period().is_some(),
+                }
+            })
+            .collect();
+        let most_inputs = outputs.iter().map(|o| o.inputs.len()).max().unwrap_or(0);
+        Predictor {
+            outputs,
+            width,
+            most_inputs,
+            vectors: wide_vectors(),
+        }
+    }
+
+    /// The buffers one-row prediction reuses.
+    pub fn scratch(&self) -> Scratch<'m> {
+        let most_nodes = self.outputs.iter().map(|o| o.tree.nodes().len()).max();
+        Scratch {
+            lazy: self.outputs.iter().map(|o| Lazy::new(o.tree)).collect(),
+            row: vec![0.0; self.most_inputs],
+            pieces: vec![
+                0.0;
+                self.outputs
+                    .iter()
+                    .map(|o| padded_pieces(o.tree))
+                    .max()
+                    .unwrap_or(0)
+            ],
+            nodes: vec![0.0; most_nodes.unwrap_or(0)],
+            block_inputs: vec![0.0; self.most_inputs * BLOCK],
+            block_nodes: vec![0.0; most_nodes.unwrap_or(0) * BLOCK],
+        }
+    }
+
+    /// Values per state.
+    pub fn width(&self) -> usize {
+        self.width
+    }
+
+    /// The predicted variables' indices in the state, in output order.
+    pub fn variables(&self) -> impl Iterator<Item = usize> + '_ {
+        self.outputs.iter().map(|o| o.variable)
+    }
+
+    /// Per output, the boxes its decision tree has and the mean number of
+    /// pieces left in one.
+    pub fn shapes(&self) -> Vec<(usize, f64)> {
+        self.outputs.iter().map(|o| o.compiled.shape()).collect()
+    }
+
+    /// Output `o`'s change for `state`, in level spacings.
+    fn change(&self, o: usize, state: &[f64], path: Path, scratch: &mut Scratch<'m>) -> f64 {
+        let out = &self.outputs[o];
+        let row = &mut scratch.row[..out.inputs.len()];
+        for (slot, &i) in row.iter_mut().zip(&out.inputs) {
+            *slot = state[i];
+        }
+        match path {
+            Path::Plain => {
+                let wide = self.vectors;
+                let (values, nodes) = (&mut scratch.pieces, &mut scratch.nodes);
+                row_value(out, row, wide, values, nodes)
+            }
+            Path::Lazy => scratch.lazy[o].value(row),
+            Path::Compiled => out.compiled.value(out.tree, row, &mut scratch.lazy[o]),
+        }
+    }
+
+    /// The next real value of every output for one state (`width()`
+    /// values), into `next`.
+    pub fn next_values(
+        &self,
+        state: &[f64],
+        path: Path,
+        scratch: &mut Scratch<'m>,
+        next: &mut [f64],
+    ) {
+        for (o, value) in next.iter_mut().enumerate() {
+            let change = self.change(o, state, path, scratch);
+            *value = self.outputs[o].advance(state, change);
+        }
+    }
+
+    /// The next level of every output for one state, into `levels`.
+    pub fn next_levels(
+        &self,
+        state: &[f64],
+        path: Path,
+        scratch: &mut Scratch<'m>,
+        levels: &mut [u16],
+    ) {
+        for (o, level) in levels.iter_mut().enumerate() {
+            let change = self.change(o, state, path, scratch);
+            let out = &self.outputs[o];
+            *level = out.quantizer.level(out.advance(state, change)).0;
+        }
+    }
+
+    /// The next levels `[output][row]` of the states whose values are
+    /// `columns` (`[variable][row]`, the learned variables), tree by tree
+    /// (each tree's pieces stay in cache), [`BLOCK`] rows at once: every
+    /// piece's value for the block in one vectorized loop, summed in
+    /// [`Tree::piece_value`]'s order, then the MIN/MAX nodes from the
+    /// leaves up — the plain evaluation's numbers.
+    pub fn levels(&self, columns: &[&[f64]], scratch: &mut Scratch<'m>) -> Vec<Vec<u16>> {
+        let rows = columns.first().map_or(0, |c| c.len());
+        let wide = self.vectors;
+        (0..self.outputs.len())
+            .map(|o| {
+                let out = &self.outputs[o];
+                let current = columns[out.variable];
+                let mut levels = Vec::with_capacity(rows);
+                for start in (0..rows).step_by(BLOCK) {
+                    let block = BLOCK.min(rows - start);
+                    let values = self.block_values(o, columns, start, block, wide, scratch);
+                    for (&x, &change) in current[start..start + block].iter().zip(values) {
+                        levels.push(out.quantizer.level(out.advance_from(x, change)).0);
+                    }
+                }
+                levels
+            })
+            .collect()
+    }
+
+    /// Output `o`'s change for the `rows` states from `start` of `columns`
+    /// (at most [`BLOCK`]): the root's values among the scratch's node
+    /// values. A whole block reads the columns in place; a part is copied
+    /// into the scratch, padded.
+    fn block_values<'s>(
+        &self,
+        o: usize,
+        columns: &[&[f64]],
+        start: usize,
+        rows: usize,
+        wide: Vectors,
+        scratch: &'s mut Scratch<'m>,
+    ) -> &'s [f64] {
+        let out = &self.outputs[o];
+        let tree = out.tree;
+        // Each input's values for the block, one after another (a part
+        // block padded with what was there).
+        let inputs = &mut scratch.block_inputs;
+        for (i, &v) in out.inputs.iter().enumerate() {
+            inputs[i * BLOCK..i * BLOCK + rows].copy_from_slice(&columns[v][start..start + rows]);
+        }
+        let inputs = &inputs[..out.inputs.len() * BLOCK];
+        let nodes = &mut scratch.block_nodes;
+        for (j, node) in tree.nodes().iter().enumerate().rev() {
+            // Children come after their parent: their values are in `tail`.
+            let (head, tail) = nodes.split_at_mut((j + 1) * BLOCK);
+            let value = &mut head[j * BLOCK..];
+            let child = |c: u32| &tail[(c as usize - j - 1) * BLOCK..][..BLOCK];
+            match *node {
+                Node::Piece(p) => {
+                    let (bias, weights) = tree.piece(p as usize);
+                    piece_block(bias, weights, inputs, &mut value[..BLOCK], wide);
+                }
+                // The ties of `Tree::value`: the first child's value.
+                Node::Min(a, b) => {
+                    for ((v, &x), &y) in value.iter_mut().zip(child(a)).zip(child(b)) {
+                        *v = if y < x { y } else { x };
+                    }
+                }
+                Node::Max(a, b) => {
+                    for ((v, &x), &y) in value.iter_mut().zip(child(a)).zip(child(b)) {
+                        *v = if y > x { y } else { x };
+                    }
+                }
+            }
+        }
+        &nodes[..rows]
+    }
+}
+
+/// One row's value of `out`'s tree, every piece evaluated: all pieces at
+/// once (each summed in [`Tree::piece_value`]'s order, pieces side by side
+/// in vector registers), then the MIN/MAX nodes from the leaves up, ties
+/// to the first child as [`Tree::value`].
+fn row_value(
+    out: &Output,
+    row: &[f64],
+    wide: Vectors,
+    values: &mut [f64],
+    nodes: &mut [f64],
+) -> f64 {
+    let tree = out.tree;
+    let values = &mut values[..padded_pieces(tree)];
+    pieces_of_row(&out.by_input, row, values, wide);
+    for (j, node) in tree.nodes().iter().enumerate().rev() {
+        nodes[j] = match *node {
+            Node::Piece(p) => values[p as usize],
+            Node::Min(a, b) => {
+                let (x, y) = (nodes[a as usize], nodes[b as usize]);
+                if y < x { y } else { x }
+            }
+            Node::Max(a, b) => {
+                let (x, y) = (nodes[a as usize], nodes[b as usize]);
+                if y > x { y } else { x }
+            }
+        };
+    }
+    nodes[0]
+}
+
+/// A tree's pieces rounded up to whole vectors of 8 (the padding pieces
+/// are zero and never read), so that one row's loop over pieces has no
+/// remainder.
+fn padded_pieces(tree: &Tree) -> usize {
+    tree.pieces().div_ceil(8) * 8
+}
+
+/// Every piece's value at `row`: `by_input` holds the biases, then each
+/// input's weights, piece by piece ([`padded_pieces`] of them).
+fn pieces_of_row(by_input: &[f64], row: &[f64], values: &mut [f64], wide: Vectors) {
+    #[cfg(target_arch = "x86_64")]
+    match wide {
+        // SAFETY: `wide_vectors` found the CPU's features.
+        Vectors::Avx512 => return unsafe { pieces_of_row_avx512(by_input, row, values) },
+        Vectors::Avx2 => return unsafe { pieces_of_row_avx2(by_input, row, values) },
+        Vectors::Sse => {}
+    }
+    let _ = wide;
+    pieces_of_row_portable(by_input, row, values);
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn pieces_of_row_avx2(by_input: &[f64], row: &[f64], values: &mut [f64]) {
+    pieces_of_row_portable(by_input, row, values);
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f")]
+unsafe fn pieces_of_row_avx512(by_input: &[f64], row: &[f64], values: &mut [f64]) {
+    pieces_of_row_portable(by_input, row, values);
+}
+
+#[inline(always)]
+fn pieces_of_row_portable(by_input: &[f64], row: &[f64], values: &mut [f64]) {
+    let padded = values.len();
+    for (chunk, out) in values.chunks_exact_mut(8).enumerate() {
+        let column = |i: usize| -> &[f64; 8] {
+            by_input[i * padded + chunk * 8..][..8]
+                .try_into()
+                .expect("8 values")
+        };
+        let mut sum = *column(0);
+        for (i, &x) in row.iter().enumerate() {
+            for (s, &w) in sum.iter_mut().zip(column(i + 1)) {
+                *s += w * x;
+            }
+        }
+        out.copy_from_slice(&sum);
+    }
+}
+
+/// The widest vector instructions this CPU has: the same additions and
+/// multiplications, two, four (AVX2) or eight (AVX-512) numbers at a time.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Vectors {
+    Sse,
+    Avx2,
+    Avx512,
+}
+
+fn wide_vectors() -> Vectors {
+    #[cfg(target_arch = "x86_64")]
+    {
+        if std::arch::is_x86_feature_detected!("avx512f") {
+            return Vectors::Avx512;
+        }
+        if std::arch::is_x86_feature_detected!("avx2") {
+            return Vectors::Avx2;
+        }
+    }
+    Vectors::Sse
+}
+
+/// A piece's value for every row of a block (`inputs`: each input's
+/// [`BLOCK`] values in turn; rows past a part block's end are computed and
+/// ignored): bias + Σ wᵢxᵢ in input order, as [`Tree::piece_value`] sums,
+/// rows side by side in registers — with the `wide` vectors (IEEE
+/// additions and multiplications either way, never fused: the same
+/// numbers).
+fn piece_block(bias: f64, weights: &[f64], inputs: &[f64], value: &mut [f64], wide: Vectors) {
+    #[cfg(target_arch = "x86_64")]
+    match wide {
+        // SAFETY: `wide_vectors` found the CPU's features.
+        Vectors::Avx512 => return unsafe { piece_block_avx512(bias, weights, inputs, value) },
+        Vectors::Avx2 => return unsafe { piece_block_avx2(bias, weights, inputs, value) },
+        Vectors::Sse => {}
+    }
+    let _ = wide;
+    piece_block_lanes::<8>(bias, weights, inputs, value);
+}
+
+/// [`piece_block`] compiled for AVX2: 32 rows in eight registers.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn piece_block_avx2(bias: f64, weights: &[f64], inputs: &[f64], value: &mut [f64]) {
+    piece_block_lanes::<BLOCK>(bias, weights, inputs, value);
+}
+
+/// [`piece_block`] compiled for AVX-512: 32 rows in four registers.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f")]
+unsafe fn piece_block_avx512(bias: f64, weights: &[f64], inputs: &[f64], value: &mut [f64]) {
+    piece_block_lanes::<BLOCK>(bias, weights, inputs, value);
+}
+
+/// [`piece_block`], `LANES` rows at a time (`LANES` divides [`BLOCK`]).
+#[inline(always)]
+fn piece_block_lanes<const LANES: usize>(
+    bias: f64,
+    weights: &[f64],
+    inputs: &[f64],
+    value: &mut [f64],
+) {
+    for (lane, out) in value.chunks_exact_mut(LANES).enumerate() {
+        let mut sum = [bias; LANES];
+        for (&w, column) in weights.iter().zip(inputs.chunks_exact(BLOCK)) {
+            let x: &[f64; LANES] = column[lane * LANES..][..LANES]
+                .try_into()
+                .expect("LANES values");
+            for (s, &x) in sum.iter_mut().zip(x) {
+                *s += w * x;
+            }
+        }
+        out.copy_from_slice(&sum);
+    }
+}
+
+impl Output<'_> {
+    /// The variable's next value: its current one plus `change` spacings,
+    /// an angle that wraps brought back onto the circle from its range's
+    /// start.
+    fn advance(&self, state: &[f64], change: f64) -> f64 {
+        self.advance_from(state[self.variable], change)
+    }
+
+    /// [`Output::advance`] from the variable's current value `current`.
+    fn advance_from(&self, current: f64, change: f64) -> f64 {
+        let start = self.wraps.then_some(self.quantizer.min);
+        step(current, change, self.spacing, start)
+    }
+}
+
+/// `current` moved by `change` level spacings of `spacing`, brought back
+/// onto the circle from `wrap_start` when the variable wraps.
+fn step(current: f64, change: f64, spacing: f64, wrap_start: Option<f64>) -> f64 {
+    let next = current + change * spacing;
+    let Some(start) = wrap_start else {
+        return next;
+    };
+    let (d, tau) = (next - start, std::f64::consts::TAU);
+    // rem_euclid's value without its division where d is within a turn of
+    // the range (exact either way: Sterbenz).
+    let turned = if (0.0..tau).contains(&d) {
+        d
+    } else if (tau..2.0 * tau).contains(&d) {
+        d - tau
+    } else if (-tau..0.0).contains(&d) {
+        d + tau
+    } else {
+        d.rem_euclid(tau)
+    };
+    turned + start
+}
+
+/// A variable of `entry` at `current` moved by `change` level spacings (on
+/// the circle for an angle that wraps): the inverse of [`change`], as every
+/// model that predicts a change advances its variable.
+pub fn advance(entry: &Entry, current: f64, change: f64) -> f64 {
+    let q = &entry.quantizer;
+    let spacing = (q.max - q.min) / (q.levels - 1) as f64;
+    step(current, change, spacing, entry.period().map(|_| q.min))
+}
+
+/// The change from `x` to `y` in level spacings of `entry`, on the circle
+/// for an angle that wraps: what a piecewise-linear tree learns, the
+/// inverse of how its output advances the variable.
+pub fn change(entry: &Entry, x: f64, y: f64) -> f64 {
+    let q = &entry.quantizer;
+    let spacing = (q.max - q.min) / (q.levels - 1) as f64;
+    let mut d = y - x;
+    if entry.period().is_some() {
+        let pi = std::f64::consts::PI;
+        d = (d + pi).rem_euclid(std::f64::consts::TAU) - pi;
+    }
+    d / spacing
+}
+
+/// The real values `[variable][row]` of the `learned` variables on side
+/// `x` (current) or `y` (next) of `pairs.parquet`.
+pub fn real_values(pairs: &Table, side: &str, learned: &[&Entry]) -> Result<Vec<Vec<f64>>> {
+    learned
+        .iter()
+        .map(|e| {
+            Ok(pairs
+                .f64_column(&format!("{side}.{}", e.variable))?
+                .values()
+                .to_vec())
+        })
+        .collect()
+}
+
+/// Rows `rows` of `columns` (`[variable][row]`) as states, one after
+/// another: the layout [`Predictor`] reads.
+pub fn states(columns: &[Vec<f64>], rows: &[usize]) -> Vec<f64> {
+    rows.iter()
+        .flat_map(|&r| columns.iter().map(move |c| c[r]))
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::pwl::lazy::tests::random_tree;
+    use alnlab_codes::Code;
+
+    fn entry(variable: &str, min: f64, max: f64) -> Entry {
+        Entry {
+            variable: variable.into(),
+            learned: true,
+            note: String::new(),
+            quantizer: Quantizer {
+                min,
+                max,
+                levels: 101,
+            },
+            code: Code::Gray,
+            width: 7,
+            walk_step: 0,
+            walk_span: 0,
+            seed: 0,
+            clamped: 0,
+        }
+    }
+
+    #[test]
+    fn every_path_and_the_blocked_batch_give_the_same_levels() {
+        let tau = std::f64::consts::TAU;
+        let (a, roll) = (
+            entry("a.1.x", -4.0, 4.0),
+            entry("roll.2", -tau / 2.0, tau / 2.0),
+        );
+        let learned = [&a, &roll];
+        let trees = [random_tree(2, 24, 5), random_tree(1, 9, 6)];
+        let reads = [
+            Reads {
+                variable: 0,
+                inputs: vec![0, 1],
+            },
+            Reads {
+                variable: 1,
+                inputs: vec![1],
+            },
+        ];
+        // 77 states (two blocks and a part), some outside the compiled box.
+        let states: Vec<f64> = (0..154)
+            .map(|i| ((i as f64 * 0.618_033_988_7).fract() * 2.0 - 1.0) * 3.0)
+            .collect();
+        let predictor = Predictor::new(&trees, &reads, &learned, &states[..100]);
+        let mut scratch = predictor.scratch();
+        let columns: Vec<Vec<f64>> = (0..2)
+            .map(|v| states.chunks_exact(2).map(|s| s[v]).collect())
+            .collect();
+        let columns: Vec<&[f64]> = columns.iter().map(Vec::as_slice).collect();
+        let batch = predictor.levels(&columns, &mut scratch);
+        let mut next = [0u16; 2];
+        for path in Path::ALL {
+            for (r, state) in states.chunks_exact(2).enumerate() {
+                predictor.next_levels(state, path, &mut scratch, &mut next);
+                assert_eq!(next, [batch[0][r], batch[1][r]], "{path:?}, row {r}");
+            }
+        }
+    }
+
+    #[test]
+    fn a_change_goes_the_short_way_round_and_advances_back() {
+        let tau = std::f64::consts::TAU;
+        let roll = entry("roll.2", -tau / 2.0, tau / 2.0);
+        let spacing = tau / 100.0;
+        let across = change(&roll, 3.1, -3.1);
+        assert!((across - (tau - 6.2) / spacing).abs() < 1e-9, "{across}");
+        let tree = [Tree::affine(across, &[0.0])];
+        let reads = [Reads {
+            variable: 0,
+            inputs: vec![0],
+        }];
+        let predictor = Predictor::new(&tree, &reads, &[&roll], &[3.1]);
+        let mut next = [0.0];
+        predictor.next_values(&[3.1], Path::Plain, &mut predictor.scratch(), &mut next);
+        assert!((next[0] + 3.1).abs() < 1e-9, "{}", next[0]);
+        let plain = entry("a.1.x", -4.0, 4.0);
+        assert!((change(&plain, 3.1, -3.1) + 6.2 / 0.08).abs() < 1e-9);
+    }
+}
