@@ -170,7 +170,7 @@ pub fn step_of<'p>(predictor: &'p Predictor) -> impl FnMut(&[Vec<f64>]) -> Vec<V
             for (slot, column) in row.iter_mut().zip(state) {
                 *slot = column[s];
             }
-            predictor.next_values(&row, Evaluation::Compiled, &mut scratch, &mut next);
+            predictor.next_values(&row, Evaluation::Plain, &mut scratch, &mut next);
             for (column, &n) in values.iter_mut().zip(&next) {
                 column.push(n);
             }

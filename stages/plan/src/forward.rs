@@ -312,7 +312,7 @@ fn wiring(learned: &[&Entry], p: &Prepared, cost: &Cost) -> Result<Wiring, Strin
 
 /// A piecewise-linear ALN as a forward model, in real values: the true
 /// state's learned variables, each frame's torques set as the hinge torque
-/// variables' values, the predicted variables advanced (compiled trees, one
+/// variables' values, the predicted variables advanced (every piece, one
 /// candidate at a time, nothing allocated), and the task's variables costed
 /// at the predicted values.
 pub struct Piecewise<'a> {
@@ -374,7 +374,7 @@ impl<'a> Piecewise<'a> {
         }
         self.predictor.next_values(
             &self.state,
-            Path::Compiled,
+            Path::Plain,
             &mut self.scratch,
             &mut self.next,
         );

@@ -221,9 +221,51 @@ impl<'m> Predictor<'m> {
         scratch: &mut Scratch<'m>,
         levels: &mut [u16],
     ) {
+        if path == Path::Plain {
+            return self.plain_levels(state, scratch, levels);
+        }
         for (o, level) in levels.iter_mut().enumerate() {
             let change = self.change(o, state, path, scratch);
             let out = &self.outputs[o];
+            *level = out.quantizer.level(out.advance(state, change)).0;
+        }
+    }
+
+    /// [`Predictor::next_levels`] by the plain path, the whole state
+    /// compiled for the widest vectors the CPU has.
+    fn plain_levels(&self, state: &[f64], scratch: &mut Scratch<'m>, levels: &mut [u16]) {
+        #[cfg(target_arch = "x86_64")]
+        match self.vectors {
+            // SAFETY: `wide_vectors` found the CPU's features.
+            Vectors::Avx512 => return unsafe { self.plain_levels_avx512(state, scratch, levels) },
+            Vectors::Avx2 => return unsafe { self.plain_levels_avx2(state, scratch, levels) },
+            Vectors::Sse => {}
+        }
+        self.plain_levels_portable(state, scratch, levels);
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx512f")]
+    unsafe fn plain_levels_avx512(&self, state: &[f64], scratch: &mut Scratch<'m>, levels: &mut [u16]) {
+        self.plain_levels_portable(state, scratch, levels);
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    unsafe fn plain_levels_avx2(&self, state: &[f64], scratch: &mut Scratch<'m>, levels: &mut [u16]) {
+        self.plain_levels_portable(state, scratch, levels);
+    }
+
+    #[inline(always)]
+    fn plain_levels_portable(&self, state: &[f64], scratch: &mut Scratch<'m>, levels: &mut [u16]) {
+        for (out, level) in self.outputs.iter().zip(levels) {
+            let row = &mut scratch.row[..out.inputs.len()];
+            for (slot, &i) in row.iter_mut().zip(&out.inputs) {
+                *slot = state[i];
+            }
+            let values = &mut scratch.pieces[..padded_pieces(out.tree)];
+            pieces_of_row_portable(&out.by_input, row, values);
+            let change = tree_value(out.tree, values, &mut scratch.nodes);
             *level = out.quantizer.level(out.advance(state, change)).0;
         }
     }
@@ -245,9 +287,16 @@ impl<'m> Predictor<'m> {
                 for start in (0..rows).step_by(BLOCK) {
                     let block = BLOCK.min(rows - start);
                     let values = self.block_values(o, columns, start, block, wide, scratch);
-                    for (&x, &change) in current[start..start + block].iter().zip(values) {
-                        levels.push(out.quantizer.level(out.advance_from(x, change)).0);
+                    // Whole blocks of plain arithmetic, which vectorizes.
+                    let mut next = [0.0f64; BLOCK];
+                    for ((n, &x), &change) in next.iter_mut().zip(&current[start..]).zip(values) {
+                        *n = out.advance_from(x, change);
                     }
+                    let mut level = [0u16; BLOCK];
+                    for (l, &n) in level.iter_mut().zip(&next) {
+                        *l = out.quantizer.level(n).0;
+                    }
+                    levels.extend_from_slice(&level[..block]);
                 }
                 levels
             })
@@ -269,13 +318,23 @@ impl<'m> Predictor<'m> {
     ) -> &'s [f64] {
         let out = &self.outputs[o];
         let tree = out.tree;
-        // Each input's values for the block, one after another (a part
-        // block padded with what was there).
-        let inputs = &mut scratch.block_inputs;
-        for (i, &v) in out.inputs.iter().enumerate() {
-            inputs[i * BLOCK..i * BLOCK + rows].copy_from_slice(&columns[v][start..start + rows]);
+        // Each input's values for the block: in place for a whole block, a
+        // part block copied into the scratch and padded with what was there.
+        let padded = &mut scratch.block_inputs;
+        if rows < BLOCK {
+            for (i, &v) in out.inputs.iter().enumerate() {
+                padded[i * BLOCK..i * BLOCK + rows]
+                    .copy_from_slice(&columns[v][start..start + rows]);
+            }
         }
-        let inputs = &inputs[..out.inputs.len() * BLOCK];
+        let padded = &*padded;
+        let inputs = |i: usize| -> &[f64] {
+            if rows < BLOCK {
+                &padded[i * BLOCK..(i + 1) * BLOCK]
+            } else {
+                &columns[out.inputs[i]][start..start + BLOCK]
+            }
+        };
         let nodes = &mut scratch.block_nodes;
         for (j, node) in tree.nodes().iter().enumerate().rev() {
             // Children come after their parent: their values are in `tail`.
@@ -285,7 +344,7 @@ impl<'m> Predictor<'m> {
             match *node {
                 Node::Piece(p) => {
                     let (bias, weights) = tree.piece(p as usize);
-                    piece_block(bias, weights, inputs, &mut value[..BLOCK], wide);
+                    piece_block(bias, weights, &inputs, &mut value[..BLOCK], wide);
                 }
                 // The ties of `Tree::value`: the first child's value.
                 Node::Min(a, b) => {
@@ -318,6 +377,13 @@ fn row_value(
     let tree = out.tree;
     let values = &mut values[..padded_pieces(tree)];
     pieces_of_row(&out.by_input, row, values, wide);
+    tree_value(tree, values, nodes)
+}
+
+/// The tree's value from its pieces' `values`: the MIN/MAX nodes from the
+/// leaves up, ties to the first child as [`Tree::value`].
+#[inline(always)]
+fn tree_value(tree: &Tree, values: &[f64], nodes: &mut [f64]) -> f64 {
     for (j, node) in tree.nodes().iter().enumerate().rev() {
         nodes[j] = match *node {
             Node::Piece(p) => values[p as usize],
@@ -408,13 +474,19 @@ fn wide_vectors() -> Vectors {
     Vectors::Sse
 }
 
-/// A piece's value for every row of a block (`inputs`: each input's
-/// [`BLOCK`] values in turn; rows past a part block's end are computed and
+/// A piece's value for every row of a block (`inputs(i)`: input i's
+/// [`BLOCK`] values; rows past a part block's end are computed and
 /// ignored): bias + Σ wᵢxᵢ in input order, as [`Tree::piece_value`] sums,
 /// rows side by side in registers — with the `wide` vectors (IEEE
 /// additions and multiplications either way, never fused: the same
 /// numbers).
-fn piece_block(bias: f64, weights: &[f64], inputs: &[f64], value: &mut [f64], wide: Vectors) {
+fn piece_block<'x>(
+    bias: f64,
+    weights: &[f64],
+    inputs: &impl Fn(usize) -> &'x [f64],
+    value: &mut [f64],
+    wide: Vectors,
+) {
     #[cfg(target_arch = "x86_64")]
     match wide {
         // SAFETY: `wide_vectors` found the CPU's features.
@@ -429,29 +501,39 @@ fn piece_block(bias: f64, weights: &[f64], inputs: &[f64], value: &mut [f64], wi
 /// [`piece_block`] compiled for AVX2: 32 rows in eight registers.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
-unsafe fn piece_block_avx2(bias: f64, weights: &[f64], inputs: &[f64], value: &mut [f64]) {
+unsafe fn piece_block_avx2<'x>(
+    bias: f64,
+    weights: &[f64],
+    inputs: &impl Fn(usize) -> &'x [f64],
+    value: &mut [f64],
+) {
     piece_block_lanes::<BLOCK>(bias, weights, inputs, value);
 }
 
 /// [`piece_block`] compiled for AVX-512: 32 rows in four registers.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx512f")]
-unsafe fn piece_block_avx512(bias: f64, weights: &[f64], inputs: &[f64], value: &mut [f64]) {
+unsafe fn piece_block_avx512<'x>(
+    bias: f64,
+    weights: &[f64],
+    inputs: &impl Fn(usize) -> &'x [f64],
+    value: &mut [f64],
+) {
     piece_block_lanes::<BLOCK>(bias, weights, inputs, value);
 }
 
 /// [`piece_block`], `LANES` rows at a time (`LANES` divides [`BLOCK`]).
 #[inline(always)]
-fn piece_block_lanes<const LANES: usize>(
+fn piece_block_lanes<'x, const LANES: usize>(
     bias: f64,
     weights: &[f64],
-    inputs: &[f64],
+    inputs: &impl Fn(usize) -> &'x [f64],
     value: &mut [f64],
 ) {
     for (lane, out) in value.chunks_exact_mut(LANES).enumerate() {
         let mut sum = [bias; LANES];
-        for (&w, column) in weights.iter().zip(inputs.chunks_exact(BLOCK)) {
-            let x: &[f64; LANES] = column[lane * LANES..][..LANES]
+        for (i, &w) in weights.iter().enumerate() {
+            let x: &[f64; LANES] = inputs(i)[lane * LANES..][..LANES]
                 .try_into()
                 .expect("LANES values");
             for (s, &x) in sum.iter_mut().zip(x) {
@@ -479,6 +561,7 @@ impl Output<'_> {
 
 /// `current` moved by `change` level spacings of `spacing`, brought back
 /// onto the circle from `wrap_start` when the variable wraps.
+#[inline]
 fn step(current: f64, change: f64, spacing: f64, wrap_start: Option<f64>) -> f64 {
     let next = current + change * spacing;
     let Some(start) = wrap_start else {
