@@ -847,3 +847,108 @@ fn round_off_is_not_learned_and_the_logged_step_replays_exactly() {
         }
     }
 }
+
+#[test]
+fn piecewise_linear_models_predict_all_but_the_given_controls_the_same_on_any_thread_count() {
+    use alnlab_aln::ModelKind;
+    use alnlab_aln::model::Model;
+    let dir = tempfile::tempdir().unwrap();
+    let manifest = r#"
+[experiment]
+name = "e2e"
+seed = 3
+
+[[simulate.scene]]
+name = "worm"
+kind = "worm"
+runs = 2
+duration = 3.0
+controller = { kind = "random" }
+
+[train]
+model = "piecewise-linear"
+controls = "given"
+informative_inputs = 6
+
+[test]
+resimulate_steps = [1]
+rollout_starts = 5
+horizon = 3
+peer = true
+"#;
+    write_manifest(dir.path(), "m.toml", manifest);
+    let record = run_ok(dir.path(), &["m.toml"]);
+    let artifact = |record: &RunRecord, role: &str| {
+        std::fs::read(dir.path().join(&record.variants[0].artifacts[role].path)).unwrap()
+    };
+    let model_path = dir.path().join(&record.variants[0].artifacts["model"].path);
+    let model = Model::read(&model_path).unwrap();
+    assert_eq!(model.header.model, ModelKind::PiecewiseLinear);
+    let predicted: Vec<&str> = model
+        .header
+        .outputs
+        .iter()
+        .map(|(n, _)| n.as_str())
+        .collect();
+    assert!(!predicted.is_empty() && predicted.iter().all(|n| !n.starts_with("g.")));
+    assert!(
+        model.header.outputs.len() + 6 == model.header.inputs,
+        "the 6 torques given"
+    );
+    for ((name, pieces), (reads, tree)) in model
+        .header
+        .outputs
+        .iter()
+        .zip(model.header.reads.iter().zip(&model.pieces))
+    {
+        assert!(reads.contains(name), "{name} reads itself");
+        assert!(reads.len() <= 7 && tree.inputs() == reads.len());
+        assert_eq!(*pieces, tree.pieces());
+    }
+    // Every model scored on the predicted variables only; the peer among them.
+    let summary = alnlab_summarize::read(
+        &dir.path()
+            .join(&record.variants[0].artifacts["summary"].path),
+    )
+    .unwrap();
+    let mut variables: Vec<&str> = summary.iter().map(|r| r.variable.as_str()).collect();
+    variables.sort_unstable();
+    variables.dedup();
+    let mut expected = predicted.clone();
+    expected.sort_unstable();
+    assert_eq!(variables, expected);
+    for m in [
+        "aln",
+        "persistence",
+        "linear",
+        "boosted",
+        "simulator@1/frame",
+    ] {
+        assert!(summary.iter().any(|r| r.model == m), "{m} summarized");
+    }
+    let timings = alnlab_common::table::Table::read(
+        &dir.path()
+            .join(&record.variants[0].artifacts["timings"].path),
+    )
+    .unwrap();
+    let paths = timings.strings("path").unwrap();
+    for p in ["batched", "pwl-plain", "pwl-lazy", "pwl-compiled"] {
+        assert!(paths.iter().any(|x| x == p), "{p} timed");
+    }
+    // On one thread, in another folder: the same model and predictions.
+    let out = Command::new(env!("CARGO_BIN_EXE_alnlab"))
+        .current_dir(dir.path())
+        .env("RAYON_NUM_THREADS", "1")
+        .args(["-q", "run", "m.toml", "--out", "one-thread"])
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", stderr(&out));
+    let json = std::fs::read(dir.path().join("one-thread/e2e/run.json")).unwrap();
+    let again: RunRecord = serde_json::from_slice(&json).unwrap();
+    for role in ["model", "predictions", "rollout"] {
+        assert!(
+            artifact(&record, role) == artifact(&again, role),
+            "{role} differs on one thread"
+        );
+    }
+}

@@ -1,6 +1,7 @@
-//! Hostile input for the surfaces round 2 added: the plan stage's tasks,
-//! `alnlab runs` over damaged records, `export mlflow` against servers that
-//! fail, `export verilog`, and the circuit stage without its tools. Every
+//! Hostile input for the surfaces rounds 2 and 3 added: the plan stage's
+//! tasks, `alnlab runs` over damaged records, `export mlflow` against
+//! servers that fail, `export verilog`, the circuit stage without its
+//! tools, and piecewise-linear models where they cannot go. Every
 //! case exits with its code — 2 for the user's mistake, 1 for damaged data
 //! — and names the file, key or row; none panics or leaves a file behind.
 
@@ -629,4 +630,96 @@ fn the_circuit_stage_without_its_tools_says_how_to_install_them() {
     // added.
     assert!(d.join("runs/cache/summarize").is_dir());
     assert_eq!(circuits(), before, "a circuit artifact was left");
+}
+
+#[test]
+fn piecewise_linear_models_refuse_what_they_cannot_do() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let piecewise = TINY.replace("[train]\n", "[train]\nmodel = \"piecewise-linear\"\n");
+    std::fs::write(d.join("pwl.toml"), &piecewise).unwrap();
+    let out = alnlab(d, &["-q", "run", "pwl.toml"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let record: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(d.join("runs/tiny/run.json")).unwrap()).unwrap();
+    let artifact = |role: &str| {
+        record["variants"][0]["artifacts"][role]["path"]
+            .as_str()
+            .unwrap()
+            .to_string()
+    };
+    let edits: [(&str, &str, &str, &[&str]); 3] = [
+        (
+            "controls given to a bit-forest",
+            "model = \"piecewise-linear\"\n",
+            "controls = \"given\"\n",
+            &["controls", "piecewise-linear"],
+        ),
+        (
+            "a learning rate of zero",
+            "model = \"piecewise-linear\"\n",
+            "model = \"piecewise-linear\"\npwl = { rate = 0.0 }\n",
+            &["pwl.rate", "0 < rate"],
+        ),
+        (
+            "a circuit of real numbers",
+            "[test]\n",
+            "[circuit]\nsynthesize = true\n\n[test]\n",
+            &["synthesize", "piecewise-linear"],
+        ),
+    ];
+    let mut cases: Vec<_> = edits
+        .iter()
+        .map(|(name, from, to, mentions)| {
+            let file = format!("{}.toml", name.replace(' ', "-"));
+            std::fs::write(d.join(&file), piecewise.replacen(from, to, 1)).unwrap();
+            let mut mentions = mentions.to_vec();
+            mentions.push(&file);
+            case(name, &["check", &file], &mentions, None).exits(2)
+        })
+        .collect();
+    let (model, codebook) = (artifact("model"), artifact("codebook"));
+    cases.push(
+        case(
+            "a piecewise-linear model exported as Verilog",
+            &[
+                "export",
+                "verilog",
+                &model,
+                "--codebook",
+                &codebook,
+                "-o",
+                "v",
+            ],
+            &["piecewise-linear", "only bit-forests"],
+            None,
+        )
+        .exits(2),
+    );
+    let (levels, pairs) = (artifact("levels"), artifact("pairs"));
+    cases.push(
+        case(
+            "a piecewise-linear model trained in shards",
+            &[
+                "train",
+                "--manifest",
+                "pwl.toml",
+                "--codebook",
+                &codebook,
+                "--levels",
+                &levels,
+                "--pairs",
+                &pairs,
+                "--shard",
+                "1/2",
+                "--out",
+                "s1",
+            ],
+            &["piecewise-linear", "--train-shard"],
+            Some(Path::new("s1")),
+        )
+        .exits(2),
+    );
+    check_all(d, &cases);
+    assert!(!d.join("v").exists(), "the refused export made its folder");
 }

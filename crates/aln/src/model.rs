@@ -741,6 +741,48 @@ mod tests {
     }
 
     #[test]
+    fn a_piecewise_linear_model_round_trips_and_a_malformed_tree_is_named() {
+        use crate::pwl::{Node, Tree as Pwl};
+        let mut m = model();
+        m.header.model = ModelKind::PiecewiseLinear;
+        m.header.target = Target::Change;
+        m.header.inputs = 3;
+        m.header.outputs = vec![("a.1.x".into(), 2), ("a.1.y".into(), 1)];
+        m.header.reads = vec![vec!["a.1.x".into(), "b".into()], vec!["a.1.y".into()]];
+        m.trees = Vec::new();
+        let hinge = Pwl::from_parts(
+            2,
+            vec![Node::Max(1, 2), Node::Piece(0), Node::Piece(1)],
+            vec![0.5, 1.0, -2.0, 0.25, 0.0, 3.0],
+        )
+        .unwrap();
+        m.pieces = vec![hinge, Pwl::affine(-1.0, &[0.125])];
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("model.aln");
+        m.write(&path).unwrap();
+        assert_eq!(Model::read(&path).unwrap(), m);
+        // The first tree's MAX names node 7 of 3, under a valid checksum.
+        let mut bytes = std::fs::read(&path).unwrap();
+        let header = serde_json::to_vec(&m.header).unwrap().len();
+        let first_child = 24 + header + 12 + 4;
+        assert_eq!(u32_of(&bytes[first_child..first_child + 4]), 1);
+        bytes[first_child] = 7;
+        let body = bytes.len() - 4;
+        let crc = crc32fast::hash(&bytes[..body]);
+        bytes[body..].copy_from_slice(&crc.to_le_bytes());
+        let error = Model::from_bytes(&path, &bytes).unwrap_err().to_string();
+        assert!(
+            error.contains("the tree of output 0") && error.contains("child 7"),
+            "{error}"
+        );
+        // Its header asking for more bytes than there are.
+        let mut short = std::fs::read(&path).unwrap();
+        short.truncate(short.len() - 20);
+        let error = Model::from_bytes(&path, &short).unwrap_err().to_string();
+        assert!(error.contains("model.aln"), "{error}");
+    }
+
+    #[test]
     fn a_model_fits_only_codes_of_its_widths() {
         use alnlab_codes::{Code, DeltaSpec, Quantizer};
         let entry = |variable: &str, code, levels| {

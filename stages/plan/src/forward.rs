@@ -372,12 +372,8 @@ impl<'a> Piecewise<'a> {
         for &(k, v) in &self.torques {
             self.state[v] = frame[k];
         }
-        self.predictor.next_values(
-            &self.state,
-            Path::Plain,
-            &mut self.scratch,
-            &mut self.next,
-        );
+        self.predictor
+            .next_values(&self.state, Path::Plain, &mut self.scratch, &mut self.next);
         for (&v, &x) in self.predicted.iter().zip(&self.next) {
             self.state[v] = x;
         }

@@ -246,13 +246,23 @@ impl<'m> Predictor<'m> {
 
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx512f")]
-    unsafe fn plain_levels_avx512(&self, state: &[f64], scratch: &mut Scratch<'m>, levels: &mut [u16]) {
+    unsafe fn plain_levels_avx512(
+        &self,
+        state: &[f64],
+        scratch: &mut Scratch<'m>,
+        levels: &mut [u16],
+    ) {
         self.plain_levels_portable(state, scratch, levels);
     }
 
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2")]
-    unsafe fn plain_levels_avx2(&self, state: &[f64], scratch: &mut Scratch<'m>, levels: &mut [u16]) {
+    unsafe fn plain_levels_avx2(
+        &self,
+        state: &[f64],
+        scratch: &mut Scratch<'m>,
+        levels: &mut [u16],
+    ) {
         self.plain_levels_portable(state, scratch, levels);
     }
 
