@@ -5,8 +5,9 @@
 //! - **Inputs: real values, not levels.** `pairs.parquet` holds the values
 //!   the levels were made from; a level throws away up to half a spacing
 //!   of every input, noise a linear piece would pass on to its output.
-//!   Each tree reads the output's informative inputs (chosen on the levels,
-//!   as for the bit models) and always the variable itself.
+//!   Each tree reads the output's informative inputs (chosen on the levels
+//!   against the change of level, as for the bit models' change targets)
+//!   and always the variable itself.
 //! - **Target: the change** of the variable's real value, on the circle
 //!   for an angle that wraps, in level spacings — so a tree of one piece is
 //!   the robust linear baseline and every figure stays in levels.
@@ -18,6 +19,7 @@
 use alnlab_aln::linear::least_absolute;
 use alnlab_aln::pwl::Tree;
 use alnlab_aln::pwl::predict::{change, real_values};
+use alnlab_codes::residual::change as level_change;
 use alnlab_codes::{Entry, level_column};
 use alnlab_common::table::Table;
 use alnlab_common::{Error, Result};
@@ -195,11 +197,23 @@ pub fn train(
                 .iter()
                 .map(|e| level_column(levels, "x", e))
                 .collect::<Result<_>>()?;
-            let y_levels: Vec<&[u16]> = predicted
+            // Scored against what the tree learns: the change of level (on
+            // the circle for an angle), shifted to be non-negative.
+            let changes: Vec<Vec<u16>> = predicted
                 .iter()
-                .map(|&v| level_column(levels, "y", learned[v]))
+                .map(|&v| {
+                    let y = level_column(levels, "y", learned[v])?;
+                    let period = learned[v].period();
+                    let top = i32::from(u16::MAX / 2);
+                    Ok(x_levels[v]
+                        .iter()
+                        .zip(y)
+                        .map(|(&x, &y)| (level_change(x, y, period).clamp(-top, top) + top) as u16)
+                        .collect())
+                })
                 .collect::<Result<_>>()?;
-            let chosen = select::informative(&x_levels, &y_levels, rows, count);
+            let targets: Vec<&[u16]> = changes.iter().map(Vec::as_slice).collect();
+            let chosen = select::informative(&x_levels, &targets, rows, count);
             chosen
                 .into_iter()
                 .zip(&predicted)

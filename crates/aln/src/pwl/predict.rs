@@ -62,6 +62,59 @@ struct Output<'m> {
     /// The pieces' coefficients transposed — the biases, then each input's
     /// weights, piece by piece — for every piece of one row at once.
     by_input: Vec<f64>,
+    /// The MIN/MAX nodes as a straight program over one row's values.
+    program: Program,
+}
+
+/// A tree's MIN and MAX nodes from the leaves up, over a row of slots: the
+/// pieces' values first ([`padded_pieces`] of them), then each operation's
+/// result in turn. Selecting instead of branching on the node's kind keeps
+/// one row's evaluation free of branches the CPU cannot predict.
+struct Program {
+    /// (first child's slot, second child's slot, MAX?).
+    ops: Vec<(u32, u32, bool)>,
+    /// The root's slot.
+    root: u32,
+}
+
+impl Program {
+    fn of(tree: &Tree) -> Program {
+        let padded = padded_pieces(tree) as u32;
+        let nodes = tree.nodes();
+        let mut slot = vec![0u32; nodes.len()];
+        let mut ops = Vec::new();
+        for (j, node) in nodes.iter().enumerate().rev() {
+            slot[j] = match *node {
+                Node::Piece(p) => p,
+                Node::Min(a, b) | Node::Max(a, b) => {
+                    ops.push((
+                        slot[a as usize],
+                        slot[b as usize],
+                        matches!(node, Node::Max(..)),
+                    ));
+                    padded + ops.len() as u32 - 1
+                }
+            };
+        }
+        Program { ops, root: slot[0] }
+    }
+
+    /// Slots a row needs: the padded pieces and every result.
+    fn slots(&self, tree: &Tree) -> usize {
+        padded_pieces(tree) + self.ops.len()
+    }
+
+    /// The root's value, the pieces' values in `slots` already; ties to the
+    /// first child as [`Tree::value`].
+    #[inline(always)]
+    fn run(&self, slots: &mut [f64], padded: usize) -> f64 {
+        for (k, &(a, b, max)) in self.ops.iter().enumerate() {
+            let (x, y) = (slots[a as usize], slots[b as usize]);
+            let take = if max { y > x } else { y < x };
+            slots[padded + k] = if take { y } else { x };
+        }
+        slots[self.root as usize]
+    }
 }
 
 /// A piecewise-linear model made ready to predict.
@@ -81,9 +134,8 @@ pub struct Predictor<'m> {
 pub struct Scratch<'m> {
     lazy: Vec<Lazy<'m>>,
     row: Vec<f64>,
-    /// One row's piece values, and node values.
+    /// One row's slots: piece values, then node values ([`Program`]).
     pieces: Vec<f64>,
-    nodes: Vec<f64>,
     block_inputs: Vec<f64>,
     block_nodes: Vec<f64>,
 }
@@ -126,6 +178,7 @@ impl<'m> Predictor<'m> {
                 Output {
                     tree,
                     by_input,
+                    program: Program::of(tree),
                     compiled: DecisionTree::build(tree, &own, dtree::Settings::default()),
                     variable: r.variable,
                     inputs: r.inputs.clone(),
@@ -154,11 +207,10 @@ impl<'m> Predictor<'m> {
                 0.0;
                 self.outputs
                     .iter()
-                    .map(|o| padded_pieces(o.tree))
+                    .map(|o| o.program.slots(o.tree))
                     .max()
                     .unwrap_or(0)
             ],
-            nodes: vec![0.0; most_nodes.unwrap_or(0)],
             block_inputs: vec![0.0; self.most_inputs * BLOCK],
             block_nodes: vec![0.0; most_nodes.unwrap_or(0) * BLOCK],
         }
@@ -190,8 +242,7 @@ impl<'m> Predictor<'m> {
         match path {
             Path::Plain => {
                 let wide = self.vectors;
-                let (values, nodes) = (&mut scratch.pieces, &mut scratch.nodes);
-                row_value(out, row, wide, values, nodes)
+                row_value(out, row, wide, &mut scratch.pieces)
             }
             Path::Lazy => scratch.lazy[o].value(row),
             Path::Compiled => out.compiled.value(out.tree, row, &mut scratch.lazy[o]),
@@ -273,9 +324,10 @@ impl<'m> Predictor<'m> {
             for (slot, &i) in row.iter_mut().zip(&out.inputs) {
                 *slot = state[i];
             }
-            let values = &mut scratch.pieces[..padded_pieces(out.tree)];
-            pieces_of_row_portable(&out.by_input, row, values);
-            let change = tree_value(out.tree, values, &mut scratch.nodes);
+            let padded = padded_pieces(out.tree);
+            let slots = &mut scratch.pieces[..out.program.slots(out.tree)];
+            pieces_of_row_portable(&out.by_input, row, &mut slots[..padded]);
+            let change = out.program.run(slots, padded);
             *level = out.quantizer.level(out.advance(state, change)).0;
         }
     }
@@ -377,37 +429,11 @@ impl<'m> Predictor<'m> {
 /// once (each summed in [`Tree::piece_value`]'s order, pieces side by side
 /// in vector registers), then the MIN/MAX nodes from the leaves up, ties
 /// to the first child as [`Tree::value`].
-fn row_value(
-    out: &Output,
-    row: &[f64],
-    wide: Vectors,
-    values: &mut [f64],
-    nodes: &mut [f64],
-) -> f64 {
-    let tree = out.tree;
-    let values = &mut values[..padded_pieces(tree)];
-    pieces_of_row(&out.by_input, row, values, wide);
-    tree_value(tree, values, nodes)
-}
-
-/// The tree's value from its pieces' `values`: the MIN/MAX nodes from the
-/// leaves up, ties to the first child as [`Tree::value`].
-#[inline(always)]
-fn tree_value(tree: &Tree, values: &[f64], nodes: &mut [f64]) -> f64 {
-    for (j, node) in tree.nodes().iter().enumerate().rev() {
-        nodes[j] = match *node {
-            Node::Piece(p) => values[p as usize],
-            Node::Min(a, b) => {
-                let (x, y) = (nodes[a as usize], nodes[b as usize]);
-                if y < x { y } else { x }
-            }
-            Node::Max(a, b) => {
-                let (x, y) = (nodes[a as usize], nodes[b as usize]);
-                if y > x { y } else { x }
-            }
-        };
-    }
-    nodes[0]
+fn row_value(out: &Output, row: &[f64], wide: Vectors, slots: &mut [f64]) -> f64 {
+    let padded = padded_pieces(out.tree);
+    let slots = &mut slots[..out.program.slots(out.tree)];
+    pieces_of_row(&out.by_input, row, &mut slots[..padded], wide);
+    out.program.run(slots, padded)
 }
 
 /// A tree's pieces rounded up to whole vectors of 8 (the padding pieces
