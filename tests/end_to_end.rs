@@ -483,6 +483,20 @@ fn quantize_parameters_are_checked_with_their_place() {
     );
 }
 
+/// Runs `manifest` in `dir` again on one thread, into `one-thread`; its
+/// record.
+fn on_one_thread(dir: &Path, manifest: &str) -> RunRecord {
+    let out = Command::new(env!("CARGO_BIN_EXE_alnlab"))
+        .current_dir(dir)
+        .env("RAYON_NUM_THREADS", "1")
+        .args(["-q", "run", manifest, "--out", "one-thread"])
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", stderr(&out));
+    let json = std::fs::read(dir.join("one-thread/e2e/run.json")).unwrap();
+    serde_json::from_slice(&json).unwrap()
+}
+
 #[test]
 fn threshold_models_train_one_tree_per_variable_the_same_on_any_thread_count() {
     use alnlab_aln::ModelKind;
@@ -503,15 +517,7 @@ fn threshold_models_train_one_tree_per_variable_the_same_on_any_thread_count() {
     );
     assert!(model.trees.iter().all(|(id, _)| id.bit == 0));
     // On one thread, in another folder: the same model, bit for bit.
-    let out = Command::new(env!("CARGO_BIN_EXE_alnlab"))
-        .current_dir(dir.path())
-        .env("RAYON_NUM_THREADS", "1")
-        .args(["-q", "run", "m.toml", "--out", "one-thread"])
-        .output()
-        .unwrap();
-    assert!(out.status.success(), "{}", stderr(&out));
-    let json = std::fs::read(dir.path().join("one-thread/e2e/run.json")).unwrap();
-    let again: RunRecord = serde_json::from_slice(&json).unwrap();
+    let again = on_one_thread(dir.path(), "m.toml");
     let again_path = dir.path().join(&again.variants[0].artifacts["model"].path);
     assert_eq!(
         std::fs::read(model_path).unwrap(),
@@ -936,15 +942,7 @@ peer = true
         assert!(paths.iter().any(|x| x == p), "{p} timed");
     }
     // On one thread, in another folder: the same model and predictions.
-    let out = Command::new(env!("CARGO_BIN_EXE_alnlab"))
-        .current_dir(dir.path())
-        .env("RAYON_NUM_THREADS", "1")
-        .args(["-q", "run", "m.toml", "--out", "one-thread"])
-        .output()
-        .unwrap();
-    assert!(out.status.success(), "{}", stderr(&out));
-    let json = std::fs::read(dir.path().join("one-thread/e2e/run.json")).unwrap();
-    let again: RunRecord = serde_json::from_slice(&json).unwrap();
+    let again = on_one_thread(dir.path(), "m.toml");
     for role in ["model", "predictions", "rollout"] {
         assert!(
             artifact(&record, role) == artifact(&again, role),

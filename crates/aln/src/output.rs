@@ -139,27 +139,28 @@ impl Output {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use alnlab_codes::{Code, Quantizer};
 
-    fn entry(variable: &str, min: f64, max: f64) -> Entry {
+    /// A learned Gray-coded entry of `levels` levels over `min..max`.
+    pub(crate) fn entry_of(variable: &str, min: f64, max: f64, levels: usize) -> Entry {
         Entry {
             variable: variable.into(),
             learned: true,
             note: String::new(),
-            quantizer: Quantizer {
-                min,
-                max,
-                levels: 64,
-            },
+            quantizer: Quantizer { min, max, levels },
             code: Code::Gray,
-            width: 6,
+            width: usize::BITS - (levels - 1).leading_zeros(),
             walk_step: 0,
             walk_span: 0,
             seed: 1,
             clamped: 0,
         }
+    }
+
+    fn entry(variable: &str, min: f64, max: f64) -> Entry {
+        entry_of(variable, min, max, 64)
     }
 
     #[test]

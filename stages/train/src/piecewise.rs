@@ -55,6 +55,10 @@ pub struct PwlParams {
     /// A declared noise (level spacings) instead of the nearest-neighbour
     /// estimate.
     pub tolerance: Option<f64>,
+    /// With the controls given: every tree reads every control besides its
+    /// informative inputs, so that a planner's torques move every
+    /// prediction (a forward model's need, not the one-step error's).
+    pub read_controls: bool,
 }
 
 /// `split`'s values.
@@ -85,6 +89,7 @@ impl Default for PwlParams {
             huber: Some(1.0),
             confidence: 0.75,
             tolerance: None,
+            read_controls: false,
         }
     }
 }
@@ -220,6 +225,15 @@ pub fn train(
                 .map(|(mut inputs, &v)| {
                     if !inputs.contains(&v) {
                         inputs.push(v);
+                    }
+                    if controls_given && params.read_controls {
+                        let controls =
+                            (0..learned.len()).filter(|&u| is_control(&learned[u].variable));
+                        for u in controls {
+                            if !inputs.contains(&u) {
+                                inputs.push(u);
+                            }
+                        }
                     }
                     inputs.sort_unstable();
                     inputs

@@ -667,25 +667,9 @@ pub fn states(columns: &[Vec<f64>], rows: &[usize]) -> Vec<f64> {
 mod tests {
     use super::*;
     use crate::pwl::lazy::tests::random_tree;
-    use alnlab_codes::Code;
 
     fn entry(variable: &str, min: f64, max: f64) -> Entry {
-        Entry {
-            variable: variable.into(),
-            learned: true,
-            note: String::new(),
-            quantizer: Quantizer {
-                min,
-                max,
-                levels: 101,
-            },
-            code: Code::Gray,
-            width: 7,
-            walk_step: 0,
-            walk_span: 0,
-            seed: 0,
-            clamped: 0,
-        }
+        crate::output::tests::entry_of(variable, min, max, 101)
     }
 
     #[test]

@@ -195,12 +195,14 @@ pub(super) fn charts(md: &mut String, variants: &[Loaded], shared: bool, dir: &P
             .filter(|t| t.model == "aln" && t.threads == 1)
         {
             let single = t.path != "batched";
+            // A piecewise-linear model's one-row paths: plain, lazy, compiled.
+            let how = match t.path.strip_prefix("pwl-") {
+                Some(path) => format!("one at a time, {path}"),
+                None if single => "one at a time".into(),
+                None => "batched".into(),
+            };
             series.push(Series {
-                name: format!(
-                    "{}, {}",
-                    aln_name(v, n),
-                    if single { "one at a time" } else { "batched" }
-                ),
+                name: format!("{}, {how}", aln_name(v, n)),
                 style: style_of("aln", k),
                 points: vec![Point {
                     x_range: Some((t.ns_min / 1000.0, t.ns_max / 1000.0)),

@@ -76,7 +76,9 @@ pub(super) fn findings(md: &mut String, run: &RunInfo, variants: &[Loaded]) {
         md,
         "Errors are in quantization levels (0 is the exact level) of the variable predicted one \
          stride ahead, averaged over a variant's variables. Baselines: *persistence* predicts no \
-         change, *linear* is a least-squares linear map of the state, *simulator@k/frame* \
+         change, *linear* is the robust linear fit of each variable's change (least absolute \
+         deviations, from the real values of the inputs the ALN reads), *boosted* (where \
+         present) gradient-boosted trees fitted to the same change, *simulator@k/frame* \
          re-steps the physics from the logged frame with k integration steps per frame (the \
          logged step is exact by construction). A *normalized* error divides each variable's \
          mean error by the standard deviation of its true levels over the same rows, so runs \
@@ -225,7 +227,8 @@ fn variant_findings(md: &mut String, v: &Loaded) {
     }
 
     let c = &v.coverage;
-    if c.read < 0.99 {
+    // (A piecewise-linear model has no leaves to wire: coverage is 0 of 0.)
+    if c.read < 0.99 && c.literals > 0 {
         let _ = writeln!(
             md,
             "  - ⚠ Each tree has {} leaves for {} input literals (bits and their complements), \

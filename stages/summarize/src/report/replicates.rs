@@ -64,7 +64,20 @@ impl Figures {
 /// simulation. `None` unless both have the same ≥ 2 replicate seeds.
 pub(super) fn between(a: &Loaded, b: &Loaded) -> Option<(Interval, Vec<Option<f64>>)> {
     let seeds = |v: &Loaded| v.replicates.iter().map(|f| f.seed).collect::<Vec<_>>();
-    if a.replicates.len() < 2 || seeds(a) != seeds(b) {
+    // Means over different variables (one model given the controls, one
+    // predicting them) do not pair.
+    fn variables<'a>(v: &'a Loaded) -> Vec<&'a str> {
+        let mut names: Vec<&str> = v
+            .judged()
+            .0
+            .iter()
+            .filter(|r| r.model == "aln")
+            .map(|r| r.variable.as_str())
+            .collect();
+        names.sort_unstable();
+        names
+    }
+    if a.replicates.len() < 2 || seeds(a) != seeds(b) || variables(a) != variables(b) {
         return None;
     }
     let values: Vec<Option<f64>> = a
