@@ -181,10 +181,12 @@ impl Loaded<'_> {
     }
 
     /// The ALN one state at a time: the parsimonious path of a bit-forest,
-    /// the binary search of a threshold model.
+    /// the binary search of a threshold model, a piecewise-linear model's
+    /// plain path (its fastest).
     fn aln_single(&self) -> Option<&Timing> {
         self.timing("aln", "single")
             .or_else(|| self.timing("aln", "threshold-search"))
+            .or_else(|| self.timing("aln", "pwl-plain"))
     }
 
     /// The ALN's batches on all threads, when there are more than one.

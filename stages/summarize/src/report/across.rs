@@ -411,7 +411,11 @@ pub(super) fn side_by_side(md: &mut String, variants: &[Loaded], shared: bool) {
             format!("`{}`", v.info.name),
             time(v.ns("aln", "batched")),
             time(v.aln_single().map(|t| t.ns_per_state)),
-            v.hardware.delays().to_string(),
+            match v.hardware.delays() {
+                // No gates: a piecewise-linear model computes with numbers.
+                0 => "—".to_string(),
+                delays => delays.to_string(),
+            },
         ];
         if measured {
             row.push(
