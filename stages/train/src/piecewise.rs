@@ -17,8 +17,8 @@
 //!   are read, never predicted.
 
 use alnlab_aln::linear::least_absolute;
-use alnlab_aln::pwl::Tree;
 use alnlab_aln::pwl::predict::{change, real_values};
+use alnlab_aln::pwl::{MAX_PIECES, Tree};
 use alnlab_codes::residual::change as level_change;
 use alnlab_codes::{Entry, level_column};
 use alnlab_common::table::Table;
@@ -104,10 +104,10 @@ impl PwlParams {
                 format!("expected 0 < rate ≤ 1, found {}", self.rate),
             );
         }
-        if !(1..=1 << 16).contains(&self.max_pieces) {
+        if !(1..=MAX_PIECES).contains(&self.max_pieces) {
             return bad(
                 "max_pieces",
-                format!("expected 1 to 65536, found {}", self.max_pieces),
+                format!("expected 1 to {MAX_PIECES}, found {}", self.max_pieces),
             );
         }
         if !(self.confidence > 0.0 && self.confidence < 1.0) {

@@ -235,7 +235,7 @@ fn piece_bounds(tree: &Tree, p: usize, lo: &[f64], hi: &[f64]) -> (f64, f64) {
         high += a.max(b);
         scale += a.abs().max(b.abs());
     }
-    let margin = 8.0 * (weights.len() as f64 + 2.0) * f64::EPSILON * scale;
+    let margin = 8.0 * (weights.len() as f64 + 2.0) * (f64::EPSILON * scale + f64::MIN_POSITIVE);
     (low - margin, high + margin)
 }
 
@@ -302,6 +302,9 @@ fn dominates(
     hi: &[f64],
     budget: &mut usize,
 ) -> bool {
+    if *budget == 0 {
+        return false;
+    }
     let above = |x: u32, y: u32, budget: &mut usize| dominates(tree, nodes, x, y, lo, hi, budget);
     match (nodes[a as usize], nodes[b as usize]) {
         (_, Node::Max(b1, b2)) => above(a, b1, budget) && above(a, b2, budget),
@@ -330,7 +333,9 @@ fn difference_low(tree: &Tree, p: usize, q: usize, lo: &[f64], hi: &[f64]) -> f6
         low += (d * l).min(d * h);
         scale += (p.abs() + q.abs()) * l.abs().max(h.abs());
     }
-    low - 16.0 * (wp.len() as f64 + 2.0) * f64::EPSILON * scale
+    // Relative rounding, and an absolute term for products that underflow.
+    let terms = wp.len() as f64 + 2.0;
+    low - 16.0 * terms * (f64::EPSILON * scale + f64::MIN_POSITIVE)
 }
 
 /// The pieces reached from `root` in `nodes`, in order of the first child.

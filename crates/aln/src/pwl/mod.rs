@@ -45,6 +45,10 @@ pub struct Tree {
     coefficients: Vec<f64>,
 }
 
+/// The most pieces a tree may have: evaluation recurses as deep as the
+/// tree, so a model file cannot ask for more than a thread's stack holds.
+pub const MAX_PIECES: usize = 4096;
+
 /// Why a tree's parts do not make a tree.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct Malformed(pub String);
@@ -79,6 +83,11 @@ impl Tree {
                 "{} coefficients are not whole pieces of {} (bias and {inputs} weights)",
                 coefficients.len(),
                 inputs + 1
+            ));
+        }
+        if pieces > MAX_PIECES {
+            return bad(format!(
+                "{pieces} pieces, more than the {MAX_PIECES} a tree may have"
             ));
         }
         if let Some(c) = coefficients.iter().find(|c| !c.is_finite()) {

@@ -64,6 +64,10 @@ struct Output<'m> {
     by_input: Vec<f64>,
     /// The MIN/MAX nodes as a straight program over one row's values.
     program: Program,
+    /// The tree's pieces padded to whole vectors, and one row's slots
+    /// ([`Program`]): kept, not derived per row.
+    padded: usize,
+    slots: usize,
 }
 
 /// A tree's MIN and MAX nodes from the leaves up, over a row of slots: the
@@ -175,10 +179,13 @@ impl<'m> Predictor<'m> {
                         by_input[i * padded + p] = c;
                     }
                 }
+                let program = Program::of(tree);
                 Output {
                     tree,
                     by_input,
-                    program: Program::of(tree),
+                    slots: program.slots(tree),
+                    padded,
+                    program,
                     compiled: DecisionTree::build(tree, &own, dtree::Settings::default()),
                     variable: r.variable,
                     inputs: r.inputs.clone(),
@@ -203,14 +210,7 @@ impl<'m> Predictor<'m> {
         Scratch {
             lazy: self.outputs.iter().map(|o| Lazy::new(o.tree)).collect(),
             row: vec![0.0; self.most_inputs],
-            pieces: vec![
-                0.0;
-                self.outputs
-                    .iter()
-                    .map(|o| o.program.slots(o.tree))
-                    .max()
-                    .unwrap_or(0)
-            ],
+            pieces: vec![0.0; self.outputs.iter().map(|o| o.slots).max().unwrap_or(0)],
             block_inputs: vec![0.0; self.most_inputs * BLOCK],
             block_nodes: vec![0.0; most_nodes.unwrap_or(0) * BLOCK],
         }
@@ -250,7 +250,7 @@ impl<'m> Predictor<'m> {
     }
 
     /// The next real value of every output for one state (`width()`
-    /// values), into `next`.
+    /// values), into `next` (one value per output).
     pub fn next_values(
         &self,
         state: &[f64],
@@ -324,8 +324,8 @@ impl<'m> Predictor<'m> {
             for (slot, &i) in row.iter_mut().zip(&out.inputs) {
                 *slot = state[i];
             }
-            let padded = padded_pieces(out.tree);
-            let slots = &mut scratch.pieces[..out.program.slots(out.tree)];
+            let padded = out.padded;
+            let slots = &mut scratch.pieces[..out.slots];
             pieces_of_row_portable(&out.by_input, row, &mut slots[..padded]);
             let change = out.program.run(slots, padded);
             *level = out.quantizer.level(out.advance(state, change)).0;
@@ -430,8 +430,8 @@ impl<'m> Predictor<'m> {
 /// in vector registers), then the MIN/MAX nodes from the leaves up, ties
 /// to the first child as [`Tree::value`].
 fn row_value(out: &Output, row: &[f64], wide: Vectors, slots: &mut [f64]) -> f64 {
-    let padded = padded_pieces(out.tree);
-    let slots = &mut slots[..out.program.slots(out.tree)];
+    let padded = out.padded;
+    let slots = &mut slots[..out.slots];
     pieces_of_row(&out.by_input, row, &mut slots[..padded], wide);
     out.program.run(slots, padded)
 }
