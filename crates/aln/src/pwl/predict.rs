@@ -142,6 +142,8 @@ pub struct Scratch<'m> {
     pieces: Vec<f64>,
     block_inputs: Vec<f64>,
     block_nodes: Vec<f64>,
+    /// One state's change per output.
+    changes: Vec<f64>,
 }
 
 /// Rows a batch evaluates together: each piece's value for all of them in
@@ -213,6 +215,7 @@ impl<'m> Predictor<'m> {
             pieces: vec![0.0; self.outputs.iter().map(|o| o.slots).max().unwrap_or(0)],
             block_inputs: vec![0.0; self.most_inputs * BLOCK],
             block_nodes: vec![0.0; most_nodes.unwrap_or(0) * BLOCK],
+            changes: vec![0.0; self.outputs.len()],
         }
     }
 
@@ -317,9 +320,13 @@ impl<'m> Predictor<'m> {
         self.plain_levels_portable(state, scratch, levels);
     }
 
+    /// Every tree's change first, then every variable advanced and
+    /// quantized: kept apart, the quantizers' divisions are independent of
+    /// one another and overlap instead of each waiting at the end of its
+    /// tree's chain of selects.
     #[inline(always)]
     fn plain_levels_portable(&self, state: &[f64], scratch: &mut Scratch<'m>, levels: &mut [u16]) {
-        for (out, level) in self.outputs.iter().zip(levels) {
+        for (out, change) in self.outputs.iter().zip(&mut scratch.changes) {
             let row = &mut scratch.row[..out.inputs.len()];
             for (slot, &i) in row.iter_mut().zip(&out.inputs) {
                 *slot = state[i];
@@ -327,7 +334,9 @@ impl<'m> Predictor<'m> {
             let padded = out.padded;
             let slots = &mut scratch.pieces[..out.slots];
             pieces_of_row_portable(&out.by_input, row, &mut slots[..padded]);
-            let change = out.program.run(slots, padded);
+            *change = out.program.run(slots, padded);
+        }
+        for ((out, &change), level) in self.outputs.iter().zip(&scratch.changes).zip(levels) {
             *level = out.quantizer.level(out.advance(state, change)).0;
         }
     }
