@@ -156,6 +156,25 @@ def judged_figures(summary_path, comparisons_path):
     return figures
 
 
+def replicate_figures(artifacts):
+    """judged_figures with the learned peer (boosted trees) where the test
+    stage fitted one, and the ALN's mean error per variable."""
+    summary_path, comparisons_path = artifacts["summary"]["path"], artifacts["comparisons"]["path"]
+    figures = judged_figures(summary_path, comparisons_path)
+    summary = pq.read_table(summary_path).to_pylist()
+    rows = "held-out" if any(r["rows"] == "held-out" for r in summary) else "all"
+    boosted = [r["mean"] for r in summary if r["rows"] == rows and r["model"] == "boosted"]
+    if boosted:
+        figures["boosted mean"] = float(np.mean(boosted))
+        for row in pq.read_table(comparisons_path).to_pylist():
+            if row["rows"] == rows and row["model"] == "aln" and row["variable"] is None \
+                    and row["against"] == "boosted":
+                figures["aln - boosted"] = row["mean_difference"]
+    figures["by_variable"] = {r["variable"]: r["mean"] for r in summary
+                              if r["rows"] == rows and r["model"] == "aln"}
+    return figures
+
+
 def check_metrics(variant):
     """The run record's metrics, recomputed from the artifacts: the headline
     figures, every variable's mean error, the one-thread timings and the
@@ -202,14 +221,21 @@ def check_replicates(record, report_dir):
     rows = list(csv.DictReader(open(Path(report_dir) / "replicates.csv")))
     checked = 0
     for name, replicates in by_variant.items():
-        per = [judged_figures(r["artifacts"]["summary"]["path"], r["artifacts"]["comparisons"]["path"])
-               for r in sorted(replicates, key=lambda r: r["replicate"])]
+        ordered = sorted(replicates, key=lambda r: r["replicate"])
+        per = [replicate_figures(r["artifacts"]) for r in ordered]
         for row in (r for r in rows if r["variant"] == name):
             if row["figure"].startswith("aln mean - "):
-                other = row["figure"][len("aln mean - "):-len(" aln mean")]
-                theirs = [judged_figures(r["artifacts"]["summary"]["path"], r["artifacts"]["comparisons"]["path"])
+                # "aln mean - B aln mean", or "… over N common variables":
+                # means over the variables both variants' ALNs predict.
+                other = row["figure"][len("aln mean - "):].split(" aln mean")[0]
+                theirs = [replicate_figures(r["artifacts"])
                           for r in sorted(by_variant[other], key=lambda r: r["replicate"])]
-                values = np.array([p["aln mean"] - q["aln mean"] for p, q in zip(per, theirs)])
+                common = sorted(set(per[0]["by_variable"]) & set(theirs[0]["by_variable"]))
+                if len(common) != len(per[0]["by_variable"]) or len(common) != len(theirs[0]["by_variable"]):
+                    assert row["figure"].endswith(f" over {len(common)} common variables"), row
+                values = np.array([
+                    np.mean([p["by_variable"][v] for v in common]) - np.mean([q["by_variable"][v] for v in common])
+                    for p, q in zip(per, theirs)])
             else:
                 values = np.array([p[row["figure"]] for p in per])
             listed = [float(x) for x in row["values"].split(";")]

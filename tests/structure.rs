@@ -1,6 +1,7 @@
 //! The workspace's layering, read from `cargo metadata`: a stage crate
 //! (`stages/<name>/`) never depends on another stage crate — what several
-//! stages need is a library crate under `crates/`. A dev-dependency may
+//! stages need is a library crate under `crates/`; a view (`views/<name>/`,
+//! the report) reads every stage's tables and only the pipeline uses it. A dev-dependency may
 //! build a stage's test input with an upstream stage; nothing of it reaches
 //! the stage's library.
 
@@ -78,6 +79,51 @@ fn stage_to_stage(packages: &BTreeMap<String, (String, Vec<String>)>) -> Vec<Str
                 .map(move |d| format!("{name} → {d}"))
         })
         .collect()
+}
+
+/// The dependencies on a view by anything but the pipeline (the root
+/// package), as "a → b".
+fn view_users(packages: &BTreeMap<String, (String, Vec<String>)>) -> Vec<String> {
+    let is_view = |name: &str| {
+        packages
+            .get(name)
+            .is_some_and(|(folder, _)| folder.starts_with("views/"))
+    };
+    packages
+        .iter()
+        .filter(|(_, (folder, _))| !folder.is_empty())
+        .flat_map(|(name, (_, deps))| {
+            deps.iter()
+                .filter(|d| is_view(d))
+                .map(move |d| format!("{name} → {d}"))
+        })
+        .collect()
+}
+
+#[test]
+fn only_the_pipeline_uses_the_report() {
+    let packages = workspace();
+    let (folder, _) = packages.get("alnlab-report").expect("the report crate");
+    assert_eq!(folder, "views/report");
+    let users = view_users(&packages);
+    assert!(
+        users.is_empty(),
+        "only the pipeline may use a view (a stage writes tables; the report reads them): \
+         {users:?}"
+    );
+    let pipeline = packages.get("alnlab").expect("the pipeline package");
+    assert!(pipeline.1.contains(&"alnlab-report".to_string()));
+}
+
+#[test]
+fn the_check_sees_a_stage_using_the_report() {
+    let mut packages = workspace();
+    packages
+        .get_mut("alnlab-summarize")
+        .expect("the summarize stage")
+        .1
+        .push("alnlab-report".into());
+    assert_eq!(view_users(&packages), ["alnlab-summarize → alnlab-report"]);
 }
 
 #[test]

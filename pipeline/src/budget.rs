@@ -10,11 +10,10 @@
 //! about what a large workstation holds — and a manifest may raise them in
 //! `[experiment.budget]`.
 
-use alnlab_codes::Code;
 use alnlab_common::params::Positive;
 use serde::{Deserialize, Serialize};
 
-use crate::manifest::Stages;
+use crate::stages::Stages;
 
 /// The limits a variant's estimated work must stay under
 /// (`[experiment.budget]`; every key optional).
@@ -128,11 +127,7 @@ impl Estimate {
             .test_rows
             .map_or(rows * stride.test_fraction.get(), |cap| cap.0 as f64);
         let q = &stages.quantize;
-        let width = match q.code {
-            Code::Walk => q.width.0 as f64,
-            Code::Thermometer => q.levels.0 as f64 - 1.0,
-            Code::Binary | Code::Gray => (q.levels.0 as f64).log2().ceil(),
-        };
+        let width = f64::from(q.code.width(q.levels.0.max(2) as usize, q.width.0 as u32));
         let t = &stages.train;
         let trees = vars * width * t.vote.0 as f64;
         let node_updates = t.epochs.0 as f64 * train_rows * trees * t.leaves.0 as f64;

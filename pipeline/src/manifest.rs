@@ -18,7 +18,7 @@ use serde::{Deserialize, Serialize};
 use serde_spanned::Spanned;
 use toml::de::{DeTable, DeValue};
 
-use crate::stages::{Archived, STAGES, Stage};
+use crate::stages::{Archived, STAGES, Stage, Stages};
 
 mod locate;
 use locate::{Locator, has_key, span_of};
@@ -111,33 +111,6 @@ pub struct Variant {
     /// The stage tables the manifest, with this variant's overrides, sets
     /// (a stage an archived dataset stands for must not be set).
     pub tables: BTreeSet<&'static str>,
-}
-
-/// The parameters of every stage, one table each.
-#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct Stages {
-    /// `[simulate]`
-    #[serde(default)]
-    pub simulate: alnlab_simulate::Params,
-    /// `[stride]`
-    #[serde(default)]
-    pub stride: alnlab_stride::Params,
-    /// `[quantize]`
-    #[serde(default)]
-    pub quantize: alnlab_quantize::Params,
-    /// `[train]`
-    #[serde(default)]
-    pub train: alnlab_train::Params,
-    /// `[test]`
-    #[serde(default)]
-    pub test: alnlab_evaluate::Params,
-    /// `[plan]`
-    #[serde(default)]
-    pub plan: alnlab_plan::Params,
-    /// `[circuit]`
-    #[serde(default)]
-    pub circuit: alnlab_circuit::Params,
 }
 
 /// The whole document as deserialized (variants handled separately).

@@ -5,7 +5,7 @@
 //!
 //! Each variant's replicate becomes one MLflow run, under an MLflow
 //! experiment named after the alnlab experiment: its resolved parameters
-//! (dotted keys), its metrics ([`alnlab_summarize::metrics`]: figures at
+//! (dotted keys), its metrics ([`alnlab_report::metrics`]: figures at
 //! step 0, per-epoch training errors and per-horizon closed-loop errors as
 //! steps), tags (the alnlab run id, variant and replicate, the git commit as
 //! `mlflow.source.git.commit`, the manifest's path and sha256) and, as

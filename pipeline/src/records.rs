@@ -16,7 +16,7 @@ use std::time::SystemTime;
 
 use alnlab_common::hash::sha256_hex;
 use alnlab_common::{Error, Result, atomic};
-use alnlab_summarize::metrics::Metrics;
+use alnlab_report::metrics::Metrics;
 use serde::{Deserialize, Serialize};
 
 /// The format of the records this alnlab writes.
@@ -115,7 +115,7 @@ impl VariantRecord {
                 ))
             })
         };
-        alnlab_summarize::metrics::read(&alnlab_summarize::metrics::Sources {
+        alnlab_report::metrics::read(&alnlab_report::metrics::Sources {
             summary: &path("summary")?,
             comparisons: &path("comparisons")?,
             horizons: &path("horizons")?,

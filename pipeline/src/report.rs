@@ -1,10 +1,10 @@
 //! Rendering a run's report from its record: the record names every
-//! artifact, the summarize crate draws the tables and charts.
+//! artifact, the report crate draws the tables and charts.
 
 use std::path::{Path, PathBuf};
 
 use alnlab_common::{Error, Result};
-use alnlab_summarize::report::{self, Replicate, RunInfo, StageTime, VariantInfo};
+use alnlab_report::{self as report, Replicate, RunInfo, StageTime, VariantInfo};
 
 use crate::records::{RunRecord, VariantRecord};
 

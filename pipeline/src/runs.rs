@@ -6,7 +6,7 @@ use std::collections::BTreeMap;
 use std::path::Path;
 
 use alnlab_common::{Error, Result};
-use alnlab_summarize::metrics::Metrics;
+use alnlab_report::metrics::Metrics;
 use alnlab_summarize::paired::Interval;
 use serde::Serialize;
 

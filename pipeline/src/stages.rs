@@ -13,9 +13,34 @@ use std::path::{Path, PathBuf};
 use alnlab_aln::shard::Shard;
 use alnlab_common::params::ParamError;
 use alnlab_common::{Progress, Provenance, Result};
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
-use crate::manifest::Stages;
+/// The parameters of every stage, one table each.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Stages {
+    /// `[simulate]`
+    #[serde(default)]
+    pub simulate: alnlab_simulate::Params,
+    /// `[stride]`
+    #[serde(default)]
+    pub stride: alnlab_stride::Params,
+    /// `[quantize]`
+    #[serde(default)]
+    pub quantize: alnlab_quantize::Params,
+    /// `[train]`
+    #[serde(default)]
+    pub train: alnlab_train::Params,
+    /// `[test]`
+    #[serde(default)]
+    pub test: alnlab_evaluate::Params,
+    /// `[plan]`
+    #[serde(default)]
+    pub plan: alnlab_plan::Params,
+    /// `[circuit]`
+    #[serde(default)]
+    pub circuit: alnlab_circuit::Params,
+}
 
 /// One stage of the graph.
 pub struct Stage {

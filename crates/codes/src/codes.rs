@@ -31,6 +31,16 @@ pub enum Code {
 impl Code {
     /// Every code.
     pub const ALL: [Code; 4] = [Code::Binary, Code::Gray, Code::Walk, Code::Thermometer];
+
+    /// Bits a codeword of `levels` levels has (at least 2 levels); a walk's
+    /// width is its own parameter, `walk_width`, which the others ignore.
+    pub fn width(self, levels: usize, walk_width: u32) -> u32 {
+        match self {
+            Code::Binary | Code::Gray => binary_width(levels),
+            Code::Thermometer => (levels - 1) as u32,
+            Code::Walk => walk_width,
+        }
+    }
 }
 
 // A code's name is its serde name, as in manifests: one mapping for the
@@ -69,11 +79,11 @@ impl Codec {
         if levels > usize::from(u16::MAX) + 1 {
             return Err(format!("expected at most 65536 levels, found {levels}"));
         }
-        let width = match code {
-            Code::Binary | Code::Gray => binary_width(levels),
-            Code::Thermometer => (levels - 1) as u32,
-            Code::Walk => walk.ok_or("the walk code needs its width and span")?.width,
+        let walk_width = match (code, walk) {
+            (Code::Walk, None) => return Err("the walk code needs its width and span".into()),
+            (_, walk) => walk.map_or(0, |w| w.width),
         };
+        let width = code.width(levels, walk_width);
         let words = width.div_ceil(64) as usize;
         let mut table = vec![0u64; levels * words];
         let walk_step = if code == Code::Walk {

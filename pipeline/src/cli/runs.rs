@@ -5,12 +5,12 @@ use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
 use alnlab_common::{Error, Result};
-use alnlab_summarize::report::format::sig3;
+use alnlab_report::format::sig3;
 use clap::{Args, Subcommand};
 use serde_json::json;
 
 use crate::records::{self, Stored};
-use alnlab_summarize::metrics;
+use alnlab_report::metrics;
 
 use crate::runs::{self, Diff, Figure, Filter, HEADLINE, MetricChange, VariantRun};
 
@@ -234,7 +234,7 @@ fn variant_json(out: &Path, v: &VariantRun) -> serde_json::Value {
 /// "0.545", or "0.545 [0.530, 0.560]" across replicates.
 fn figure_text(f: &Figure) -> String {
     match (f.low, f.high) {
-        (Some(low), Some(high)) => alnlab_summarize::report::format::estimate(f.mean, low, high),
+        (Some(low), Some(high)) => alnlab_report::format::estimate(f.mean, low, high),
         _ => sig3(f.mean),
     }
 }

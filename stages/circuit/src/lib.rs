@@ -22,21 +22,20 @@
 
 pub mod bench;
 pub mod check;
+pub mod measured;
 pub mod simulate;
 pub mod synth;
 pub mod tools;
 pub mod verilog;
 
 use std::path::Path;
-use std::sync::Arc;
 
 use alnlab_aln::ModelKind;
 use alnlab_aln::runtime::Trained;
 use alnlab_codes::{Entry, level_rows, split_rows};
 use alnlab_common::params::{Count, ParamError};
-use alnlab_common::table::{self, Table};
+use alnlab_common::table::Table;
 use alnlab_common::{Error, Progress, Provenance, Result, params};
-use arrow_array::{Array, StringArray, UInt32Array, UInt64Array};
 use serde::{Deserialize, Serialize};
 
 pub use synth::{Figures, Part, VariableFigures};
@@ -88,11 +87,11 @@ pub fn run(
         .map_err(|e| params::invalid("circuit", e))?;
     let path = out_dir.join(CIRCUIT_FILE);
     if !params.synthesize {
-        return write(&path, None, provenance);
+        return measured::write(&path, None, provenance);
     }
     let trained = Trained::read(model_path, codebook_path)?;
     if trained.model.header.model == ModelKind::Threshold {
-        return write(&path, None, provenance);
+        return measured::write(&path, None, provenance);
     }
     if trained.model.header.model == ModelKind::PiecewiseLinear {
         return Err(Error::Invalid(format!(
@@ -108,7 +107,11 @@ pub fn run(
         params.rows.map(Count::get),
         progress,
     )?;
-    write(&path, Some((&figures, rows as u64)), provenance)
+    let measured = measured::Measured {
+        figures,
+        rows_equal: rows as u64,
+    };
+    measured::write(&path, Some(&measured), provenance)
 }
 
 /// `trained` (read from `model_path`) measured as a circuit on the first
@@ -152,58 +155,4 @@ pub fn circuit_of(trained: &Trained, model_path: &Path) -> Result<Circuit> {
         .collect();
     Circuit::new(&trained.model, &names, &trained.codecs, &trained.outputs)
         .map_err(|m| Error::bad_file(model_path, m))
-}
-
-/// Writes `circuit.parquet`: three rows per variable (trees, votes,
-/// decode), or none.
-fn write(path: &Path, figures: Option<(&Figures, u64)>, provenance: &Provenance) -> Result<()> {
-    let mut rows: Vec<(&str, &str, Part)> = Vec::new();
-    if let Some((f, _)) = figures {
-        for v in &f.variables {
-            for (part, figures) in [("trees", v.trees), ("votes", v.votes), ("decode", v.decode)] {
-                rows.push((&v.variable, part, figures));
-            }
-        }
-    }
-    let each = |s: &str| -> Arc<dyn Array> {
-        Arc::new(StringArray::from_iter_values(rows.iter().map(|_| s)))
-    };
-    let (tools, library, equal) = figures.map_or(("", "", 0), |(f, n)| {
-        (f.tools.as_str(), f.library.as_str(), n)
-    });
-    let batch = table::batch(vec![
-        (
-            "variable",
-            Arc::new(StringArray::from_iter_values(rows.iter().map(|r| r.0))) as Arc<dyn Array>,
-        ),
-        (
-            "part",
-            Arc::new(StringArray::from_iter_values(rows.iter().map(|r| r.1))),
-        ),
-        (
-            "cells",
-            Arc::new(UInt64Array::from_iter_values(
-                rows.iter().map(|r| r.2.cells),
-            )),
-        ),
-        (
-            "inverters",
-            Arc::new(UInt64Array::from_iter_values(
-                rows.iter().map(|r| r.2.inverters),
-            )),
-        ),
-        (
-            "depth",
-            Arc::new(UInt32Array::from_iter_values(
-                rows.iter().map(|r| r.2.depth),
-            )),
-        ),
-        (
-            "rows_equal",
-            Arc::new(UInt64Array::from_iter_values(rows.iter().map(|_| equal))),
-        ),
-        ("tools", each(tools)),
-        ("library", each(library)),
-    ]);
-    table::write_parquet(path, &batch, provenance)
 }

@@ -26,6 +26,7 @@ mod predict;
 mod resimulate;
 mod rollout;
 pub mod timing;
+pub mod timings;
 
 use std::path::Path;
 use std::sync::Arc;
@@ -40,14 +41,9 @@ use alnlab_common::params::{self, Count, Fraction, ParamError};
 use alnlab_common::state_log::StateLog;
 use alnlab_common::table::{self, Table};
 use alnlab_common::{Error, Progress, Provenance, Result};
-use arrow_array::types::{Float64Type, UInt16Type};
-use arrow_array::{
-    Array, BooleanArray, DictionaryArray, Float64Array, ListArray, StringArray, UInt16Array,
-    UInt32Array,
-};
+use arrow_array::types::UInt16Type;
+use arrow_array::{Array, BooleanArray, DictionaryArray, StringArray, UInt16Array, UInt32Array};
 use serde::{Deserialize, Serialize};
-
-use crate::timing::Timing;
 
 /// Version of what this stage writes (part of every cache key; 5: the
 /// robust linear baseline of the change, piecewise-linear models).
@@ -449,7 +445,8 @@ pub fn run(
         &rolled,
         provenance,
     )?;
-    write_timings(&out_dir.join(TIMINGS_FILE), &timings, provenance)
+    let rows: Vec<timings::Row> = timings.iter().map(timings::Row::measured).collect();
+    timings::write(&out_dir.join(TIMINGS_FILE), &rows, provenance)
 }
 
 /// The model, made ready: a bit model's runtime, or a piecewise-linear
@@ -585,67 +582,4 @@ fn write_predictions(
         ("error", Arc::new(UInt16Array::from(error))),
     ]);
     table::write_parquet(path, &batch, provenance)
-}
-
-/// `timings.parquet`: one row per model, evaluation path and thread count:
-/// the median ns per state of [`timing::REPEATS`] interleaved runs, their
-/// range and every run in round order (`ns_runs`), with the states it
-/// failed to predict and the machine (cores, CPU model).
-fn write_timings(path: &Path, timings: &[Timing], provenance: &Provenance) -> Result<()> {
-    let cores = std::thread::available_parallelism().map_or(1, |n| n.get()) as u32;
-    let cpu = cpu_model();
-    let column =
-        |f: fn(&Timing) -> u32| UInt32Array::from(timings.iter().map(f).collect::<Vec<_>>());
-    let ns = |f: fn(&Timing) -> f64| -> Arc<dyn Array> {
-        Arc::new(Float64Array::from_iter_values(timings.iter().map(f)))
-    };
-    let batch = table::batch(vec![
-        (
-            "model",
-            Arc::new(StringArray::from_iter_values(
-                timings.iter().map(|t| t.model.as_str()),
-            )) as Arc<dyn Array>,
-        ),
-        (
-            "path",
-            Arc::new(StringArray::from_iter_values(
-                timings.iter().map(|t| t.path),
-            )),
-        ),
-        ("ns_per_state", ns(|t| t.spread().median)),
-        ("ns_min", ns(|t| t.spread().min)),
-        ("ns_max", ns(|t| t.spread().max)),
-        (
-            "ns_runs",
-            Arc::new(ListArray::from_iter_primitive::<Float64Type, _, _>(
-                timings
-                    .iter()
-                    .map(|t| Some(t.runs.iter().map(|&x| Some(x)).collect::<Vec<_>>())),
-            )),
-        ),
-        ("states", Arc::new(column(|t| t.states as u32))),
-        ("threads", Arc::new(column(|t| t.threads as u32))),
-        ("failed", Arc::new(column(|t| t.failed as u32))),
-        (
-            "cores",
-            Arc::new(UInt32Array::from(vec![cores; timings.len()])),
-        ),
-        (
-            "cpu",
-            Arc::new(StringArray::from(vec![cpu.as_str(); timings.len()])),
-        ),
-    ]);
-    table::write_parquet(path, &batch, provenance)
-}
-
-/// The CPU's model name (Linux's `/proc/cpuinfo`), or "unknown CPU".
-fn cpu_model() -> String {
-    std::fs::read_to_string("/proc/cpuinfo")
-        .ok()
-        .and_then(|info| {
-            info.lines()
-                .find_map(|l| l.strip_prefix("model name")?.split_once(':'))
-                .map(|(_, name)| name.trim().to_string())
-        })
-        .unwrap_or_else(|| "unknown CPU".into())
 }

@@ -33,6 +33,7 @@
 pub mod episode;
 pub mod forward;
 pub mod planner;
+pub mod planning;
 pub mod task;
 
 use std::collections::BTreeMap;
@@ -55,7 +56,7 @@ use alnlab_physics::replay::SceneReplay;
 use alnlab_physics::{Prepared, Runner, Scene, foxglove, state_from_generalized};
 use arrow_array::builder::{ListBuilder, StringBuilder};
 use arrow_array::types::Float64Type;
-use arrow_array::{Array, Float64Array, ListArray, StringArray, UInt32Array, UInt64Array};
+use arrow_array::{Array, Float64Array, ListArray, StringArray, UInt32Array};
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
@@ -195,22 +196,6 @@ impl Params {
     }
 }
 
-/// One row of `planning.parquet`: an episode's summed cost.
-struct EpisodeRow {
-    task: String,
-    model: String,
-    planner: &'static str,
-    budget: u32,
-    episode: u32,
-    evaluations: u64,
-    cost: f64,
-    ms: (f64, f64, f64),
-    /// Simulated time per decision (one frame), in ms: real time.
-    real_time_ms: f64,
-    /// RMS over frames of the model's one-step error on the task's variables.
-    prediction_rms: f64,
-}
-
 /// The per-frame rows of `plan.parquet`, column by column.
 #[derive(Default)]
 struct FrameRows {
@@ -232,7 +217,7 @@ struct FrameRows {
 /// Everything the stage writes, filled episode by episode.
 struct Outputs {
     frames: FrameRows,
-    episodes: Vec<EpisodeRow>,
+    episodes: Vec<planning::Episode>,
     view: View,
 }
 
@@ -468,7 +453,7 @@ pub fn run(
         out
     };
     write_frames(&out_dir.join(PLAN_FILE), &out.frames, provenance)?;
-    write_episodes(&out_dir.join(PLANNING_FILE), &out.episodes, provenance)?;
+    planning::write(&out_dir.join(PLANNING_FILE), &out.episodes, provenance)?;
     out.view.log.finish(provenance)
 }
 
@@ -603,20 +588,22 @@ impl TaskRun<'_> {
             ))
         })?;
         times.sort_by(f64::total_cmp);
-        let ms = match times.as_slice() {
+        let (ms_per_decision, ms_min, ms_max) = match times.as_slice() {
             [] => (0.0, 0.0, 0.0),
             t => (t[t.len() / 2], t[0], t[t.len() - 1]),
         };
         let frames_run = c.params.frames.get() as f64;
-        out.episodes.push(EpisodeRow {
+        out.episodes.push(planning::Episode {
             task: self.task.to_string(),
             model: model.to_string(),
-            planner,
+            planner: planner.to_string(),
             budget,
             episode: e as u32,
             evaluations: u64::from(budget) * c.params.horizon.get() as u64,
             cost: total,
-            ms,
+            ms_per_decision,
+            ms_min,
+            ms_max,
             real_time_ms: c.p.scene.frame_dt.get() * 1e3,
             prediction_rms: (squared_error / frames_run).sqrt(),
         });
@@ -714,51 +701,6 @@ fn write_frames(path: &Path, rows: &FrameRows, provenance: &Provenance) -> Resul
         ("variables", Arc::new(string_lists(&rows.variables))),
         ("reached", Arc::new(f64_lists(&rows.reached))),
         ("expected", Arc::new(f64_lists(&rows.expected))),
-    ]);
-    table::write_parquet(path, &batch, provenance)
-}
-
-fn write_episodes(path: &Path, rows: &[EpisodeRow], provenance: &Provenance) -> Result<()> {
-    let f = |g: fn(&EpisodeRow) -> f64| -> Arc<dyn Array> {
-        Arc::new(Float64Array::from_iter_values(rows.iter().map(g)))
-    };
-    let batch = table::batch(vec![
-        (
-            "task",
-            Arc::new(StringArray::from_iter_values(rows.iter().map(|r| &r.task))) as Arc<dyn Array>,
-        ),
-        (
-            "model",
-            Arc::new(StringArray::from_iter_values(rows.iter().map(|r| &r.model))),
-        ),
-        (
-            "planner",
-            Arc::new(StringArray::from_iter_values(
-                rows.iter().map(|r| r.planner),
-            )),
-        ),
-        (
-            "budget",
-            Arc::new(UInt32Array::from_iter_values(rows.iter().map(|r| r.budget))),
-        ),
-        (
-            "episode",
-            Arc::new(UInt32Array::from_iter_values(
-                rows.iter().map(|r| r.episode),
-            )),
-        ),
-        (
-            "evaluations",
-            Arc::new(UInt64Array::from_iter_values(
-                rows.iter().map(|r| r.evaluations),
-            )),
-        ),
-        ("cost", f(|r| r.cost)),
-        ("ms_per_decision", f(|r| r.ms.0)),
-        ("ms_min", f(|r| r.ms.1)),
-        ("ms_max", f(|r| r.ms.2)),
-        ("real_time_ms", f(|r| r.real_time_ms)),
-        ("prediction_rms", f(|r| r.prediction_rms)),
     ]);
     table::write_parquet(path, &batch, provenance)
 }

@@ -12,16 +12,12 @@
 //! - `horizons.parquet`, the closed-loop errors per set of rows (all
 //!   starts, the held-out ones), model and horizon, over all variables.
 //!
-//! [`report`] renders a run's summaries, timings and training logs as
-//! Markdown and SVG; [`metrics`] gives a variant's headline figures as
-//! named numbers, for tracking runs.
+//! The report that reads these tables (and every other stage's) is a view
+//! of its own, `alnlab-report` (`views/report`).
 
 pub mod bench;
-mod charts;
-pub mod metrics;
 pub mod paired;
-pub mod report;
-mod stats;
+pub mod stats;
 
 use std::collections::BTreeSet;
 use std::path::Path;
@@ -48,8 +44,6 @@ pub const SUMMARY_FILE: &str = "summary.parquet";
 pub const COMPARISONS_FILE: &str = "comparisons.parquet";
 /// File name of the closed-loop table.
 pub const HORIZONS_FILE: &str = "horizons.parquet";
-/// File name of the report.
-pub const REPORT_FILE: &str = "report.md";
 
 /// Which test rows a figure is over.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

@@ -12,6 +12,7 @@
 pub mod bench;
 pub mod forest;
 pub mod learn;
+pub mod log;
 pub mod piecewise;
 pub mod pwl;
 pub mod select;
@@ -19,7 +20,6 @@ pub mod shard;
 mod threshold;
 
 use std::path::Path;
-use std::sync::Arc;
 
 use alnlab_codes::bits::encode;
 use alnlab_codes::codes::{Code, Codec};
@@ -27,9 +27,8 @@ use alnlab_codes::residual::{DeltaSpec, change};
 use alnlab_codes::{Codebook, level_column, split_rows};
 use alnlab_common::hash::sha256_file;
 use alnlab_common::params::{self, Count, Fraction, ParamError};
-use alnlab_common::table::{self, Table};
+use alnlab_common::table::Table;
 use alnlab_common::{Error, Progress, Provenance, Result};
-use arrow_array::{Array, Float64Array, StringArray, UInt32Array, UInt64Array};
 use serde::{Deserialize, Serialize};
 
 use alnlab_aln::model::{Header, Model};
@@ -451,50 +450,35 @@ fn change_limit(
     (*kth).max(1)
 }
 
-/// `training.parquet`: one row per tree per epoch.
+/// A bit model's log: one row per tree per epoch.
 fn write_log(
     path: &Path,
     trained: &[forest::Trained],
     learned: &[&alnlab_codes::Entry],
     provenance: &Provenance,
 ) -> Result<()> {
-    let rows = trained.iter().flat_map(|t| {
-        t.epochs
-            .iter()
-            .zip(&t.seconds)
-            .enumerate()
-            .map(move |(k, e)| (t, k, e))
-    });
-    let (mut variable, mut bit, mut vote, mut epoch) =
-        (Vec::new(), Vec::new(), Vec::new(), Vec::new());
-    let (mut errors, mut updates, mut seconds) = (Vec::new(), Vec::new(), Vec::new());
-    for (t, k, (e, s)) in rows {
-        variable.push(learned[t.id.variable as usize].variable.as_str());
-        bit.push(t.id.bit);
-        vote.push(t.id.vote);
-        epoch.push(k as u32 + 1);
-        errors.push(e.errors as u64);
-        updates.push(e.updates as u64);
-        seconds.push(*s);
-    }
-    let batch = table::batch(vec![
-        (
-            "variable",
-            Arc::new(StringArray::from(variable)) as Arc<dyn Array>,
-        ),
-        ("bit", Arc::new(UInt32Array::from(bit))),
-        ("vote", Arc::new(UInt32Array::from(vote))),
-        ("epoch", Arc::new(UInt32Array::from(epoch))),
-        ("errors", Arc::new(UInt64Array::from(errors))),
-        ("updates", Arc::new(UInt64Array::from(updates))),
-        ("seconds", Arc::new(Float64Array::from(seconds))),
-    ]);
-    table::write_parquet(path, &batch, provenance)
+    let rows = trained
+        .iter()
+        .flat_map(|t| {
+            t.epochs
+                .iter()
+                .zip(&t.seconds)
+                .enumerate()
+                .map(move |(k, (e, s))| log::Epoch {
+                    variable: learned[t.id.variable as usize].variable.clone(),
+                    bit: t.id.bit,
+                    vote: t.id.vote,
+                    epoch: k as u32 + 1,
+                    errors: e.errors as u64,
+                    updates: e.updates as u64,
+                    seconds: *s,
+                })
+        })
+        .collect();
+    log::write(path, &log::Log::Epochs(rows), provenance)
 }
 
-/// A piecewise-linear model's `training.parquet`: one row per tree per
-/// round — pieces after the round, pieces split, RMS and mean absolute
-/// error over the training rows (level spacings) before the splits.
+/// A piecewise-linear model's log: one row per tree per round of growth.
 fn write_rounds(
     path: &Path,
     trained: &[piecewise::TrainedTree],
@@ -503,28 +487,16 @@ fn write_rounds(
 ) -> Result<()> {
     let rows = trained
         .iter()
-        .flat_map(|t| t.rounds.iter().enumerate().map(move |(k, r)| (t, k, r)));
-    let (mut variable, mut round, mut pieces, mut splits) =
-        (Vec::new(), Vec::new(), Vec::new(), Vec::new());
-    let (mut rms, mut mean_absolute) = (Vec::new(), Vec::new());
-    for (t, k, r) in rows {
-        variable.push(learned[t.variable].variable.as_str());
-        round.push(k as u32 + 1);
-        pieces.push(r.pieces as u32);
-        splits.push(r.splits as u32);
-        rms.push(r.rms);
-        mean_absolute.push(r.mean_absolute);
-    }
-    let batch = table::batch(vec![
-        (
-            "variable",
-            Arc::new(StringArray::from(variable)) as Arc<dyn Array>,
-        ),
-        ("round", Arc::new(UInt32Array::from(round))),
-        ("pieces", Arc::new(UInt32Array::from(pieces))),
-        ("splits", Arc::new(UInt32Array::from(splits))),
-        ("rms", Arc::new(Float64Array::from(rms))),
-        ("mean_absolute", Arc::new(Float64Array::from(mean_absolute))),
-    ]);
-    table::write_parquet(path, &batch, provenance)
+        .flat_map(|t| {
+            t.rounds.iter().enumerate().map(move |(k, r)| log::Round {
+                variable: learned[t.variable].variable.clone(),
+                round: k as u32 + 1,
+                pieces: r.pieces as u32,
+                splits: r.splits as u32,
+                rms: r.rms,
+                mean_absolute: r.mean_absolute,
+            })
+        })
+        .collect();
+    log::write(path, &log::Log::Rounds(rows), provenance)
 }

@@ -8,12 +8,10 @@
 //! shard is the tree trained in one process, and merging is a sort.
 
 use std::path::{Path, PathBuf};
-use std::sync::Arc;
 
-use alnlab_common::table::{self, Table};
 use alnlab_common::{Error, Provenance, Result};
-use arrow_array::{Array, Float64Array, StringArray, UInt32Array, UInt64Array};
 
+use crate::log::{self, Log};
 use crate::{MODEL_FILE, TRAINING_FILE};
 use alnlab_aln::model::RawModel;
 
@@ -82,17 +80,8 @@ pub fn merge(parts: &[PathBuf], provenance: &Provenance, out_dir: &Path) -> Resu
     merge_logs(parts, &order, provenance, &out_dir.join(TRAINING_FILE))
 }
 
-/// One row of a training log.
-struct LogRow {
-    variable: String,
-    bit: u32,
-    vote: u32,
-    epoch: u32,
-    errors: u64,
-    updates: u64,
-    seconds: f64,
-}
-
+/// The bit models' logs of `parts`, one log with its rows in tree order
+/// (`variables` gives the variables' order).
 fn merge_logs(
     parts: &[PathBuf],
     variables: &[String],
@@ -101,60 +90,18 @@ fn merge_logs(
 ) -> Result<()> {
     let mut rows = Vec::new();
     for dir in parts {
-        let log = dir.join(TRAINING_FILE);
-        let table = Table::read(&log)?;
-        let names = table.strings("variable")?;
-        let u32s = |name: &str| {
-            table
-                .column::<UInt32Array>(name)
-                .map(|c| c.values().to_vec())
-        };
-        let (bit, vote, epoch) = (u32s("bit")?, u32s("vote")?, u32s("epoch")?);
-        let errors = table.column::<UInt64Array>("errors")?.values().to_vec();
-        let updates = table.column::<UInt64Array>("updates")?.values().to_vec();
-        let seconds = table.f64_column("seconds")?.values().to_vec();
-        for (i, variable) in names.into_iter().enumerate() {
-            rows.push(LogRow {
-                variable,
-                bit: bit[i],
-                vote: vote[i],
-                epoch: epoch[i],
-                errors: errors[i],
-                updates: updates[i],
-                seconds: seconds[i],
-            });
+        let part = dir.join(TRAINING_FILE);
+        match log::read(&part)? {
+            Log::Epochs(epochs) => rows.extend(epochs),
+            Log::Rounds(_) => {
+                return Err(Error::bad_file(
+                    &part,
+                    "a piecewise-linear model's rounds: only bit models are trained in shards",
+                ));
+            }
         }
     }
     let position = |v: &str| variables.iter().position(|x| *x == v).unwrap_or(usize::MAX);
     rows.sort_by_key(|r| (position(&r.variable), r.bit, r.vote, r.epoch));
-    let column =
-        |f: fn(&LogRow) -> u32| Arc::new(UInt32Array::from_iter_values(rows.iter().map(f)));
-    let batch = table::batch(vec![
-        (
-            "variable",
-            Arc::new(StringArray::from_iter_values(
-                rows.iter().map(|r| r.variable.as_str()),
-            )) as Arc<dyn Array>,
-        ),
-        ("bit", column(|r| r.bit)),
-        ("vote", column(|r| r.vote)),
-        ("epoch", column(|r| r.epoch)),
-        (
-            "errors",
-            Arc::new(UInt64Array::from_iter_values(rows.iter().map(|r| r.errors))),
-        ),
-        (
-            "updates",
-            Arc::new(UInt64Array::from_iter_values(
-                rows.iter().map(|r| r.updates),
-            )),
-        ),
-        (
-            "seconds",
-            Arc::new(Float64Array::from_iter_values(
-                rows.iter().map(|r| r.seconds),
-            )),
-        ),
-    ]);
-    table::write_parquet(path, &batch, provenance)
+    log::write(path, &Log::Epochs(rows), provenance)
 }

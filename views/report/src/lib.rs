@@ -1,5 +1,6 @@
-//! The report of a run: `report.md` and its SVG charts, rendered from the
-//! artifacts alone (summaries, timings, training logs, models) and the run's
+//! The report of a run, a view over every stage's output that only the
+//! pipeline uses: `report.md`, `report.html` and their SVG charts, rendered
+//! from the artifacts alone (summaries, timings, training logs, models) and the run's
 //! record — so it can be rendered again at any time without recomputing.
 //!
 //! Per variant: the paper's §4.6 table (best and worst variable of each
@@ -11,11 +12,13 @@
 //! a reproducibility block.
 
 mod across;
+mod charts;
 mod circuit;
 mod findings;
 pub mod format;
 mod glossary;
 pub mod html;
+pub mod metrics;
 mod plan;
 mod replicates;
 mod variant;
@@ -26,15 +29,15 @@ use std::path::{Path, PathBuf};
 use alnlab_aln::model::{Header, Model};
 use alnlab_aln::{ModelKind, Target};
 use alnlab_codes::{Codebook, unit_of};
-use alnlab_common::table::Table;
 use alnlab_common::{Result, atomic};
-use arrow_array::cast::AsArray;
-use arrow_array::types::Float64Type;
-use arrow_array::{Float64Array, ListArray, UInt32Array, UInt64Array};
 
-use crate::paired::{Interval, Verdict};
-use crate::{Comparison, REPORT_FILE, Rows, SummaryRow};
+use alnlab_evaluate::timings::Row as Timing;
+use alnlab_summarize::paired::{Interval, Verdict};
+use alnlab_summarize::{Comparison, Rows, SummaryRow};
 use format::{Align, MdTable};
+
+/// File name of the report.
+pub const REPORT_FILE: &str = "report.md";
 
 /// What the report needs of a run.
 pub struct RunInfo {
@@ -103,25 +106,12 @@ pub struct StageTime {
     pub compute_seconds: f64,
 }
 
-/// One row of `timings.parquet`.
-pub(crate) struct Timing {
-    pub(crate) model: String,
-    pub(crate) path: String,
-    /// ns per state: the median of the timed runs, and their range.
-    pub(crate) ns_per_state: f64,
-    ns_min: f64,
-    ns_max: f64,
-    /// ns per state of every run, in round order: run k of every model was
-    /// timed in the same round.
-    runs: Vec<f64>,
-    pub(crate) threads: u32,
-    cores: u32,
-    cpu: String,
-    failed: u32,
+/// "3.81 µs (3.62–4.10)": a timing's median and range.
+pub(crate) trait Spread {
+    fn spread(&self) -> String;
 }
 
-impl Timing {
-    /// "3.81 µs (3.62–4.10)": median and range.
+impl Spread for Timing {
     fn spread(&self) -> String {
         format!(
             "{} ({}–{})",
@@ -359,17 +349,17 @@ pub(crate) fn aln_against<'c>(
 }
 
 fn load(info: &VariantInfo) -> Result<Loaded<'_>> {
-    let (summary, held_out, judged) = split_rows(crate::read(&info.summary)?);
+    let (summary, held_out, judged) = split_rows(alnlab_summarize::read(&info.summary)?);
     let count = |rows: &[SummaryRow]| rows.first().map_or(0, |r| r.stats.n);
     let rows = (count(&summary), count(&held_out));
-    let comparisons = crate::read_comparisons(&info.comparisons)?;
-    let horizons = crate::read_horizons(&info.horizons)?;
+    let comparisons = alnlab_summarize::read_comparisons(&info.comparisons)?;
+    let horizons = alnlab_summarize::read_horizons(&info.horizons)?;
     let horizons = horizons
         .into_iter()
         .filter(|h| h.0 == judged)
         .map(|(_, model, horizon, mean, p95)| (model, horizon, mean, p95))
         .collect();
-    let timings = read_timings(&info.timings)?;
+    let timings = alnlab_evaluate::timings::read(&info.timings)?;
     let training = read_training(&info.training)?;
 
     let model = Model::read(&info.model)?;
@@ -485,69 +475,14 @@ fn load(info: &VariantInfo) -> Result<Loaded<'_>> {
     })
 }
 
-/// Reads `timings.parquet`.
-pub(crate) fn read_timings(path: &Path) -> Result<Vec<Timing>> {
-    let table = Table::read(path)?;
-    let text = |name: &str| table.strings(name);
-    let (models, paths) = (text("model")?, text("path")?);
-    let ns = table.column::<Float64Array>("ns_per_state")?.values();
-    let ns_min = table.column::<Float64Array>("ns_min")?.values();
-    let ns_max = table.column::<Float64Array>("ns_max")?.values();
-    let runs = table.column::<ListArray>("ns_runs")?;
-    let threads = table.column::<UInt32Array>("threads")?.values();
-    let cores = table.column::<UInt32Array>("cores")?.values();
-    let cpu = text("cpu")?;
-    let failed = table.column::<UInt32Array>("failed")?.values();
-    Ok((0..table.num_rows())
-        .map(|i| Timing {
-            model: models[i].clone(),
-            path: paths[i].clone(),
-            ns_per_state: ns[i],
-            ns_min: ns_min[i],
-            ns_max: ns_max[i],
-            runs: runs
-                .value(i)
-                .as_primitive_opt::<Float64Type>()
-                .map(|r| r.values().to_vec())
-                .unwrap_or_default(),
-            threads: threads[i],
-            cores: cores[i],
-            cpu: cpu[i].clone(),
-            failed: failed[i],
-        })
-        .collect())
-}
-
-/// Reads `training.parquet`: the mean training errors per tree, per epoch
-/// (1-based).
+/// A bit model's mean training errors per tree, per epoch (1-based), from
+/// `training.parquet`; none for a piecewise-linear model's rounds.
 pub(crate) fn read_training(path: &Path) -> Result<Vec<(f64, f64)>> {
-    let log = Table::read(path)?;
-    // A piecewise-linear model's log has rounds, not epochs of bit errors.
-    if log.column::<UInt32Array>("round").is_ok() {
-        return Ok(Vec::new());
-    }
-    let epochs = log.column::<UInt32Array>("epoch")?.values();
-    let errors = log.column::<UInt64Array>("errors")?.values();
-    let mut per_epoch: Vec<(u64, u64)> = Vec::new();
-    for (&epoch, &e) in epochs.iter().zip(errors.iter()) {
-        let k = epoch as usize;
-        if k == 0 {
-            return Err(alnlab_common::Error::bad_file(
-                path,
-                "epochs count from 1; found 0",
-            ));
-        }
-        if per_epoch.len() < k {
-            per_epoch.resize(k, (0, 0));
-        }
-        per_epoch[k - 1].0 += e;
-        per_epoch[k - 1].1 += 1;
-    }
-    Ok(per_epoch
-        .iter()
-        .enumerate()
-        .filter(|(_, (_, trees))| *trees > 0)
-        .map(|(k, (sum, trees))| ((k + 1) as f64, *sum as f64 / *trees as f64))
+    let log = alnlab_train::log::read(path)?;
+    Ok(log
+        .mean_errors_per_epoch()
+        .into_iter()
+        .map(|(epoch, errors)| (f64::from(epoch), errors))
         .collect())
 }
 

@@ -23,8 +23,8 @@ use std::path::Path;
 use alnlab_common::Result;
 use serde::{Deserialize, Serialize};
 
-use crate::report::{aln_against, overall, read_timings, read_training, split_rows};
-use crate::{Rows, read_comparisons, read_horizons};
+use crate::{aln_against, overall, read_training, split_rows};
+use alnlab_summarize::{Rows, read_comparisons, read_horizons};
 
 /// The prefix of the per-variable figures' names.
 pub const BY_VARIABLE: &str = "error_by_variable/";
@@ -51,7 +51,7 @@ pub struct Sources<'a> {
 
 /// The headline metrics of one variant (one replicate) from its artifacts.
 pub fn read(sources: &Sources) -> Result<Metrics> {
-    let (all, held_out, rows) = split_rows(crate::read(sources.summary)?);
+    let (all, held_out, rows) = split_rows(alnlab_summarize::read(sources.summary)?);
     let judged = if rows == Rows::HeldOut { held_out } else { all };
     let mut values = BTreeMap::new();
     let mut put = |name: String, value: f64| {
@@ -81,7 +81,7 @@ pub fn read(sources: &Sources) -> Result<Metrics> {
             put(format!("difference/{model}/high"), d.high);
         }
     }
-    for t in read_timings(sources.timings)? {
+    for t in alnlab_evaluate::timings::read(sources.timings)? {
         let name = match t.threads {
             1 => format!("ns_per_state/{}/{}", t.model, t.path),
             n => format!("ns_per_state/{}/{}/threads_{n}", t.model, t.path),

@@ -10,9 +10,9 @@ use std::path::Path;
 use alnlab_common::{Result, atomic};
 
 use super::format::{Align, MdTable, interval, micros, sig3};
-use super::{Loaded, baseline_models, normalized, overall, worse_than_persistence};
+use super::{Loaded, Spread, baseline_models, normalized, overall, worse_than_persistence};
 use crate::charts::{self, Axis, Plot, Point, Series, style_of};
-use crate::paired::Interval;
+use alnlab_summarize::paired::Interval;
 
 /// The chart files this section writes.
 pub(super) const CLOSED_LOOP: &str = "closed-loop.svg";

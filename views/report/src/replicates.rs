@@ -13,11 +13,12 @@ use alnlab_common::{Result, atomic};
 use super::findings::{accuracy_word, difference};
 use super::format::{estimate, sig3};
 use super::{Loaded, Replicate, aln_against, overall, split_rows};
-use crate::Rows;
-use crate::paired::Interval;
+use alnlab_summarize::Rows;
+use alnlab_summarize::paired::Interval;
 
-/// The models whose errors the headline gives.
-pub(super) const MODELS: [&str; 3] = ["aln", "persistence", "linear"];
+/// The models whose errors the headline gives (the learned peer where the
+/// test stage fitted one).
+pub(super) const MODELS: [&str; 4] = ["aln", "persistence", "linear", "boosted"];
 
 /// One replicate's headline figures, on its held-out rows (all test rows
 /// when none is held out).
@@ -31,19 +32,29 @@ pub(super) struct Figures {
     pub differences: Vec<Option<f64>>,
     /// (model, step, mean) of the closed-loop errors.
     pub horizons: Vec<(String, u16, f64)>,
+    /// The ALN's mean error per variable, sorted by variable: variants that
+    /// predict different sets of variables pair over the ones they share.
+    pub aln_by_variable: Vec<(String, f64)>,
 }
 
 impl Figures {
     pub fn read(replicate: &Replicate) -> Result<Figures> {
-        let (all, held, rows) = split_rows(crate::read(&replicate.summary)?);
+        let (all, held, rows) = split_rows(alnlab_summarize::read(&replicate.summary)?);
         let judged = if rows == Rows::HeldOut { held } else { all };
-        let comparisons = crate::read_comparisons(&replicate.comparisons)?;
-        let horizons = crate::read_horizons(&replicate.horizons)?
+        let comparisons = alnlab_summarize::read_comparisons(&replicate.comparisons)?;
+        let horizons = alnlab_summarize::read_horizons(&replicate.horizons)?
             .into_iter()
             .filter(|h| h.0 == rows)
             .map(|(_, model, step, mean, _)| (model, step, mean))
             .collect();
+        let mut aln_by_variable: Vec<(String, f64)> = judged
+            .iter()
+            .filter(|r| r.model == "aln")
+            .map(|r| (r.variable.clone(), r.stats.mean))
+            .collect();
+        aln_by_variable.sort_by(|a, b| a.0.cmp(&b.0));
         Ok(Figures {
+            aln_by_variable,
             horizons,
             seed: replicate.seed,
             rows,
@@ -59,34 +70,58 @@ impl Figures {
     }
 }
 
+/// Two variants' ALNs paired replicate by replicate.
+pub(super) struct Between {
+    /// Variant `a`'s ALN mean error minus `b`'s, across replicates.
+    pub difference: Interval,
+    /// Each replicate's difference.
+    pub values: Vec<Option<f64>>,
+    /// The variables both predict, when they do not predict the same ones
+    /// (one given the controls, one predicting them): the means are over
+    /// these alone.
+    pub common: Option<usize>,
+}
+
 /// Variant `a`'s ALN mean error minus `b`'s, paired replicate by replicate:
 /// both ran with the same seeds, so replicate k of each saw the same
-/// simulation. `None` unless both have the same ≥ 2 replicate seeds.
-pub(super) fn between(a: &Loaded, b: &Loaded) -> Option<(Interval, Vec<Option<f64>>)> {
+/// simulation; over the variables both predict. `None` unless both have
+/// the same ≥ 2 replicate seeds and share a variable.
+pub(super) fn between(a: &Loaded, b: &Loaded) -> Option<Between> {
     let seeds = |v: &Loaded| v.replicates.iter().map(|f| f.seed).collect::<Vec<_>>();
-    // Means over different variables (one model given the controls, one
-    // predicting them) do not pair.
-    fn variables<'a>(v: &'a Loaded) -> Vec<&'a str> {
-        let mut names: Vec<&str> = v
-            .judged()
-            .0
-            .iter()
-            .filter(|r| r.model == "aln")
-            .map(|r| r.variable.as_str())
-            .collect();
-        names.sort_unstable();
-        names
-    }
-    if a.replicates.len() < 2 || seeds(a) != seeds(b) || variables(a) != variables(b) {
+    if a.replicates.len() < 2 || seeds(a) != seeds(b) {
         return None;
     }
+    let names = |f: &Figures| {
+        f.aln_by_variable
+            .iter()
+            .map(|(v, _)| v.clone())
+            .collect::<Vec<_>>()
+    };
+    let (first_a, first_b) = (names(&a.replicates[0]), names(&b.replicates[0]));
+    let shared: Vec<&String> = first_a.iter().filter(|v| first_b.contains(v)).collect();
+    if shared.is_empty() {
+        return None;
+    }
+    let mean_over_shared = |f: &Figures| -> Option<f64> {
+        let errors: Vec<f64> = f
+            .aln_by_variable
+            .iter()
+            .filter(|(v, _)| shared.contains(&v))
+            .map(|(_, e)| *e)
+            .collect();
+        (errors.len() == shared.len()).then(|| errors.iter().sum::<f64>() / errors.len() as f64)
+    };
     let values: Vec<Option<f64>> = a
         .replicates
         .iter()
         .zip(&b.replicates)
-        .map(|(x, y)| Some(x.means[0]? - y.means[0]?))
+        .map(|(x, y)| Some(mean_over_shared(x)? - mean_over_shared(y)?))
         .collect();
-    Some((across(&values)?, values))
+    Some(Between {
+        difference: across(&values)?,
+        values,
+        common: (first_a != first_b).then_some(shared.len()),
+    })
 }
 
 /// The interval across replicates of one figure, when every replicate has it.
@@ -153,44 +188,54 @@ pub(super) fn section(md: &mut String, variants: &[Loaded], dir: &Path) -> Resul
          their mean with the 95% t-interval across replicates. `replicates.csv` holds every \
          value.\n"
     );
+    // The models some replicated variant has.
+    let replicated: Vec<&Loaded> = variants.iter().filter(|v| v.replicates.len() > 1).collect();
+    let shown: Vec<usize> = (0..MODELS.len())
+        .filter(|&k| {
+            replicated
+                .iter()
+                .any(|v| v.replicates.iter().any(|f| f.means[k].is_some()))
+        })
+        .collect();
+    let baselines = || shown.iter().copied().filter(|&k| k > 0);
     let _ = write!(md, "| variant | replicate | seed |");
-    for m in MODELS {
-        let _ = write!(md, " {m} mean |");
+    for &k in &shown {
+        let _ = write!(md, " {} mean |", MODELS[k]);
     }
-    for b in &MODELS[1..] {
-        let _ = write!(md, " ALN − {b} |");
+    for k in baselines() {
+        let _ = write!(md, " ALN − {} |", MODELS[k]);
     }
     let _ = writeln!(
         md,
         "\n|---|---|---:|{}",
-        "---:|".repeat(MODELS.len() * 2 - 1)
+        "---:|".repeat(shown.len() * 2 - 1)
     );
     let mut csv =
         String::from("variant,figure,replicates,mean,std_dev,ci_low,ci_high,verdict,values\n");
     let cell = |x: Option<f64>| x.map_or("—".into(), sig3);
-    for v in variants.iter().filter(|v| v.replicates.len() > 1) {
-        for (k, f) in v.replicates.iter().enumerate() {
-            let _ = write!(md, "| {} | {} | {} |", v.info.name, k + 1, f.seed);
-            for &m in &f.means {
-                let _ = write!(md, " {} |", cell(m));
+    for v in replicated.iter().copied() {
+        for (r, f) in v.replicates.iter().enumerate() {
+            let _ = write!(md, "| {} | {} | {} |", v.info.name, r + 1, f.seed);
+            for &k in &shown {
+                let _ = write!(md, " {} |", cell(f.means[k]));
             }
-            for &d in &f.differences {
-                let _ = write!(md, " {} |", cell(d));
+            for k in baselines() {
+                let _ = write!(md, " {} |", cell(f.differences[k - 1]));
             }
             md.push('\n');
         }
         let _ = write!(md, "| {} | mean [95%] | |", v.info.name);
         let mut figures: Vec<(String, Vec<Option<f64>>)> = Vec::new();
-        for (k, m) in MODELS.iter().enumerate() {
+        for &k in &shown {
             figures.push((
-                format!("{m} mean"),
+                format!("{} mean", MODELS[k]),
                 v.replicates.iter().map(|f| f.means[k]).collect(),
             ));
         }
-        for (k, b) in MODELS[1..].iter().enumerate() {
+        for k in baselines() {
             figures.push((
-                format!("aln - {b}"),
-                v.replicates.iter().map(|f| f.differences[k]).collect(),
+                format!("aln - {}", MODELS[k]),
+                v.replicates.iter().map(|f| f.differences[k - 1]).collect(),
             ));
         }
         for (figure, values) in &figures {
@@ -212,9 +257,19 @@ pub(super) fn section(md: &mut String, variants: &[Loaded], dir: &Path) -> Resul
     // Variants against each other, paired by replicate.
     for (i, a) in variants.iter().enumerate() {
         for b in &variants[i + 1..] {
-            if let Some((d, values)) = between(a, b) {
-                let figure = format!("aln mean - {} aln mean", b.info.name);
-                csv_line(&mut csv, &a.info.name, &figure, &d, true, &values);
+            if let Some(paired) = between(a, b) {
+                let over = paired
+                    .common
+                    .map_or(String::new(), |n| format!(" over {n} common variables"));
+                let figure = format!("aln mean - {} aln mean{over}", b.info.name);
+                csv_line(
+                    &mut csv,
+                    &a.info.name,
+                    &figure,
+                    &paired.difference,
+                    true,
+                    &paired.values,
+                );
             }
         }
     }

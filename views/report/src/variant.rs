@@ -14,7 +14,7 @@ use super::across::{aln_name, baselines_table, closed_loop_rows, horizon_models,
 use super::format::{Align, MdTable, interval, sig3};
 use super::{Loaded, SummaryRow, baseline_models, mean_of, paper_rows, worse_than_persistence};
 use crate::charts::{self, Axis, Plot, Series, style_of};
-use crate::stats::{HISTOGRAM_BINS, histogram_bin_name};
+use alnlab_summarize::stats::{HISTOGRAM_BINS, histogram_bin_name};
 
 /// A chart's file name: the variant's name, made safe, and the chart's.
 pub(super) fn file_name(variant: &str, chart: &str) -> String {

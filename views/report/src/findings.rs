@@ -6,9 +6,9 @@
 use std::fmt::Write as _;
 
 use super::format::{estimate, interval, micros, sig3};
-use super::{Loaded, RunInfo, Timing, normalized, overall, paper_rows};
-use crate::Rows;
-use crate::paired::{Interval, Verdict};
+use super::{Loaded, RunInfo, Spread, Timing, normalized, overall, paper_rows};
+use alnlab_summarize::Rows;
+use alnlab_summarize::paired::{Interval, Verdict};
 
 /// The simulator baseline at the fewest integration steps per frame that
 /// the variant ran: (model name, steps per frame).
@@ -302,12 +302,16 @@ fn across_variants(md: &mut String, variants: &[Loaded]) {
             .iter()
             .filter(|v| v.info.name != best.info.name)
             .filter_map(|v| {
-                let (d, _) = super::replicates::between(v, best)?;
+                let paired = super::replicates::between(v, best)?;
+                let d = &paired.difference;
+                let over = paired.common.map_or(String::new(), |n| {
+                    format!(", over the {n} variables both predict")
+                });
                 Some(format!(
-                    "`{}` is {} it ({})",
+                    "`{}` is {} it ({}{over})",
                     v.info.name,
-                    accuracy_word(&d),
-                    difference(&d)
+                    accuracy_word(d),
+                    difference(d)
                 ))
             })
             .collect();
@@ -392,7 +396,7 @@ mod tests {
     };
 
     use super::*;
-    use crate::Predictions;
+    use alnlab_summarize::Predictions;
 
     /// A verdict word only where the interval excludes zero: the ALN against
     /// a model equal to it on every row, one that differs from it by ±1 in

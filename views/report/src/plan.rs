@@ -9,57 +9,12 @@
 use std::fmt::Write as _;
 use std::path::Path;
 
-use alnlab_common::table::Table;
 use alnlab_common::{Result, atomic};
-use arrow_array::{UInt32Array, UInt64Array};
+use alnlab_plan::planning::{self, Episode};
 
 use super::format::{Align, MdTable, estimate, interval, sig3};
 use crate::charts::{self, Axis, Marker, Plot, Point, Series, style_of};
-use crate::paired::Interval;
-
-/// One row of `planning.parquet`.
-struct Episode {
-    task: String,
-    model: String,
-    planner: String,
-    budget: u32,
-    episode: u32,
-    evaluations: u64,
-    cost: f64,
-    ms: f64,
-    real_time_ms: f64,
-    prediction_rms: f64,
-}
-
-fn read(path: &Path) -> Result<Vec<Episode>> {
-    let t = Table::read(path)?;
-    let (task, model, planner) = (
-        t.strings("task")?,
-        t.strings("model")?,
-        t.strings("planner")?,
-    );
-    let budget = t.column::<UInt32Array>("budget")?.values();
-    let episode = t.column::<UInt32Array>("episode")?.values();
-    let evaluations = t.column::<UInt64Array>("evaluations")?.values();
-    let cost = t.f64_column("cost")?.values();
-    let ms = t.f64_column("ms_per_decision")?.values();
-    let real = t.f64_column("real_time_ms")?.values();
-    let rms = t.f64_column("prediction_rms")?.values();
-    Ok((0..t.num_rows())
-        .map(|i| Episode {
-            task: task[i].clone(),
-            model: model[i].clone(),
-            planner: planner[i].clone(),
-            budget: budget[i],
-            episode: episode[i],
-            evaluations: evaluations[i],
-            cost: cost[i],
-            ms: ms[i],
-            real_time_ms: real[i],
-            prediction_rms: rms[i],
-        })
-        .collect())
-}
+use alnlab_summarize::paired::Interval;
 
 /// One policy's episodes of one task, in episode order.
 struct Policy<'a> {
@@ -77,7 +32,7 @@ impl Policy<'_> {
 
     /// The median over episodes of their median decision times.
     fn ms(&self) -> f64 {
-        let mut ms: Vec<f64> = self.episodes.iter().map(|e| e.ms).collect();
+        let mut ms: Vec<f64> = self.episodes.iter().map(|e| e.ms_per_decision).collect();
         ms.sort_by(f64::total_cmp);
         ms[ms.len() / 2]
     }
@@ -174,7 +129,7 @@ pub(super) fn section(
     dir: &Path,
     chart_name: impl Fn(&str) -> String,
 ) -> Result<()> {
-    let rows = read(path)?;
+    let rows = planning::read(path)?;
     if rows.is_empty() {
         return Ok(());
     }

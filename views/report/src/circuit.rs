@@ -7,9 +7,7 @@
 use std::fmt::Write as _;
 use std::path::Path;
 
-use alnlab_common::table::Table;
-use alnlab_common::{Error, Result};
-use arrow_array::{UInt32Array, UInt64Array};
+use alnlab_common::Result;
 
 use super::format::MdTable;
 
@@ -53,62 +51,40 @@ impl Measured {
     }
 }
 
-/// Reads `circuit.parquet`; none when the stage measured nothing (an empty
-/// table: `[circuit] synthesize` off, or a threshold model).
+/// Reads `circuit.parquet` ([`alnlab_circuit::measured`]); none when the
+/// stage measured nothing (`[circuit] synthesize` off, or a threshold
+/// model).
 pub(super) fn read(path: &Path) -> Result<Option<Measured>> {
-    let table = Table::read(path)?;
-    if table.num_rows() == 0 {
+    let Some(measured) = alnlab_circuit::measured::read(path)? else {
         return Ok(None);
-    }
-    let (variables, parts) = (table.strings("variable")?, table.strings("part")?);
-    let cells = table.column::<UInt64Array>("cells")?.values();
-    let inverters = table.column::<UInt64Array>("inverters")?.values();
-    let depths = table.column::<UInt32Array>("depth")?.values();
-    let rows_equal = table.column::<UInt64Array>("rows_equal")?.value(0);
+    };
+    let f = &measured.figures;
+    let part = |p: alnlab_circuit::synth::Part| Part {
+        cells: p.cells,
+        inverters: p.inverters,
+        depth: p.depth,
+    };
     let mut m = Measured {
-        trees: Part::default(),
-        votes: Part::default(),
-        decode: Part::default(),
+        trees: part(f.part(|v| v.trees)),
+        votes: part(f.part(|v| v.votes)),
+        decode: part(f.part(|v| v.decode)),
         depth: 0,
         deepest: (String::new(), 0, 0, 0),
-        variables: 0,
-        rows_equal,
-        tools: table.strings("tools")?.swap_remove(0),
-        library: table.strings("library")?.swap_remove(0),
+        variables: f.variables.len(),
+        rows_equal: measured.rows_equal,
+        tools: f.tools.clone(),
+        library: f.library.clone(),
     };
-    // Per variable, its parts' depths (trees, votes, decode), in file order.
-    let mut per_variable: Vec<(String, [u32; 3])> = Vec::new();
-    for r in 0..table.num_rows() {
-        let (slot, k) = match parts[r].as_str() {
-            "trees" => (&mut m.trees, 0),
-            "votes" => (&mut m.votes, 1),
-            "decode" => (&mut m.decode, 2),
-            other => {
-                return Err(Error::bad_file(
-                    path,
-                    format!("row {r}: part `{other}`, expected trees, votes or decode"),
-                ));
-            }
-        };
-        slot.cells += cells[r];
-        slot.inverters += inverters[r];
-        slot.depth = slot.depth.max(depths[r]);
-        match per_variable.last_mut() {
-            Some((v, d)) if *v == variables[r] => d[k] = depths[r],
-            _ => {
-                let mut d = [0; 3];
-                d[k] = depths[r];
-                per_variable.push((variables[r].clone(), d));
-            }
-        }
-    }
-    m.variables = per_variable.len();
     // The deepest variable, the first of equals.
-    for (v, d) in &per_variable {
-        let depth = d.iter().sum();
-        if m.deepest.0.is_empty() || depth > m.depth {
-            m.depth = depth;
-            m.deepest = (v.clone(), d[0], d[1], d[2]);
+    for v in &f.variables {
+        if m.deepest.0.is_empty() || v.depth() > m.depth {
+            m.depth = v.depth();
+            m.deepest = (
+                v.variable.clone(),
+                v.trees.depth,
+                v.votes.depth,
+                v.decode.depth,
+            );
         }
     }
     Ok(Some(m))

@@ -1,0 +1,139 @@
+//! `planning.parquet`, the plan stage's table of episodes: its row, its
+//! writer and its reader. One row per task, model, planner, budget and
+//! episode: the summed cost, the evaluations per decision, the decision
+//! time in ms (median and range over the episode's decisions), real time
+//! (the simulated time a decision stands for: one frame), and the model's
+//! one-step error on the task's variables over the episode.
+
+use std::path::Path;
+use std::sync::Arc;
+
+use alnlab_common::table::{self, Table};
+use alnlab_common::{Provenance, Result};
+use arrow_array::{Array, Float64Array, StringArray, UInt32Array, UInt64Array};
+
+/// One row of `planning.parquet`: an episode of one policy.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Episode {
+    pub task: String,
+    /// The forward model (`aln`, `linear`, `simulator@k`) or a reference
+    /// (`zero`, `random`).
+    pub model: String,
+    /// The planner; empty for a reference.
+    pub planner: String,
+    /// Sequences per decision.
+    pub budget: u32,
+    pub episode: u32,
+    /// Forward-model evaluations per decision.
+    pub evaluations: u64,
+    /// The task's cost summed over the episode's frames.
+    pub cost: f64,
+    /// ms per decision: the median over the episode's decisions, and the
+    /// range.
+    pub ms_per_decision: f64,
+    pub ms_min: f64,
+    pub ms_max: f64,
+    /// Simulated time per decision (one frame), in ms: real time.
+    pub real_time_ms: f64,
+    /// RMS over frames of the model's one-step error on the task's
+    /// variables.
+    pub prediction_rms: f64,
+}
+
+/// Writes `rows` to `path`.
+pub fn write(path: &Path, rows: &[Episode], provenance: &Provenance) -> Result<()> {
+    let real = |f: fn(&Episode) -> f64| -> Arc<dyn Array> {
+        Arc::new(Float64Array::from_iter_values(rows.iter().map(f)))
+    };
+    let count = |f: fn(&Episode) -> u32| -> Arc<dyn Array> {
+        Arc::new(UInt32Array::from_iter_values(rows.iter().map(f)))
+    };
+    let text = |f: fn(&Episode) -> &str| -> Arc<dyn Array> {
+        Arc::new(StringArray::from_iter_values(rows.iter().map(f)))
+    };
+    let batch = table::batch(vec![
+        ("task", text(|r| &r.task)),
+        ("model", text(|r| &r.model)),
+        ("planner", text(|r| &r.planner)),
+        ("budget", count(|r| r.budget)),
+        ("episode", count(|r| r.episode)),
+        (
+            "evaluations",
+            Arc::new(UInt64Array::from_iter_values(
+                rows.iter().map(|r| r.evaluations),
+            )),
+        ),
+        ("cost", real(|r| r.cost)),
+        ("ms_per_decision", real(|r| r.ms_per_decision)),
+        ("ms_min", real(|r| r.ms_min)),
+        ("ms_max", real(|r| r.ms_max)),
+        ("real_time_ms", real(|r| r.real_time_ms)),
+        ("prediction_rms", real(|r| r.prediction_rms)),
+    ]);
+    table::write_parquet(path, &batch, provenance)
+}
+
+/// Reads `planning.parquet`.
+pub fn read(path: &Path) -> Result<Vec<Episode>> {
+    let t = Table::read(path)?;
+    let (task, model, planner) = (
+        t.strings("task")?,
+        t.strings("model")?,
+        t.strings("planner")?,
+    );
+    let count = |name: &str| t.column::<UInt32Array>(name).map(|c| c.values());
+    let real = |name: &str| t.f64_column(name).map(|c| c.values());
+    let (budget, episode) = (count("budget")?, count("episode")?);
+    let evaluations = t.column::<UInt64Array>("evaluations")?.values();
+    let (cost, ms) = (real("cost")?, real("ms_per_decision")?);
+    let (ms_min, ms_max) = (real("ms_min")?, real("ms_max")?);
+    let (real_time, rms) = (real("real_time_ms")?, real("prediction_rms")?);
+    Ok((0..t.num_rows())
+        .map(|i| Episode {
+            task: task[i].clone(),
+            model: model[i].clone(),
+            planner: planner[i].clone(),
+            budget: budget[i],
+            episode: episode[i],
+            evaluations: evaluations[i],
+            cost: cost[i],
+            ms_per_decision: ms[i],
+            ms_min: ms_min[i],
+            ms_max: ms_max[i],
+            real_time_ms: real_time[i],
+            prediction_rms: rms[i],
+        })
+        .collect())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn episodes_read_back_as_written() {
+        let rows = vec![Episode {
+            task: "bend".into(),
+            model: "aln".into(),
+            planner: "cem".into(),
+            budget: 64,
+            episode: 3,
+            evaluations: 640,
+            cost: 12.5,
+            ms_per_decision: 1.5,
+            ms_min: 1.25,
+            ms_max: 2.0,
+            real_time_ms: 10.0,
+            prediction_rms: 0.03,
+        }];
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("planning.parquet");
+        let provenance = Provenance {
+            stage: "plan".into(),
+            params: serde_json::Value::Null,
+            inputs: Default::default(),
+        };
+        write(&path, &rows, &provenance).unwrap();
+        assert_eq!(read(&path).unwrap(), rows);
+    }
+}
