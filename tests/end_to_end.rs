@@ -580,6 +580,26 @@ fn the_report_renders_with_its_charts_and_renders_again_the_same() {
     ] {
         assert!(report.contains(heading), "{heading} missing:\n{report}");
     }
+    // The first screen: the abstract, the main figure and one results
+    // table of at most eight rows, before the appendix.
+    let (first, appendix) = report.split_once("## Appendix").expect("an appendix");
+    assert!(appendix.contains("## Findings"));
+    assert!(first.contains("**Abstract.** "), "{first}");
+    assert!(first.contains("](headline.svg)"), "{first}");
+    assert!(dir.path().join("runs/e2e/report/headline.svg").exists());
+    let table_rows = first
+        .lines()
+        .filter(|l| l.starts_with("| ") && !l.starts_with("| model"))
+        .count();
+    assert!((1..=8).contains(&table_rows), "{first}");
+    assert!(first.lines().count() <= 250);
+    // One replicate: the ALN's interval is labelled as over rows.
+    assert!(
+        first.contains("over the test rows of one simulation"),
+        "{first}"
+    );
+    let html = std::fs::read_to_string(report_path.with_file_name("report.html")).unwrap();
+    assert!(html.contains("<details>\n<summary>Findings</summary>"));
     // The findings' verdict follows the paired comparison's interval.
     let mean = |model: &str| {
         let rows: Vec<f64> = summary

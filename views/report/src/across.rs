@@ -154,6 +154,7 @@ pub(super) fn charts(md: &mut String, variants: &[Loaded], shared: bool, dir: &P
             y: Axis::error("mean error (levels)", ys),
             series,
             pareto: false,
+            rules: Vec::new(),
         });
         atomic::write_bytes(&dir.join(CLOSED_LOOP), chart.as_bytes())?;
         let baselines = if shared {
@@ -245,6 +246,7 @@ pub(super) fn charts(md: &mut String, variants: &[Loaded], shared: bool, dir: &P
             y: Axis::error(unit, ys),
             series,
             pareto: true,
+            rules: Vec::new(),
         });
         atomic::write_bytes(&dir.join(SPEED), chart.as_bytes())?;
         let whose = if shared {
@@ -287,6 +289,7 @@ pub(super) fn charts(md: &mut String, variants: &[Loaded], shared: bool, dir: &P
             y: Axis::error("errors per tree (mean)", ys),
             series,
             pareto: false,
+            rules: Vec::new(),
         });
         atomic::write_bytes(&dir.join(TRAINING), chart.as_bytes())?;
         let _ = writeln!(

@@ -62,6 +62,8 @@ const BOOSTED: RGBColor = RGBColor(0x00, 0x66, 0x66);
 /// The planning references: the random controller, and the real-time line.
 const RANDOM_TORQUES: RGBColor = RGBColor(0xDD, 0x44, 0x00);
 const REAL_TIME: RGBColor = RGBColor(0xAA, 0xAA, 0xAA);
+/// A reference line across a plot ([`Plot::rules`]).
+const RULE: RGBColor = RGBColor(0x77, 0x77, 0x77);
 
 /// A marker's shape.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -221,6 +223,9 @@ pub struct Plot {
     /// Draw the Pareto front of all points (lower x and lower y are better)
     /// as a staircase under them.
     pub pareto: bool,
+    /// Reference levels of y (zero: persistence), each drawn as a thin grey
+    /// line across the plot and named in the legend — a reference, not data.
+    pub rules: Vec<(f64, String)>,
 }
 
 /// The points no other point beats on both x and y (lower is better), by
@@ -575,6 +580,8 @@ where
 enum Entry<'a> {
     Series(&'a Series),
     Front,
+    /// A reference line ([`Plot::rules`]), by name.
+    Rule(&'a str),
     Note(&'a str),
 }
 
@@ -592,6 +599,7 @@ pub fn plot(plot: &Plot) -> String {
             let (lo, hi) = p.y_range.unwrap_or((p.y, p.y));
             [p.y, lo, hi]
         })
+        .chain(plot.rules.iter().map(|r| r.0))
         .collect();
     let x = Ticks::new(&plot.x, &xs);
     let y = Ticks::new(&plot.y, &ys);
@@ -601,6 +609,7 @@ pub fn plot(plot: &Plot) -> String {
         ""
     };
     let mut entries: Vec<Entry> = plot.series.iter().map(Entry::Series).collect();
+    entries.extend(plot.rules.iter().map(|(_, name)| Entry::Rule(name)));
     if plot.pareto {
         entries.push(Entry::Front);
     }
@@ -612,7 +621,7 @@ pub fn plot(plot: &Plot) -> String {
         .map(|e| match e {
             Entry::Series(s) => s.name.chars().count(),
             Entry::Front => "Pareto front".len(),
-            Entry::Note(n) => n.chars().count(),
+            Entry::Rule(n) | Entry::Note(n) => n.chars().count(),
         })
         .max()
         .unwrap_or(0);
@@ -640,6 +649,15 @@ pub fn plot(plot: &Plot) -> String {
             .draw()?;
         let px = |p: (f64, f64)| chart.backend_coord(&(x.place(p.0), y.place(p.1)));
 
+        let (x_low, x_high) = x.range;
+        for (level, _) in &plot.rules {
+            let y_at = y.place(*level);
+            let ends = vec![
+                chart.backend_coord(&(x_low, y_at)),
+                chart.backend_coord(&(x_high, y_at)),
+            ];
+            draw_line(root, ends, RULE, true, 1)?;
+        }
         if plot.pareto {
             let all: Vec<(f64, f64)> = plot
                 .series
@@ -696,6 +714,7 @@ pub fn plot(plot: &Plot) -> String {
                     (&s.name, None)
                 }
                 Entry::Front => ("Pareto front", Some((RGBColor(0x55, 0x55, 0x55), true))),
+                Entry::Rule(name) => (name, Some((RULE, true))),
                 Entry::Note(note) => (note, None),
             };
             if let Some((colour, dashed)) = line {
@@ -795,6 +814,7 @@ mod tests {
                 series("persistence", "persistence"),
             ],
             pareto: true,
+            rules: Vec::new(),
         });
         well_formed(&p);
         assert!(p.contains("aln · walk") && p.contains("Pareto front"));

@@ -12,7 +12,7 @@ use alnlab_summarize::paired::{Interval, Verdict};
 
 /// The simulator baseline at the fewest integration steps per frame that
 /// the variant ran: (model name, steps per frame).
-fn coarsest_simulator<'a>(v: &'a Loaded) -> Option<(&'a str, u32)> {
+pub(super) fn coarsest_simulator<'a>(v: &'a Loaded) -> Option<(&'a str, u32)> {
     v.timings
         .iter()
         .filter_map(|t| {

@@ -17,6 +17,7 @@ mod circuit;
 mod findings;
 pub mod format;
 mod glossary;
+mod headline;
 pub mod html;
 pub mod metrics;
 mod plan;
@@ -275,6 +276,13 @@ pub fn render(run: &RunInfo, dir: &Path) -> Result<PathBuf> {
     let shared = across::shares_baselines(&variants);
     let mut md = String::new();
     let _ = writeln!(md, "# {} — report\n", run.experiment);
+    headline::first_screen(&mut md, run, &variants, dir)?;
+    let _ = writeln!(
+        md,
+        "## Appendix\n\nThe figures above in detail: findings per variant, the experimenter's \
+         notes, replicates, each variant's tables and charts, definitions and how to reproduce \
+         the run.\n"
+    );
     findings::findings(&mut md, run, &variants);
     across::charts(&mut md, &variants, shared, dir)?;
     across::side_by_side(&mut md, &variants, shared);

@@ -279,6 +279,7 @@ pub(super) fn section(
             y: Axis::error("task cost per episode", costs.iter().copied()),
             series,
             pareto: false,
+            rules: Vec::new(),
         });
         let file = chart_name(&format!("plan-{task}"));
         atomic::write_bytes(&dir.join(&file), chart.as_bytes())?;

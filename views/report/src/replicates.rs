@@ -35,9 +35,22 @@ pub(super) struct Figures {
     /// The ALN's mean error per variable, sorted by variable: variants that
     /// predict different sets of variables pair over the ones they share.
     pub aln_by_variable: Vec<(String, f64)>,
+    /// Every model's mean error over the variables, in summary order.
+    pub model_means: Vec<(String, f64)>,
 }
 
 impl Figures {
+    /// `model`'s mean error over the variables, if the replicate has it.
+    pub fn mean_of(&self, model: &str) -> Option<f64> {
+        self.model_means
+            .iter()
+            .find(|(m, _)| m == model)
+            .map(|(_, e)| *e)
+    }
+}
+
+impl Figures {
+    /// One replicate's figures, read from its summary and comparisons.
     pub fn read(replicate: &Replicate) -> Result<Figures> {
         let (all, held, rows) = split_rows(alnlab_summarize::read(&replicate.summary)?);
         let judged = if rows == Rows::HeldOut { held } else { all };
@@ -53,8 +66,16 @@ impl Figures {
             .map(|r| (r.variable.clone(), r.stats.mean))
             .collect();
         aln_by_variable.sort_by(|a, b| a.0.cmp(&b.0));
+        let mut model_means: Vec<(String, f64)> = Vec::new();
+        for row in &judged {
+            if !model_means.iter().any(|(m, _)| *m == row.model) {
+                let (mean, _) = overall(&judged, &row.model).expect("the model has rows");
+                model_means.push((row.model.clone(), mean));
+            }
+        }
         Ok(Figures {
             aln_by_variable,
+            model_means,
             horizons,
             seed: replicate.seed,
             rows,

@@ -125,6 +125,7 @@ pub(super) fn section(
             y: Axis::error("mean error (levels)", ys),
             series,
             pareto: false,
+            rules: Vec::new(),
         });
         let name = file_name(&v.info.name, "closed-loop");
         atomic::write_bytes(&dir.join(&name), chart.as_bytes())?;

@@ -1,0 +1,384 @@
+//! The report's first screen: an abstract of three sentences, one figure —
+//! every model's difference from persistence against its time per state —
+//! and one results table of at most eight rows. Everything after it is the
+//! appendix.
+//!
+//! Every figure is on held-out rows, in levels (the one primary metric).
+//! With replicates, a figure is the mean across them with its 95% interval
+//! across replicates (seeds before rows); with one replicate the ALN's
+//! interval is over the test rows of one simulation and is labelled so,
+//! the other models' figures have none.
+
+use std::fmt::Write as _;
+use std::path::Path;
+
+use alnlab_common::{Result, atomic};
+use alnlab_summarize::paired::Interval;
+
+use super::charts::{self, Axis, Plot, Point, Series, style_of};
+use super::findings::{accuracy_word, speed_verdict};
+use super::format::{MdTable, estimate, interval, micros, sig3};
+use super::{Loaded, RunInfo, Timing, overall};
+
+/// File name of the figure.
+const FIGURE: &str = "headline.svg";
+/// Rows of the results table, at most.
+const TABLE_ROWS: usize = 8;
+
+/// What an estimate's interval is over.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Over {
+    /// Replicates (seeds): this many.
+    Seeds(usize),
+    /// The test rows of one simulation.
+    Rows,
+    /// No interval: one replicate, and no paired comparison over rows.
+    Nothing,
+}
+
+/// A figure with its interval, if it has one.
+#[derive(Clone, Copy, Debug)]
+struct Estimate {
+    mean: f64,
+    interval: Option<(f64, f64)>,
+    over: Over,
+    /// The interval's verdict, when it is a difference.
+    verdict: Option<&'static str>,
+}
+
+impl Estimate {
+    fn across_seeds(values: &[f64]) -> Option<Estimate> {
+        let i = Interval::of(values)?;
+        Some(Estimate {
+            mean: i.mean,
+            interval: Some((i.low, i.high)),
+            over: Over::Seeds(values.len()),
+            verdict: Some(accuracy_word(&i)),
+        })
+    }
+
+    fn point(mean: f64) -> Estimate {
+        Estimate {
+            mean,
+            interval: None,
+            over: Over::Nothing,
+            verdict: None,
+        }
+    }
+
+    /// "1.04 [1.02, 1.06]", or the mean alone.
+    fn cell(&self) -> String {
+        match self.interval {
+            Some((low, high)) => estimate(self.mean, low, high),
+            None => sig3(self.mean),
+        }
+    }
+
+    /// "-0.136 [-0.150, -0.121]": a difference, signed.
+    fn difference_cell(&self) -> String {
+        match self.interval {
+            Some((low, high)) => interval(self.mean, low, high),
+            None => format!("{:+.3}", self.mean),
+        }
+    }
+}
+
+/// One model of one variant on the first screen.
+struct Entry<'a> {
+    variant: &'a Loaded<'a>,
+    /// Its place among the report's variants (its style).
+    place: usize,
+    model: &'a str,
+    variables: usize,
+    error: Estimate,
+    against_persistence: Option<Estimate>,
+    timing: Option<&'a Timing>,
+}
+
+impl Entry<'_> {
+    fn label(&self, variants: usize) -> String {
+        match (self.model, variants) {
+            ("aln", 1) => "ALN".into(),
+            ("aln", _) => format!("ALN `{}`", self.variant.info.name),
+            (model, _) => model.into(),
+        }
+    }
+}
+
+/// `model`'s figures in `v`: its mean error and its difference from
+/// persistence, across replicates when there are several.
+fn entry<'a>(v: &'a Loaded<'a>, place: usize, model: &'a str) -> Option<Entry<'a>> {
+    let (judged, rows) = v.judged();
+    let variables = judged.iter().filter(|r| r.model == model).count();
+    let (mean, _) = overall(judged, model)?;
+    let per_seed = |f: &dyn Fn(&super::replicates::Figures) -> Option<f64>| -> Option<Vec<f64>> {
+        (v.replicates.len() > 1)
+            .then(|| v.replicates.iter().map(f).collect::<Option<Vec<f64>>>())
+            .flatten()
+    };
+    let error = per_seed(&|f| f.mean_of(model))
+        .and_then(|values| Estimate::across_seeds(&values))
+        .map(|e| Estimate { verdict: None, ..e })
+        .unwrap_or(Estimate::point(mean));
+    let against_persistence = if model == "persistence" {
+        None
+    } else if let Some(values) = per_seed(&|f| Some(f.mean_of(model)? - f.mean_of("persistence")?))
+    {
+        Estimate::across_seeds(&values)
+    } else if model == "aln" {
+        super::aln_against(&v.comparisons, rows, "persistence", None).map(|i| Estimate {
+            mean: i.mean,
+            interval: Some((i.low, i.high)),
+            over: Over::Rows,
+            verdict: Some(accuracy_word(i)),
+        })
+    } else {
+        overall(judged, "persistence").map(|(p, _)| Estimate::point(mean - p))
+    };
+    let timing = match model {
+        "aln" | "linear" | "boosted" => v.timing(model, "batched"),
+        "persistence" => None,
+        _ => v.timing(model, "single"),
+    };
+    Some(Entry {
+        variant: v,
+        place,
+        model,
+        variables,
+        error,
+        against_persistence,
+        timing,
+    })
+}
+
+/// The models on the first screen: every variant's ALN (the best first),
+/// then the best variant's baselines — persistence, the robust linear fit,
+/// the learned peer where there is one, and the simulator at its fewest
+/// steps a frame — at most [`TABLE_ROWS`] in all.
+fn entries<'a>(variants: &'a [Loaded<'a>]) -> Vec<Entry<'a>> {
+    let mut alns: Vec<Entry> = variants
+        .iter()
+        .enumerate()
+        .filter_map(|(k, v)| entry(v, k, "aln"))
+        .collect();
+    alns.sort_by(|a, b| a.error.mean.total_cmp(&b.error.mean));
+    let Some(best) = alns.first().map(|e| (e.variant, e.place)) else {
+        return alns;
+    };
+    let coarsest = super::findings::coarsest_simulator(best.0).map(|(name, _)| name);
+    let baselines: Vec<Entry> = ["persistence", "linear", "boosted"]
+        .into_iter()
+        .chain(coarsest)
+        .filter_map(|m| entry(best.0, best.1, m))
+        .collect();
+    let keep_alns = TABLE_ROWS.saturating_sub(baselines.len()).max(1);
+    alns.truncate(keep_alns);
+    alns.extend(baselines);
+    alns.truncate(TABLE_ROWS);
+    alns
+}
+
+/// "across 5 replicates" / "over the rows of one simulation".
+fn over_words(over: Over) -> String {
+    match over {
+        Over::Seeds(n) => format!("95% interval across {n} replicates"),
+        Over::Rows => "95% interval over the test rows of one simulation".into(),
+        Over::Nothing => "one replicate: no interval".into(),
+    }
+}
+
+/// Writes the first screen into `md` and its figure into `dir`.
+pub(super) fn first_screen(
+    md: &mut String,
+    run: &RunInfo,
+    variants: &[Loaded],
+    dir: &Path,
+) -> Result<()> {
+    let entries = entries(variants);
+    let Some(best) = entries.first() else {
+        return Ok(());
+    };
+    abstract_(md, run, variants, &entries);
+    figure(md, variants.len(), &entries, dir)?;
+    table(md, variants.len(), &entries);
+    let (test, held_out) = best.variant.rows;
+    let intervals = match (best.error.over, best.against_persistence.map(|d| d.over)) {
+        (Over::Seeds(_), _) => over_words(best.error.over),
+        (_, Some(Over::Rows)) => "one replicate: errors without an interval, the ALN's \
+                                  difference from persistence with its 95% interval over the test \
+                                  rows of one simulation (rows, not seeds: narrower than seed to \
+                                  seed)"
+            .into(),
+        _ => "one replicate: no intervals".into(),
+    };
+    let _ = writeln!(
+        md,
+        "Errors: mean over a model's variables of its mean error in levels on the {held_out} \
+         held-out test rows (of {test}); {intervals}. Baselines are the best ALN's variant's. \
+         Times: replicate 1, median and range of 5 interleaved runs.\n"
+    );
+    Ok(())
+}
+
+/// Three sentences: what was measured, the best ALN's standing, its speed.
+fn abstract_(md: &mut String, run: &RunInfo, variants: &[Loaded], entries: &[Entry]) {
+    let best = &entries[0];
+    let replicates = best.variant.replicates.len().max(1);
+    let description = run.description.trim().trim_end_matches('.');
+    let _ = write!(
+        md,
+        "**Abstract.** {description} — {} variant{}, {replicates} replicate{} each (a new \
+         simulation, split and model), every error in quantization levels on rows held out of \
+         training.",
+        variants.len(),
+        if variants.len() == 1 { "" } else { "s" },
+        if replicates == 1 { "" } else { "s" },
+    );
+    let name = if variants.len() == 1 {
+        "The ALN".to_string()
+    } else {
+        format!("The best ALN, `{}`,", best.variant.info.name)
+    };
+    let _ = write!(md, " {name} errs {} levels", best.error.cell());
+    if let Some(d) = &best.against_persistence {
+        let _ = write!(
+            md,
+            ", {} persistence ({})",
+            d.verdict.unwrap_or("against"),
+            d.difference_cell()
+        );
+    }
+    // The strongest other model that is not the simulator's exact step.
+    let rival = entries
+        .iter()
+        .filter(|e| e.model != "aln" && e.model != "persistence")
+        .min_by(|a, b| a.error.mean.total_cmp(&b.error.mean));
+    if let Some(rival) = rival {
+        let values: Option<Vec<f64>> = (best.variant.replicates.len() > 1)
+            .then(|| {
+                best.variant
+                    .replicates
+                    .iter()
+                    .map(|f| Some(f.mean_of("aln")? - f.mean_of(rival.model)?))
+                    .collect()
+            })
+            .flatten();
+        match values.and_then(|v| Estimate::across_seeds(&v)) {
+            Some(d) => {
+                let _ = write!(
+                    md,
+                    " and {} {}, the best other model ({})",
+                    d.verdict.unwrap_or("against"),
+                    rival.model,
+                    d.difference_cell()
+                );
+            }
+            None => {
+                let _ = write!(
+                    md,
+                    "; the best other model, {}, errs {}",
+                    rival.model,
+                    rival.error.cell()
+                );
+            }
+        }
+    }
+    md.push('.');
+    let simulator = entries
+        .iter()
+        .filter(|e| e.model.starts_with("simulator@"))
+        .find_map(|e| Some((e, e.timing?)));
+    if let (Some(aln), Some((sim, sim_time))) = (best.timing, simulator) {
+        let word = speed_verdict(aln, sim_time);
+        let against = if word.starts_with("indistinguishable") {
+            format!("indistinguishable in speed from {}", sim.model)
+        } else {
+            format!("{word} than {}", sim.model)
+        };
+        let _ = write!(
+            md,
+            " It predicts a state in {} on one thread (batched over {} states), {against} \
+             re-stepping each frame ({}, error {}).",
+            micros(aln.ns_per_state),
+            aln.states,
+            micros(sim_time.ns_per_state),
+            sim.error.cell()
+        );
+    }
+    md.push_str("\n\n");
+}
+
+/// The main figure: every entry's difference from persistence (its
+/// interval) against its time per state on one thread (its range).
+fn figure(md: &mut String, variants: usize, entries: &[Entry], dir: &Path) -> Result<()> {
+    let series: Vec<Series> = entries
+        .iter()
+        .filter_map(|e| {
+            let d = e.against_persistence?;
+            let t = e.timing?;
+            Some(Series {
+                name: e.label(variants).replace('`', ""),
+                style: style_of(e.model, e.place),
+                points: vec![Point {
+                    x: t.ns_per_state / 1000.0,
+                    y: d.mean,
+                    x_range: Some((t.ns_min / 1000.0, t.ns_max / 1000.0)),
+                    y_range: d.interval,
+                }],
+                joined: false,
+                hollow: false,
+            })
+        })
+        .collect();
+    if series.is_empty() {
+        return Ok(());
+    }
+    let svg = charts::plot(&Plot {
+        title: "error against speed: difference from persistence".into(),
+        x: Axis::log("µs per state, one thread (log)"),
+        y: Axis::linear("mean error − persistence's (levels; below 0: better)"),
+        series,
+        pareto: false,
+        rules: vec![(0.0, "persistence (no change)".into())],
+    });
+    atomic::write_bytes(&dir.join(FIGURE), svg.as_bytes())?;
+    let over = entries[0]
+        .against_persistence
+        .map_or(Over::Nothing, |d| d.over);
+    let _ = writeln!(
+        md,
+        "![difference from persistence against time per state]({FIGURE})\n\n\
+         Each model's mean error minus persistence's on the same rows (bars: {}) against its time \
+         to predict a state on one thread (bars: the range of 5 timed runs). Lower is more \
+         accurate, left is faster.\n",
+        over_words(over)
+    );
+    Ok(())
+}
+
+/// The results table: at most [`TABLE_ROWS`] rows.
+fn table(md: &mut String, variants: usize, entries: &[Entry]) {
+    let mut t = MdTable::new(&["model", "variables"]).numbers(&[
+        "mean error (levels)",
+        "− persistence",
+        "µs per state, one thread",
+    ]);
+    for e in entries {
+        t.row(vec![
+            e.label(variants),
+            e.variables.to_string(),
+            e.error.cell(),
+            e.against_persistence
+                .map_or("—".into(), |d| d.difference_cell()),
+            e.timing.map_or("—".into(), |t| {
+                format!(
+                    "{} ({}–{})",
+                    sig3(t.ns_per_state / 1000.0),
+                    sig3(t.ns_min / 1000.0),
+                    sig3(t.ns_max / 1000.0)
+                )
+            }),
+        ]);
+    }
+    t.write(md);
+}
