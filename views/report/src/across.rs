@@ -176,7 +176,7 @@ pub(super) fn charts(md: &mut String, variants: &[Loaded], shared: bool, dir: &P
     let unit = if shared {
         "mean error (levels)"
     } else {
-        "normalized error"
+        "normalized error (secondary metric)"
     };
     let y_of = |v: &Loaded, model: &str| -> Option<(f64, Option<(f64, f64)>)> {
         if shared {
@@ -362,12 +362,7 @@ pub(super) fn side_by_side(md: &mut String, variants: &[Loaded], shared: bool) {
     );
     let mut table = MdTable::new(&["variant"])
         .column("rows", Align::Left)
-        .numbers(&[
-            "ALN mean",
-            "ALN normalized",
-            "ALN p95",
-            "ALN mean, all test rows",
-        ])
+        .numbers(&["ALN mean", "ALN normalized (secondary)", "ALN p95"])
         .column("ALN − persistence [95%]", Align::Left)
         .numbers(&["variables worse than persistence"]);
     for v in variants {
@@ -381,7 +376,6 @@ pub(super) fn side_by_side(md: &mut String, variants: &[Loaded], shared: bool) {
             aln.map_or("—".into(), |(m, _)| sig3(m)),
             normalized(judged, "aln").map_or("—".into(), sig3),
             aln.map_or("—".into(), |(_, p)| sig3(p)),
-            overall(&v.summary, "aln").map_or("—".into(), |(m, _)| sig3(m)),
             v.compared("persistence", None)
                 .map_or("—".into(), |d| interval(d.mean, d.low, d.high)),
             format!("{}{worse} of {total}", if worse > 0 { "⚠ " } else { "" }),
@@ -457,7 +451,8 @@ pub(super) fn side_by_side(md: &mut String, variants: &[Loaded], shared: bool) {
 /// difference against each when `with_aln`): errors and speed.
 pub(super) fn baselines_table(md: &mut String, v: &Loaded, with_aln: bool) {
     let (judged, _) = v.judged();
-    let mut table = MdTable::new(&["model"]).numbers(&["mean", "normalized", "p95", "max"]);
+    let mut table =
+        MdTable::new(&["model"]).numbers(&["mean", "normalized (secondary)", "p95", "max"]);
     if with_aln {
         table = table.column("ALN − model [95%]", Align::Left);
     }

@@ -51,19 +51,26 @@ const VARIANT_MARKERS: [Marker; 4] = [
     Marker::Triangle,
     Marker::Diamond,
 ];
-/// The baselines keep out of the variants' colours: black and greys for
-/// persistence and linear, one brown for the simulator at every step count.
+/// The baselines keep out of the variants' colours: black and grey for
+/// persistence and linear, browns for the simulator — darker the more steps
+/// a frame, each step count its own shade and marker.
 const PERSISTENCE: RGBColor = RGBColor(0, 0, 0);
 const LINEAR: RGBColor = RGBColor(0x77, 0x77, 0x77);
-const SIMULATOR: RGBColor = RGBColor(0x99, 0x66, 0x33);
+const SIMULATOR: [RGBColor; 5] = [
+    RGBColor(0xCC, 0x99, 0x55),
+    RGBColor(0xAA, 0x77, 0x33),
+    RGBColor(0x88, 0x55, 0x22),
+    RGBColor(0x66, 0x3D, 0x14),
+    RGBColor(0x44, 0x28, 0x0A),
+];
 /// The learned peer (gradient-boosted trees): dark teal, dashed like a
 /// baseline.
 const BOOSTED: RGBColor = RGBColor(0x00, 0x66, 0x66);
-/// The planning references: the random controller, and the real-time line.
+/// The planning reference the random controller.
 const RANDOM_TORQUES: RGBColor = RGBColor(0xDD, 0x44, 0x00);
-const REAL_TIME: RGBColor = RGBColor(0xAA, 0xAA, 0xAA);
-/// A reference line across a plot ([`Plot::rules`]).
-const RULE: RGBColor = RGBColor(0x77, 0x77, 0x77);
+/// A reference line across a plot ([`Plot::rules`]): lighter than any
+/// series.
+const RULE: RGBColor = RGBColor(0xAA, 0xAA, 0xAA);
 
 /// A marker's shape.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -98,20 +105,19 @@ pub fn style_of(model: &str, variant: usize) -> Style {
         // Doing nothing looks the same whether it predicts or controls.
         "persistence" | "zero torques" => dashed(PERSISTENCE, Marker::Square),
         "random torques" => dashed(RANDOM_TORQUES, Marker::Cross),
-        "real time" => dashed(REAL_TIME, Marker::Plus),
         "linear" => dashed(LINEAR, Marker::Triangle),
         "boosted" => dashed(BOOSTED, Marker::Circle),
         _ => match simulator_steps(model) {
-            Some(steps) => dashed(
-                SIMULATOR,
-                match steps {
-                    1 => Marker::Diamond,
-                    2..=3 => Marker::Cross,
-                    4..=6 => Marker::Plus,
-                    7..=12 => Marker::Square,
-                    _ => Marker::Circle,
-                },
-            ),
+            Some(steps) => {
+                let (k, marker) = match steps {
+                    1 => (0, Marker::Diamond),
+                    2..=3 => (1, Marker::Cross),
+                    4..=6 => (2, Marker::Plus),
+                    7..=12 => (3, Marker::Square),
+                    _ => (4, Marker::Circle),
+                };
+                dashed(SIMULATOR[k], marker)
+            }
             None => Style {
                 colour: VARIANT_COLOURS[variant % VARIANT_COLOURS.len()],
                 marker: VARIANT_MARKERS[(variant / VARIANT_COLOURS.len()) % VARIANT_MARKERS.len()],
@@ -223,9 +229,35 @@ pub struct Plot {
     /// Draw the Pareto front of all points (lower x and lower y are better)
     /// as a staircase under them.
     pub pareto: bool,
-    /// Reference levels of y (zero: persistence), each drawn as a thin grey
-    /// line across the plot and named in the legend — a reference, not data.
-    pub rules: Vec<(f64, String)>,
+    /// Reference lines (zero: persistence; real time), each drawn thin and
+    /// grey across the plot and named in the legend — a reference, not data.
+    pub rules: Vec<Rule>,
+}
+
+/// A reference line of a [`Plot`]: a level of y, or of x when vertical.
+pub struct Rule {
+    pub at: f64,
+    pub name: String,
+    pub vertical: bool,
+}
+
+impl Rule {
+    /// A level of y.
+    pub fn horizontal(at: f64, name: &str) -> Rule {
+        Rule {
+            at,
+            name: name.into(),
+            vertical: false,
+        }
+    }
+
+    /// A level of x.
+    pub fn vertical(at: f64, name: &str) -> Rule {
+        Rule {
+            vertical: true,
+            ..Rule::horizontal(at, name)
+        }
+    }
 }
 
 /// The points no other point beats on both x and y (lower is better), by
@@ -593,13 +625,14 @@ pub fn plot(plot: &Plot) -> String {
             let (lo, hi) = p.x_range.unwrap_or((p.x, p.x));
             [p.x, lo, hi]
         })
+        .chain(plot.rules.iter().filter(|r| r.vertical).map(|r| r.at))
         .collect();
     let ys: Vec<f64> = points()
         .flat_map(|p| {
             let (lo, hi) = p.y_range.unwrap_or((p.y, p.y));
             [p.y, lo, hi]
         })
-        .chain(plot.rules.iter().map(|r| r.0))
+        .chain(plot.rules.iter().filter(|r| !r.vertical).map(|r| r.at))
         .collect();
     let x = Ticks::new(&plot.x, &xs);
     let y = Ticks::new(&plot.y, &ys);
@@ -609,7 +642,7 @@ pub fn plot(plot: &Plot) -> String {
         ""
     };
     let mut entries: Vec<Entry> = plot.series.iter().map(Entry::Series).collect();
-    entries.extend(plot.rules.iter().map(|(_, name)| Entry::Rule(name)));
+    entries.extend(plot.rules.iter().map(|r| Entry::Rule(&r.name)));
     if plot.pareto {
         entries.push(Entry::Front);
     }
@@ -649,13 +682,15 @@ pub fn plot(plot: &Plot) -> String {
             .draw()?;
         let px = |p: (f64, f64)| chart.backend_coord(&(x.place(p.0), y.place(p.1)));
 
-        let (x_low, x_high) = x.range;
-        for (level, _) in &plot.rules {
-            let y_at = y.place(*level);
-            let ends = vec![
-                chart.backend_coord(&(x_low, y_at)),
-                chart.backend_coord(&(x_high, y_at)),
-            ];
+        for rule in &plot.rules {
+            let ends = if rule.vertical {
+                let x_at = x.place(rule.at);
+                [(x_at, y.range.0), (x_at, y.range.1)]
+            } else {
+                let y_at = y.place(rule.at);
+                [(x.range.0, y_at), (x.range.1, y_at)]
+            };
+            let ends = ends.iter().map(|e| chart.backend_coord(e)).collect();
             draw_line(root, ends, RULE, true, 1)?;
         }
         if plot.pareto {
@@ -726,18 +761,68 @@ pub fn plot(plot: &Plot) -> String {
     })
 }
 
-/// A histogram of errors: the share of errors in each named bin, bars in
-/// `colour`.
-pub fn histogram(title: &str, bins: &[(String, u64)], colour: RGBColor) -> String {
-    let total = bins.iter().map(|b| b.1).sum::<u64>().max(1) as f64;
-    let shares: Vec<f64> = bins.iter().map(|b| 100.0 * b.1 as f64 / total).collect();
+/// One bin of a [`histogram`]: errors from `low` to below `high` levels.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Bin {
+    pub low: f64,
+    pub high: f64,
+    pub count: u64,
+}
+
+/// Where an error of `e` levels sits on a histogram's axis: log10(1 + e),
+/// so that bins of one level near zero and of fifty in the tail both show.
+fn log_place(e: f64) -> f64 {
+    (1.0 + e).log10()
+}
+
+/// Each bin's share of all errors per decade of its width on the axis
+/// (%): a bar's area is its share, whatever its width.
+fn densities(bins: &[Bin]) -> Vec<f64> {
+    let total = bins.iter().map(|b| b.count).sum::<u64>().max(1) as f64;
+    bins.iter()
+        .map(|b| 100.0 * b.count as f64 / total / (log_place(b.high) - log_place(b.low)))
+        .collect()
+}
+
+/// A histogram of errors: bars as wide as their bins on an axis of
+/// log10(1 + error) — one level near zero and fifty in the tail both
+/// readable — and as high as their share of the errors per decade of that
+/// axis, so a bar's area is its share and a wide bin is no false spike; in
+/// `colour`, `overlay` (a name and bins) drawn as a black outline over them.
+pub fn histogram(
+    title: &str,
+    bins: &[Bin],
+    colour: RGBColor,
+    overlay: Option<(&str, &[Bin])>,
+) -> String {
+    let heights = densities(bins);
+    let outline = overlay.map(|(_, o)| (o, densities(o)));
     let axis = Axis {
         from_zero: true,
-        ..Axis::linear("share of errors (%)")
+        ..Axis::linear("share of errors per decade (%)")
     };
-    let y = Ticks::new(&axis, &shares);
-    let n = bins.len() as f64;
-    // Wide enough that bin names like "10–19" keep apart.
+    let all_heights: Vec<f64> = heights
+        .iter()
+        .chain(outline.iter().flat_map(|(_, h)| h))
+        .copied()
+        .collect();
+    let y = Ticks::new(&axis, &all_heights);
+    let end = bins
+        .iter()
+        .chain(overlay.iter().flat_map(|(_, o)| o.iter()))
+        .map(|b| b.high)
+        .fold(1.0, f64::max);
+    let ticks: Vec<(f64, String)> = [0.0, 1.0, 2.0, 5.0, 10.0, 20.0, 50.0, 100.0, 200.0, 500.0]
+        .into_iter()
+        .filter(|&v| v <= end)
+        .map(|v| (log_place(v), format!("{v}")))
+        .collect();
+    let label = |v: f64| {
+        ticks
+            .iter()
+            .find(|(t, _)| (t - v).abs() < 1e-9)
+            .map_or_else(String::new, |(_, l)| l.clone())
+    };
     svg((PLOT.0 + 80, PLOT.1), |root| {
         let mut chart = ChartBuilder::on(root)
             .caption(title, (FONT, TITLE_SIZE))
@@ -746,8 +831,8 @@ pub fn histogram(title: &str, bins: &[(String, u64)], colour: RGBColor) -> Strin
             .y_label_area_size(72)
             .build_cartesian_2d(
                 TickedAxis {
-                    range: (0.0, n),
-                    ticks: (0..bins.len()).map(|k| k as f64 + 0.5).collect(),
+                    range: (0.0, log_place(end)),
+                    ticks: ticks.iter().map(|t| t.0).collect(),
                 },
                 TickedAxis {
                     range: (0.0, y.range.1),
@@ -757,22 +842,40 @@ pub fn histogram(title: &str, bins: &[(String, u64)], colour: RGBColor) -> Strin
         chart
             .configure_mesh()
             .disable_x_mesh()
-            .x_desc("error (levels)")
+            .x_desc("error (levels; axis log10(1 + error))")
             .y_desc(axis.label.as_str())
             .label_style(text_style(LABEL_SIZE))
             .axis_desc_style(text_style(LABEL_SIZE))
-            .x_label_formatter(&|v| {
-                bins.get(v.floor() as usize)
-                    .map_or_else(String::new, |b| b.0.clone())
-            })
+            .x_label_formatter(&|v| label(*v))
             .y_label_formatter(&|v| y.label(*v))
             .light_line_style(WHITE)
             .bold_line_style(BLACK.mix(0.12))
             .draw()?;
-        chart.draw_series(shares.iter().enumerate().map(|(k, &share)| {
-            let k = k as f64;
-            Rectangle::new([(k + 0.1, 0.0), (k + 0.9, share)], colour.filled())
+        chart.draw_series(bins.iter().zip(&heights).map(|(b, &h)| {
+            let (low, high) = (log_place(b.low), log_place(b.high));
+            Rectangle::new([(low, 0.0), (high, h)], colour.filled())
         }))?;
+        if let Some((o, h)) = &outline {
+            // A step outline: up and across each bin, down at the end.
+            let mut steps = vec![(o.first().map_or(0.0, |b| log_place(b.low)), 0.0)];
+            for (b, &h) in o.iter().zip(h) {
+                steps.push((log_place(b.low), h));
+                steps.push((log_place(b.high), h));
+            }
+            steps.push((o.last().map_or(0.0, |b| log_place(b.high)), 0.0));
+            chart.draw_series(std::iter::once(PathElement::new(
+                steps,
+                BLACK.stroke_width(2),
+            )))?;
+            if let Some((name, _)) = overlay {
+                let font = text_style(LABEL_SIZE);
+                root.draw_text(
+                    &format!("outline: {name}"),
+                    &font,
+                    (PLOT.0 as i32 - 180, 40),
+                )?;
+            }
+        }
         Ok(())
     })
 }
@@ -791,13 +894,23 @@ mod tests {
 
     #[test]
     fn charts_are_svg_with_their_labels() {
-        let bins: Vec<(String, u64)> = ["0", "1", "10–19", "100+"]
-            .iter()
-            .map(|b| (b.to_string(), 3))
-            .collect();
-        let h = histogram("worst", &bins, VARIANT_COLOURS[0]);
+        let bin = |low, high, count| Bin { low, high, count };
+        let bins = [bin(0.0, 1.0, 3), bin(1.0, 2.0, 3), bin(10.0, 20.0, 3)];
+        // Equal counts: each bar's area (height × width on the axis) is
+        // its share, a third.
+        let d = densities(&bins);
+        for (b, h) in bins.iter().zip(&d) {
+            let area = h * (log_place(b.high) - log_place(b.low));
+            assert!((area - 100.0 / 3.0).abs() < 1e-9, "{b:?}: {area}");
+        }
+        let h = histogram(
+            "worst",
+            &bins,
+            VARIANT_COLOURS[0],
+            Some(("persistence", &bins)),
+        );
         well_formed(&h);
-        assert!(h.contains("10–19") && h.contains("100+"));
+        assert!(h.contains("outline: persistence"));
         let series = |name: &str, model: &str| Series {
             name: name.into(),
             style: style_of(model, 0),
@@ -835,7 +948,6 @@ mod tests {
             "simulator@5/frame",
             "simulator@10/frame",
             "random torques",
-            "real time",
         ] {
             assert_eq!(style_of(model, 0), style_of(model, 7), "{model}");
             seen.push(style_of(model, 0));

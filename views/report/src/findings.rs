@@ -50,6 +50,29 @@ pub(super) fn speed_verdict(a: &Timing, b: &Timing) -> String {
     }
 }
 
+/// Where the secondary metric (normalized error) orders the ALN and
+/// persistence the other way round from the primary one (levels), a clause
+/// saying so; none where they agree.
+fn metrics_disagree(v: &Loaded) -> Option<String> {
+    let judged = v.judged().0;
+    let (aln, persistence) = (overall(judged, "aln")?.0, overall(judged, "persistence")?.0);
+    let (aln_n, persistence_n) = (
+        normalized(judged, "aln")?,
+        normalized(judged, "persistence")?,
+    );
+    let (levels, secondary) = (aln - persistence, aln_n - persistence_n);
+    (levels * secondary < 0.0).then(|| {
+        format!(
+            " — the secondary metric disagrees: in normalized error the ALN's {} is {} than \
+             persistence's {}, so the two metrics order them oppositely; levels are the \
+             headline",
+            sig3(aln_n),
+            if secondary < 0.0 { "lower" } else { "higher" },
+            sig3(persistence_n)
+        )
+    })
+}
+
 /// "-0.136 [-0.150, -0.121]": a paired difference and its interval.
 pub(super) fn difference(i: &Interval) -> String {
     interval(i.mean, i.low, i.high)
@@ -139,8 +162,8 @@ fn variant_findings(md: &mut String, v: &Loaded) {
         n => format!(", replicate 1 of {n} (seed {})", v.info.replicates[0].seed),
     };
     let mut sentence = format!(
-        "- **`{name}`**{replicate} {which}: the ALN's mean error is {} levels ({} normalized) \
-         over {variables} variables ({})",
+        "- **`{name}`**{replicate} {which}: the ALN's mean error is {} levels ({} normalized, \
+         a secondary metric) over {variables} variables ({})",
         sig3(aln),
         sig3(normalized(judged, "aln").unwrap_or(f64::NAN)),
         groups.join(", ")
@@ -156,6 +179,9 @@ fn variant_findings(md: &mut String, v: &Loaded) {
                 difference(d)
             );
         }
+    }
+    if let Some(note) = metrics_disagree(v) {
+        sentence.push_str(&note);
     }
     let [lower, higher, unclear, tied] = v.verdict_counts("persistence");
     let _ = write!(
@@ -345,7 +371,7 @@ fn across_variants(md: &mut String, variants: &[Loaded]) {
 fn against_the_paper(md: &mut String, variants: &[Loaded]) {
     for v in variants {
         let (mut lower, mut rows, mut far_higher) = (0, 0, Vec::new());
-        for (f, ours) in paper_rows(&v.summary) {
+        for (f, ours) in paper_rows(v.judged().0) {
             let (group, which) = (f[0], f[1]);
             let Ok(paper) = f[2].parse::<f64>() else {
                 continue;

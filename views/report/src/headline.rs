@@ -15,7 +15,7 @@ use std::path::Path;
 use alnlab_common::{Result, atomic};
 use alnlab_summarize::paired::Interval;
 
-use super::charts::{self, Axis, Plot, Point, Series, style_of};
+use super::charts::{self, Axis, Plot, Point, Rule, Series, style_of};
 use super::findings::{accuracy_word, speed_verdict};
 use super::format::{MdTable, estimate, interval, micros, sig3};
 use super::{Loaded, RunInfo, Timing, overall};
@@ -91,6 +91,8 @@ struct Entry<'a> {
     model: &'a str,
     variables: usize,
     error: Estimate,
+    /// Persistence's mean error on the same rows and variables.
+    persistence: Option<Estimate>,
     against_persistence: Option<Estimate>,
     timing: Option<&'a Timing>,
 }
@@ -116,10 +118,14 @@ fn entry<'a>(v: &'a Loaded<'a>, place: usize, model: &'a str) -> Option<Entry<'a
             .then(|| v.replicates.iter().map(f).collect::<Option<Vec<f64>>>())
             .flatten()
     };
-    let error = per_seed(&|f| f.mean_of(model))
-        .and_then(|values| Estimate::across_seeds(&values))
-        .map(|e| Estimate { verdict: None, ..e })
-        .unwrap_or(Estimate::point(mean));
+    let mean_of = |model: &str, mean: f64| {
+        per_seed(&|f| f.mean_of(model))
+            .and_then(|values| Estimate::across_seeds(&values))
+            .map(|e| Estimate { verdict: None, ..e })
+            .unwrap_or(Estimate::point(mean))
+    };
+    let error = mean_of(model, mean);
+    let persistence = overall(judged, "persistence").map(|(p, _)| mean_of("persistence", p));
     let against_persistence = if model == "persistence" {
         None
     } else if let Some(values) = per_seed(&|f| Some(f.mean_of(model)? - f.mean_of("persistence")?))
@@ -146,6 +152,7 @@ fn entry<'a>(v: &'a Loaded<'a>, place: usize, model: &'a str) -> Option<Entry<'a
         model,
         variables,
         error,
+        persistence,
         against_persistence,
         timing,
     })
@@ -198,10 +205,34 @@ pub(super) fn first_screen(
     let Some(best) = entries.first() else {
         return Ok(());
     };
-    abstract_(md, run, variants, &entries);
+    let planning = match entries
+        .iter()
+        .find(|e| e.model == "aln" && e.variant.info.planning.is_some())
+    {
+        Some(e) => {
+            let path = e.variant.info.planning.as_ref().expect("checked");
+            let phrases = super::plan::aln_within_real_time(path)?;
+            (!phrases.is_empty()).then_some((e.variant.info.name.as_str(), phrases))
+        }
+        None => None,
+    };
+    abstract_(md, run, variants, &entries, planning.as_ref());
     figure(md, variants.len(), &entries, dir)?;
     table(md, variants.len(), &entries);
     let (test, held_out) = best.variant.rows;
+    let paired = if best.variant.replicates.len() > 1 {
+        "replicate by replicate"
+    } else {
+        "row by row"
+    };
+    let baselines = match entries.iter().find(|e| e.model == "persistence") {
+        Some(p) if entries.iter().any(|e| e.variables != p.variables) => format!(
+            " The baselines are scored on the best ALN's variables ({}); an ALN over other \
+             variables is set against persistence on its own, in the \"persistence's\" column.",
+            p.variables
+        ),
+        _ => String::new(),
+    };
     let intervals = match (best.error.over, best.against_persistence.map(|d| d.over)) {
         (Over::Seeds(_), _) => over_words(best.error.over),
         (_, Some(Over::Rows)) => "one replicate: errors without an interval, the ALN's \
@@ -214,14 +245,22 @@ pub(super) fn first_screen(
     let _ = writeln!(
         md,
         "Errors: mean over a model's variables of its mean error in levels on the {held_out} \
-         held-out test rows (of {test}); {intervals}. Baselines are the best ALN's variant's. \
-         Times: replicate 1, median and range of 5 interleaved runs.\n"
+         held-out test rows (of {test}); {intervals}; a difference is paired — the same rows \
+         and variables, {paired}.{baselines} Times: replicate 1, every test state predicted at \
+         once, median and range of 5 interleaved runs.\n"
     );
     Ok(())
 }
 
-/// Three sentences: what was measured, the best ALN's standing, its speed.
-fn abstract_(md: &mut String, run: &RunInfo, variants: &[Loaded], entries: &[Entry]) {
+/// Three sentences: what was measured, the best ALN's standing, and its
+/// speed — or, where it planned, how it planned within real time.
+fn abstract_(
+    md: &mut String,
+    run: &RunInfo,
+    variants: &[Loaded],
+    entries: &[Entry],
+    planning: Option<&(&str, Vec<String>)>,
+) {
     let best = &entries[0];
     let replicates = best.variant.replicates.len().max(1);
     let description = run.description.trim().trim_end_matches('.');
@@ -248,42 +287,53 @@ fn abstract_(md: &mut String, run: &RunInfo, variants: &[Loaded], entries: &[Ent
             d.difference_cell()
         );
     }
-    // The strongest other model that is not the simulator's exact step.
+    // The best other model (the simulator's exact step is never on the
+    // first screen), and the robust linear fit, the practitioner's first try.
     let rival = entries
         .iter()
         .filter(|e| e.model != "aln" && e.model != "persistence")
         .min_by(|a, b| a.error.mean.total_cmp(&b.error.mean));
-    if let Some(rival) = rival {
+    let against = |other: &Entry| -> String {
         let values: Option<Vec<f64>> = (best.variant.replicates.len() > 1)
             .then(|| {
                 best.variant
                     .replicates
                     .iter()
-                    .map(|f| Some(f.mean_of("aln")? - f.mean_of(rival.model)?))
+                    .map(|f| Some(f.mean_of("aln")? - f.mean_of(other.model)?))
                     .collect()
             })
             .flatten();
         match values.and_then(|v| Estimate::across_seeds(&v)) {
-            Some(d) => {
-                let _ = write!(
-                    md,
-                    " and {} {}, the best other model ({})",
-                    d.verdict.unwrap_or("against"),
-                    rival.model,
-                    d.difference_cell()
-                );
-            }
-            None => {
-                let _ = write!(
-                    md,
-                    "; the best other model, {}, errs {}",
-                    rival.model,
-                    rival.error.cell()
-                );
-            }
+            Some(d) => format!(
+                "{} {} ({})",
+                d.verdict.unwrap_or("against"),
+                other.model,
+                d.difference_cell()
+            ),
+            None => format!("{}, at {}", other.model, other.error.cell()),
+        }
+    };
+    if let Some(rival) = rival {
+        if best.variant.replicates.len() > 1 {
+            let _ = write!(md, " and {}, the best other model", against(rival));
+        } else {
+            let _ = write!(md, "; the best other model is {}", against(rival));
+        }
+        if let Some(linear) = entries.iter().find(|e| e.model == "linear")
+            && rival.model != "linear"
+        {
+            let _ = write!(md, ", and {}", against(linear));
         }
     }
     md.push('.');
+    if let Some((variant, phrases)) = planning {
+        let _ = write!(
+            md,
+            " Planning with it (`{variant}`) within real time, its best plan: {}.\n\n",
+            phrases.join("; ")
+        );
+        return;
+    }
     let simulator = entries
         .iter()
         .filter(|e| e.model.starts_with("simulator@"))
@@ -297,7 +347,7 @@ fn abstract_(md: &mut String, run: &RunInfo, variants: &[Loaded], entries: &[Ent
         };
         let _ = write!(
             md,
-            " It predicts a state in {} on one thread (batched over {} states), {against} \
+            " It predicts a state in {} on one thread (all {} test states at once), {against} \
              re-stepping each frame ({}, error {}).",
             micros(aln.ns_per_state),
             aln.states,
@@ -339,7 +389,7 @@ fn figure(md: &mut String, variants: usize, entries: &[Entry], dir: &Path) -> Re
         y: Axis::linear("mean error − persistence's (levels; below 0: better)"),
         series,
         pareto: false,
-        rules: vec![(0.0, "persistence (no change)".into())],
+        rules: vec![Rule::horizontal(0.0, "persistence (no change)")],
     });
     atomic::write_bytes(&dir.join(FIGURE), svg.as_bytes())?;
     let over = entries[0]
@@ -360,6 +410,7 @@ fn figure(md: &mut String, variants: usize, entries: &[Entry], dir: &Path) -> Re
 fn table(md: &mut String, variants: usize, entries: &[Entry]) {
     let mut t = MdTable::new(&["model", "variables"]).numbers(&[
         "mean error (levels)",
+        "persistence's",
         "− persistence",
         "µs per state, one thread",
     ]);
@@ -368,6 +419,10 @@ fn table(md: &mut String, variants: usize, entries: &[Entry]) {
             e.label(variants),
             e.variables.to_string(),
             e.error.cell(),
+            match (e.model, e.persistence) {
+                ("persistence", _) | (_, None) => "—".into(),
+                (_, Some(p)) => p.cell(),
+            },
             e.against_persistence
                 .map_or("—".into(), |d| d.difference_cell()),
             e.timing.map_or("—".into(), |t| {

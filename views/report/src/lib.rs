@@ -288,8 +288,17 @@ pub fn render(run: &RunInfo, dir: &Path) -> Result<PathBuf> {
     across::side_by_side(&mut md, &variants, shared);
     replicates::section(&mut md, &variants, dir)?;
     let n = variants.len();
+    let histogram_variable = variant::histogram_variable(&variants);
     for (k, v) in variants.iter().enumerate() {
-        variant::section(&mut md, v, (k, n), shared, dir, run.compare_with_paper)?;
+        variant::section(
+            &mut md,
+            v,
+            (k, n),
+            shared,
+            dir,
+            run.compare_with_paper,
+            histogram_variable,
+        )?;
         if let Some(path) = &v.info.planning {
             plan::section(&mut md, path, dir, |chart| {
                 variant::file_name(&v.info.name, chart)

@@ -12,9 +12,11 @@ use alnlab_common::{Result, atomic};
 
 use super::across::{aln_name, baselines_table, closed_loop_rows, horizon_models, horizon_points};
 use super::format::{Align, MdTable, interval, sig3};
-use super::{Loaded, SummaryRow, baseline_models, mean_of, paper_rows, worse_than_persistence};
+use super::{
+    Loaded, SummaryRow, baseline_models, mean_of, overall, paper_rows, worse_than_persistence,
+};
 use crate::charts::{self, Axis, Plot, Series, style_of};
-use alnlab_summarize::stats::{HISTOGRAM_BINS, histogram_bin_name};
+use alnlab_summarize::stats::{HISTOGRAM_BINS, HISTOGRAM_EDGES, histogram_bin_name};
 
 /// A chart's file name: the variant's name, made safe, and the chart's.
 pub(super) fn file_name(variant: &str, chart: &str) -> String {
@@ -39,12 +41,28 @@ pub(super) fn section(
     shared: bool,
     dir: &Path,
     compare_with_paper: bool,
+    histogram_variable: Option<&str>,
 ) -> Result<()> {
     let _ = writeln!(md, "## Variant `{}`\n", v.info.name);
     if !v.info.description.is_empty() {
         let _ = writeln!(md, "{}\n", v.info.description);
     }
     let _ = writeln!(md, "Model: {}.\n", v.description);
+    // Rows also trained on, reported once, apart: every table below is on
+    // the held-out rows.
+    let (all, held) = v.rows;
+    if held < all
+        && let Some((mean, _)) = overall(&v.summary, "aln")
+    {
+        let _ = writeln!(
+            md,
+            "On all {all} test rows — {} of them also trained on, as the paper's protocol has \
+             it — the ALN's mean error is {} levels; every table below is on the {held} held-out \
+             rows alone.\n",
+            all - held,
+            sig3(mean)
+        );
+    }
 
     if !v.not_learned.is_empty() {
         let _ = writeln!(
@@ -99,7 +117,7 @@ pub(super) fn section(
     }
 
     worse(md, v);
-    histogram(md, v, k, dir)?;
+    histogram(md, v, k, histogram_variable, dir)?;
     hardware(md, v);
 
     if !shared && !v.horizons.is_empty() {
@@ -147,10 +165,11 @@ fn by_group(md: &mut String, v: &Loaded) {
     let _ = writeln!(
         md,
         "### Error by group (paper §4.6)\n\nThe ALN's best and worst variable of each group over \
-         all test rows, in quantization levels (the mean also in SI units: levels × the size of \
-         one level), and its mean on the held-out rows alone.\n"
+         the held-out test rows, in quantization levels (the mean also in SI units: levels × the \
+         size of one level).\n"
     );
-    let aln: Vec<&SummaryRow> = v.summary.iter().filter(|r| r.model == "aln").collect();
+    let judged = v.judged().0;
+    let aln: Vec<&SummaryRow> = judged.iter().filter(|r| r.model == "aln").collect();
     let mut groups: Vec<&str> = aln.iter().map(|r| r.group.as_str()).collect();
     groups.dedup();
     let mut picked: Vec<(&str, &str, &SummaryRow)> = Vec::new();
@@ -178,7 +197,6 @@ fn by_group(md: &mut String, v: &Loaded) {
         "median",
         "IQR",
         "max",
-        "held-out mean",
     ]);
     for &(group, which, r) in &picked {
         let s = &r.stats;
@@ -197,18 +215,18 @@ fn by_group(md: &mut String, v: &Loaded) {
             sig3(s.median),
             sig3(s.iqr),
             s.max.to_string(),
-            mean_of(&v.held_out, "aln", &r.variable).map_or("—".into(), sig3),
         ]);
     }
     table.write(md);
 
-    let baselines = baseline_models(&v.summary);
+    let baselines = baseline_models(judged);
     if baselines.is_empty() {
         return;
     }
     let _ = writeln!(
         md,
-        "The same variables: mean error of the ALN and of each baseline over all test rows.\n"
+        "The same variables: mean error of the ALN and of each baseline over the held-out test \
+         rows.\n"
     );
     let mut names = vec!["aln"];
     names.extend(&baselines);
@@ -216,7 +234,7 @@ fn by_group(md: &mut String, v: &Loaded) {
     for &(group, which, r) in &picked {
         let mut cells = vec![group.into(), which.into(), format!("`{}`", r.variable)];
         for m in &names {
-            cells.push(mean_of(&v.summary, m, &r.variable).map_or("—".into(), sig3));
+            cells.push(mean_of(judged, m, &r.variable).map_or("—".into(), sig3));
         }
         table.row(cells);
     }
@@ -228,7 +246,8 @@ fn beside_the_paper(md: &mut String, v: &Loaded) {
     let _ = writeln!(
         md,
         "### Beside the paper (§4.6)\n\nThe paper's numbers as published (its table of §4.6), \
-         ours for the same group and rank; errors in quantization levels. Our variables and \
+         ours for the same group and rank on the held-out test rows (the paper's 9000 test \
+         samples included its training ones); errors in quantization levels. Our variables and \
          ranges are our simulator's, not DynaTree's, so a row compares like with like only as \
          far as the groups do.\n"
     );
@@ -246,7 +265,7 @@ fn beside_the_paper(md: &mut String, v: &Loaded) {
             "paper max",
             "ours",
         ]);
-    for (f, ours) in paper_rows(&v.summary) {
+    for (f, ours) in paper_rows(v.judged().0) {
         let ours_or = |x: Option<String>| x.unwrap_or_else(|| "—".into());
         table.row(vec![
             f[0].into(),
@@ -309,29 +328,91 @@ fn worse(md: &mut String, v: &Loaded) {
     table.write(md);
 }
 
-/// The §4.5 histogram of the worst variable, with its tail.
-fn histogram(md: &mut String, v: &Loaded, k: usize, dir: &Path) -> Result<()> {
-    let Some(worst) = v
-        .summary
+/// The variable every variant's histogram shows: the first variant's worst
+/// ALN variable on the judged rows, when every variant predicts it.
+pub(super) fn histogram_variable<'a>(variants: &'a [Loaded]) -> Option<&'a str> {
+    let worst = variants
+        .first()?
+        .judged()
+        .0
         .iter()
         .filter(|r| r.model == "aln")
-        .max_by(|a, b| a.stats.mean.total_cmp(&b.stats.mean))
+        .max_by(|a, b| a.stats.mean.total_cmp(&b.stats.mean))?;
+    variants
+        .iter()
+        .all(|v| {
+            v.judged()
+                .0
+                .iter()
+                .any(|r| r.model == "aln" && r.variable == worst.variable)
+        })
+        .then_some(worst.variable.as_str())
+}
+
+/// The bins of `row`'s error histogram, the open last one closed at its
+/// largest error; none past the largest.
+fn bins_of(row: &SummaryRow) -> Vec<charts::Bin> {
+    (0..HISTOGRAM_BINS)
+        .map(|b| {
+            let low = f64::from(HISTOGRAM_EDGES[b]);
+            let high = HISTOGRAM_EDGES
+                .get(b + 1)
+                .map_or(f64::from(row.stats.max) + 1.0, |&e| f64::from(e));
+            charts::Bin {
+                low,
+                high: high.max(low + 1.0),
+                count: row.stats.histogram[b],
+            }
+        })
+        .filter(|b| b.low <= f64::from(row.stats.max))
+        .collect()
+}
+
+/// The §4.5 histogram of `variable` (the report's choice, the same in
+/// every variant that predicts it; else this variant's worst), with its
+/// tail and persistence's errors overlaid.
+fn histogram(
+    md: &mut String,
+    v: &Loaded,
+    k: usize,
+    variable: Option<&str>,
+    dir: &Path,
+) -> Result<()> {
+    let judged = v.judged().0;
+    let aln = || judged.iter().filter(|r| r.model == "aln");
+    let chosen = variable.and_then(|name| aln().find(|r| r.variable == name));
+    let Some(worst) = chosen.or_else(|| aln().max_by(|a, b| a.stats.mean.total_cmp(&b.stats.mean)))
     else {
         return Ok(());
     };
     let bins: Vec<(String, u64)> = (0..HISTOGRAM_BINS)
         .map(|b| (histogram_bin_name(b), worst.stats.histogram[b]))
         .collect();
+    let persistence = judged
+        .iter()
+        .find(|r| r.model == "persistence" && r.variable == worst.variable);
     let name = file_name(&v.info.name, "histogram");
     let title = format!("{}: errors of {}", v.info.name, worst.variable);
-    let chart = charts::histogram(&title, &bins, style_of("aln", k).colour);
+    let overlay = persistence.map(bins_of);
+    let chart = charts::histogram(
+        &title,
+        &bins_of(worst),
+        style_of("aln", k).colour,
+        overlay.as_deref().map(|o| ("persistence", o)),
+    );
     atomic::write_bytes(&dir.join(&name), chart.as_bytes())?;
     let _ = writeln!(
         md,
-        "### Error histogram of the worst variable, `{}` (paper §4.5)\n\n![histogram]({name})\n\n\
-         All test rows; the paper's bars of 0 to 9 levels, then its \"10 or more\" split to show \
-         the tail.\n",
-        worst.variable
+        "### Error histogram of `{}` (paper §4.5)\n\n![histogram]({name})\n\n{} Held-out test \
+         rows; the paper's bars of 0 to 9 levels, then its \"10 or more\" split to show the tail. \
+         Each bar is as wide as its bin and as high as its share of the errors per level, so its \
+         area is its share; the black outline is persistence on the same rows.\n",
+        worst.variable,
+        if chosen.is_some() {
+            "The report's worst variable, the same in every variant that predicts it."
+        } else {
+            "This variant's worst variable."
+        }
     );
     let total = worst.stats.n.max(1) as f64;
     let mut table = MdTable::new(&["error (levels)"]).numbers(&["count", "share"]);
