@@ -25,14 +25,10 @@ type Step = (&'static str, fn(&Suite) -> Result<(), String>);
 const STEPS: &[Step] = &[
     ("cargo test --workspace", cargo_test),
     (
-        "the quickstart read by standard readers",
+        "the quickstart (three replicates) read by standard readers, its figures recomputed",
         quickstart_interop,
     ),
     ("both quickstart forests as circuits", quickstart_circuits),
-    (
-        "three replicates, their figures recomputed",
-        replicates_interop,
-    ),
     (
         "MLflow: runs exported to a real server and read back",
         mlflow_round_trip,
@@ -116,38 +112,6 @@ fn quickstart_circuits(suite: &Suite) -> Result<(), String> {
         )?;
     }
     Ok(())
-}
-
-/// The quickstart with three replicates: the figures across replicates,
-/// recomputed.
-fn replicates_interop(suite: &Suite) -> Result<(), String> {
-    let quickstart = std::fs::read_to_string(root().join("experiments/quickstart.toml"))
-        .map_err(|e| format!("experiments/quickstart.toml: {e}"))?;
-    let seed = quickstart
-        .lines()
-        .find(|l| l.starts_with("seed = "))
-        .ok_or("experiments/quickstart.toml has no `seed = ` line")?;
-    let manifest = suite.work.join("replicates.toml");
-    std::fs::write(
-        &manifest,
-        quickstart.replacen(seed, &format!("{seed}\nreplicates = 3"), 1),
-    )
-    .map_err(|e| format!("{}: {e}", manifest.display()))?;
-    let reports = reports(suite).join("replicates");
-    run_in_root(
-        alnlab()
-            .args(["--quiet", "run"])
-            .arg(&manifest)
-            .arg("--out")
-            .arg(runs(suite))
-            .arg("--reports")
-            .arg(&reports),
-    )?;
-    interop(
-        suite,
-        &runs(suite).join("quickstart/run.json"),
-        &reports.join("quickstart"),
-    )
 }
 
 fn interop(suite: &Suite, record: &Path, report: &Path) -> Result<(), String> {

@@ -89,6 +89,47 @@ pub(super) fn accuracy_word(i: &Interval) -> &'static str {
     }
 }
 
+/// The definitions section, at the end of the report: every term the first
+/// screen and the findings use.
+pub(super) fn definitions(md: &mut String) {
+    let _ = writeln!(
+        md,
+        "## Definitions\n\n\
+         - **Level**: a variable's range is cut into L evenly spaced values (its quantization \
+         levels; L and the size of one level in SI units are in each variant's group table). An \
+         error is how many levels a prediction lands from the true next value's level, 0 being \
+         exact; every error is averaged over a model's variables — the primary metric.\n\
+         - **Held-out rows**: test rows not trained on. Where the split lets test rows be \
+         training rows too (the paper's protocol), the figure over all of them is given once per \
+         variant, apart.\n\
+         - **Variant, replicate**: a variant is one configuration of the manifest; a replicate \
+         runs it again from a new seed — a new simulation, split and model.\n\
+         - **ALN**: the adaptive logic network under test — a *bit-forest* (the 1991 form: \
+         AND/OR trees over input bits, one per output bit, decoded to a level) or a \
+         *piecewise-linear* ALN (MIN/MAX trees over affine pieces of the real inputs, predicting \
+         the change).\n\
+         - **Baselines**: *persistence* predicts no change; *linear* is the robust linear fit of \
+         each variable's change (least absolute deviations, from the real values of the inputs \
+         the ALN reads); *boosted* (where present) gradient-boosted trees fitted to the same \
+         change; *simulator@k/frame* re-steps the physics from the logged frame with k \
+         integration steps per frame (the logged step is exact by construction).\n\
+         - **Normalized error** (a secondary metric): each variable's mean error over the \
+         standard deviation of its true levels on the same rows, so runs with different ranges, \
+         level counts or codes compare.\n\
+         - **Comparison and interval**: the mean paired difference of two models' errors on the \
+         same rows and variables (below zero: the first is better) with its 95% t-interval — \
+         across replicates where there are several, else over the test rows of one simulation, \
+         which treats rows as independent (neighbouring frames are not quite, so it is on the \
+         narrow side, and it says nothing of seed-to-seed spread). \"Better\" or \"worse\" \
+         only when the interval excludes zero, otherwise \"indistinguishable\" (\"tied\" \
+         when every difference is zero).\n\
+         - **Times**: on the machine named under Reproducibility, every model on one thread, the \
+         median of 5 runs with their range, the runs of all models interleaved in rounds; \
+         \"faster\" or \"slower\" only when one's time over the other's is below 1 in every \
+         round, or above 1 in every round.\n"
+    );
+}
+
 /// Writes the findings section.
 pub(super) fn findings(md: &mut String, run: &RunInfo, variants: &[Loaded]) {
     let _ = writeln!(md, "## Findings\n");
@@ -97,23 +138,8 @@ pub(super) fn findings(md: &mut String, run: &RunInfo, variants: &[Loaded]) {
     }
     let _ = writeln!(
         md,
-        "Errors are in quantization levels (0 is the exact level) of the variable predicted one \
-         stride ahead, averaged over a variant's variables. Baselines: *persistence* predicts no \
-         change, *linear* is the robust linear fit of each variable's change (least absolute \
-         deviations, from the real values of the inputs the ALN reads), *boosted* (where \
-         present) gradient-boosted trees fitted to the same change, *simulator@k/frame* \
-         re-steps the physics from the logged frame with k integration steps per frame (the \
-         logged step is exact by construction). A *normalized* error divides each variable's \
-         mean error by the standard deviation of its true levels over the same rows, so runs \
-         with different ranges, level counts or codes compare. A comparison is the mean paired \
-         difference of two models' errors on the same rows (below zero: the ALN's errors are \
-         lower) with its 95% t-interval; \"better\" or \"worse\" only when the interval \
-         excludes zero, otherwise \"indistinguishable\" (\"tied\" when every difference is \
-         zero). The interval treats rows as independent; neighbouring frames are not quite, so \
-         it is on the narrow side. Times are from the machine named under Reproducibility, every \
-         model on one thread, the median of 5 runs with their range, the runs of all models \
-         interleaved in rounds; \"faster\" or \"slower\" only when the ALN's time over the \
-         other's is below 1 in every round, or above 1 in every round.\n"
+        "Terms (levels, baselines, intervals, verdicts) are defined under Definitions at the \
+         end.\n"
     );
     for v in variants {
         variant_findings(md, v);

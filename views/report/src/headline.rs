@@ -185,6 +185,25 @@ fn entries<'a>(variants: &'a [Loaded<'a>]) -> Vec<Entry<'a>> {
     alns
 }
 
+/// Whether the variants ran on the same test rows: persistence — which
+/// learns nothing — errs the same on every variable they share.
+fn same_data(variants: &[Loaded]) -> bool {
+    let persistence = |v: &Loaded| -> Vec<(String, u64)> {
+        v.judged()
+            .0
+            .iter()
+            .filter(|r| r.model == "persistence")
+            .map(|r| (r.variable.clone(), r.stats.mean.to_bits()))
+            .collect()
+    };
+    variants.windows(2).all(|w| {
+        let (a, b) = (persistence(&w[0]), persistence(&w[1]));
+        let common: Vec<&(String, u64)> =
+            a.iter().filter(|x| b.iter().any(|y| y.0 == x.0)).collect();
+        !common.is_empty() && common.iter().all(|x| b.contains(x))
+    })
+}
+
 /// "across 5 replicates" / "over the rows of one simulation".
 fn over_words(over: Over) -> String {
     match over {
@@ -247,7 +266,8 @@ pub(super) fn first_screen(
         "Errors: mean over a model's variables of its mean error in levels on the {held_out} \
          held-out test rows (of {test}); {intervals}; a difference is paired — the same rows \
          and variables, {paired}.{baselines} Times: replicate 1, every test state predicted at \
-         once, median and range of 5 interleaved runs.\n"
+         once, median and range of 5 interleaved runs. Levels, baselines and intervals are \
+         defined under Definitions, at the end.\n"
     );
     Ok(())
 }
@@ -275,8 +295,14 @@ fn abstract_(
     );
     let name = if variants.len() == 1 {
         "The ALN".to_string()
-    } else {
+    } else if same_data(variants) {
         format!("The best ALN, `{}`,", best.variant.info.name)
+    } else {
+        format!(
+            "On `{}`, the variant of lowest error (the variants ran on different data, so this \
+             ranks them without pairing), the ALN",
+            best.variant.info.name
+        )
     };
     let _ = write!(md, " {name} errs {} levels", best.error.cell());
     if let Some(d) = &best.against_persistence {

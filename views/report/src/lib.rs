@@ -306,6 +306,7 @@ pub fn render(run: &RunInfo, dir: &Path) -> Result<PathBuf> {
         }
     }
     glossary::section(&mut md, &variants);
+    findings::definitions(&mut md);
     reproducibility(&mut md, run, &variants);
     let path = dir.join(REPORT_FILE);
     atomic::write_bytes(&path, md.as_bytes())?;
