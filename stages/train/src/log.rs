@@ -3,6 +3,7 @@
 //! on the training rows); a piecewise-linear model one row per tree per
 //! round of growth (its pieces and errors after the round).
 
+use std::collections::BTreeMap;
 use std::path::Path;
 use std::sync::Arc;
 
@@ -48,26 +49,21 @@ pub enum Log {
 }
 
 impl Log {
-    /// A bit model's mean errors per tree, per epoch: (epoch, errors),
-    /// epochs from 1; empty for a piecewise-linear model's rounds.
+    /// A bit model's mean errors per tree, per epoch: (epoch, errors), in
+    /// epoch order; empty for a piecewise-linear model's rounds.
     pub fn mean_errors_per_epoch(&self) -> Vec<(u32, f64)> {
         let Log::Epochs(rows) = self else {
             return Vec::new();
         };
-        let mut per_epoch: Vec<(u64, u64)> = Vec::new();
+        let mut per_epoch: BTreeMap<u32, (u64, u64)> = BTreeMap::new();
         for row in rows {
-            let k = row.epoch as usize;
-            if per_epoch.len() < k {
-                per_epoch.resize(k, (0, 0));
-            }
-            per_epoch[k - 1].0 += row.errors;
-            per_epoch[k - 1].1 += 1;
+            let (errors, trees) = per_epoch.entry(row.epoch).or_default();
+            *errors += row.errors;
+            *trees += 1;
         }
         per_epoch
-            .iter()
-            .enumerate()
-            .filter(|(_, (_, trees))| *trees > 0)
-            .map(|(k, (sum, trees))| (k as u32 + 1, *sum as f64 / *trees as f64))
+            .into_iter()
+            .map(|(epoch, (errors, trees))| (epoch, errors as f64 / trees as f64))
             .collect()
     }
 }

@@ -7,6 +7,7 @@ use std::fmt::Write as _;
 
 use super::format::{estimate, interval, micros, sig3};
 use super::{Loaded, RunInfo, Spread, Timing, normalized, overall, paper_rows};
+use alnlab_evaluate::timing::REPEATS;
 use alnlab_summarize::Rows;
 use alnlab_summarize::paired::{Interval, Verdict};
 
@@ -124,7 +125,7 @@ pub(super) fn definitions(md: &mut String) {
          only when the interval excludes zero, otherwise \"indistinguishable\" (\"tied\" \
          when every difference is zero).\n\
          - **Times**: on the machine named under Reproducibility, every model on one thread, the \
-         median of 5 runs with their range, the runs of all models interleaved in rounds; \
+         median of {REPEATS} runs with their range, the runs of all models interleaved in rounds; \
          \"faster\" or \"slower\" only when one's time over the other's is below 1 in every \
          round, or above 1 in every round.\n"
     );

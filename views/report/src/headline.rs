@@ -13,6 +13,7 @@ use std::fmt::Write as _;
 use std::path::Path;
 
 use alnlab_common::{Result, atomic};
+use alnlab_evaluate::timing::REPEATS;
 use alnlab_summarize::paired::Interval;
 
 use super::charts::{self, Axis, Plot, Point, Rule, Series, style_of};
@@ -110,7 +111,7 @@ impl Entry<'_> {
 /// `model`'s figures in `v`: its mean error and its difference from
 /// persistence, across replicates when there are several.
 fn entry<'a>(v: &'a Loaded<'a>, place: usize, model: &'a str) -> Option<Entry<'a>> {
-    let (judged, rows) = v.judged();
+    let judged = v.judged().0;
     let variables = judged.iter().filter(|r| r.model == model).count();
     let (mean, _) = overall(judged, model)?;
     let per_seed = |f: &dyn Fn(&super::replicates::Figures) -> Option<f64>| -> Option<Vec<f64>> {
@@ -128,11 +129,13 @@ fn entry<'a>(v: &'a Loaded<'a>, place: usize, model: &'a str) -> Option<Entry<'a
     let persistence = overall(judged, "persistence").map(|(p, _)| mean_of("persistence", p));
     let against_persistence = if model == "persistence" {
         None
-    } else if let Some(values) = per_seed(&|f| Some(f.mean_of(model)? - f.mean_of("persistence")?))
-    {
+    } else if let Some(values) = per_seed(&|f| match model {
+        "aln" => f.aln_minus("persistence"),
+        _ => Some(f.mean_of(model)? - f.mean_of("persistence")?),
+    }) {
         Estimate::across_seeds(&values)
     } else if model == "aln" {
-        super::aln_against(&v.comparisons, rows, "persistence", None).map(|i| Estimate {
+        v.compared("persistence", None).map(|i| Estimate {
             mean: i.mean,
             interval: Some((i.low, i.high)),
             over: Over::Rows,
@@ -265,9 +268,10 @@ pub(super) fn first_screen(
         md,
         "Errors: mean over a model's variables of its mean error in levels on the {held_out} \
          held-out test rows (of {test}); {intervals}; a difference is paired — the same rows \
-         and variables, {paired}.{baselines} Times: replicate 1, every test state predicted at \
-         once, median and range of 5 interleaved runs. Levels, baselines and intervals are \
-         defined under Definitions, at the end.\n"
+         and variables, {paired}.{baselines} Times: replicate 1, the learned models predicting \
+         every test state at once, the simulator re-stepping one frame at a time; median and \
+         range of {REPEATS} interleaved runs. Levels, baselines and intervals are defined under \
+         Definitions, at the end.\n"
     );
     Ok(())
 }
@@ -325,7 +329,7 @@ fn abstract_(
                 best.variant
                     .replicates
                     .iter()
-                    .map(|f| Some(f.mean_of("aln")? - f.mean_of(other.model)?))
+                    .map(|f| f.aln_minus(other.model))
                     .collect()
             })
             .flatten();
@@ -425,7 +429,7 @@ fn figure(md: &mut String, variants: usize, entries: &[Entry], dir: &Path) -> Re
         md,
         "![difference from persistence against time per state]({FIGURE})\n\n\
          Each model's mean error minus persistence's on the same rows (bars: {}) against its time \
-         to predict a state on one thread (bars: the range of 5 timed runs). Lower is more \
+         to predict a state on one thread (bars: the range of {REPEATS} timed runs). Lower is more \
          accurate, left is faster.\n",
         over_words(over)
     );

@@ -23,7 +23,7 @@ use std::path::Path;
 use alnlab_common::Result;
 use serde::{Deserialize, Serialize};
 
-use crate::{aln_against, overall, read_training, split_rows};
+use crate::{aln_against, overall, split_rows};
 use alnlab_summarize::{Rows, read_comparisons, read_horizons};
 
 /// The prefix of the per-variable figures' names.
@@ -89,9 +89,9 @@ pub fn read(sources: &Sources) -> Result<Metrics> {
         put(name, t.ns_per_state);
     }
     let mut steps: BTreeMap<String, Vec<(u32, f64)>> = BTreeMap::new();
-    let training: Vec<(u32, f64)> = read_training(sources.training)?
+    let training: Vec<(u32, f64)> = alnlab_train::log::read(sources.training)?
+        .mean_errors_per_epoch()
         .into_iter()
-        .map(|(epoch, mean)| (epoch as u32, mean))
         .filter(|(_, mean)| mean.is_finite())
         .collect();
     if !training.is_empty() {

@@ -136,6 +136,9 @@ pub(super) fn aln_within_real_time(path: &Path) -> Result<Vec<String>> {
             .map(|p| p.planner)
             .collect();
         planners.dedup();
+        if planners.is_empty() {
+            continue;
+        }
         let mean = |p: &Policy| Interval::of(&p.costs()).map_or(f64::INFINITY, |i| i.mean);
         let best = planners
             .iter()

@@ -40,6 +40,16 @@ pub(super) struct Figures {
 }
 
 impl Figures {
+    /// The ALN's mean paired difference against `model`: the stage's paired
+    /// comparison for the headline baselines, the difference of the two
+    /// means (the same rows and variables) for any other model.
+    pub fn aln_minus(&self, model: &str) -> Option<f64> {
+        match MODELS[1..].iter().position(|m| *m == model) {
+            Some(k) => self.differences[k],
+            None => Some(self.mean_of("aln")? - self.mean_of(model)?),
+        }
+    }
+
     /// `model`'s mean error over the variables, if the replicate has it.
     pub fn mean_of(&self, model: &str) -> Option<f64> {
         self.model_means

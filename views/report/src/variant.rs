@@ -405,11 +405,12 @@ fn histogram(
         md,
         "### Error histogram of `{}` (paper §4.5)\n\n![histogram]({name})\n\n{} Held-out test \
          rows; the paper's bars of 0 to 9 levels, then its \"10 or more\" split to show the tail. \
-         Each bar is as wide as its bin and as high as its share of the errors per level, so its \
-         area is its share; the black outline is persistence on the same rows.\n",
+         Each bar is as wide as its bin on the log(1 + error) axis and as high as its share of the \
+         errors per decade of that axis, so its area is its share; the black outline is \
+         persistence on the same rows.\n",
         worst.variable,
         if chosen.is_some() {
-            "The report's worst variable, the same in every variant that predicts it."
+            "The first variant's worst variable, shown in every variant that predicts it."
         } else {
             "This variant's worst variable."
         }
