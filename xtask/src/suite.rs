@@ -123,10 +123,18 @@ fn interop(suite: &Suite, record: &Path, report: &Path) -> Result<(), String> {
     )
 }
 
-/// Both quickstart runs (one replicate, then three) exported to an MLflow
-/// server on loopback, the first twice (which must add nothing), and every
-/// record read back with MLflow's own client.
+/// Two runs of the quickstart (the interop step's, then the same manifest
+/// again with every stage from the cache) exported to an MLflow server on
+/// loopback, the first twice (which must add nothing), and every record read
+/// back with MLflow's own client.
 fn mlflow_round_trip(suite: &Suite) -> Result<(), String> {
+    run_in_root(
+        alnlab()
+            .args(["--quiet", "run", "experiments/quickstart.toml", "--out"])
+            .arg(runs(suite))
+            .arg("--reports")
+            .arg(reports(suite)),
+    )?;
     let dir = suite.work.join("mlflow");
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).map_err(|e| format!("{}: {e}", dir.display()))?;
