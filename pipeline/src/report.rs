@@ -1,10 +1,12 @@
 //! Rendering a run's report from its record: the record names every
 //! artifact, the report crate draws the tables and charts.
 
+use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 use alnlab_common::{Error, Result};
-use alnlab_report::{self as report, Replicate, RunInfo, StageTime, VariantInfo};
+use alnlab_plan::task::Task;
+use alnlab_report::{self as report, PlanSetup, Replicate, RunInfo, StageTime, VariantInfo};
 
 use crate::records::{RunRecord, VariantRecord};
 
@@ -39,6 +41,7 @@ pub fn render(record: &RunRecord, dir: &Path) -> Result<PathBuf> {
                         summary: artifact(r, "summary")?,
                         comparisons: artifact(r, "comparisons")?,
                         horizons: artifact(r, "horizons")?,
+                        planning: r.artifacts.get("planning").map(|a| PathBuf::from(&a.path)),
                     })
                 })
                 .collect::<Result<_>>()?;
@@ -64,6 +67,7 @@ pub fn render(record: &RunRecord, dir: &Path) -> Result<PathBuf> {
                 model: artifact("model")?,
                 codebook: artifact("codebook")?,
                 planning: v.artifacts.get("planning").map(|a| PathBuf::from(&a.path)),
+                plan_setup: plan_setup(&v.parameters),
                 circuit: v.artifacts.get("circuit").map(|a| PathBuf::from(&a.path)),
                 replicates,
             })
@@ -88,4 +92,47 @@ pub fn render(record: &RunRecord, dir: &Path) -> Result<PathBuf> {
             .map(|d| (d.dataset.clone(), d.sha256.clone())),
     };
     report::render(&run, dir)
+}
+
+/// What the plan stage was asked, from a variant's recorded parameters
+/// (the manifest's `[plan]` as dotted keys); `None` when it planned nothing
+/// or the record predates the keys.
+fn plan_setup(parameters: &BTreeMap<String, String>) -> Option<PlanSetup> {
+    let get = |key: &str| parameters.get(key);
+    let count = |key: &str| get(key)?.parse::<u32>().ok();
+    let mut tasks = Vec::new();
+    for k in 0.. {
+        let key = |field: &str| format!("plan.task.{k}.{field}");
+        let Some(kind) = get(&key("kind")) else {
+            break;
+        };
+        let name = get(&key("name"))?.clone();
+        let task = match kind.as_str() {
+            "hold-angles" => {
+                let prefix = key("targets.");
+                let targets = parameters
+                    .range(prefix.clone()..)
+                    .take_while(|(k, _)| k.starts_with(&prefix))
+                    .map(|(k, v)| Some((k[prefix.len()..].to_string(), v.parse().ok()?)))
+                    .collect::<Option<_>>()?;
+                Task::HoldAngles { name, targets }
+            }
+            "spin" => Task::Spin {
+                name,
+                variable: get(&key("variable"))?.clone(),
+                rate: get(&key("rate"))?.parse().ok()?,
+            },
+            _ => return None,
+        };
+        tasks.push((task.name().to_string(), task.describe()));
+    }
+    if tasks.is_empty() {
+        return None;
+    }
+    Some(PlanSetup {
+        tasks,
+        horizon: count("plan.horizon")?,
+        frames: count("plan.frames")?,
+        episodes: count("plan.episodes")?,
+    })
 }

@@ -43,6 +43,29 @@ impl Task {
         }
     }
 
+    /// What the task asks and what a frame costs, in words with units:
+    /// "pitch.2 to 0.6 rad and pitch.3 to -0.6 rad; a frame costs the sum of
+    /// the squared angles to go (rad², on the circle)".
+    pub fn describe(&self) -> String {
+        match self {
+            Task::HoldAngles { targets, .. } => {
+                let each: Vec<String> = targets
+                    .iter()
+                    .map(|(v, t)| format!("`{v}` to {t} rad"))
+                    .collect();
+                format!(
+                    "reach and hold {}; a frame costs the sum of the squared angles still to go \
+                     (rad², on the circle)",
+                    each.join(" and ")
+                )
+            }
+            Task::Spin { variable, rate, .. } => format!(
+                "spin `{variable}` at {rate} rad/s; a frame costs the squared difference from \
+                 that rate ((rad/s)²)"
+            ),
+        }
+    }
+
     /// Checks the task on its own: targets named as angles, finite numbers.
     /// On error, the field and the message.
     pub fn validate(&self) -> Result<(), (&'static str, String)> {

@@ -242,9 +242,19 @@ fn write_horizons(path: &Path, rows: &[HorizonRow], provenance: &Provenance) -> 
     table::write_parquet(path, &batch, provenance)
 }
 
-/// One row of `horizons.parquet` as read back: (rows, model, horizon, mean,
-/// 95th percentile).
-pub type HorizonFigures = (Rows, String, u16, f64, f64);
+/// One row of `horizons.parquet` as read back.
+#[derive(Clone, Debug, PartialEq)]
+pub struct HorizonFigures {
+    pub rows: Rows,
+    pub model: String,
+    /// Steps fed back (1 is the first prediction).
+    pub horizon: u16,
+    /// Errors pooled: one per start and variable.
+    pub n: u64,
+    pub mean: f64,
+    /// The 95th percentile.
+    pub p95: f64,
+}
 
 /// Reads `horizons.parquet` back.
 pub fn read_horizons(path: &Path) -> Result<Vec<HorizonFigures>> {
@@ -252,12 +262,20 @@ pub fn read_horizons(path: &Path) -> Result<Vec<HorizonFigures>> {
     let sets = rows_column(&table, path)?;
     let models = table.strings("model")?;
     let horizons = table.column::<UInt16Array>("horizon")?.values();
+    let n = table.column::<UInt64Array>("n")?.values();
     let (mean, p95) = (
         table.f64_column("mean")?.values(),
         table.f64_column("p95")?.values(),
     );
     Ok((0..table.num_rows())
-        .map(|i| (sets[i], models[i].clone(), horizons[i], mean[i], p95[i]))
+        .map(|i| HorizonFigures {
+            rows: sets[i],
+            model: models[i].clone(),
+            horizon: horizons[i],
+            n: n[i],
+            mean: mean[i],
+            p95: p95[i],
+        })
         .collect())
 }
 
@@ -782,15 +800,19 @@ mod tests {
         .unwrap();
         let horizons = read_horizons(&dir.path().join(HORIZONS_FILE)).unwrap();
         // Over all starts; over the held-out ones (rows 11 and 12, not 10).
+        let figures: Vec<_> = horizons
+            .iter()
+            .map(|h| (h.rows, h.model.as_str(), h.horizon, h.n, h.mean, h.p95))
+            .collect();
         assert_eq!(
-            horizons,
+            figures,
             [
-                (Rows::All, "aln".to_string(), 1, 2.0, 2.9),
-                (Rows::All, "aln".to_string(), 2, 5.0, 5.0),
-                (Rows::All, "persistence".to_string(), 1, 0.0, 0.0),
-                (Rows::HeldOut, "aln".to_string(), 1, 1.0, 1.0),
-                (Rows::HeldOut, "aln".to_string(), 2, 5.0, 5.0),
-                (Rows::HeldOut, "persistence".to_string(), 1, 0.0, 0.0),
+                (Rows::All, "aln", 1, 2, 2.0, 2.9),
+                (Rows::All, "aln", 2, 1, 5.0, 5.0),
+                (Rows::All, "persistence", 1, 1, 0.0, 0.0),
+                (Rows::HeldOut, "aln", 1, 1, 1.0, 1.0),
+                (Rows::HeldOut, "aln", 2, 1, 5.0, 5.0),
+                (Rows::HeldOut, "persistence", 1, 1, 0.0, 0.0),
             ]
         );
         let rows = read(&dir.path().join(SUMMARY_FILE)).unwrap();

@@ -10,7 +10,9 @@ use std::path::Path;
 use alnlab_common::{Result, atomic};
 
 use super::format::{Align, MdTable, interval, micros, sig3};
-use super::{Loaded, Spread, baseline_models, normalized, overall, worse_than_persistence};
+use super::{
+    Loaded, Spread, baseline_models, closed_loop, normalized, overall, worse_than_persistence,
+};
 use crate::charts::{self, Axis, Plot, Point, Series, style_of};
 use alnlab_summarize::paired::Interval;
 
@@ -45,64 +47,35 @@ pub(super) fn aln_name(v: &Loaded, variants: usize) -> String {
     }
 }
 
-/// The models with closed-loop figures in variant `v`, in their order.
-pub(super) fn horizon_models<'a>(v: &'a Loaded) -> Vec<&'a str> {
-    let mut models: Vec<&str> = v.horizons.iter().map(|h| h.0.as_str()).collect();
-    models.dedup();
-    models
-}
-
-/// A model's closed-loop mean error per step: across replicates (mean and
-/// 95% interval) when the variant has several, else its first replicate's.
-pub(super) fn horizon_points(v: &Loaded, model: &str) -> Vec<Point> {
-    let first: Vec<(u16, f64)> = v
-        .horizons
-        .iter()
-        .filter(|h| h.0 == model)
-        .map(|h| (h.1, h.2))
-        .collect();
-    first
-        .iter()
-        .map(|&(step, mean)| {
-            let values: Option<Vec<f64>> = v
-                .replicates
-                .iter()
-                .map(|f| {
-                    f.horizons
-                        .iter()
-                        .find(|h| h.0 == model && h.1 == step)
-                        .map(|h| h.2)
-                })
-                .collect();
-            match values
-                .filter(|v| v.len() > 1)
-                .and_then(|v| Interval::of(&v))
-            {
-                Some(i) => Point {
-                    y_range: Some((i.low, i.high)),
-                    ..Point::at(f64::from(step), i.mean)
-                },
-                None => Point::at(f64::from(step), mean),
-            }
-        })
-        .collect()
-}
-
 /// A model's mean error on the judged rows, across replicates when there
-/// are several (the headline models only).
+/// are several.
 fn mean_point(v: &Loaded, model: &str) -> Option<(f64, Option<(f64, f64)>)> {
     let (mean, _) = overall(v.judged().0, model)?;
-    let k = super::replicates::MODELS.iter().position(|m| *m == model);
-    let across = k.and_then(|k| {
-        let values: Option<Vec<f64>> = v.replicates.iter().map(|f| f.means[k]).collect();
-        values
-            .filter(|v| v.len() > 1)
-            .and_then(|v| Interval::of(&v))
-    });
+    let values: Option<Vec<f64>> = v.replicates.iter().map(|f| f.mean_of(model)).collect();
+    let across = values
+        .filter(|v| v.len() > 1)
+        .and_then(|v| Interval::of(&v));
     Some(match across {
         Some(i) => (i.mean, Some((i.low, i.high))),
         None => (mean, None),
     })
+}
+
+/// The ALN's mean error minus persistence's on its own rows: across
+/// replicates (paired by replicate) when there are several.
+fn gap_to_persistence(v: &Loaded) -> Option<(f64, Option<(f64, f64)>)> {
+    let values: Option<Vec<f64>> = v
+        .replicates
+        .iter()
+        .map(|f| f.aln_minus("persistence"))
+        .collect();
+    match values
+        .filter(|v| v.len() > 1)
+        .and_then(|v| Interval::of(&v))
+    {
+        Some(i) => Some((i.mean, Some((i.low, i.high)))),
+        None => v.compared("persistence", None).map(|d| (d.mean, None)),
+    }
 }
 
 /// Writes the three cross-variant charts and their captions.
@@ -120,69 +93,17 @@ pub(super) fn charts(md: &mut String, variants: &[Loaded], shared: bool, dir: &P
         ""
     };
 
-    // Closed loop.
-    if variants.iter().any(|v| !v.horizons.is_empty()) {
-        let mut series: Vec<Series> = variants
-            .iter()
-            .enumerate()
-            .map(|(k, v)| Series {
-                name: aln_name(v, n),
-                style: style_of("aln", k),
-                points: horizon_points(v, "aln"),
-                joined: true,
-                hollow: false,
-            })
-            .collect();
-        if shared {
-            for model in horizon_models(&variants[0])
-                .into_iter()
-                .filter(|m| *m != "aln")
-            {
-                series.push(Series {
-                    name: model.to_string(),
-                    style: style_of(model, 0),
-                    points: horizon_points(&variants[0], model),
-                    joined: true,
-                    hollow: false,
-                });
-            }
-        }
-        let ys = series.iter().flat_map(|s| s.points.iter().map(|p| p.y));
-        let chart = charts::plot(&Plot {
-            title: "closed-loop error against horizon".into(),
-            x: Axis::integer("steps fed back"),
-            y: Axis::error("mean error (levels)", ys),
-            series,
-            pareto: false,
-            rules: Vec::new(),
-        });
-        atomic::write_bytes(&dir.join(CLOSED_LOOP), chart.as_bytes())?;
-        let baselines = if shared {
-            "; the baselines, the same for every variant, once"
-        } else {
-            " (the variants ran on different data, so each one's baselines are in its own \
-             section)"
-        };
-        let _ = writeln!(
-            md,
-            "![closed-loop error against horizon]({CLOSED_LOOP})\n\nFrom the true state of test \
-             rows held out of training (all test rows when none is), each model is fed its own \
-             predictions; its levels are scored against the logged trajectory at every step (all \
-             variables pooled). Every variant's ALN{baselines}.{bars}\n"
-        );
-    }
-
     // Speed against error.
     let unit = if shared {
         "mean error (levels)"
     } else {
-        "normalized error (secondary metric)"
+        "ALN's mean error − persistence's (levels)"
     };
     let y_of = |v: &Loaded, model: &str| -> Option<(f64, Option<(f64, f64)>)> {
         if shared {
             mean_point(v, model)
         } else {
-            normalized(v.judged().0, model).map(|x| (x, None))
+            gap_to_persistence(v)
         }
     };
     let mut series = Vec::new();
@@ -240,31 +161,39 @@ pub(super) fn charts(md: &mut String, variants: &[Loaded], shared: bool, dir: &P
     }
     if !series.is_empty() {
         let ys = series.iter().flat_map(|s| s.points.iter().map(|p| p.y));
+        let (y, rules) = if shared {
+            (Axis::error(unit, ys), Vec::new())
+        } else {
+            (
+                Axis::linear(unit),
+                vec![charts::Rule::horizontal(0.0, "persistence")],
+            )
+        };
         let chart = charts::plot(&Plot {
             title: "speed against error, one thread".into(),
             x: Axis::log("µs per predicted state (log)"),
-            y: Axis::error(unit, ys),
+            y,
             series,
-            pareto: true,
-            rules: Vec::new(),
+            // A front only among models that predicted the same rows.
+            pareto: shared,
+            rules,
         });
         atomic::write_bytes(&dir.join(SPEED), chart.as_bytes())?;
         let whose = if shared {
-            "every variant's ALN (filled: batched; hollow: one state at a time) and the timed \
-             baselines"
+            "error averaged over the variables on the held-out rows, for every variant's ALN \
+             (filled: batched; hollow: one state at a time) and the timed baselines. The dashed \
+             staircase is the Pareto front: no point beats one on it in both speed and error."
         } else {
-            "every variant's ALN (filled: batched; hollow: one state at a time); the variants \
-             ran on different data, so the error is normalized (each variable's mean error over \
-             the standard deviation of its true levels) and the baselines are in each variant's \
-             section"
+            "every variant's ALN (filled: batched; hollow: one state at a time) by its mean \
+             error minus persistence's on its own held-out rows: the variants ran on different \
+             data, so their errors are not set side by side, no front is drawn across them, and \
+             the baselines are in each variant's section."
         };
         let _ = writeln!(
             md,
             "![µs per predicted state against error]({SPEED})\n\nTime per predicted state on one \
              thread (median of the timed runs; horizontal bars their range; the simulator per \
-             re-simulated frame) against error averaged over the variables on the held-out rows, \
-             for {whose}. The dashed staircase is the Pareto front: no point beats one on it in \
-             both speed and error.{bars}\n"
+             re-simulated frame) against {whose}{bars}\n"
         );
     }
 
@@ -295,59 +224,41 @@ pub(super) fn charts(md: &mut String, variants: &[Loaded], shared: bool, dir: &P
         let _ = writeln!(
             md,
             "![training errors per epoch]({TRAINING})\n\nTraining rows each tree got wrong in an \
-             epoch, averaged over the trees (first replicate).\n"
+             epoch, counted as each row is presented (before the tree adapts to it), averaged \
+             over the trees (first replicate). Where the count rises after the first epochs, the \
+             trees fit the training rows worse as training goes on — not an artifact of counting \
+             while adapting (the trees as they stand at an epoch's end err about as often): the \
+             §3.3 rule moves every heuristically responsible node a step toward each row's target \
+             in turn, which is not a descent on the training error: a step that fixes one row may \
+             break others. Training runs the manifest's epochs \
+             regardless (the paper's 10).\n"
         );
     }
     if shared && variants.iter().any(|v| !v.horizons.is_empty()) {
-        closed_loop_table(md, variants);
+        let _ = writeln!(md, "### Closed loop\n");
+        let mut columns: Vec<closed_loop::Column> = variants
+            .iter()
+            .enumerate()
+            .map(|(k, v)| closed_loop::Column {
+                name: aln_name(v, n),
+                variant: v,
+                model: "aln",
+                style: style_of("aln", k),
+            })
+            .collect();
+        for model in closed_loop::models(&variants[0]) {
+            if model != "aln" {
+                columns.push(closed_loop::Column {
+                    name: model.to_string(),
+                    variant: &variants[0],
+                    model,
+                    style: style_of(model, 0),
+                });
+            }
+        }
+        closed_loop::section(md, dir, (CLOSED_LOOP, None), &columns)?;
     }
     Ok(())
-}
-
-/// The closed-loop figures behind the chart, when the variants share their
-/// baselines: each variant's ALN and the baselines once.
-fn closed_loop_table(md: &mut String, variants: &[Loaded]) {
-    let n = variants.len();
-    let mut columns: Vec<(String, &Loaded, &str)> = variants
-        .iter()
-        .map(|v| (aln_name(v, n), v, "aln"))
-        .collect();
-    for m in horizon_models(&variants[0])
-        .into_iter()
-        .filter(|m| *m != "aln")
-    {
-        columns.push((m.to_string(), &variants[0], m));
-    }
-    closed_loop_rows(md, &columns);
-}
-
-/// A closed-loop table, one row per step: the mean (and then the 95th
-/// percentile) of each (name, variant, model) column, first replicate.
-pub(super) fn closed_loop_rows(md: &mut String, columns: &[(String, &Loaded, &str)]) {
-    let mut steps: Vec<u16> = columns
-        .iter()
-        .flat_map(|(_, v, _)| v.horizons.iter().map(|h| h.1))
-        .collect();
-    steps.sort_unstable();
-    steps.dedup();
-    for (what, pick) in [("mean", 2usize), ("95th percentile", 3)] {
-        let _ = writeln!(md, "Closed-loop error, {what} (levels):\n");
-        let names: Vec<&str> = columns.iter().map(|c| c.0.as_str()).collect();
-        let mut table = MdTable::new(&["steps"]).numbers(&names);
-        for &step in &steps {
-            let mut cells = vec![step.to_string()];
-            for (_, v, model) in columns {
-                cells.push(
-                    v.horizons
-                        .iter()
-                        .find(|h| h.0 == *model && h.1 == step)
-                        .map_or("—".into(), |h| sig3(if pick == 2 { h.2 } else { h.3 })),
-                );
-            }
-            table.row(cells);
-        }
-        table.write(md);
-    }
 }
 
 /// The variants side by side: accuracy, then cost; and the baselines once

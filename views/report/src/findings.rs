@@ -259,8 +259,8 @@ fn variant_findings(md: &mut String, v: &Loaded) {
         }
         let _ = write!(
             md,
-            "). The simulator re-stepping a frame with {steps} step{} takes {} for an error of \
-             {}: the ALN is {}",
+            "). The simulator re-stepping a frame with {steps} step{} takes {} for an error on \
+             this replicate of {}: the ALN is {}",
             if steps == 1 { "" } else { "s" },
             sim_time.spread(),
             sig3(sim_mean),
@@ -294,12 +294,12 @@ fn variant_findings(md: &mut String, v: &Loaded) {
         );
     }
 
-    if let Some(last) = v.horizons.iter().map(|h| h.1).max() {
+    if let Some(last) = v.horizons.iter().map(|h| h.horizon).max() {
         let at = |model: &str| {
             v.horizons
                 .iter()
-                .find(|h| h.0 == model && h.1 == last)
-                .map(|h| h.2)
+                .find(|h| h.model == model && h.horizon == last)
+                .map(|h| h.mean)
         };
         if let (Some(aln), Some(persistence)) = (at("aln"), at("persistence")) {
             let _ = write!(

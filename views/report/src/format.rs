@@ -34,17 +34,39 @@ pub fn sig3(x: f64) -> String {
     format!("{rounded:.*}", decimals_for(rounded))
 }
 
+/// [`sig3`] with its sign: "+21.6", "-0.104".
+pub fn signed(x: f64) -> String {
+    if x > 0.0 {
+        format!("+{}", sig3(x))
+    } else {
+        sig3(x)
+    }
+}
+
 /// A mean and its interval, each to the decimals that give the largest of
 /// them three significant figures, signed: "+0.517 [+0.495, +0.540]".
 pub fn interval(mean: f64, low: f64, high: f64) -> String {
     let largest = mean.abs().max(low.abs()).max(high.abs());
+    if tiny(largest) {
+        return format!("{mean:+.2e} [{low:+.2e}, {high:+.2e}]");
+    }
     let d = decimals_for(largest);
     format!("{mean:+.d$} [{low:+.d$}, {high:+.d$}]")
 }
 
+/// Below 10⁻³ fixed decimals would run long: such figures (a simulator's
+/// round-off) are written with exponents.
+fn tiny(largest: f64) -> bool {
+    largest > 0.0 && largest < 1e-3
+}
+
 /// A mean and its unsigned interval: "1.91 [1.66, 2.16]".
 pub fn estimate(mean: f64, low: f64, high: f64) -> String {
-    let d = decimals_for(mean.abs().max(low.abs()).max(high.abs()));
+    let largest = mean.abs().max(low.abs()).max(high.abs());
+    if tiny(largest) {
+        return format!("{mean:.2e} [{low:.2e}, {high:.2e}]");
+    }
+    let d = decimals_for(largest);
     format!("{mean:.d$} [{low:.d$}, {high:.d$}]")
 }
 
@@ -168,6 +190,16 @@ mod tests {
             "-0.0380 [-0.0680, -0.0070]"
         );
         assert_eq!(micros(5472.0), "5.47 µs");
+        // Round-off-sized figures in exponent form.
+        assert_eq!(
+            estimate(2.7e-6, -4.7e-6, 1.01e-5),
+            "2.70e-6 [-4.70e-6, 1.01e-5]"
+        );
+        assert_eq!(
+            interval(-2.7e-6, -4.7e-6, 0.0),
+            "-2.70e-6 [-4.70e-6, +0.00e0]"
+        );
+        assert_eq!(signed(21.43), "+21.4");
     }
 
     #[test]

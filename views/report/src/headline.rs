@@ -188,23 +188,9 @@ fn entries<'a>(variants: &'a [Loaded<'a>]) -> Vec<Entry<'a>> {
     alns
 }
 
-/// Whether the variants ran on the same test rows: persistence — which
-/// learns nothing — errs the same on every variable they share.
+/// Whether the variants ran on the same test rows.
 fn same_data(variants: &[Loaded]) -> bool {
-    let persistence = |v: &Loaded| -> Vec<(String, u64)> {
-        v.judged()
-            .0
-            .iter()
-            .filter(|r| r.model == "persistence")
-            .map(|r| (r.variable.clone(), r.stats.mean.to_bits()))
-            .collect()
-    };
-    variants.windows(2).all(|w| {
-        let (a, b) = (persistence(&w[0]), persistence(&w[1]));
-        let common: Vec<&(String, u64)> =
-            a.iter().filter(|x| b.iter().any(|y| y.0 == x.0)).collect();
-        !common.is_empty() && common.iter().all(|x| b.contains(x))
-    })
+    variants.windows(2).all(|w| super::same_rows(&w[0], &w[1]))
 }
 
 /// "across 5 replicates" / "over the rows of one simulation".
@@ -227,20 +213,17 @@ pub(super) fn first_screen(
     let Some(best) = entries.first() else {
         return Ok(());
     };
-    let planning = match entries
+    let planning = entries
         .iter()
-        .find(|e| e.model == "aln" && e.variant.info.planning.is_some())
-    {
-        Some(e) => {
-            let path = e.variant.info.planning.as_ref().expect("checked");
-            let phrases = super::plan::aln_within_real_time(path)?;
+        .find(|e| e.model == "aln" && !e.variant.planning.is_empty())
+        .and_then(|e| {
+            let phrases = super::plan::aln_within_real_time(&e.variant.planning);
             (!phrases.is_empty()).then_some((e.variant.info.name.as_str(), phrases))
-        }
-        None => None,
-    };
+        });
     abstract_(md, run, variants, &entries, planning.as_ref());
     figure(md, variants.len(), &entries, dir)?;
-    table(md, variants.len(), &entries);
+    let decisions = Decisions::of(variants, &entries);
+    table(md, variants.len(), &entries, decisions.as_ref());
     let (test, held_out) = best.variant.rows;
     let paired = if best.variant.replicates.len() > 1 {
         "replicate by replicate"
@@ -270,7 +253,8 @@ pub(super) fn first_screen(
          held-out test rows (of {test}); {intervals}; a difference is paired — the same rows \
          and variables, {paired}.{baselines} Times: replicate 1, the learned models predicting \
          every test state at once, the simulator re-stepping one frame at a time; median and \
-         range of {REPEATS} interleaved runs. Levels, baselines and intervals are defined under \
+         range of {REPEATS} interleaved runs; a baseline several variants share is timed once \
+         (by the first), and that one timing is quoted throughout. Levels, baselines and intervals are defined under \
          Definitions, at the end.\n"
     );
     Ok(())
@@ -290,12 +274,13 @@ fn abstract_(
     let description = run.description.trim().trim_end_matches('.');
     let _ = write!(
         md,
-        "**Abstract.** {description} — {} variant{}, {replicates} replicate{} each (a new \
+        "**Abstract.** {description} — {} variant{}, {replicates} replicate{}{} (a new \
          simulation, split and model), every error in quantization levels on rows held out of \
          training.",
         variants.len(),
         if variants.len() == 1 { "" } else { "s" },
         if replicates == 1 { "" } else { "s" },
+        if variants.len() == 1 { "" } else { " each" },
     );
     let name = if variants.len() == 1 {
         "The ALN".to_string()
@@ -359,7 +344,8 @@ fn abstract_(
     if let Some((variant, phrases)) = planning {
         let _ = write!(
             md,
-            " Planning with it (`{variant}`) within real time, its best plan: {}.\n\n",
+            " Planning with it (`{variant}`), each planner at its largest budget that decides \
+             within real time: {}.\n\n",
             phrases.join("; ")
         );
         return;
@@ -436,16 +422,64 @@ fn figure(md: &mut String, variants: usize, entries: &[Entry], dir: &Path) -> Re
     Ok(())
 }
 
+/// Where the run planned: every first-screen model's ms per decision at
+/// one planner and budget (the ALN's within real time), read from the plans
+/// of the variant that planned with it.
+struct Decisions {
+    planner: String,
+    budget: u32,
+    /// Per entry, in order.
+    ms: Vec<Option<f64>>,
+}
+
+impl Decisions {
+    fn of(variants: &[Loaded], entries: &[Entry]) -> Option<Decisions> {
+        let best = entries
+            .iter()
+            .find(|e| e.model == "aln" && !e.variant.planning.is_empty())?;
+        let (planner, budget) = super::plan::reference_policy(&best.variant.planning[0])?;
+        let plan_model = |model: &str| match model.strip_suffix("/frame") {
+            Some(simulator) => simulator.to_string(),
+            None => model.to_string(),
+        };
+        let ms = entries
+            .iter()
+            .map(|e| {
+                let model = plan_model(e.model);
+                // The ALN's own plans; a baseline's from whichever variant
+                // planned with it.
+                let sources: Vec<&Loaded> = if e.model == "aln" {
+                    vec![e.variant]
+                } else {
+                    variants.iter().collect()
+                };
+                sources.iter().find_map(|v| {
+                    super::plan::decision_ms(v.planning.first()?, &model, &planner, budget)
+                })
+            })
+            .collect();
+        Some(Decisions {
+            planner,
+            budget,
+            ms,
+        })
+    }
+}
+
 /// The results table: at most [`TABLE_ROWS`] rows.
-fn table(md: &mut String, variants: usize, entries: &[Entry]) {
-    let mut t = MdTable::new(&["model", "variables"]).numbers(&[
+fn table(md: &mut String, variants: usize, entries: &[Entry], decisions: Option<&Decisions>) {
+    let decision_column =
+        decisions.map(|d| format!("ms per decision ({}, {} sequences)", d.planner, d.budget));
+    let mut columns = vec![
         "mean error (levels)",
         "persistence's",
         "− persistence",
         "µs per state, one thread",
-    ]);
-    for e in entries {
-        t.row(vec![
+    ];
+    columns.extend(decision_column.as_deref());
+    let mut t = MdTable::new(&["model", "variables"]).numbers(&columns);
+    for (k, e) in entries.iter().enumerate() {
+        let mut cells = vec![
             e.label(variants),
             e.variables.to_string(),
             e.error.cell(),
@@ -463,7 +497,11 @@ fn table(md: &mut String, variants: usize, entries: &[Entry]) {
                     sig3(t.ns_max / 1000.0)
                 )
             }),
-        ]);
+        ];
+        if let Some(d) = decisions {
+            cells.push(d.ms[k].map_or("—".into(), sig3));
+        }
+        t.row(cells);
     }
     t.write(md);
 }

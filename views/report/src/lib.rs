@@ -14,6 +14,7 @@
 mod across;
 mod charts;
 mod circuit;
+mod closed_loop;
 mod findings;
 pub mod format;
 mod glossary;
@@ -33,8 +34,9 @@ use alnlab_codes::{Codebook, unit_of};
 use alnlab_common::{Result, atomic};
 
 use alnlab_evaluate::timings::Row as Timing;
+use alnlab_plan::planning::Episode;
 use alnlab_summarize::paired::{Interval, Verdict};
-use alnlab_summarize::{Comparison, Rows, SummaryRow};
+use alnlab_summarize::{Comparison, HorizonFigures, Rows, SummaryRow};
 use format::{Align, MdTable};
 
 /// File name of the report.
@@ -83,6 +85,8 @@ pub struct VariantInfo {
     pub codebook: PathBuf,
     /// The plan stage's per-episode table, if the run had one.
     pub planning: Option<PathBuf>,
+    /// What the plan stage was asked, when it planned.
+    pub plan_setup: Option<PlanSetup>,
     /// The circuit stage's figures, if the run had them.
     pub circuit: Option<PathBuf>,
     /// Every replicate of the variant (the first is the one above), when
@@ -90,13 +94,28 @@ pub struct VariantInfo {
     pub replicates: Vec<Replicate>,
 }
 
-/// One replicate of a variant: its seed, its summaries and its
-/// closed-loop figures.
+/// One replicate of a variant: its seed, its summaries, its closed-loop
+/// figures and its plans.
 pub struct Replicate {
     pub seed: u64,
     pub summary: PathBuf,
     pub comparisons: PathBuf,
     pub horizons: PathBuf,
+    /// The plan stage's per-episode table, if the run had one.
+    pub planning: Option<PathBuf>,
+}
+
+/// What the plan stage was asked, defined beside its figures.
+pub struct PlanSetup {
+    /// Per task, its name and what it asks and costs
+    /// (`alnlab_plan::task::Task::describe`).
+    pub tasks: Vec<(String, String)>,
+    /// Frames a plan looks ahead.
+    pub horizon: u32,
+    /// Frames per episode, one decision each.
+    pub frames: u32,
+    /// Episodes per task and replicate.
+    pub episodes: u32,
 }
 
 /// One stage of a variant in the run.
@@ -136,9 +155,9 @@ struct Loaded<'a> {
     comparisons: Vec<Comparison>,
     /// Per learned variable, the SI size of one level and its unit.
     level_si: Vec<(String, f64, &'static str)>,
-    /// (model, horizon, mean, 95th percentile) of the closed-loop errors,
-    /// from the held-out starts (all starts when none is held out).
-    horizons: Vec<(String, u16, f64, f64)>,
+    /// The closed-loop errors from the held-out starts (all starts when
+    /// none is held out).
+    horizons: Vec<HorizonFigures>,
     timings: Vec<Timing>,
     /// Mean training errors per tree, per epoch (1-based).
     training: Vec<(f64, f64)>,
@@ -156,6 +175,9 @@ struct Loaded<'a> {
     description: String,
     /// The replicates' headline figures, when there are several.
     replicates: Vec<replicates::Figures>,
+    /// Every replicate's plans, in replicate order (empty when the variant
+    /// planned nothing).
+    planning: Vec<Vec<Episode>>,
 }
 
 impl Loaded<'_> {
@@ -272,7 +294,8 @@ impl Hardware {
 /// `report.md`.
 pub fn render(run: &RunInfo, dir: &Path) -> Result<PathBuf> {
     atomic::sweep_leftovers(dir)?;
-    let variants: Vec<Loaded> = run.variants.iter().map(load).collect::<Result<_>>()?;
+    let mut variants: Vec<Loaded> = run.variants.iter().map(load).collect::<Result<_>>()?;
+    one_timing_per_model(&mut variants);
     let shared = across::shares_baselines(&variants);
     let mut md = String::new();
     let _ = writeln!(md, "# {} — report\n", run.experiment);
@@ -299,8 +322,8 @@ pub fn render(run: &RunInfo, dir: &Path) -> Result<PathBuf> {
             run.compare_with_paper,
             histogram_variable,
         )?;
-        if let Some(path) = &v.info.planning {
-            plan::section(&mut md, path, dir, |chart| {
+        if let Some(rows) = v.planning.first() {
+            plan::section(&mut md, rows, v.info.plan_setup.as_ref(), dir, |chart| {
                 variant::file_name(&v.info.name, chart)
             })?;
         }
@@ -317,6 +340,67 @@ pub fn render(run: &RunInfo, dir: &Path) -> Result<PathBuf> {
         html::page(&title, &md).as_bytes(),
     )?;
     Ok(path)
+}
+
+/// Whether variants `a` and `b` ran on the same test rows: persistence —
+/// which learns nothing — errs the same on every variable they share.
+fn same_rows(a: &Loaded, b: &Loaded) -> bool {
+    let persistence = |v: &Loaded| -> Vec<(String, u64)> {
+        v.judged()
+            .0
+            .iter()
+            .filter(|r| r.model == "persistence")
+            .map(|r| (r.variable.clone(), r.stats.mean.to_bits()))
+            .collect()
+    };
+    let (a, b) = (persistence(a), persistence(b));
+    let common: Vec<&(String, u64)> = a.iter().filter(|x| b.iter().any(|y| y.0 == x.0)).collect();
+    !common.is_empty() && common.iter().all(|x| b.contains(x))
+}
+
+/// Gives a model that several variants timed on the same rows one timing:
+/// the first such variant's. Each variant's test stage times its own
+/// baselines, so a simulator or a linear fit the variants share would
+/// otherwise be quoted at as many speeds as there are variants. The
+/// simulator re-steps the same frames whatever a variant learns, so it is
+/// one model wherever the rows are the same; a fitted baseline only where
+/// its errors are too (the same variables, to the bit). ALNs are each
+/// variant's own.
+fn one_timing_per_model(variants: &mut [Loaded]) {
+    let same_model = |a: &Loaded, b: &Loaded, model: &str| {
+        if model.starts_with("simulator@") {
+            return same_rows(a, b);
+        }
+        let rows = |v: &Loaded| -> Vec<(String, u64)> {
+            v.judged()
+                .0
+                .iter()
+                .filter(|r| r.model == model)
+                .map(|r| (r.variable.clone(), r.stats.mean.to_bits()))
+                .collect()
+        };
+        let first = rows(a);
+        !first.is_empty() && first == rows(b)
+    };
+    for k in 1..variants.len() {
+        let (earlier, rest) = variants.split_at_mut(k);
+        let later = &mut rest[0];
+        let mut timings = std::mem::take(&mut later.timings);
+        for t in timings.iter_mut().filter(|t| t.model != "aln") {
+            let first = earlier.iter().find_map(|e| {
+                if !same_model(e, later, &t.model) {
+                    return None;
+                }
+                e.timings
+                    .iter()
+                    .find(|f| f.model == t.model && f.path == t.path && f.threads == t.threads)
+            });
+            if let Some(first) = first {
+                *t = first.clone();
+            }
+        }
+        later.timings = timings;
+    }
 }
 
 /// Removes the charts in `dir` the report no longer shows (left by an
@@ -372,11 +456,7 @@ fn load(info: &VariantInfo) -> Result<Loaded<'_>> {
     let rows = (count(&summary), count(&held_out));
     let comparisons = alnlab_summarize::read_comparisons(&info.comparisons)?;
     let horizons = alnlab_summarize::read_horizons(&info.horizons)?;
-    let horizons = horizons
-        .into_iter()
-        .filter(|h| h.0 == judged)
-        .map(|(_, model, horizon, mean, p95)| (model, horizon, mean, p95))
-        .collect();
+    let horizons = horizons.into_iter().filter(|h| h.rows == judged).collect();
     let timings = alnlab_evaluate::timings::read(&info.timings)?;
     let training = read_training(&info.training)?;
 
@@ -470,7 +550,16 @@ fn load(info: &VariantInfo) -> Result<Loaded<'_>> {
     } else {
         Vec::new()
     };
+    let planning = match &info.planning {
+        Some(first) => std::iter::once(Some(first))
+            .chain(info.replicates.iter().skip(1).map(|r| r.planning.as_ref()))
+            .flatten()
+            .map(|path| alnlab_plan::planning::read(path))
+            .collect::<Result<_>>()?,
+        None => Vec::new(),
+    };
     Ok(Loaded {
+        planning,
         replicates,
         description,
         not_learned,

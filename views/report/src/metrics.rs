@@ -97,12 +97,12 @@ pub fn read(sources: &Sources) -> Result<Metrics> {
     if !training.is_empty() {
         steps.insert("training_error".into(), training);
     }
-    for (set, model, horizon, mean, _) in read_horizons(sources.horizons)? {
-        if set == rows && mean.is_finite() {
+    for h in read_horizons(sources.horizons)? {
+        if h.rows == rows && h.mean.is_finite() {
             steps
-                .entry(format!("closed_loop/{model}"))
+                .entry(format!("closed_loop/{}", h.model))
                 .or_default()
-                .push((u32::from(horizon), mean));
+                .push((u32::from(h.horizon), h.mean));
         }
     }
     for series in steps.values_mut() {

@@ -10,8 +10,9 @@ use std::fmt::Write as _;
 use std::path::Path;
 
 use alnlab_common::{Result, atomic};
-use alnlab_plan::planning::{self, Episode};
+use alnlab_plan::planning::Episode;
 
+use super::PlanSetup;
 use super::format::{Align, MdTable, estimate, interval, sig3};
 use crate::charts::{self, Axis, Marker, Plot, Point, Rule, Series, style_of};
 use alnlab_summarize::paired::Interval;
@@ -111,60 +112,149 @@ fn policies<'a>(rows: &'a [Episode], task: &str) -> Vec<Policy<'a>> {
     out
 }
 
-/// Per task, the ALN's plan within real time, as a phrase for the report's
-/// first screen: each of its planners at its largest budget whose median
-/// decision fits one frame (the rule of the equal-time table), the lowest
-/// mean cost among them, against zero torques paired by episode. Empty when
-/// the variant planned nothing with the ALN.
-pub(super) fn aln_within_real_time(path: &Path) -> Result<Vec<String>> {
-    let rows = planning::read(path)?;
+/// `model` with `planner` at its largest budget whose median decision fits
+/// `limit` ms: a rule fixed before any cost is seen, not the best of its
+/// budgets.
+fn within<'p, 'a>(
+    policies: &'p [Policy<'a>],
+    model: &str,
+    planner: &str,
+    limit: f64,
+) -> Option<&'p Policy<'a>> {
+    policies
+        .iter()
+        .filter(|p| p.model == model && p.planner == planner && p.ms() <= limit)
+        .max_by_key(|p| p.budget)
+}
+
+/// The tasks of `rows`, in the stage's order.
+fn tasks(rows: &[Episode]) -> Vec<&str> {
     let mut tasks: Vec<&str> = rows.iter().map(|e| e.task.as_str()).collect();
     tasks.dedup();
+    tasks
+}
+
+/// The frame's duration, real time, of `task` in ms.
+fn real_time(rows: &[Episode], task: &str) -> f64 {
+    rows.iter()
+        .find(|e| e.task == task)
+        .map_or(0.0, |e| e.real_time_ms)
+}
+
+/// The planner and budget the first screen times every forward model at:
+/// the ALN's first planner at its largest budget within real time on the
+/// first task (its smallest budget when none fits).
+pub(super) fn reference_policy(rows: &[Episode]) -> Option<(String, u32)> {
+    let task = *tasks(rows).first()?;
+    let policies = policies(rows, task);
+    let first = policies.iter().find(|p| p.model == "aln" && p.planned())?;
+    let chosen = within(&policies, "aln", first.planner, real_time(rows, task)).unwrap_or(first);
+    Some((chosen.planner.to_string(), chosen.budget))
+}
+
+/// `model`'s median ms per decision with `planner` at `budget`, over every
+/// episode of every task.
+pub(super) fn decision_ms(
+    rows: &[Episode],
+    model: &str,
+    planner: &str,
+    budget: u32,
+) -> Option<f64> {
+    let mut ms: Vec<f64> = rows
+        .iter()
+        .filter(|e| e.model == model && e.planner == planner && e.budget == budget)
+        .map(|e| e.ms_per_decision)
+        .collect();
+    ms.sort_by(f64::total_cmp);
+    ms.get(ms.len() / 2).copied()
+}
+
+/// Per task and ALN planner, its plan within real time as a phrase for the
+/// report's first screen: the planner at its largest budget whose median
+/// decision fits one frame in replicate 1 (the rule of the equal-time
+/// table, no pick by cost), against zero torques episode by episode — the
+/// mean difference across replicates with its 95% interval when there are
+/// several, else over the episodes of the one. Empty when no replicate
+/// planned with the ALN.
+pub(super) fn aln_within_real_time(replicates: &[Vec<Episode>]) -> Vec<String> {
+    let Some(first) = replicates.first() else {
+        return Vec::new();
+    };
     let mut phrases = Vec::new();
-    for task in tasks {
-        let policies = policies(&rows, task);
-        let Some(zero) = policies.iter().find(|p| p.model == "zero") else {
-            continue;
-        };
-        let real_time = rows
+    for task in tasks(first) {
+        let policies_1 = policies(first, task);
+        let mut planners: Vec<&str> = policies_1
             .iter()
-            .find(|e| e.task == task)
-            .map_or(0.0, |e| e.real_time_ms);
-        let mut planners: Vec<&str> = policies
-            .iter()
-            .filter(|p| p.model == "aln")
+            .filter(|p| p.model == "aln" && p.planned())
             .map(|p| p.planner)
             .collect();
         planners.dedup();
-        if planners.is_empty() {
-            continue;
+        let limit = real_time(first, task);
+        for planner in planners {
+            let Some(chosen) = within(&policies_1, "aln", planner, limit) else {
+                phrases.push(format!(
+                    "`{task}` {planner}: no budget decides within real time ({} ms)",
+                    sig3(limit)
+                ));
+                continue;
+            };
+            // Per replicate: the mean cost, zero torques' and their mean
+            // paired difference.
+            let per_replicate: Option<Vec<(f64, f64, f64)>> = replicates
+                .iter()
+                .map(|rows| {
+                    let policies = policies(rows, task);
+                    let p = policies.iter().find(|p| {
+                        p.model == "aln" && p.planner == planner && p.budget == chosen.budget
+                    })?;
+                    let zero = policies.iter().find(|p| p.model == "zero")?;
+                    let mean = |x: Vec<f64>| x.iter().sum::<f64>() / x.len() as f64;
+                    let diffs = p
+                        .episodes
+                        .iter()
+                        .zip(&zero.episodes)
+                        .map(|(a, b)| a.cost - b.cost)
+                        .collect();
+                    Some((mean(p.costs()), mean(zero.costs()), mean(diffs)))
+                })
+                .collect();
+            let Some(per_replicate) = per_replicate else {
+                continue;
+            };
+            let n = per_replicate.len() as f64;
+            let (cost, zero) = per_replicate
+                .iter()
+                .fold((0.0, 0.0), |(c, z), r| (c + r.0 / n, z + r.1 / n));
+            let difference = if per_replicate.len() > 1 {
+                let d: Vec<f64> = per_replicate.iter().map(|r| r.2).collect();
+                Interval::of(&d).map(|i| {
+                    format!(
+                        "{}: {} across {} replicates",
+                        i.verdict().as_str(),
+                        interval(i.mean, i.low, i.high),
+                        d.len()
+                    )
+                })
+            } else {
+                policies_1.iter().find(|p| p.model == "zero").map(|zero| {
+                    format!(
+                        "{} over the episodes of one replicate",
+                        chosen.against(zero)
+                    )
+                })
+            };
+            phrases.push(format!(
+                "`{task}` {planner} ({} sequences, {} ms a decision): cost {} against zero \
+                 torques' {}, {}",
+                chosen.budget,
+                sig3(chosen.ms()),
+                sig3(cost),
+                sig3(zero),
+                difference.unwrap_or_default()
+            ));
         }
-        let mean = |p: &Policy| Interval::of(&p.costs()).map_or(f64::INFINITY, |i| i.mean);
-        let best = planners
-            .iter()
-            .filter_map(|&planner| {
-                policies
-                    .iter()
-                    .filter(|p| p.model == "aln" && p.planner == planner && p.ms() <= real_time)
-                    .max_by_key(|p| p.budget)
-            })
-            .min_by(|a, b| mean(a).total_cmp(&mean(b)));
-        let phrase = match best {
-            Some(p) => format!(
-                "`{task}` {} ({} sequences, {} ms a decision): cost {} against zero torques' {}, \
-                 {}",
-                p.planner,
-                p.budget,
-                sig3(p.ms()),
-                p.cost_cell(),
-                zero.cost_cell(),
-                p.against(zero)
-            ),
-            None => format!("`{task}`: no ALN plan decides within real time"),
-        };
-        phrases.push(phrase);
     }
-    Ok(phrases)
+    phrases
 }
 
 /// The chart's style name of a plan model (`simulator@10` is the report's
@@ -181,38 +271,46 @@ fn style_name(model: &str) -> String {
 /// nothing), its charts into `dir` named by `chart_name`.
 pub(super) fn section(
     md: &mut String,
-    path: &Path,
+    rows: &[Episode],
+    setup: Option<&PlanSetup>,
     dir: &Path,
     chart_name: impl Fn(&str) -> String,
 ) -> Result<()> {
-    let rows = planning::read(path)?;
     if rows.is_empty() {
         return Ok(());
     }
-    let mut tasks: Vec<&str> = rows.iter().map(|e| e.task.as_str()).collect();
-    tasks.dedup();
     let _ = writeln!(
         md,
         "### Planning with the predictor (§1)\n\nModel-predictive control in the simulator: \
          every frame a planner searches torque sequences with a forward model, the simulator \
          executes the first frame's torques, and the task's cost of the frame reached adds up \
          over the episode. Every policy ran the same episodes (the same start states), so each \
-         is compared with zero torques episode by episode. Cost: mean over episodes [95% \
-         interval]; time: median ms per decision on one thread.\n"
+         is compared with zero torques episode by episode. The tables and charts are replicate \
+         1's; the first screen pairs every replicate. Cost: mean over episodes [95% interval]; \
+         time: median ms per decision on one thread.\n"
     );
-    for task in tasks {
-        let policies = policies(&rows, task);
+    for task in tasks(rows) {
+        let policies = policies(rows, task);
         let (Some(zero), Some(random)) = (
             policies.iter().find(|p| p.model == "zero"),
             policies.iter().find(|p| p.model == "random"),
         ) else {
             continue;
         };
-        let real_time = rows
-            .iter()
-            .find(|e| e.task == task)
-            .map_or(0.0, |e| e.real_time_ms);
+        let real_time = real_time(rows, task);
         let _ = writeln!(md, "#### Task `{task}`\n");
+        if let Some(setup) = setup
+            && let Some((_, what)) = setup.tasks.iter().find(|(name, _)| name == task)
+        {
+            let _ = writeln!(
+                md,
+                "The task: {what}. An episode is {} frames from a logged state, one decision a \
+                 frame, each planning {} frames ahead; its cost is the sum of its frames' costs, \
+                 in the same unit; {} episodes a policy, the same start states for every \
+                 policy.\n",
+                setup.frames, setup.horizon, setup.episodes
+            );
+        }
         let mut table = MdTable::new(&["model", "planner", "budget"])
             .numbers(&[
                 "evaluations / decision",
@@ -377,12 +475,7 @@ fn at_equal_time(
         // Each method at its largest budget within the limit.
         let fitting: Vec<&Policy> = methods
             .iter()
-            .filter_map(|&(model, planner)| {
-                policies
-                    .iter()
-                    .filter(|p| p.model == model && p.planner == planner && p.ms() <= limit)
-                    .max_by_key(|p| p.budget)
-            })
+            .filter_map(|&(model, planner)| within(policies, model, planner, limit))
             .collect();
         let mean = |p: &Policy| Interval::of(&p.costs()).map_or(f64::INFINITY, |i| i.mean);
         let lowest_of = |keep: &dyn Fn(&Policy) -> bool| {

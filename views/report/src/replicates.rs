@@ -25,8 +25,6 @@ pub(super) const MODELS: [&str; 4] = ["aln", "persistence", "linear", "boosted"]
 pub(super) struct Figures {
     pub seed: u64,
     pub rows: Rows,
-    /// Mean error over the variables, per model of [`MODELS`].
-    pub means: Vec<Option<f64>>,
     /// The ALN's mean paired difference against each baseline of
     /// [`MODELS`] (the ALN itself excepted).
     pub differences: Vec<Option<f64>>,
@@ -67,8 +65,8 @@ impl Figures {
         let comparisons = alnlab_summarize::read_comparisons(&replicate.comparisons)?;
         let horizons = alnlab_summarize::read_horizons(&replicate.horizons)?
             .into_iter()
-            .filter(|h| h.0 == rows)
-            .map(|(_, model, step, mean, _)| (model, step, mean))
+            .filter(|h| h.rows == rows)
+            .map(|h| (h.model, h.horizon, h.mean))
             .collect();
         let mut aln_by_variable: Vec<(String, f64)> = judged
             .iter()
@@ -89,10 +87,6 @@ impl Figures {
             horizons,
             seed: replicate.seed,
             rows,
-            means: MODELS
-                .iter()
-                .map(|m| overall(&judged, m).map(|(mean, _)| mean))
-                .collect(),
             differences: MODELS[1..]
                 .iter()
                 .map(|b| aln_against(&comparisons, rows, b, None).map(|d| d.mean))
@@ -163,7 +157,7 @@ fn across(values: &[Option<f64>]) -> Option<Interval> {
 
 /// A variant's ALN mean error across its replicates.
 pub(super) fn aln_mean(v: &Loaded) -> Option<Interval> {
-    let values: Vec<Option<f64>> = v.replicates.iter().map(|f| f.means[0]).collect();
+    let values: Vec<Option<f64>> = v.replicates.iter().map(|f| f.mean_of(MODELS[0])).collect();
     across(&values)
 }
 
@@ -185,7 +179,7 @@ pub(super) fn finding(md: &mut String, v: &Loaded) {
          disagree, this is the finding):"
     );
     for (k, model) in MODELS.iter().enumerate() {
-        let values: Vec<Option<f64>> = v.replicates.iter().map(|f| f.means[k]).collect();
+        let values: Vec<Option<f64>> = v.replicates.iter().map(|f| f.mean_of(MODELS[k])).collect();
         if let Some(i) = across(&values) {
             let _ = write!(line, " {model} {};", with_interval(&i));
         }
@@ -225,7 +219,7 @@ pub(super) fn section(md: &mut String, variants: &[Loaded], dir: &Path) -> Resul
         .filter(|&k| {
             replicated
                 .iter()
-                .any(|v| v.replicates.iter().any(|f| f.means[k].is_some()))
+                .any(|v| v.replicates.iter().any(|f| f.mean_of(MODELS[k]).is_some()))
         })
         .collect();
     let baselines = || shown.iter().copied().filter(|&k| k > 0);
@@ -248,7 +242,7 @@ pub(super) fn section(md: &mut String, variants: &[Loaded], dir: &Path) -> Resul
         for (r, f) in v.replicates.iter().enumerate() {
             let _ = write!(md, "| {} | {} | {} |", v.info.name, r + 1, f.seed);
             for &k in &shown {
-                let _ = write!(md, " {} |", cell(f.means[k]));
+                let _ = write!(md, " {} |", cell(f.mean_of(MODELS[k])));
             }
             for k in baselines() {
                 let _ = write!(md, " {} |", cell(f.differences[k - 1]));
@@ -260,7 +254,7 @@ pub(super) fn section(md: &mut String, variants: &[Loaded], dir: &Path) -> Resul
         for &k in &shown {
             figures.push((
                 format!("{} mean", MODELS[k]),
-                v.replicates.iter().map(|f| f.means[k]).collect(),
+                v.replicates.iter().map(|f| f.mean_of(MODELS[k])).collect(),
             ));
         }
         for k in baselines() {
@@ -269,8 +263,34 @@ pub(super) fn section(md: &mut String, variants: &[Loaded], dir: &Path) -> Resul
                 v.replicates.iter().map(|f| f.differences[k - 1]).collect(),
             ));
         }
-        for (figure, values) in &figures {
+        let shown_in_table = figures.len();
+        // For the first screen's check, in the file only: every other
+        // model's mean, and each baseline's mean minus persistence's.
+        for (model, _) in &v.replicates[0].model_means {
+            let means = |m: &str| -> Vec<Option<f64>> {
+                v.replicates.iter().map(|f| f.mean_of(m)).collect()
+            };
+            if !MODELS.contains(&model.as_str()) {
+                figures.push((format!("{model} mean"), means(model)));
+            }
+            if model != "aln" && model != "persistence" {
+                let persistence = means("persistence");
+                let gap = means(model)
+                    .iter()
+                    .zip(&persistence)
+                    .map(|(m, p)| Some((*m)? - (*p)?))
+                    .collect();
+                figures.push((format!("{model} mean - persistence mean"), gap));
+            }
+        }
+        for (k, (figure, values)) in figures.iter().enumerate() {
             let interval = across(values);
+            if k >= shown_in_table {
+                if let Some(i) = interval {
+                    csv_line(&mut csv, &v.info.name, figure, &i, false, values);
+                }
+                continue;
+            }
             let _ = write!(
                 md,
                 " {} |",

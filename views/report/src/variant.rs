@@ -10,12 +10,13 @@ use std::path::Path;
 use alnlab_aln::ModelKind;
 use alnlab_common::{Result, atomic};
 
-use super::across::{aln_name, baselines_table, closed_loop_rows, horizon_models, horizon_points};
+use super::across::{aln_name, baselines_table};
+use super::closed_loop;
 use super::format::{Align, MdTable, interval, sig3};
 use super::{
     Loaded, SummaryRow, baseline_models, mean_of, overall, paper_rows, worse_than_persistence,
 };
-use crate::charts::{self, Axis, Plot, Series, style_of};
+use crate::charts::{self, style_of};
 use alnlab_summarize::stats::{HISTOGRAM_BINS, HISTOGRAM_EDGES, histogram_bin_name};
 
 /// A chart's file name: the variant's name, made safe, and the chart's.
@@ -121,40 +122,22 @@ pub(super) fn section(
     hardware(md, v);
 
     if !shared && !v.horizons.is_empty() {
-        let models = horizon_models(v);
-        let series: Vec<Series> = models
-            .iter()
-            .map(|&m| Series {
+        let _ = writeln!(md, "### Closed loop\n");
+        let columns: Vec<closed_loop::Column> = closed_loop::models(v)
+            .into_iter()
+            .map(|m| closed_loop::Column {
                 name: if m == "aln" {
                     aln_name(v, n)
                 } else {
                     m.to_string()
                 },
+                variant: v,
+                model: m,
                 style: style_of(m, k),
-                points: horizon_points(v, m),
-                joined: true,
-                hollow: false,
             })
             .collect();
-        let ys = series.iter().flat_map(|s| s.points.iter().map(|p| p.y));
-        let chart = charts::plot(&Plot {
-            title: format!("{}: closed-loop error against horizon", v.info.name),
-            x: Axis::integer("steps fed back"),
-            y: Axis::error("mean error (levels)", ys),
-            series,
-            pareto: false,
-            rules: Vec::new(),
-        });
-        let name = file_name(&v.info.name, "closed-loop");
-        atomic::write_bytes(&dir.join(&name), chart.as_bytes())?;
-        let _ = writeln!(
-            md,
-            "### Closed loop\n\n![closed-loop error against horizon]({name})\n\nAs in the chart \
-             across variants, with this variant's baselines.\n"
-        );
-        let columns: Vec<(String, &Loaded, &str)> =
-            models.iter().map(|&m| (m.to_string(), v, m)).collect();
-        closed_loop_rows(md, &columns);
+        let file = file_name(&v.info.name, "closed-loop");
+        closed_loop::section(md, dir, (&file, Some(&v.info.name)), &columns)?;
     }
     Ok(())
 }
