@@ -1,0 +1,252 @@
+//! Every committed report's first screen says what its record says: each
+//! figure of the results table (mean error, persistence's, the difference
+//! from persistence, with their intervals across replicates) agrees, to the
+//! digits shown, with the same figure in the report's `replicates.csv` —
+//! the file the interop check recomputes from the stages' tables with
+//! numpy and scipy; the abstract quotes the table; and `reports/README.md`
+//! quotes no number its report's first screen does not.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+fn reports_root() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("reports")
+}
+
+/// The committed reports' folders.
+fn committed_reports() -> Vec<PathBuf> {
+    let mut dirs: Vec<PathBuf> = std::fs::read_dir(reports_root())
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.join("report.md").exists())
+        .collect();
+    dirs.sort();
+    assert!(dirs.len() >= 7, "{dirs:?}");
+    dirs
+}
+
+/// The Markdown before the appendix: abstract, figure, table, caption.
+fn first_screen(report: &str) -> &str {
+    report.split("\n## Appendix").next().unwrap()
+}
+
+/// A figure of `replicates.csv`: its mean and 95% interval.
+#[derive(Clone, Copy, Debug)]
+struct Figure {
+    mean: f64,
+    low: f64,
+    high: f64,
+}
+
+/// `replicates.csv` by (variant, figure).
+fn figures(dir: &Path) -> BTreeMap<(String, String), Figure> {
+    let mut reader = csv::Reader::from_path(dir.join("replicates.csv")).unwrap();
+    let headers = reader.headers().unwrap().clone();
+    let column = |name: &str| headers.iter().position(|h| h == name).unwrap();
+    let (variant, figure, mean, low, high) = (
+        column("variant"),
+        column("figure"),
+        column("mean"),
+        column("ci_low"),
+        column("ci_high"),
+    );
+    reader
+        .records()
+        .map(|r| {
+            let r = r.unwrap();
+            let number = |k: usize| r[k].parse::<f64>().unwrap();
+            (
+                (r[variant].to_string(), r[figure].to_string()),
+                Figure {
+                    mean: number(mean),
+                    low: number(low),
+                    high: number(high),
+                },
+            )
+        })
+        .collect()
+}
+
+/// The numbers of a cell ("0.682 [0.381, 0.983]", "+0.0438 [+0.0068,
+/// +0.0808]", "-0.231", "3.2e-5"), each with the decimals its mantissa was
+/// written to (`None` in exponent form).
+fn numbers(cell: &str) -> Vec<(f64, Option<usize>)> {
+    cell.replace('−', "-")
+        .split(|c: char| !(c.is_ascii_digit() || c == '.' || c == '-' || c == '+' || c == 'e'))
+        .filter(|t| t.chars().any(|c| c.is_ascii_digit()))
+        .map(|t| {
+            let decimals = (!t.contains('e')).then(|| t.split('.').nth(1).map_or(0, str::len));
+            (
+                t.parse::<f64>()
+                    .unwrap_or_else(|_| panic!("{t:?} in {cell:?}")),
+                decimals,
+            )
+        })
+        .collect()
+}
+
+/// Whether `cell` writes `figure` (mean, then its interval when the cell
+/// has one) to the digits shown.
+fn agrees(cell: &str, figure: Figure) -> bool {
+    let shown = numbers(cell);
+    let expected = [figure.mean, figure.low, figure.high];
+    !shown.is_empty()
+        && shown.len() <= 3
+        && shown.iter().zip(expected).all(|(&(x, decimals), value)| {
+            let tolerance = match decimals {
+                Some(d) => 0.5 * 10f64.powi(-(d as i32)) + 1e-9,
+                // Three significant figures in exponent form.
+                None => 5e-3 * value.abs(),
+            };
+            (x - value).abs() <= tolerance
+        })
+}
+
+/// The results table of a first screen: header cells and rows of cells.
+fn results_table(screen: &str) -> (Vec<String>, Vec<Vec<String>>) {
+    let cells = |line: &str| -> Vec<String> {
+        line.trim()
+            .trim_matches('|')
+            .split('|')
+            .map(|c| c.trim().to_string())
+            .collect()
+    };
+    let mut lines = screen.lines().skip_while(|l| !l.starts_with("| model |"));
+    let header = cells(lines.next().expect("a results table"));
+    let rows = lines
+        .skip(1)
+        .take_while(|l| l.starts_with('|'))
+        .map(cells)
+        .collect();
+    (header, rows)
+}
+
+#[test]
+fn cells_are_read_with_their_precision() {
+    assert_eq!(
+        numbers("+0.0438 [+0.0068, -0.0808]"),
+        [(0.0438, Some(4)), (0.0068, Some(4)), (-0.0808, Some(4))]
+    );
+    assert_eq!(numbers("−0.231"), [(-0.231, Some(3))]);
+    assert_eq!(numbers("3.18e-17"), [(3.18e-17, None)]);
+    let figure = Figure {
+        mean: 0.68202,
+        low: 0.38098,
+        high: 0.98306,
+    };
+    assert!(agrees("0.682 [0.381, 0.983]", figure));
+    assert!(!agrees("0.682 [0.381, 0.984]", figure));
+    assert!(!agrees("0.683", figure));
+}
+
+#[test]
+fn every_first_screen_table_agrees_with_its_replicates() {
+    for dir in committed_reports() {
+        let name = dir.file_name().unwrap().to_string_lossy().to_string();
+        let report = std::fs::read_to_string(dir.join("report.md")).unwrap();
+        let screen = first_screen(&report);
+        assert!(
+            screen.lines().count() <= 250,
+            "{name}: {} lines before the appendix",
+            screen.lines().count()
+        );
+        let figures = figures(&dir);
+        let variants: Vec<&String> = figures.keys().map(|(v, _)| v).collect();
+        let (header, rows) = results_table(screen);
+        let column = |title: &str| {
+            header
+                .iter()
+                .position(|h| h.starts_with(title))
+                .unwrap_or_else(|| panic!("{name}: no column {title:?} in {header:?}"))
+        };
+        let (error, persistence, gap) = (
+            column("mean error"),
+            column("persistence's"),
+            column("− persistence"),
+        );
+        assert!(!rows.is_empty() && rows.len() <= 8, "{name}: {rows:?}");
+        // Baselines are the best (first) ALN's variant's.
+        let variant_of = |label: &str| -> String {
+            match label.strip_prefix("ALN `") {
+                Some(rest) => rest.trim_end_matches('`').to_string(),
+                None => variants[0].clone(),
+            }
+        };
+        let best = variant_of(&rows[0][0]);
+        let mut checked = 0;
+        for row in &rows {
+            let label = &row[0];
+            let (variant, model) = if label.starts_with("ALN") {
+                (variant_of(label), "aln".to_string())
+            } else {
+                (best.clone(), label.clone())
+            };
+            let figure = |f: &str| {
+                *figures
+                    .get(&(variant.clone(), f.to_string()))
+                    .unwrap_or_else(|| panic!("{name}: no `{variant},{f}` in replicates.csv"))
+            };
+            let mut check = |cell: &str, f: &str| {
+                let expected = figure(f);
+                assert!(
+                    agrees(cell, expected),
+                    "{name}, row {label}: {cell:?} is not {f} = {expected:?}"
+                );
+                checked += 1;
+            };
+            check(&row[error], &format!("{model} mean"));
+            if model != "persistence" {
+                check(&row[persistence], "persistence mean");
+                let difference = if model == "aln" {
+                    "aln - persistence".to_string()
+                } else {
+                    format!("{model} mean - persistence mean")
+                };
+                check(&row[gap], &difference);
+            }
+        }
+        // The abstract quotes the best ALN's row.
+        let abstract_ = screen
+            .lines()
+            .find(|l| l.starts_with("**Abstract.**"))
+            .unwrap_or_else(|| panic!("{name}: no abstract"));
+        let quoted = abstract_
+            .split(" errs ")
+            .nth(1)
+            .and_then(|rest| rest.split(" levels").next())
+            .unwrap_or_else(|| panic!("{name}: the abstract quotes no error"));
+        assert_eq!(quoted, rows[0][error], "{name}: abstract against table");
+        assert!(
+            abstract_.contains(&format!("({}", rows[0][gap])),
+            "{name}: the abstract does not quote {:?}",
+            rows[0][gap]
+        );
+        assert!(checked >= 5, "{name}: {checked} figures checked");
+    }
+}
+
+#[test]
+fn the_reports_index_quotes_only_first_screen_figures() {
+    let index = std::fs::read_to_string(reports_root().join("README.md")).unwrap();
+    let normal = |s: &str| s.replace('−', "-");
+    let mut lines = 0;
+    for line in index.lines().filter(|l| l.starts_with("| [")) {
+        let name = line[3..].split(']').next().unwrap();
+        let report = std::fs::read_to_string(reports_root().join(name).join("report.md")).unwrap();
+        let screen = normal(first_screen(&report));
+        let finding = normal(line.rsplit(" | ").next().unwrap());
+        for token in finding
+            .split(|c: char| !(c.is_ascii_digit() || c == '.' || c == '-' || c == '+' || c == '×'))
+        {
+            let token = token.trim_matches(['.', '-']);
+            if token.chars().any(|c| c.is_ascii_digit()) {
+                assert!(
+                    screen.contains(token),
+                    "reports/README.md, {name}: {token:?} is not on the report's first screen"
+                );
+            }
+        }
+        lines += 1;
+    }
+    assert!(lines >= 7, "{lines} reports listed");
+}
