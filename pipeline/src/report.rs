@@ -6,7 +6,9 @@ use std::path::{Path, PathBuf};
 
 use alnlab_common::{Error, Result};
 use alnlab_plan::task::Task;
-use alnlab_report::{self as report, PlanSetup, Replicate, RunInfo, StageTime, VariantInfo};
+use alnlab_report::{
+    self as report, PlanSetup, PlanTask, Replicate, RunInfo, StageTime, VariantInfo,
+};
 
 use crate::records::{RunRecord, VariantRecord};
 
@@ -124,7 +126,11 @@ fn plan_setup(parameters: &BTreeMap<String, String>) -> Option<PlanSetup> {
             },
             _ => return None,
         };
-        tasks.push((task.name().to_string(), task.describe()));
+        tasks.push(PlanTask {
+            name: task.name().to_string(),
+            definition: task.describe(),
+            unit: task.cost_unit().to_string(),
+        });
     }
     if tasks.is_empty() {
         return None;

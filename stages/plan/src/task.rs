@@ -66,6 +66,14 @@ impl Task {
         }
     }
 
+    /// The unit of a frame's cost, and so of an episode's.
+    pub fn cost_unit(&self) -> &'static str {
+        match self {
+            Task::HoldAngles { .. } => "rad²",
+            Task::Spin { .. } => "(rad/s)²",
+        }
+    }
+
     /// Checks the task on its own: targets named as angles, finite numbers.
     /// On error, the field and the message.
     pub fn validate(&self) -> Result<(), (&'static str, String)> {
@@ -177,6 +185,27 @@ fn on_circle(d: f64) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_task_says_what_it_asks_and_in_what_unit_it_costs() {
+        let bend = Task::HoldAngles {
+            name: "bend".into(),
+            targets: BTreeMap::from([("pitch.2".into(), 0.6), ("pitch.3".into(), -0.6)]),
+        };
+        assert_eq!(
+            bend.describe(),
+            "reach and hold `pitch.2` to 0.6 rad and `pitch.3` to -0.6 rad; a frame costs the \
+             sum of the squared angles still to go (rad², on the circle)"
+        );
+        assert_eq!(bend.cost_unit(), "rad²");
+        let spin = Task::Spin {
+            name: "spin".into(),
+            variable: "omega.3.x".into(),
+            rate: 2.0,
+        };
+        assert!(spin.describe().starts_with("spin `omega.3.x` at 2 rad/s"));
+        assert_eq!(spin.cost_unit(), "(rad/s)²");
+    }
 
     fn names() -> Vec<String> {
         ["omega.1.x", "roll.2", "pitch.2", "v.1.x"]

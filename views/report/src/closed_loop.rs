@@ -181,11 +181,11 @@ pub(super) fn section(
     let _ = write!(
         md,
         "![closed loop: error minus persistence's]({file})\n\nFrom the true state of {starts} \
-         starts — test rows spread evenly over those with {horizon} logged frames after them, \
-         {} — each model is fed its own predictions for {horizon} steps and scored against the \
-         logged trajectory at every step (levels, all its variables pooled). Drawn: its mean \
-         error minus persistence's at the same step, {over}{bars}; below zero, better than \
-         persistence.",
+         starts — test rows spread evenly over those with {horizon} logged frames after them \
+         (at most `test.rollout_starts` of them, 200 by default), {} — each model is fed its \
+         own predictions for {horizon} steps and scored against the logged trajectory at every \
+         step (levels, all its variables pooled). Drawn: its mean error minus persistence's at \
+         the same step, {over}{bars}; below zero, better than persistence.",
         if held {
             "those held out of training"
         } else {

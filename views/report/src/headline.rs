@@ -217,10 +217,24 @@ pub(super) fn first_screen(
         .iter()
         .find(|e| e.model == "aln" && !e.variant.planning.is_empty())
         .and_then(|e| {
-            let phrases = super::plan::aln_within_real_time(&e.variant.planning);
+            let setup = e.variant.info.plan_setup.as_ref();
+            let phrases = super::plan::within_real_time(&e.variant.planning, "aln", setup);
             (!phrases.is_empty()).then_some((e.variant.info.name.as_str(), phrases))
         });
-    abstract_(md, run, variants, &entries, planning.as_ref());
+    // The true model planning by the same rule, for scale.
+    let true_model = variants.iter().find_map(|v| {
+        let model = super::plan::true_model(v.planning.first()?)?;
+        let phrases = super::plan::within_real_time(&v.planning, model, v.info.plan_setup.as_ref());
+        (!phrases.is_empty()).then(|| (model.to_string(), phrases))
+    });
+    abstract_(
+        md,
+        run,
+        variants,
+        &entries,
+        planning.as_ref(),
+        true_model.as_ref(),
+    );
     figure(md, variants.len(), &entries, dir)?;
     let decisions = Decisions::of(variants, &entries);
     table(md, variants.len(), &entries, decisions.as_ref());
@@ -250,12 +264,26 @@ pub(super) fn first_screen(
     let _ = writeln!(
         md,
         "Errors: mean over a model's variables of its mean error in levels on the {held_out} \
-         held-out test rows (of {test}); {intervals}; a difference is paired — the same rows \
-         and variables, {paired}.{baselines} Times: replicate 1, the learned models predicting \
-         every test state at once, the simulator re-stepping one frame at a time; median and \
-         range of {REPEATS} interleaved runs; a baseline several variants share is timed once \
-         (by the first), and that one timing is quoted throughout. Levels, baselines and intervals are defined under \
-         Definitions, at the end.\n"
+         held-out test rows (of {test}{also}); {intervals}; a difference is paired — the same \
+         rows and variables, {paired}.{baselines} Models: persistence predicts no change; \
+         linear is a robust linear fit of the change; simulator@k/frame re-steps each frame \
+         from its logged state with k integration steps (exact at the scene's own step \
+         count). Times: replicate 1, the learned models predicting every test state at once, \
+         the simulator re-stepping one frame at a time; median and range of {REPEATS} \
+         interleaved runs; a baseline several variants share is timed once (by the first), \
+         and that one timing is quoted throughout.{decisions} Levels, baselines and intervals \
+         are defined under Definitions, at the end.\n",
+        also = if test > held_out {
+            format!("; the other {} were also trained on", test - held_out)
+        } else {
+            String::new()
+        },
+        decisions = if decisions.is_some() {
+            " Time per decision (ms): a planner's median time to choose one frame's torques, over \
+             every task's episodes, one thread."
+        } else {
+            ""
+        },
     );
     Ok(())
 }
@@ -268,6 +296,7 @@ fn abstract_(
     variants: &[Loaded],
     entries: &[Entry],
     planning: Option<&(&str, Vec<String>)>,
+    true_model: Option<&(String, Vec<String>)>,
 ) {
     let best = &entries[0];
     let replicates = best.variant.replicates.len().max(1);
@@ -345,9 +374,19 @@ fn abstract_(
         let _ = write!(
             md,
             " Planning with it (`{variant}`), each planner at its largest budget that decides \
-             within real time: {}.\n\n",
+             within real time: {}",
             phrases.join("; ")
         );
+        match true_model {
+            Some((model, phrases)) => {
+                let _ = write!(
+                    md,
+                    "; by the same rule with {model}/frame, the true model, as forward model: {}.\n\n",
+                    phrases.join("; ")
+                );
+            }
+            None => md.push_str(".\n\n"),
+        }
         return;
     }
     let simulator = entries
@@ -468,8 +507,12 @@ impl Decisions {
 
 /// The results table: at most [`TABLE_ROWS`] rows.
 fn table(md: &mut String, variants: usize, entries: &[Entry], decisions: Option<&Decisions>) {
-    let decision_column =
-        decisions.map(|d| format!("ms per decision ({}, {} sequences)", d.planner, d.budget));
+    let decision_column = decisions.map(|d| {
+        format!(
+            "ms per decision ({}, {} sequences; median over tasks)",
+            d.planner, d.budget
+        )
+    });
     let mut columns = vec![
         "mean error (levels)",
         "persistence's",

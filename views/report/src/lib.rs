@@ -105,11 +105,19 @@ pub struct Replicate {
     pub planning: Option<PathBuf>,
 }
 
+/// One planning task, as the plan stage defines it.
+pub struct PlanTask {
+    pub name: String,
+    /// What it asks and what a frame costs
+    /// (`alnlab_plan::task::Task::describe`).
+    pub definition: String,
+    /// The unit of its cost (`rad²`).
+    pub unit: String,
+}
+
 /// What the plan stage was asked, defined beside its figures.
 pub struct PlanSetup {
-    /// Per task, its name and what it asks and costs
-    /// (`alnlab_plan::task::Task::describe`).
-    pub tasks: Vec<(String, String)>,
+    pub tasks: Vec<PlanTask>,
     /// Frames a plan looks ahead.
     pub horizon: u32,
     /// Frames per episode, one decision each.

@@ -169,53 +169,61 @@ pub(super) fn decision_ms(
     ms.get(ms.len() / 2).copied()
 }
 
-/// Per task and ALN planner, its plan within real time as a phrase for the
-/// report's first screen: the planner at its largest budget whose median
-/// decision fits one frame in replicate 1 (the rule of the equal-time
-/// table, no pick by cost), against zero torques episode by episode — the
-/// mean difference across replicates with its 95% interval when there are
-/// several, else over the episodes of the one. Empty when no replicate
-/// planned with the ALN.
-pub(super) fn aln_within_real_time(replicates: &[Vec<Episode>]) -> Vec<String> {
+/// Per task and planner of forward `model`, its plan within real time as a
+/// phrase for the report's first screen: the planner at its largest budget
+/// whose median decision fits one frame in replicate 1 (the rule of the
+/// equal-time table, no pick by cost), against zero torques episode by
+/// episode — the mean difference across replicates with its 95% interval
+/// when there are several, else over the episodes of the one. Costs carry
+/// the task's unit from `setup`. Empty when no replicate planned with it.
+pub(super) fn within_real_time(
+    replicates: &[Vec<Episode>],
+    model: &str,
+    setup: Option<&PlanSetup>,
+) -> Vec<String> {
     let Some(first) = replicates.first() else {
         return Vec::new();
     };
     let mut phrases = Vec::new();
     for task in tasks(first) {
+        let unit = setup
+            .and_then(|s| s.tasks.iter().find(|t| t.name == task))
+            .map_or(String::new(), |t| format!(" {}", t.unit));
         let policies_1 = policies(first, task);
         let mut planners: Vec<&str> = policies_1
             .iter()
-            .filter(|p| p.model == "aln" && p.planned())
+            .filter(|p| p.model == model && p.planned())
             .map(|p| p.planner)
             .collect();
         planners.dedup();
         let limit = real_time(first, task);
         for planner in planners {
-            let Some(chosen) = within(&policies_1, "aln", planner, limit) else {
+            let Some(chosen) = within(&policies_1, model, planner, limit) else {
                 phrases.push(format!(
                     "`{task}` {planner}: no budget decides within real time ({} ms)",
                     sig3(limit)
                 ));
                 continue;
             };
-            // Per replicate: the mean cost, zero torques' and their mean
-            // paired difference.
-            let per_replicate: Option<Vec<(f64, f64, f64)>> = replicates
+            // Per replicate: the mean cost, zero torques', their mean
+            // paired difference, and whether every episode tied exactly.
+            let per_replicate: Option<Vec<(f64, f64, f64, bool)>> = replicates
                 .iter()
                 .map(|rows| {
                     let policies = policies(rows, task);
                     let p = policies.iter().find(|p| {
-                        p.model == "aln" && p.planner == planner && p.budget == chosen.budget
+                        p.model == model && p.planner == planner && p.budget == chosen.budget
                     })?;
                     let zero = policies.iter().find(|p| p.model == "zero")?;
-                    let mean = |x: Vec<f64>| x.iter().sum::<f64>() / x.len() as f64;
-                    let diffs = p
+                    let mean = |x: &[f64]| x.iter().sum::<f64>() / x.len() as f64;
+                    let diffs: Vec<f64> = p
                         .episodes
                         .iter()
                         .zip(&zero.episodes)
                         .map(|(a, b)| a.cost - b.cost)
                         .collect();
-                    Some((mean(p.costs()), mean(zero.costs()), mean(diffs)))
+                    let same = diffs.iter().all(|d| *d == 0.0);
+                    Some((mean(&p.costs()), mean(&zero.costs()), mean(&diffs), same))
                 })
                 .collect();
             let Some(per_replicate) = per_replicate else {
@@ -225,7 +233,9 @@ pub(super) fn aln_within_real_time(replicates: &[Vec<Episode>]) -> Vec<String> {
             let (cost, zero) = per_replicate
                 .iter()
                 .fold((0.0, 0.0), |(c, z), r| (c + r.0 / n, z + r.1 / n));
-            let difference = if per_replicate.len() > 1 {
+            let difference = if per_replicate.iter().all(|r| r.3) {
+                Some("the same in every episode: the planner kept zero torque".to_string())
+            } else if per_replicate.len() > 1 {
                 let d: Vec<f64> = per_replicate.iter().map(|r| r.2).collect();
                 Interval::of(&d).map(|i| {
                     format!(
@@ -244,7 +254,7 @@ pub(super) fn aln_within_real_time(replicates: &[Vec<Episode>]) -> Vec<String> {
                 })
             };
             phrases.push(format!(
-                "`{task}` {planner} ({} sequences, {} ms a decision): cost {} against zero \
+                "`{task}` {planner} ({} sequences, {} ms a decision): cost {}{unit} against zero \
                  torques' {}, {}",
                 chosen.budget,
                 sig3(chosen.ms()),
@@ -255,6 +265,18 @@ pub(super) fn aln_within_real_time(replicates: &[Vec<Episode>]) -> Vec<String> {
         }
     }
     phrases
+}
+
+/// The true model among `rows`' forward models: the simulator at the most
+/// steps a frame.
+pub(super) fn true_model(rows: &[Episode]) -> Option<&str> {
+    rows.iter()
+        .filter_map(|e| {
+            let steps: u32 = e.model.strip_prefix("simulator@")?.parse().ok()?;
+            Some((steps, e.model.as_str()))
+        })
+        .max_by_key(|(steps, _)| *steps)
+        .map(|(_, model)| model)
 }
 
 /// The chart's style name of a plan model (`simulator@10` is the report's
@@ -300,15 +322,20 @@ pub(super) fn section(
         let real_time = real_time(rows, task);
         let _ = writeln!(md, "#### Task `{task}`\n");
         if let Some(setup) = setup
-            && let Some((_, what)) = setup.tasks.iter().find(|(name, _)| name == task)
+            && let Some(what) = setup.tasks.iter().find(|t| t.name == task)
         {
             let _ = writeln!(
                 md,
-                "The task: {what}. An episode is {} frames from a logged state, one decision a \
+                "The task: {}. An episode is {} frames from a logged state, one decision a \
                  frame, each planning {} frames ahead; its cost is the sum of its frames' costs, \
-                 in the same unit; {} episodes a policy, the same start states for every \
-                 policy.\n",
-                setup.frames, setup.horizon, setup.episodes
+                 in {}; {} episodes a policy, the same start states for every policy. Real \
+                 time: a decision within the {} ms a frame lasts.\n",
+                what.definition,
+                setup.frames,
+                setup.horizon,
+                what.unit,
+                setup.episodes,
+                sig3(real_time)
             );
         }
         let mut table = MdTable::new(&["model", "planner", "budget"])
