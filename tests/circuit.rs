@@ -1,7 +1,9 @@
 //! The circuit stage on the real binary with the real tools (Yosys, Icarus
-//! Verilog): a small pendulum experiment (31 variables: a quick circuit)
-//! with walk codes and three voters per bit, exported, synthesized and simulated on its test rows, equal to the
-//! software on every one; its figures in the report; `alnlab export
+//! Verilog, nextpnr-ice40): a small pendulum experiment (31 variables: a
+//! quick circuit) with walk codes and three voters per bit, exported,
+//! synthesized and simulated on its test rows, equal to the software on
+//! every one; its figures in the report; every variable placed and routed
+//! on an iCE40 with its critical path from timing analysis; `alnlab export
 //! verilog` writing readable modules, and refusing what it cannot do.
 
 mod common;
@@ -146,6 +148,47 @@ fn the_circuit_equals_the_software_on_every_test_row_and_its_figures_reach_the_r
     for file in ["common.v", "top.v", "v_2_x.v", "roll_2.v"] {
         assert!(d.join("verilog").join(file).exists(), "{file}");
     }
+
+    // Placed and routed on an iCE40 HX8K: every variable fits and has a
+    // critical path; the state waits for the slowest.
+    let out = alnlab(
+        d,
+        &[
+            "-q",
+            "bench",
+            "circuit",
+            "--run",
+            "runs/circuit",
+            "--rows",
+            "4",
+            "--fpga",
+            "ice40-hx8k",
+            "--json",
+        ],
+    );
+    assert!(out.status.success(), "{}", stderr(&out));
+    let bench: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let state = &bench["fpga"];
+    let placed = state["variables"].as_array().unwrap();
+    assert_eq!(placed.len() * 3, figures.num_rows());
+    let mut slowest = 0f64;
+    for p in placed {
+        let ns = p["critical_ns"].as_f64().unwrap();
+        // A register-to-register path through LUT levels: more than one
+        // LUT's delay, far less than the 1 µs clock asked for.
+        assert!(ns > 1.0 && ns < 200.0, "{p}");
+        assert!((p["max_mhz"].as_f64().unwrap() * ns - 1000.0).abs() < 1e-6);
+        let cells = p["logic_cells"].as_u64().unwrap();
+        assert!(
+            cells > 0 && cells <= p["available"].as_u64().unwrap(),
+            "{p}"
+        );
+        assert!(p["luts"].as_u64().unwrap() > 0, "{p}");
+        slowest = slowest.max(ns);
+    }
+    assert_eq!(state["device"], "ice40-hx8k");
+    assert!(state["tools"].as_str().unwrap().contains("nextpnr-ice40"));
+    assert_eq!(bench["fpga_ns_per_state"].as_f64(), Some(slowest));
 
     // A folder that holds files is refused, and nothing is written into it.
     let out = export("verilog");

@@ -33,6 +33,11 @@ const PROGRAMS: &[Program] = &[
         needed_by: "for the circuit stage's simulation",
     },
     Program {
+        command: "nextpnr-ice40",
+        package: "nextpnr-ice40",
+        needed_by: "for placing and routing circuits on an FPGA",
+    },
+    Program {
         command: "chromium",
         package: "chromium",
         needed_by: "for the reports test, a headless browser",

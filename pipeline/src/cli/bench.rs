@@ -90,9 +90,13 @@ pub enum Bench {
     /// software's levels) and give gates and depth in gate levels — trees,
     /// votes, decoding — beside the paper's estimate of 59, and how long it
     /// took. Needs `yosys` and `iverilog` (Debian: apt-get install yosys
-    /// iverilog).
+    /// iverilog). With --fpga, every variable is also placed and routed on
+    /// that FPGA between registers (needs nextpnr-ice40) and its critical
+    /// path read from timing analysis: the state's time in ns is the
+    /// slowest variable's, one part per variable.
     #[command(after_help = "Examples:
   alnlab bench circuit --run runs/quickstart --variant gray --json
+  alnlab bench circuit --run runs/quickstart --variant gray --fpga ice40-hx8k
   alnlab bench circuit --run runs/paper --rows 500")]
     Circuit {
         /// A run's folder (holding run.json) whose model to measure.
@@ -104,6 +108,12 @@ pub enum Bench {
         /// Simulate only the first ROWS test rows (default: all).
         #[arg(long, value_parser = clap::value_parser!(u64).range(1..))]
         rows: Option<u64>,
+        /// Also place and route every variable on this FPGA.
+        #[arg(long, value_parser = ["ice40-hx8k"])]
+        fpga: Option<String>,
+        /// nextpnr's placement seed.
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
         /// Print one JSON object.
         #[arg(long)]
         json: bool,
@@ -226,8 +236,12 @@ pub fn execute(bench: Bench, quiet: bool) -> Result<()> {
             run: run_dir,
             variant,
             rows,
+            fpga,
+            seed,
             json,
         } => {
+            // The only value clap lets through.
+            let fpga = fpga.map(|_| (alnlab_circuit::fpga::Device::Ice40Hx8k, seed));
             let (name, [model, codebook, levels]) = run_artifacts(
                 &run_dir,
                 variant.as_deref(),
@@ -239,6 +253,7 @@ pub fn execute(bench: Bench, quiet: bool) -> Result<()> {
                 &codebook,
                 &levels,
                 rows.map(|r| r as usize),
+                fpga,
                 &bar,
             )?;
             drop(bar);
@@ -268,6 +283,34 @@ pub fn execute(bench: Bench, quiet: bool) -> Result<()> {
                     "{:.1} s to synthesize and simulate on {} threads ({})",
                     f.seconds, f.threads, f.figures.tools
                 );
+                if let (Some(state), Some(seconds)) = (&f.fpga, f.fpga_seconds) {
+                    let placed = state.variables.iter().filter(|p| p.critical_ns.is_some());
+                    let luts: u64 = state.variables.iter().map(|p| p.luts).sum();
+                    println!(
+                        "{}: {} of {} variables placed and routed (seed {}), {luts} lookup tables in all",
+                        state.device,
+                        placed.count(),
+                        state.variables.len(),
+                        state.seed
+                    );
+                    for p in state.variables.iter().filter(|p| p.critical_ns.is_none()) {
+                        println!(
+                            "  `{}` does not fit: {} logic cells needed, {} available",
+                            p.variable, p.logic_cells, p.available
+                        );
+                    }
+                    match (state.critical_ns(), state.slowest()) {
+                        (Some(ns), Some(slowest)) => println!(
+                            "a state in {ns:.2} ns ({:.1} MHz), the slowest variable `{}` ({} logic cells); {:.1} s to map, place and route ({})",
+                            1000.0 / ns,
+                            slowest.variable,
+                            slowest.logic_cells,
+                            seconds,
+                            state.tools
+                        ),
+                        _ => println!("no time for the state: a variable does not fit"),
+                    }
+                }
             });
             Ok(())
         }

@@ -22,6 +22,7 @@
 
 pub mod bench;
 pub mod check;
+pub mod fpga;
 pub mod measured;
 pub mod simulate;
 pub mod synth;

@@ -1,15 +1,23 @@
-//! The external programs: Yosys (synthesis) and Icarus Verilog (`iverilog`,
-//! `vvp`: simulation). A missing program is an error that says how to
-//! install it; a failing one, an error with the end of what it printed.
+//! The external programs: Yosys (synthesis), Icarus Verilog (`iverilog`,
+//! `vvp`: simulation) and nextpnr-ice40 (place and route). A missing
+//! program is an error that says how to install it; a failing one, an error
+//! with the end of what it printed.
 
 use std::path::Path;
 use std::process::Command;
 
 use alnlab_common::{Error, Result};
 
-/// How to install the programs, for error messages.
-const INSTALL: &str = "the circuit check needs Yosys and Icarus Verilog on PATH (Debian, Ubuntu: \
-                       `apt-get install yosys iverilog`)";
+/// How to install `program`, for error messages.
+fn install(program: &str) -> &'static str {
+    if program.starts_with("nextpnr") {
+        "place and route needs nextpnr-ice40 on PATH (Debian, Ubuntu: `apt-get install \
+         nextpnr-ice40`)"
+    } else {
+        "the circuit check needs Yosys and Icarus Verilog on PATH (Debian, Ubuntu: `apt-get \
+         install yosys iverilog`)"
+    }
+}
 
 /// Runs `program` with `args` in `dir`; its standard output on success.
 pub fn run(program: &str, args: &[&str], dir: &Path) -> Result<String> {
@@ -19,7 +27,7 @@ pub fn run(program: &str, args: &[&str], dir: &Path) -> Result<String> {
         .output()
         .map_err(|e| match e.kind() {
             std::io::ErrorKind::NotFound => {
-                Error::Invalid(format!("`{program}` was not found: {INSTALL}"))
+                Error::Invalid(format!("`{program}` was not found: {}", install(program)))
             }
             _ => Error::io(Path::new(program), e),
         })?;
@@ -37,6 +45,22 @@ pub fn run(program: &str, args: &[&str], dir: &Path) -> Result<String> {
         )));
     }
     Ok(String::from_utf8_lossy(&output.stdout).into_owned())
+}
+
+/// The first line `program` prints, on either stream, given `--version`.
+pub fn version(program: &str) -> Result<String> {
+    let output = Command::new(program)
+        .arg("--version")
+        .output()
+        .map_err(|e| match e.kind() {
+            std::io::ErrorKind::NotFound => {
+                Error::Invalid(format!("`{program}` was not found: {}", install(program)))
+            }
+            _ => Error::io(Path::new(program), e),
+        })?;
+    let mut said = String::from_utf8_lossy(&output.stdout).into_owned();
+    said.push_str(&String::from_utf8_lossy(&output.stderr));
+    Ok(said.lines().next().unwrap_or("").trim().to_string())
 }
 
 /// The versions of Yosys and Icarus Verilog, as they print them (their

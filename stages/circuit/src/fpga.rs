@@ -1,0 +1,376 @@
+//! Gate levels turned into nanoseconds: each learned variable's predictor
+//! placed and routed on an iCE40 FPGA, its clock from timing analysis.
+//!
+//! The variable's module (its trees, votes and decoder, combinational) sits
+//! between an input register and an output register, so the only path that
+//! matters is register → predictor → register. The input register is a
+//! shift register fed from one pin — a state's hundreds of code bits cannot
+//! all be pins (the HX8K's largest package has 206) — and the output
+//! register folds to one pin by XOR, which keeps every output bit live.
+//! Yosys maps the design onto 4-input lookup tables (`synth_ice40`),
+//! nextpnr places and routes it (seeded) and its timing analysis gives the
+//! maximum clock: the critical path is one period. Adders (a walk code's
+//! popcounts) go into lookup tables too, not the carry chains: with carry
+//! chains nextpnr-ice40 0.4 routed some decoders for over ten minutes
+//! without finishing (a 16-bit walk decoder's 3144 arcs), without them in
+//! two seconds. Lookup-table adders are no faster than carry chains, so
+//! the delay measured is, if anything, longer than the part allows. Each variable takes a
+//! part of its own, the variables side by side, so the state's time is the
+//! slowest variable's. A variable whose lookup tables outnumber the part's
+//! logic cells is reported as not fitting, with the cells it needs.
+
+use std::collections::BTreeMap;
+use std::fmt::Write as _;
+use std::path::Path;
+
+use alnlab_common::{Error, Progress, Result};
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+
+use crate::tools;
+use crate::verilog::{COMMON_FILE, Circuit};
+
+/// An FPGA to place and route on.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Device {
+    /// Lattice iCE40 HX8K (7680 logic cells), CT256 package: the largest
+    /// iCE40 with an open flow.
+    Ice40Hx8k,
+}
+
+impl Device {
+    /// As manifests and reports name it.
+    pub fn name(self) -> &'static str {
+        match self {
+            Device::Ice40Hx8k => "ice40-hx8k",
+        }
+    }
+
+    /// nextpnr-ice40's arguments selecting the part.
+    fn nextpnr_args(self) -> [&'static str; 3] {
+        match self {
+            Device::Ice40Hx8k => ["--hx8k", "--package", "ct256"],
+        }
+    }
+
+    /// Logic cells (a 4-input lookup table and a flip-flop each).
+    pub fn logic_cells(self) -> u64 {
+        match self {
+            Device::Ice40Hx8k => 7680,
+        }
+    }
+}
+
+/// One variable on the part.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct Placed {
+    pub variable: String,
+    /// Lookup tables after mapping (`SB_LUT4`).
+    pub luts: u64,
+    /// Logic cells used after packing, or needed when it does not fit.
+    pub logic_cells: u64,
+    /// Of the part.
+    pub available: u64,
+    /// The critical path, register to register, in ns; none when it does
+    /// not fit.
+    pub critical_ns: Option<f64>,
+    /// The maximum clock, MHz.
+    pub max_mhz: Option<f64>,
+}
+
+/// The top module wrapping variable `v`'s predictor between registers.
+pub fn top_module(circuit: &Circuit, v: usize) -> String {
+    format!("fpga_{}", circuit.variables[v].ident)
+}
+
+/// The Verilog of [`top_module`]: a shift register of every input bit the
+/// predictor reads, fed from `din`; the predictor; its level registered
+/// and folded by XOR to `dout`.
+pub fn wrapper(circuit: &Circuit, v: usize) -> String {
+    let c = &circuit.variables[v];
+    // (port, width) of every input, in the module's port order.
+    let mut inputs: Vec<(String, usize)> = c
+        .reads
+        .iter()
+        .map(|&b| (circuit.inputs[b].ident.clone(), circuit.inputs[b].width))
+        .collect();
+    if c.takes_current {
+        inputs.push((format!("{}_current", c.ident), c.level_bits as usize));
+    }
+    let bits: usize = inputs.iter().map(|(_, w)| w).sum();
+    let out = c.level_bits as usize;
+    let mut text = String::new();
+    let _ = writeln!(
+        text,
+        "// `{}` between registers, for place and route.\n\
+         module {} (input wire clk, input wire din, output wire dout);\n  \
+         reg [{}:0] in_q;\n  reg [{}:0] out_q;\n  wire [{}:0] level;",
+        c.variable,
+        top_module(circuit, v),
+        bits - 1,
+        out - 1,
+        out - 1
+    );
+    // A one-bit shift register is a plain register.
+    let shift = if bits > 1 {
+        format!("{{in_q[{}:0], din}}", bits - 2)
+    } else {
+        "din".to_string()
+    };
+    let _ = writeln!(
+        text,
+        "  always @(posedge clk) begin\n    in_q <= {shift};\n    out_q <= level;\n  end\n  \
+         assign dout = ^out_q;"
+    );
+    let mut ports = Vec::new();
+    let mut at = 0;
+    for (name, width) in &inputs {
+        ports.push(format!("    .{name}(in_q[{}:{at}])", at + width - 1));
+        at += width;
+    }
+    ports.push(format!("    .{}_next(level)", c.ident));
+    let _ = writeln!(
+        text,
+        "  {} predictor (\n{}\n  );\nendmodule",
+        c.module,
+        ports.join(",\n")
+    );
+    text
+}
+
+/// Places and routes variable `v` of `circuit` (its files already written
+/// in `dir`, as [`crate::check::write_files`] does) on `device` with
+/// nextpnr's `seed`.
+pub fn place_and_route(
+    circuit: &Circuit,
+    v: usize,
+    device: Device,
+    seed: u64,
+    dir: &Path,
+) -> Result<Placed> {
+    let c = &circuit.variables[v];
+    let top = top_module(circuit, v);
+    let wrapper_file = format!("{top}.v");
+    let path = dir.join(&wrapper_file);
+    std::fs::write(&path, wrapper(circuit, v)).map_err(|e| Error::io(&path, e))?;
+    let netlist = format!("{top}.json");
+    let stat = format!("{top}_stat.json");
+    let script = format!(
+        "read_verilog {COMMON_FILE} {file} {wrapper_file}\n\
+         synth_ice40 -nocarry -top {top} -json {netlist}\n\
+         tee -q -o {stat} stat -json\n",
+        file = c.file,
+    );
+    let script_file = format!("{top}.ys");
+    let path = dir.join(&script_file);
+    std::fs::write(&path, script).map_err(|e| Error::io(&path, e))?;
+    tools::run("yosys", &["-q", "-s", &script_file], dir)?;
+    let luts = read_luts(&dir.join(&stat), &top)?;
+    let available = device.logic_cells();
+    if luts > available {
+        return Ok(Placed {
+            variable: c.variable.clone(),
+            luts,
+            logic_cells: luts,
+            available,
+            critical_ns: None,
+            max_mhz: None,
+        });
+    }
+    let report = format!("{top}_pnr.json");
+    let seed = seed.to_string();
+    let mut args: Vec<&str> = device.nextpnr_args().to_vec();
+    args.extend([
+        "--json",
+        &netlist,
+        "--seed",
+        &seed,
+        // A clock every design meets: the figure is what it achieves.
+        "--freq",
+        "1",
+        "--timing-allow-fail",
+        "--report",
+        &report,
+        "--quiet",
+    ]);
+    tools::run("nextpnr-ice40", &args, dir)?;
+    let (logic_cells, mhz) = read_report(&dir.join(&report))?;
+    Ok(Placed {
+        variable: c.variable.clone(),
+        luts,
+        logic_cells,
+        available,
+        critical_ns: Some(1000.0 / mhz),
+        max_mhz: Some(mhz),
+    })
+}
+
+/// The lookup tables of `top` after `synth_ice40` (`stat -json`).
+fn read_luts(path: &Path, top: &str) -> Result<u64> {
+    #[derive(Deserialize)]
+    struct Stat {
+        modules: BTreeMap<String, Module>,
+    }
+    #[derive(Deserialize)]
+    struct Module {
+        num_cells_by_type: BTreeMap<String, u64>,
+    }
+    let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+    let stat: Stat = serde_json::from_str(&text)
+        .map_err(|e| Error::bad_file(path, format!("not Yosys' `stat -json` ({e})")))?;
+    let module = stat
+        .modules
+        .iter()
+        .find(|(name, _)| name.trim_start_matches('\\') == top)
+        .map(|(_, m)| m)
+        .ok_or_else(|| Error::bad_file(path, format!("no module `{top}`")))?;
+    Ok(module
+        .num_cells_by_type
+        .get("SB_LUT4")
+        .copied()
+        .unwrap_or(0))
+}
+
+/// Logic cells used and the achieved clock (MHz) from nextpnr's
+/// `--report` JSON.
+fn read_report(path: &Path) -> Result<(u64, f64)> {
+    #[derive(Deserialize)]
+    struct Report {
+        fmax: BTreeMap<String, Clock>,
+        utilization: BTreeMap<String, Use>,
+    }
+    #[derive(Deserialize)]
+    struct Clock {
+        achieved: f64,
+    }
+    #[derive(Deserialize)]
+    struct Use {
+        used: u64,
+    }
+    let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+    let report: Report = serde_json::from_str(&text)
+        .map_err(|e| Error::bad_file(path, format!("not nextpnr's `--report` ({e})")))?;
+    let mhz = report
+        .fmax
+        .values()
+        .map(|c| c.achieved)
+        .reduce(f64::min)
+        .filter(|f| f.is_finite() && *f > 0.0)
+        .ok_or_else(|| Error::bad_file(path, "no clock with an achieved frequency"))?;
+    let cells = report
+        .utilization
+        .get("ICESTORM_LC")
+        .map(|u| u.used)
+        .ok_or_else(|| Error::bad_file(path, "no ICESTORM_LC utilization"))?;
+    Ok((cells, mhz))
+}
+
+/// Places and routes every variable of `circuit` on `device` in `dir` (a
+/// scratch folder), side by side on rayon's threads.
+pub fn place_state(
+    circuit: &Circuit,
+    device: Device,
+    seed: u64,
+    dir: &Path,
+    progress: &dyn Progress,
+) -> Result<State> {
+    let tools = format!(
+        "{}; {}",
+        tools::run("yosys", &["-V"], dir)?.trim(),
+        tools::version("nextpnr-ice40")?
+    );
+    crate::check::write_files(circuit, dir)?;
+    progress.start(
+        "place and route",
+        circuit.variables.len() as u64,
+        "variables",
+    );
+    let variables = (0..circuit.variables.len())
+        .into_par_iter()
+        .map(|v| {
+            let placed = place_and_route(circuit, v, device, seed, dir);
+            progress.advance(1);
+            placed
+        })
+        .collect::<Result<Vec<_>>>()?;
+    Ok(State {
+        device: device.name(),
+        seed,
+        tools,
+        variables,
+    })
+}
+
+/// The state on `device`: every variable placed and routed, and the
+/// slowest one's critical path (the variables run side by side, one part
+/// each).
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct State {
+    pub device: &'static str,
+    pub seed: u64,
+    pub tools: String,
+    pub variables: Vec<Placed>,
+}
+
+impl State {
+    /// The slowest variable's critical path (ns), when every variable fits.
+    pub fn critical_ns(&self) -> Option<f64> {
+        self.variables
+            .iter()
+            .map(|p| p.critical_ns)
+            .try_fold(0f64, |worst, ns| Some(worst.max(ns?)))
+    }
+
+    /// The slowest variable.
+    pub fn slowest(&self) -> Option<&Placed> {
+        self.variables
+            .iter()
+            .filter(|p| p.critical_ns.is_some())
+            .max_by(|a, b| a.critical_ns.partial_cmp(&b.critical_ns).expect("finite"))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn nextpnr_reports_are_read_for_the_worst_clock_and_the_cells() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("r.json");
+        std::fs::write(
+            &path,
+            r#"{"fmax": {"clk": {"achieved": 92.5, "constraint": 1}},
+                "utilization": {"ICESTORM_LC": {"available": 7680, "used": 823},
+                                "SB_IO": {"available": 256, "used": 3}}}"#,
+        )
+        .unwrap();
+        assert_eq!(read_report(&path).unwrap(), (823, 92.5));
+        std::fs::write(&path, r#"{"fmax": {}, "utilization": {}}"#).unwrap();
+        let error = read_report(&path).unwrap_err().to_string();
+        assert!(error.contains("no clock"), "{error}");
+    }
+
+    #[test]
+    fn the_state_waits_for_its_slowest_variable() {
+        let placed = |name: &str, ns: Option<f64>| Placed {
+            variable: name.into(),
+            luts: 1,
+            logic_cells: 1,
+            available: 7680,
+            critical_ns: ns,
+            max_mhz: ns.map(|ns| 1000.0 / ns),
+        };
+        let mut state = State {
+            device: "ice40-hx8k",
+            seed: 1,
+            tools: String::new(),
+            variables: vec![placed("a", Some(4.5)), placed("b", Some(10.8))],
+        };
+        assert_eq!(state.critical_ns(), Some(10.8));
+        assert_eq!(state.slowest().unwrap().variable, "b");
+        state.variables.push(placed("c", None));
+        assert_eq!(state.critical_ns(), None, "a variable that does not fit");
+    }
+}
