@@ -82,16 +82,21 @@ fn reports(suite: &Suite) -> PathBuf {
     suite.work.join("reports")
 }
 
-fn quickstart_interop(suite: &Suite) -> Result<(), String> {
-    let _ = std::fs::remove_dir_all(runs(suite));
-    let _ = std::fs::remove_dir_all(reports(suite));
+/// `alnlab run` of the quickstart into the suite's runs and reports.
+fn run_quickstart(suite: &Suite) -> Result<(), String> {
     run_in_root(
         alnlab()
             .args(["--quiet", "run", "experiments/quickstart.toml", "--out"])
             .arg(runs(suite))
             .arg("--reports")
             .arg(reports(suite)),
-    )?;
+    )
+}
+
+fn quickstart_interop(suite: &Suite) -> Result<(), String> {
+    let _ = std::fs::remove_dir_all(runs(suite));
+    let _ = std::fs::remove_dir_all(reports(suite));
+    run_quickstart(suite)?;
     interop(
         suite,
         &runs(suite).join("quickstart/run.json"),
@@ -128,13 +133,7 @@ fn interop(suite: &Suite, record: &Path, report: &Path) -> Result<(), String> {
 /// loopback, the first twice (which must add nothing), and every record read
 /// back with MLflow's own client.
 fn mlflow_round_trip(suite: &Suite) -> Result<(), String> {
-    run_in_root(
-        alnlab()
-            .args(["--quiet", "run", "experiments/quickstart.toml", "--out"])
-            .arg(runs(suite))
-            .arg("--reports")
-            .arg(reports(suite)),
-    )?;
+    run_quickstart(suite)?;
     let dir = suite.work.join("mlflow");
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).map_err(|e| format!("{}: {e}", dir.display()))?;

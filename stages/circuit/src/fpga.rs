@@ -208,28 +208,11 @@ pub fn place_and_route(
 
 /// The lookup tables of `top` after `synth_ice40` (`stat -json`).
 fn read_luts(path: &Path, top: &str) -> Result<u64> {
-    #[derive(Deserialize)]
-    struct Stat {
-        modules: BTreeMap<String, Module>,
-    }
-    #[derive(Deserialize)]
-    struct Module {
-        num_cells_by_type: BTreeMap<String, u64>,
-    }
-    let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
-    let stat: Stat = serde_json::from_str(&text)
-        .map_err(|e| Error::bad_file(path, format!("not Yosys' `stat -json` ({e})")))?;
-    let module = stat
-        .modules
-        .iter()
-        .find(|(name, _)| name.trim_start_matches('\\') == top)
-        .map(|(_, m)| m)
+    let stat = crate::synth::read_stat(path)?;
+    let cells = stat
+        .get(top)
         .ok_or_else(|| Error::bad_file(path, format!("no module `{top}`")))?;
-    Ok(module
-        .num_cells_by_type
-        .get("SB_LUT4")
-        .copied()
-        .unwrap_or(0))
+    Ok(cells.get("SB_LUT4").copied().unwrap_or(0))
 }
 
 /// Logic cells used and the achieved clock (MHz) from nextpnr's

@@ -170,6 +170,21 @@ pub fn synthesize(circuit: &Circuit, v: usize, dir: &Path) -> Result<VariableFig
 /// Per module, its gate cells by type (`stat -json`; instances of other
 /// modules left out).
 fn read_cells(path: &Path) -> Result<BTreeMap<String, BTreeMap<String, u64>>> {
+    Ok(read_stat(path)?
+        .into_iter()
+        .map(|(name, cells)| {
+            let gates = cells
+                .into_iter()
+                .filter(|(cell, _)| cell.starts_with("$_"))
+                .collect();
+            (name, gates)
+        })
+        .collect())
+}
+
+/// Per module (named without Yosys' leading backslash), its cells by type, from
+/// `stat -json`.
+pub(crate) fn read_stat(path: &Path) -> Result<BTreeMap<String, BTreeMap<String, u64>>> {
     #[derive(Deserialize)]
     struct Stat {
         modules: BTreeMap<String, Module>,
@@ -185,12 +200,10 @@ fn read_cells(path: &Path) -> Result<BTreeMap<String, BTreeMap<String, u64>>> {
         .modules
         .into_iter()
         .map(|(name, m)| {
-            let gates = m
-                .num_cells_by_type
-                .into_iter()
-                .filter(|(cell, _)| cell.starts_with("$_"))
-                .collect();
-            (name.trim_start_matches('\\').to_string(), gates)
+            (
+                name.trim_start_matches('\\').to_string(),
+                m.num_cells_by_type,
+            )
         })
         .collect())
 }

@@ -4,7 +4,7 @@
 //! with the end of what it printed.
 
 use std::path::Path;
-use std::process::Command;
+use std::process::{Command, Output};
 
 use alnlab_common::{Error, Result};
 
@@ -19,9 +19,10 @@ fn install(program: &str) -> &'static str {
     }
 }
 
-/// Runs `program` with `args` in `dir`; its standard output on success.
-pub fn run(program: &str, args: &[&str], dir: &Path) -> Result<String> {
-    let output = Command::new(program)
+/// Runs `program` with `args` in `dir` to its end; a missing program is an
+/// error that says how to install it.
+fn spawn(program: &str, args: &[&str], dir: &Path) -> Result<Output> {
+    Command::new(program)
         .args(args)
         .current_dir(dir)
         .output()
@@ -30,7 +31,12 @@ pub fn run(program: &str, args: &[&str], dir: &Path) -> Result<String> {
                 Error::Invalid(format!("`{program}` was not found: {}", install(program)))
             }
             _ => Error::io(Path::new(program), e),
-        })?;
+        })
+}
+
+/// Runs `program` with `args` in `dir`; its standard output on success.
+pub fn run(program: &str, args: &[&str], dir: &Path) -> Result<String> {
+    let output = spawn(program, args, dir)?;
     if !output.status.success() {
         let mut said = String::from_utf8_lossy(&output.stdout).into_owned();
         said.push_str(&String::from_utf8_lossy(&output.stderr));
@@ -49,15 +55,7 @@ pub fn run(program: &str, args: &[&str], dir: &Path) -> Result<String> {
 
 /// The first line `program` prints, on either stream, given `--version`.
 pub fn version(program: &str) -> Result<String> {
-    let output = Command::new(program)
-        .arg("--version")
-        .output()
-        .map_err(|e| match e.kind() {
-            std::io::ErrorKind::NotFound => {
-                Error::Invalid(format!("`{program}` was not found: {}", install(program)))
-            }
-            _ => Error::io(Path::new(program), e),
-        })?;
+    let output = spawn(program, &["--version"], Path::new("."))?;
     let mut said = String::from_utf8_lossy(&output.stdout).into_owned();
     said.push_str(&String::from_utf8_lossy(&output.stderr));
     Ok(said.lines().next().unwrap_or("").trim().to_string())
