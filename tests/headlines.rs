@@ -6,23 +6,15 @@
 //! numpy and scipy; the abstract quotes the table; and `reports/README.md`
 //! quotes no number its report's first screen does not.
 
+mod common;
+
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
+use common::committed_reports;
+
 fn reports_root() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("reports")
-}
-
-/// The committed reports' folders.
-fn committed_reports() -> Vec<PathBuf> {
-    let mut dirs: Vec<PathBuf> = std::fs::read_dir(reports_root())
-        .unwrap()
-        .map(|e| e.unwrap().path())
-        .filter(|p| p.join("report.md").exists())
-        .collect();
-    dirs.sort();
-    assert!(dirs.len() >= 7, "{dirs:?}");
-    dirs
 }
 
 /// The Markdown before the appendix: abstract, figure, table, caption.

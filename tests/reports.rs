@@ -2,21 +2,11 @@
 //! inside the canvas with no two labels overlapping, and every report's
 //! HTML, opened in a real browser (headless Chromium), loads every chart.
 
-use std::path::{Path, PathBuf};
+mod common;
+
 use std::process::Command;
 
-/// The committed reports' folders.
-fn committed_reports() -> Vec<PathBuf> {
-    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("reports");
-    let mut dirs: Vec<PathBuf> = std::fs::read_dir(root)
-        .unwrap()
-        .map(|e| e.unwrap().path())
-        .filter(|p| p.join("report.md").exists())
-        .collect();
-    dirs.sort();
-    assert!(dirs.len() >= 7, "{dirs:?}");
-    dirs
-}
+use common::committed_reports;
 
 /// A text element's box on the canvas (px), estimated from its font size:
 /// sans-serif glyphs are at most about 0.6 em wide on average.

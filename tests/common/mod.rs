@@ -219,3 +219,16 @@ pub fn check_all(dir: &Path, cases: &[Case]) {
     );
     assert!(!cases.is_empty());
 }
+
+/// The committed reports' folders (each holding a `report.md`), sorted.
+pub fn committed_reports() -> Vec<PathBuf> {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("reports");
+    let mut dirs: Vec<PathBuf> = std::fs::read_dir(root)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.join("report.md").exists())
+        .collect();
+    dirs.sort();
+    assert!(dirs.len() >= 7, "{dirs:?}");
+    dirs
+}

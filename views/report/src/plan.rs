@@ -61,15 +61,19 @@ impl Policy<'_> {
         !self.planner.is_empty()
     }
 
-    /// The paired difference of this policy's episode costs from `other`'s
-    /// with the verdict its interval allows, as a table cell.
-    fn against(&self, other: &Policy) -> String {
-        let diffs: Vec<f64> = self
-            .episodes
+    /// This policy's episode costs minus `other`'s, episode by episode.
+    fn differences(&self, other: &Policy) -> Vec<f64> {
+        self.episodes
             .iter()
             .zip(&other.episodes)
             .map(|(a, b)| a.cost - b.cost)
-            .collect();
+            .collect()
+    }
+
+    /// The paired difference of this policy's episode costs from `other`'s
+    /// with the verdict its interval allows, as a table cell.
+    fn against(&self, other: &Policy) -> String {
+        let diffs = self.differences(other);
         match Interval::of(&diffs) {
             Some(d) if diffs.len() > 1 => {
                 let word = d.verdict().as_str();
@@ -216,12 +220,7 @@ pub(super) fn within_real_time(
                     })?;
                     let zero = policies.iter().find(|p| p.model == "zero")?;
                     let mean = |x: &[f64]| x.iter().sum::<f64>() / x.len() as f64;
-                    let diffs: Vec<f64> = p
-                        .episodes
-                        .iter()
-                        .zip(&zero.episodes)
-                        .map(|(a, b)| a.cost - b.cost)
-                        .collect();
+                    let diffs = p.differences(zero);
                     let same = diffs.iter().all(|d| *d == 0.0);
                     Some((mean(&p.costs()), mean(&zero.costs()), mean(&diffs), same))
                 })
