@@ -298,6 +298,29 @@ def check_circuit(artifacts: dict, report_dir: str) -> int:
     return len(rows)
 
 
+def check_fpga(artifacts: dict, report_dir: str) -> int:
+    """The place-and-route figures: one row per learned variable, its
+    mapped netlist simulated equal on every test row, and the state's time
+    the report gives recomputed (the slowest variable's critical path)."""
+    if "fpga" not in artifacts:
+        return 0
+    rows = pq.read_table(artifacts["fpga"]["path"]).to_pylist()
+    if not rows:
+        return 0
+    codebook = pq.read_table(artifacts["codebook"]["path"]).to_pylist()
+    assert [r["variable"] for r in rows] == [e["variable"] for e in codebook if e["learned"]]
+    levels = pq.read_table(artifacts["levels"]["path"], columns=["split"]).column("split").to_pylist()
+    test = sum(1 for s in levels if s in ("test", "both"))
+    assert all(r["rows_equal"] == test for r in rows), (rows[0]["rows_equal"], test)
+    assert all(r["luts"] <= r["logic_cells"] or r["critical_ns"] is None for r in rows)
+    state_ns = max(r["critical_ns"] for r in rows)
+    report = open(os.path.join(report_dir, "report.md")).read()
+    quoted = [line.split("|") for line in report.splitlines() if line.startswith("| this forest on the ")]
+    assert quoted, "no FPGA row in the report"
+    assert any(abs(float(cells[4]) / state_ns - 1) < 0.005 for cells in quoted), (state_ns, quoted)
+    return len(rows)
+
+
 def main(run_json: str, report_dir: str) -> int:
     record = json.load(open(run_json))
     checked = 0
@@ -309,8 +332,9 @@ def main(run_json: str, report_dir: str) -> int:
                 table = pq.read_table(path)
                 meta = pq.read_metadata(path).metadata
                 # The plan stage plans nothing without [[plan.task]].
-                # The circuit stage measures nothing without `synthesize`.
-                assert table.num_rows > 0 or role in ("plan", "planning", "circuit"), f"{path}: no rows"
+                # The circuit stage measures nothing without `synthesize`,
+                # and places nothing without `fpga`.
+                assert table.num_rows > 0 or role in ("plan", "planning", "circuit", "fpga"), f"{path}: no rows"
                 assert meta[b"alnlab.stage"], f"{path}: no provenance"
                 assert json.loads(meta[b"alnlab.params"])["seed"] == variant.get("seed", record["seed"]), path
                 checked += 1
@@ -357,7 +381,9 @@ def main(run_json: str, report_dir: str) -> int:
         rolled = check_rollout(artifacts["predictions"]["path"], artifacts["rollout"]["path"])
         metrics = check_metrics(variant)
         circuit = check_circuit(artifacts, report_dir)
+        placed = check_fpga(artifacts, report_dir)
         print(f"{variant['name']}: {len(frames)} /state messages decoded, {circuit} circuit rows checked, "
+              f"{placed} variables placed and routed checked, "
               f"{len(pairs)} pair rows match, {checked} Parquet files read, "
               f"{summaries} summary rows recomputed, {compared} paired comparisons recomputed, "
               f"{rolled} first rollout steps match, {metrics} record metrics recomputed")

@@ -71,6 +71,7 @@ pub fn render(record: &RunRecord, dir: &Path) -> Result<PathBuf> {
                 planning: v.artifacts.get("planning").map(|a| PathBuf::from(&a.path)),
                 plan_setup: plan_setup(&v.parameters),
                 circuit: v.artifacts.get("circuit").map(|a| PathBuf::from(&a.path)),
+                fpga: v.artifacts.get("fpga").map(|a| PathBuf::from(&a.path)),
                 replicates,
             })
         })

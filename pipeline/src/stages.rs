@@ -458,7 +458,9 @@ pub const STAGES: &[Stage] = &[
         about: "Run the circuit stage alone: the trained bit-forest as Verilog, synthesized by \
                 Yosys into two-input gates (gates and depth in gate levels of its trees, votes \
                 and decoders) and simulated by Icarus Verilog on the test rows, equal to the \
-                software's levels on every row ([circuit] synthesize = true)",
+                software's levels on every row ([circuit] synthesize = true); with [circuit] \
+                fpga, every variable also placed and routed on an iCE40 by nextpnr, its \
+                critical path in ns",
         format_version: alnlab_circuit::FORMAT_VERSION,
         inputs: &[
             Input {
@@ -474,7 +476,10 @@ pub const STAGES: &[Stage] = &[
                 from: "quantize",
             },
         ],
-        outputs: &[("circuit", alnlab_circuit::CIRCUIT_FILE)],
+        outputs: &[
+            ("circuit", alnlab_circuit::CIRCUIT_FILE),
+            ("fpga", alnlab_circuit::FPGA_FILE),
+        ],
         archived: Archived::Never,
         every_replicate: false,
         params: |s| json(&s.circuit),
@@ -493,6 +498,7 @@ pub const STAGES: &[Stage] = &[
         run: |c| {
             alnlab_circuit::run(
                 &c.stages.circuit,
+                c.seed,
                 c.input("model"),
                 c.input("codebook"),
                 c.input("levels"),

@@ -91,9 +91,10 @@ pub enum Bench {
     /// votes, decoding — beside the paper's estimate of 59, and how long it
     /// took. Needs `yosys` and `iverilog` (Debian: apt-get install yosys
     /// iverilog). With --fpga, every variable is also placed and routed on
-    /// that FPGA between registers (needs nextpnr-ice40) and its critical
-    /// path read from timing analysis: the state's time in ns is the
-    /// slowest variable's, one part per variable.
+    /// that FPGA between registers (needs nextpnr-ice40), its critical
+    /// path read from timing analysis and its mapped netlist simulated on
+    /// the same rows: the state's time in ns is the slowest variable's, one
+    /// part per variable.
     #[command(after_help = "Examples:
   alnlab bench circuit --run runs/quickstart --variant gray --json
   alnlab bench circuit --run runs/quickstart --variant gray --fpga ice40-hx8k
@@ -240,8 +241,10 @@ pub fn execute(bench: Bench, quiet: bool) -> Result<()> {
             seed,
             json,
         } => {
-            // The only value clap lets through.
-            let fpga = fpga.map(|_| (alnlab_circuit::fpga::Device::Ice40Hx8k, seed));
+            let fpga = fpga.map(|name| {
+                let device = alnlab_circuit::Device::named(&name).expect("clap checks the name");
+                (device, seed)
+            });
             let (name, [model, codebook, levels]) = run_artifacts(
                 &run_dir,
                 variant.as_deref(),
@@ -280,18 +283,26 @@ pub fn execute(bench: Bench, quiet: bool) -> Result<()> {
                 }
                 println!("all       {:>10} gates; {}", f.cells, f.figures.library);
                 println!(
-                    "{:.1} s to synthesize and simulate on {} threads ({})",
-                    f.seconds, f.threads, f.figures.tools
+                    "{:.1} s to synthesize{}, and simulate on {} threads ({})",
+                    f.seconds,
+                    if f.fpga.is_some() {
+                        ", place and route"
+                    } else {
+                        ""
+                    },
+                    f.threads,
+                    f.figures.tools
                 );
-                if let (Some(state), Some(seconds)) = (&f.fpga, f.fpga_seconds) {
+                if let Some(state) = &f.fpga {
                     let placed = state.variables.iter().filter(|p| p.critical_ns.is_some());
                     let luts: u64 = state.variables.iter().map(|p| p.luts).sum();
                     println!(
-                        "{}: {} of {} variables placed and routed (seed {}), {luts} lookup tables in all",
-                        state.device,
+                        "{}: {} of {} variables placed and routed (seed {}), {luts} lookup tables in all, at most {} deep; every mapped netlist equal to the software",
+                        state.device.name(),
                         placed.count(),
                         state.variables.len(),
-                        state.seed
+                        state.seed,
+                        state.lut_levels()
                     );
                     for p in state.variables.iter().filter(|p| p.critical_ns.is_none()) {
                         println!(
@@ -301,11 +312,11 @@ pub fn execute(bench: Bench, quiet: bool) -> Result<()> {
                     }
                     match (state.critical_ns(), state.slowest()) {
                         (Some(ns), Some(slowest)) => println!(
-                            "a state in {ns:.2} ns ({:.1} MHz), the slowest variable `{}` ({} logic cells); {:.1} s to map, place and route ({})",
+                            "a state in {ns:.2} ns ({:.1} MHz), the slowest variable `{}` ({} logic cells, {} lookup tables deep) ({})",
                             1000.0 / ns,
                             slowest.variable,
                             slowest.logic_cells,
-                            seconds,
+                            slowest.lut_levels,
                             state.tools
                         ),
                         _ => println!("no time for the state: a variable does not fit"),

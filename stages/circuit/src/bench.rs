@@ -6,12 +6,12 @@ use std::path::Path;
 use std::time::Instant;
 
 use alnlab_aln::runtime::Trained;
-use alnlab_common::{Error, Progress, Result};
+use alnlab_common::{Progress, Result};
 use serde::Serialize;
 
 use crate::fpga::{self, Device};
 use crate::synth::{Figures, Part};
-use crate::{circuit_of, measure_test_rows};
+use crate::{Measurement, measure_test_rows};
 
 /// The paper's estimate (§5): 13 + 23·2 gate delays.
 pub const PAPER_DELAYS: u32 = 59;
@@ -34,20 +34,18 @@ pub struct Bench {
     pub trees: Part,
     pub votes: Part,
     pub decode: Part,
-    /// Wall time of reading the rows, export, synthesis and both
-    /// simulations (all threads).
+    /// Wall time of reading the rows, export, synthesis, simulations and,
+    /// with `fpga`, mapping, placing and routing (all threads).
     pub seconds: f64,
     pub threads: usize,
     /// Per variable.
     pub figures: Figures,
     /// Placed and routed on an FPGA, when asked: every variable's critical
-    /// path in ns.
+    /// path in ns (its mapped netlist simulated on the same rows).
     pub fpga: Option<fpga::State>,
     /// The state's time on the FPGA: the slowest variable's critical path
     /// (ns); none without `fpga`, or when a variable does not fit.
     pub fpga_ns_per_state: Option<f64>,
-    /// Wall time of mapping, placing and routing every variable.
-    pub fpga_seconds: Option<f64>,
 }
 
 /// Measures the model at `model` (trained with `codebook`) on the first
@@ -63,18 +61,9 @@ pub fn on_run(
 ) -> Result<Bench> {
     let trained = Trained::read(model, codebook)?;
     let start = Instant::now();
-    let (figures, rows) = measure_test_rows(&trained, model, levels, rows, progress)?;
+    let (measurement, rows) = measure_test_rows(&trained, model, levels, rows, fpga, progress)?;
     let seconds = start.elapsed().as_secs_f64();
-    let (fpga, fpga_seconds) = match fpga {
-        Some((device, seed)) => {
-            let start = Instant::now();
-            let circuit = circuit_of(&trained, model)?;
-            let scratch = tempfile::tempdir().map_err(|e| Error::io(&std::env::temp_dir(), e))?;
-            let state = fpga::place_state(&circuit, device, seed, scratch.path(), progress)?;
-            (Some(state), Some(start.elapsed().as_secs_f64()))
-        }
-        None => (None, None),
-    };
+    let Measurement { figures, fpga } = measurement;
     let deepest = figures.deepest().expect("a model predicts a variable");
     Ok(Bench {
         rows,
@@ -95,6 +84,5 @@ pub fn on_run(
         figures,
         fpga_ns_per_state: fpga.as_ref().and_then(fpga::State::critical_ns),
         fpga,
-        fpga_seconds,
     })
 }

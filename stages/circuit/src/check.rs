@@ -8,6 +8,7 @@ use alnlab_codes::codes::Codec;
 use alnlab_common::{Error, Progress, Result};
 use rayon::prelude::*;
 
+use crate::fpga::{self, Device};
 use crate::synth::{self, Figures, LIBRARY, VariableFigures};
 use crate::verilog::{COMMON_FILE, Circuit};
 use crate::{simulate, tools};
@@ -21,37 +22,61 @@ pub fn write_files(circuit: &Circuit, dir: &Path) -> Result<()> {
     Ok(())
 }
 
+/// What [`measure`] measured: the synthesized circuit and, when asked,
+/// every variable placed and routed on an FPGA.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Measurement {
+    pub figures: Figures,
+    pub fpga: Option<fpga::State>,
+}
+
 /// Synthesizes `circuit` in `dir` (a scratch folder) and, for the rows of
 /// levels `x` (`[variable][row]`, coded by `codecs`), simulates the
 /// exported Verilog and the synthesized netlist of every variable; both
 /// must put out the `expected` levels (`[variable][row]`: the software's),
-/// or the error names the variable, the row and both levels. Variables run
-/// in parallel on rayon's threads.
+/// or the error names the variable, the row and both levels. With `fpga`
+/// (a device and nextpnr's seed), every variable is also mapped, placed
+/// and routed on it ([`fpga::place_and_route`]) and its mapped netlist
+/// held to the same rows. Variables run in parallel on rayon's threads.
 pub fn measure(
     circuit: &Circuit,
     codecs: &[Codec],
     x: &[Vec<u16>],
     expected: &[Vec<u16>],
+    fpga: Option<(Device, u64)>,
     dir: &Path,
     progress: &dyn Progress,
-) -> Result<Figures> {
+) -> Result<Measurement> {
     let tools = tools::versions()?;
+    let fpga_tools = fpga.map(|_| fpga::tool_versions()).transpose()?;
+    let cell_models = fpga
+        .map(|_| tools::yosys_data(ICE40_MODELS))
+        .transpose()?
+        .map(|p| p.display().to_string());
     write_files(circuit, dir)?;
     let rows = x.first().map_or(0, Vec::len);
     if rows > 0 {
         simulate::write_rows(circuit, codecs, x, dir)?;
     }
     progress.start("circuit", circuit.variables.len() as u64, "variables");
-    let variables: Vec<VariableFigures> = (0..circuit.variables.len())
+    let measured: Vec<(VariableFigures, Option<fpga::Placed>)> = (0..circuit.variables.len())
         .into_par_iter()
         .map(|v| {
             let c = &circuit.variables[v];
             let figures = synth::synthesize(circuit, v, dir)?;
+            let placed = fpga
+                .map(|(device, seed)| fpga::place_and_route(circuit, v, device, seed, dir))
+                .transpose()?;
             if rows > 0 {
-                let exported = [COMMON_FILE.to_string(), c.file.clone()];
-                let netlist = [synth::netlist_file(c)];
-                for (tag, sources) in [("exported", &exported[..]), ("synthesized", &netlist[..])] {
-                    let got = simulate::run(circuit, v, sources, rows, dir, tag)?;
+                let exported = vec![COMMON_FILE.to_string(), c.file.clone()];
+                let mut netlists = vec![("exported", exported, &[][..])];
+                netlists.push(("synthesized", vec![synth::netlist_file(c)], &[]));
+                if let Some(models) = &cell_models {
+                    let mapped = vec![fpga::mapped_file(circuit, v), models.clone()];
+                    netlists.push(("mapped", mapped, ICE40_DEFINES));
+                }
+                for (tag, sources, defines) in netlists {
+                    let got = simulate::run(circuit, v, &sources, defines, rows, dir, tag)?;
                     if let Some(r) = (0..rows).find(|&r| got[r] != expected[v][r]) {
                         return Err(Error::Corrupt(format!(
                             "the {tag} circuit of `{}` puts out level {} on row {r}, the \
@@ -62,15 +87,33 @@ pub fn measure(
                 }
             }
             progress.advance(1);
-            Ok(figures)
+            Ok((figures, placed))
         })
         .collect::<Result<_>>()?;
-    Ok(Figures {
-        tools,
-        library: LIBRARY.to_string(),
-        variables,
+    let (variables, placed): (Vec<_>, Vec<_>) = measured.into_iter().unzip();
+    let fpga = fpga
+        .zip(fpga_tools)
+        .map(|((device, seed), tools)| fpga::State {
+            device,
+            seed: seed % fpga::NEXTPNR_SEEDS,
+            tools,
+            variables: placed.into_iter().flatten().collect(),
+        });
+    Ok(Measurement {
+        figures: Figures {
+            tools,
+            library: LIBRARY.to_string(),
+            variables,
+        },
+        fpga,
     })
 }
+
+/// Yosys' simulation models of the iCE40's cells, in its data folder.
+const ICE40_MODELS: &str = "ice40/cells_sim.v";
+/// Icarus Verilog reads the models without their ports' default values
+/// (a SystemVerilog form); the mapped netlist connects every port.
+const ICE40_DEFINES: &[&str] = &["NO_ICE40_DEFAULT_ASSIGNMENTS"];
 
 #[cfg(test)]
 mod tests {
@@ -158,7 +201,9 @@ mod tests {
         let names: Vec<String> = names.iter().map(|n| n.to_string()).collect();
         let circuit = Circuit::new(model, &names, codecs, outputs).unwrap();
         let dir = tempfile::tempdir().unwrap();
-        measure(&circuit, codecs, &x, &expected, dir.path(), &Silent).unwrap()
+        measure(&circuit, codecs, &x, &expected, None, dir.path(), &Silent)
+            .unwrap()
+            .figures
     }
 
     #[test]

@@ -23,8 +23,7 @@ use std::collections::BTreeMap;
 use std::fmt::Write as _;
 use std::path::Path;
 
-use alnlab_common::{Error, Progress, Result};
-use rayon::prelude::*;
+use alnlab_common::{Error, Result};
 use serde::{Deserialize, Serialize};
 
 use crate::tools;
@@ -45,6 +44,18 @@ impl Device {
         match self {
             Device::Ice40Hx8k => "ice40-hx8k",
         }
+    }
+
+    /// As a reader knows it.
+    pub fn description(self) -> &'static str {
+        match self {
+            Device::Ice40Hx8k => "Lattice iCE40 HX8K",
+        }
+    }
+
+    /// The device a manifest or a table names.
+    pub fn named(name: &str) -> Option<Device> {
+        [Device::Ice40Hx8k].into_iter().find(|d| d.name() == name)
     }
 
     /// nextpnr-ice40's arguments selecting the part.
@@ -68,6 +79,8 @@ pub struct Placed {
     pub variable: String,
     /// Lookup tables after mapping (`SB_LUT4`).
     pub luts: u64,
+    /// The predictor's longest path in lookup tables (Yosys' `ltp`).
+    pub lut_levels: u32,
     /// Logic cells used after packing, or needed when it does not fit.
     pub logic_cells: u64,
     /// Of the part.
@@ -75,13 +88,24 @@ pub struct Placed {
     /// The critical path, register to register, in ns; none when it does
     /// not fit.
     pub critical_ns: Option<f64>,
-    /// The maximum clock, MHz.
-    pub max_mhz: Option<f64>,
+}
+
+impl Placed {
+    /// The maximum clock, MHz; none when it does not fit.
+    pub fn max_mhz(&self) -> Option<f64> {
+        self.critical_ns.map(|ns| 1000.0 / ns)
+    }
 }
 
 /// The top module wrapping variable `v`'s predictor between registers.
 pub fn top_module(circuit: &Circuit, v: usize) -> String {
     format!("fpga_{}", circuit.variables[v].ident)
+}
+
+/// The mapped netlist of variable `v` (its predictor in `SB_LUT4`s, the
+/// wrapper's registers in `SB_DFF`s), as [`place_and_route`] writes it.
+pub fn mapped_file(circuit: &Circuit, v: usize) -> String {
+    format!("{}_mapped.v", top_module(circuit, v))
 }
 
 /// The Verilog of [`top_module`]: a shift register of every input bit the
@@ -139,9 +163,13 @@ pub fn wrapper(circuit: &Circuit, v: usize) -> String {
     text
 }
 
-/// Places and routes variable `v` of `circuit` (its files already written
-/// in `dir`, as [`crate::check::write_files`] does) on `device` with
-/// nextpnr's `seed`.
+/// Maps variable `v` of `circuit` (its files already written in `dir`, as
+/// [`crate::check::write_files`] does) onto `device`, writes the mapped
+/// netlist ([`mapped_file`]: the one placed) and places and routes it with
+/// nextpnr's `seed`. The predictor stays a module of its own through
+/// mapping (`keep_hierarchy`), so the netlist simulated on the test rows
+/// is the very logic placed; the registers around it keep synthesis from
+/// merging logic across them either way.
 pub fn place_and_route(
     circuit: &Circuit,
     v: usize,
@@ -156,30 +184,45 @@ pub fn place_and_route(
     std::fs::write(&path, wrapper(circuit, v)).map_err(|e| Error::io(&path, e))?;
     let netlist = format!("{top}.json");
     let stat = format!("{top}_stat.json");
+    let ltp = format!("{top}_ltp.txt");
     let script = format!(
         "read_verilog {COMMON_FILE} {file} {wrapper_file}\n\
+         hierarchy -check -top {top}\n\
+         setattr -mod -set keep_hierarchy 1 {module}\n\
          synth_ice40 -nocarry -top {top} -json {netlist}\n\
-         tee -q -o {stat} stat -json\n",
+         write_verilog -noattr {mapped}\n\
+         tee -q -o {stat} stat -json\n\
+         tee -q -o {ltp} ltp -noff {module}\n",
         file = c.file,
+        module = c.module,
+        mapped = mapped_file(circuit, v),
     );
     let script_file = format!("{top}.ys");
     let path = dir.join(&script_file);
     std::fs::write(&path, script).map_err(|e| Error::io(&path, e))?;
     tools::run("yosys", &["-q", "-s", &script_file], dir)?;
-    let luts = read_luts(&dir.join(&stat), &top)?;
+    let luts = crate::synth::read_stat(&dir.join(&stat))?
+        .values()
+        .filter_map(|cells| cells.get("SB_LUT4"))
+        .sum();
+    let ltp = dir.join(&ltp);
+    let lut_levels = *crate::synth::read_depths(&ltp)?
+        .get(&c.module)
+        .ok_or_else(|| Error::bad_file(&ltp, format!("no path of module `{}`", c.module)))?;
     let available = device.logic_cells();
+    let mut placed = Placed {
+        variable: c.variable.clone(),
+        luts,
+        lut_levels,
+        logic_cells: luts,
+        available,
+        critical_ns: None,
+    };
     if luts > available {
-        return Ok(Placed {
-            variable: c.variable.clone(),
-            luts,
-            logic_cells: luts,
-            available,
-            critical_ns: None,
-            max_mhz: None,
-        });
+        return Ok(placed);
     }
     let report = format!("{top}_pnr.json");
-    let seed = seed.to_string();
+    let seed = (seed % NEXTPNR_SEEDS).to_string();
     let mut args: Vec<&str> = device.nextpnr_args().to_vec();
     args.extend([
         "--json",
@@ -194,26 +237,22 @@ pub fn place_and_route(
         &report,
         "--quiet",
     ]);
-    tools::run("nextpnr-ice40", &args, dir)?;
+    let log = format!("{top}_pnr.log");
+    tools::run_for("nextpnr-ice40", &args, dir, &log, PLACE_AND_ROUTE_LIMIT)
+        .map_err(|e| e.context(&format!("placing and routing `{}`", c.variable)))?;
     let (logic_cells, mhz) = read_report(&dir.join(&report))?;
-    Ok(Placed {
-        variable: c.variable.clone(),
-        luts,
-        logic_cells,
-        available,
-        critical_ns: Some(1000.0 / mhz),
-        max_mhz: Some(mhz),
-    })
+    placed.logic_cells = logic_cells;
+    placed.critical_ns = Some(1000.0 / mhz);
+    Ok(placed)
 }
 
-/// The lookup tables of `top` after `synth_ice40` (`stat -json`).
-fn read_luts(path: &Path, top: &str) -> Result<u64> {
-    let stat = crate::synth::read_stat(path)?;
-    let cells = stat
-        .get(top)
-        .ok_or_else(|| Error::bad_file(path, format!("no module `{top}`")))?;
-    Ok(cells.get("SB_LUT4").copied().unwrap_or(0))
-}
+/// nextpnr reads its seed as a C `int`: seeds are taken modulo 2³¹.
+pub const NEXTPNR_SEEDS: u64 = 1 << 31;
+
+/// How long one variable may take to place and route: a walk decoder's
+/// carry chains once kept nextpnr routing for over ten minutes; mapped
+/// without them the largest forests here take seconds.
+const PLACE_AND_ROUTE_LIMIT: std::time::Duration = std::time::Duration::from_secs(900);
 
 /// Logic cells used and the achieved clock (MHz) from nextpnr's
 /// `--report` JSON.
@@ -249,40 +288,13 @@ fn read_report(path: &Path) -> Result<(u64, f64)> {
     Ok((cells, mhz))
 }
 
-/// Places and routes every variable of `circuit` on `device` in `dir` (a
-/// scratch folder), side by side on rayon's threads.
-pub fn place_state(
-    circuit: &Circuit,
-    device: Device,
-    seed: u64,
-    dir: &Path,
-    progress: &dyn Progress,
-) -> Result<State> {
-    let tools = format!(
+/// Yosys' and nextpnr-ice40's versions, as they print them.
+pub fn tool_versions() -> Result<String> {
+    Ok(format!(
         "{}; {}",
-        tools::run("yosys", &["-V"], dir)?.trim(),
+        tools::run("yosys", &["-V"], Path::new("."))?.trim(),
         tools::version("nextpnr-ice40")?
-    );
-    crate::check::write_files(circuit, dir)?;
-    progress.start(
-        "place and route",
-        circuit.variables.len() as u64,
-        "variables",
-    );
-    let variables = (0..circuit.variables.len())
-        .into_par_iter()
-        .map(|v| {
-            let placed = place_and_route(circuit, v, device, seed, dir);
-            progress.advance(1);
-            placed
-        })
-        .collect::<Result<Vec<_>>>()?;
-    Ok(State {
-        device: device.name(),
-        seed,
-        tools,
-        variables,
-    })
+    ))
 }
 
 /// The state on `device`: every variable placed and routed, and the
@@ -290,7 +302,8 @@ pub fn place_state(
 /// each).
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct State {
-    pub device: &'static str,
+    pub device: Device,
+    /// nextpnr's seed.
     pub seed: u64,
     pub tools: String,
     pub variables: Vec<Placed>,
@@ -311,6 +324,15 @@ impl State {
             .iter()
             .filter(|p| p.critical_ns.is_some())
             .max_by(|a, b| a.critical_ns.partial_cmp(&b.critical_ns).expect("finite"))
+    }
+
+    /// The longest path in lookup tables, over the variables.
+    pub fn lut_levels(&self) -> u32 {
+        self.variables
+            .iter()
+            .map(|p| p.lut_levels)
+            .max()
+            .unwrap_or(0)
     }
 }
 
@@ -342,11 +364,11 @@ mod tests {
             luts: 1,
             logic_cells: 1,
             available: 7680,
+            lut_levels: 3,
             critical_ns: ns,
-            max_mhz: ns.map(|ns| 1000.0 / ns),
         };
         let mut state = State {
-            device: "ice40-hx8k",
+            device: Device::Ice40Hx8k,
             seed: 1,
             tools: String::new(),
             variables: vec![placed("a", Some(4.5)), placed("b", Some(10.8))],

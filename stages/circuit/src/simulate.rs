@@ -60,12 +60,13 @@ fn write(path: &Path, text: &str) -> Result<()> {
 
 /// The levels variable `v`'s module puts out for the `rows` rows written by
 /// [`write_rows`], simulating the Verilog `sources` (files in `dir`: the
-/// exported ones or a synthesized netlist); `tag` keeps the files of
-/// several simulations apart.
+/// exported ones or a netlist and its cells' models) with the preprocessor
+/// `defines`; `tag` keeps the files of several simulations apart.
 pub fn run(
     circuit: &Circuit,
     v: usize,
     sources: &[String],
+    defines: &[&str],
     rows: usize,
     dir: &Path,
     tag: &str,
@@ -133,7 +134,9 @@ pub fn run(
     let bench = format!("tb_{tag}_{}.v", c.ident);
     write(&dir.join(&bench), &tb)?;
     let compiled = format!("tb_{tag}_{}.vvp", c.ident);
+    let defines: Vec<String> = defines.iter().map(|d| format!("-D{d}")).collect();
     let mut args = vec!["-g2005", "-o", compiled.as_str(), "-s", "tb"];
+    args.extend(defines.iter().map(String::as_str));
     args.extend(sources.iter().map(String::as_str));
     args.push(&bench);
     tools::run("iverilog", &args, dir)?;

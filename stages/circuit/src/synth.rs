@@ -209,7 +209,7 @@ pub(crate) fn read_stat(path: &Path) -> Result<BTreeMap<String, BTreeMap<String,
 }
 
 /// Per module, its longest topological path in cells (`ltp -noff`).
-fn read_depths(path: &Path) -> Result<BTreeMap<String, u32>> {
+pub(crate) fn read_depths(path: &Path) -> Result<BTreeMap<String, u32>> {
     let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
     let mut depths = BTreeMap::new();
     for line in text.lines() {

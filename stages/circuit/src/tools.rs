@@ -3,8 +3,10 @@
 //! program is an error that says how to install it; a failing one, an error
 //! with the end of what it printed.
 
-use std::path::Path;
-use std::process::{Command, Output};
+use std::fs::File;
+use std::path::{Path, PathBuf};
+use std::process::{Command, ExitStatus, Output};
+use std::time::{Duration, Instant};
 
 use alnlab_common::{Error, Result};
 
@@ -26,12 +28,30 @@ fn spawn(program: &str, args: &[&str], dir: &Path) -> Result<Output> {
         .args(args)
         .current_dir(dir)
         .output()
-        .map_err(|e| match e.kind() {
-            std::io::ErrorKind::NotFound => {
-                Error::Invalid(format!("`{program}` was not found: {}", install(program)))
-            }
-            _ => Error::io(Path::new(program), e),
-        })
+        .map_err(|e| not_started(program, e))
+}
+
+/// Why `program` did not start: missing (and how to install it), or else.
+fn not_started(program: &str, e: std::io::Error) -> Error {
+    match e.kind() {
+        std::io::ErrorKind::NotFound => {
+            Error::Invalid(format!("`{program}` was not found: {}", install(program)))
+        }
+        _ => Error::io(Path::new(program), e),
+    }
+}
+
+/// The error of `program` ended with `status`, quoting the end of what it
+/// `said`.
+fn failed(program: &str, args: &[&str], dir: &Path, status: ExitStatus, said: &str) -> Error {
+    let tail: Vec<&str> = said.lines().rev().take(12).collect();
+    let tail: Vec<&str> = tail.into_iter().rev().collect();
+    Error::Corrupt(format!(
+        "`{program} {}` in {} failed ({status}):\n{}",
+        args.join(" "),
+        dir.display(),
+        tail.join("\n")
+    ))
 }
 
 /// Runs `program` with `args` in `dir`; its standard output on success.
@@ -40,17 +60,80 @@ pub fn run(program: &str, args: &[&str], dir: &Path) -> Result<String> {
     if !output.status.success() {
         let mut said = String::from_utf8_lossy(&output.stdout).into_owned();
         said.push_str(&String::from_utf8_lossy(&output.stderr));
-        let tail: Vec<&str> = said.lines().rev().take(12).collect();
-        let tail: Vec<&str> = tail.into_iter().rev().collect();
-        return Err(Error::Corrupt(format!(
-            "`{program} {}` in {} failed ({}):\n{}",
-            args.join(" "),
-            dir.display(),
-            output.status,
-            tail.join("\n")
-        )));
+        return Err(failed(program, args, dir, output.status, &said));
     }
     Ok(String::from_utf8_lossy(&output.stdout).into_owned())
+}
+
+/// Runs `program` with `args` in `dir` for at most `limit`, both its
+/// streams into the file `log` there; past the limit it is stopped, and
+/// that is the error.
+pub fn run_for(program: &str, args: &[&str], dir: &Path, log: &str, limit: Duration) -> Result<()> {
+    let path = dir.join(log);
+    let file = File::create(&path).map_err(|e| Error::io(&path, e))?;
+    let copy = file.try_clone().map_err(|e| Error::io(&path, e))?;
+    let mut child = Command::new(program)
+        .args(args)
+        .current_dir(dir)
+        .stdout(copy)
+        .stderr(file)
+        .spawn()
+        .map_err(|e| not_started(program, e))?;
+    let start = Instant::now();
+    let status = loop {
+        if let Some(status) = child
+            .try_wait()
+            .map_err(|e| Error::io(Path::new(program), e))?
+        {
+            break status;
+        }
+        if start.elapsed() > limit {
+            // Already ended or killed: either way it is reaped below.
+            let _ = child.kill();
+            let _ = child.wait();
+            return Err(Error::Corrupt(format!(
+                "`{program} {}` in {} did not finish in {} s",
+                args.join(" "),
+                dir.display(),
+                limit.as_secs()
+            )));
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    };
+    if !status.success() {
+        let said = std::fs::read_to_string(&path).unwrap_or_default();
+        return Err(failed(program, args, dir, status, &said));
+    }
+    Ok(())
+}
+
+/// A file of Yosys' data folder (its scripts' `+/`, which holds e.g. the
+/// iCE40 cells' simulation models), found where Yosys itself looks:
+/// `share/` or `../share/yosys/` beside its own executable, the `yosys` on
+/// PATH with links resolved.
+pub fn yosys_data(file: &str) -> Result<PathBuf> {
+    let path = std::env::var_os("PATH").unwrap_or_default();
+    let exe = std::env::split_paths(&path)
+        .map(|dir| dir.join("yosys"))
+        .find(|p| p.is_file())
+        .ok_or_else(|| Error::Invalid(format!("`yosys` was not found: {}", install("yosys"))))?;
+    let exe = std::fs::canonicalize(&exe).map_err(|e| Error::io(&exe, e))?;
+    let bin = exe.parent().unwrap_or(Path::new("/"));
+    let candidates = [
+        bin.join("share").join(file),
+        bin.join("../share/yosys").join(file),
+    ];
+    candidates
+        .iter()
+        .find(|p| p.is_file())
+        .cloned()
+        .ok_or_else(|| {
+            Error::Invalid(format!(
+                "Yosys' data file `{file}` is in neither {} nor {}: is Yosys installed whole?",
+                candidates[0].display(),
+                candidates[1].display()
+            ))
+        })
 }
 
 /// The first line `program` prints, on either stream, given `--version`.

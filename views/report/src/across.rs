@@ -296,13 +296,20 @@ pub(super) fn side_by_side(md: &mut String, variants: &[Loaded], shared: bool) {
 
     // The measured circuit's column only when the circuit stage measured one.
     let measured = variants.iter().any(|v| v.circuit.is_some());
+    let placed = variants.iter().any(|v| v.fpga.is_some());
     let _ = writeln!(
         md,
         "Cost: time per predicted state on one thread (median of the timed runs), the §5 \
-         hardware estimate{}, training time as computed (also when the stage was cached) and the \
-         trees' memory while training.\n",
+         hardware estimate{}{}, training time as computed (also when the stage was cached) and \
+         the trees' memory while training.\n",
         if measured {
-            " and the synthesized circuit's longest path in gate levels (the circuit stage)"
+            ", the synthesized circuit's longest path in gate levels (the circuit stage)"
+        } else {
+            ""
+        },
+        if placed {
+            " and its time per state placed and routed on an FPGA (the critical path, from timing \
+             analysis)"
         } else {
             ""
         }
@@ -310,6 +317,9 @@ pub(super) fn side_by_side(md: &mut String, variants: &[Loaded], shared: bool) {
     let mut columns = vec!["ALN batched", "ALN one at a time", "hardware (gate delays)"];
     if measured {
         columns.push("circuit (gate levels)");
+    }
+    if placed {
+        columns.push("FPGA (ns)");
     }
     columns.extend(["training (s)", "trees (MiB)"]);
     let mut table = MdTable::new(&["variant"]).numbers(&columns);
@@ -330,6 +340,14 @@ pub(super) fn side_by_side(md: &mut String, variants: &[Loaded], shared: bool) {
                 v.circuit
                     .as_ref()
                     .map_or("—".into(), |c| c.depth.to_string()),
+            );
+        }
+        if placed {
+            row.push(
+                v.fpga
+                    .as_ref()
+                    .and_then(|f| f.state.critical_ns())
+                    .map_or("—".into(), sig3),
             );
         }
         row.push(

@@ -9,7 +9,9 @@ use std::path::Path;
 
 use alnlab_common::Result;
 
-use super::format::MdTable;
+use alnlab_circuit::routed::Routed;
+
+use super::format::{MdTable, sig3};
 
 /// The paper's estimate for its model (§5): 13 levels of a tree of 8192
 /// leaves, then twice the 23 bits of a code to decode it.
@@ -152,4 +154,236 @@ pub(super) fn section(md: &mut String, m: &Measured, pruned: (u64, u32), estimat
          the software's level on every one of the {} test rows for every variable.\n",
         m.rows_equal
     );
+}
+
+/// A variant's CPU figures beside the FPGA's: ns per state on one thread.
+pub(super) struct Cpu {
+    /// The software ALN in batches…
+    pub(super) aln_batched: Option<f64>,
+    /// … and one state at a time.
+    pub(super) aln_single: Option<f64>,
+    /// The simulator re-stepping a frame with one step.
+    pub(super) simulator: Option<f64>,
+}
+
+/// The forest placed and routed on an FPGA: how, the table of gate levels,
+/// lookup-table levels, ns and states per second beside the paper's
+/// estimate and the CPU, and whether the paper's "nanoseconds" holds.
+/// `gate_levels` is the synthesized circuit's longest path.
+pub(super) fn fpga_section(md: &mut String, routed: &Routed, gate_levels: u32, cpu: &Cpu) {
+    let state = &routed.state;
+    let n = state.variables.len();
+    let available = state.variables.first().map_or(0, |p| p.available);
+    let _ = writeln!(
+        md,
+        "**On an FPGA** ({}, {available} logic cells; {}; nextpnr seed {}). Each variable's \
+         predictor — its trees, votes and decoder — sits between an input register (filled bit \
+         by bit from one pin: a state's code bits outnumber the part's pins) and an output \
+         register; Yosys maps it whole onto 4-input lookup tables (`synth_ice40`; trees, votes and \
+         decoder optimized together, where the gate count above keeps them apart; adders in \
+         lookup tables too) and nextpnr places and routes it. One prediction takes the critical path \
+         between the registers, from nextpnr's timing analysis. The variables run side by side, \
+         one part each, so a state takes the slowest variable's time. The mapped netlist — the \
+         one placed, not the post-route one — simulated by Icarus Verilog puts out the \
+         software's level on every one of the {} test rows for every variable.\n",
+        state.device.description(),
+        state.tools,
+        state.seed,
+        routed.rows_equal
+    );
+    let mut table = MdTable::new(&["predictor"]).numbers(&[
+        "gate levels",
+        "lookup-table levels",
+        "ns per state",
+        "states per second",
+    ]);
+    let per_second = |ns: f64| format!("{} million", sig3(1e3 / ns));
+    let dash = || "—".to_string();
+    table.row(vec![
+        "the paper's estimate (§5)".into(),
+        PAPER_DELAYS.to_string(),
+        dash(),
+        dash(),
+        dash(),
+    ]);
+    let ns = state.critical_ns();
+    table.row(vec![
+        format!(
+            "this forest on the {} (each figure its worst variable's, of {n})",
+            state.device.description()
+        ),
+        gate_levels.to_string(),
+        state.lut_levels().to_string(),
+        ns.map_or_else(dash, sig3),
+        ns.map_or_else(dash, per_second),
+    ]);
+    for (name, figure) in [
+        (
+            "the software ALN, one CPU thread, in batches",
+            cpu.aln_batched,
+        ),
+        (
+            "the software ALN, one CPU thread, one state at a time",
+            cpu.aln_single,
+        ),
+        ("simulator@1/frame, one CPU thread", cpu.simulator),
+    ] {
+        if let Some(cpu_ns) = figure {
+            table.row(vec![
+                name.into(),
+                dash(),
+                dash(),
+                sig3(cpu_ns),
+                per_second(cpu_ns),
+            ]);
+        }
+    }
+    table.write(md);
+    let placed: Vec<f64> = {
+        let mut ns: Vec<f64> = state
+            .variables
+            .iter()
+            .filter_map(|p| p.critical_ns)
+            .collect();
+        ns.sort_by(f64::total_cmp);
+        ns
+    };
+    let luts: u64 = state.variables.iter().map(|p| p.luts).sum();
+    let largest = state
+        .variables
+        .iter()
+        .map(|p| p.logic_cells)
+        .max()
+        .unwrap_or(0);
+    if let (Some(first), Some(last)) = (placed.first(), placed.last()) {
+        let _ = write!(
+            md,
+            "Per variable, critical paths run from {} to {} ns (median {}); {luts} lookup tables \
+             in all, the largest variable taking {largest} of the part's {available} logic cells. ",
+            sig3(*first),
+            sig3(*last),
+            sig3(placed[placed.len() / 2]),
+        );
+    }
+    for p in state.variables.iter().filter(|p| p.critical_ns.is_none()) {
+        let _ = write!(
+            md,
+            "`{}` does not fit: it needs {} logic cells, the part has {}. ",
+            p.variable, p.logic_cells, p.available
+        );
+    }
+    let verdict = match (ns, state.slowest()) {
+        (Some(ns), Some(slowest)) if ns < 1000.0 => {
+            // The software's quicker path, against one state in hardware.
+            let software = [
+                (cpu.aln_batched, "in batches"),
+                (cpu.aln_single, "one state at a time"),
+            ]
+            .into_iter()
+            .filter_map(|(ns, how)| Some((ns?, how)))
+            .min_by(|a, b| a.0.total_cmp(&b.0));
+            let faster = software
+                .map(|(cpu, how)| {
+                    format!(
+                        ", {}× faster than the software ALN on one CPU thread ({how}, its quicker \
+                         path)",
+                        sig3(cpu / ns)
+                    )
+                })
+                .unwrap_or_default();
+            format!(
+                "**The paper's \"nanoseconds\" is confirmed:** a state in {} ns on this part (the \
+                 slowest variable, `{}`, through {} lookup tables){faster}.",
+                sig3(ns),
+                slowest.variable,
+                slowest.lut_levels
+            )
+        }
+        (Some(ns), _) => format!(
+            "**The paper's \"nanoseconds\" is refuted on this part:** a state takes {} ns, over a \
+             microsecond.",
+            sig3(ns)
+        ),
+        (None, _) => format!(
+            "**The paper's \"nanoseconds\" is not measured on this part:** {} of {n} variables do \
+             not fit it.",
+            state
+                .variables
+                .iter()
+                .filter(|p| p.critical_ns.is_none())
+                .count()
+        ),
+    };
+    let _ = writeln!(md, "{verdict}\n");
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use alnlab_circuit::fpga::{Device, Placed, State};
+
+    fn routed(ns: &[Option<f64>]) -> Routed {
+        let variables = ns
+            .iter()
+            .enumerate()
+            .map(|(i, &ns)| Placed {
+                variable: format!("v.{i}.x"),
+                luts: 500 + i as u64,
+                lut_levels: 5 + i as u32,
+                logic_cells: if ns.is_some() { 520 } else { 9000 },
+                available: 7680,
+                critical_ns: ns,
+            })
+            .collect();
+        Routed {
+            state: State {
+                device: Device::Ice40Hx8k,
+                seed: 7,
+                tools: "tools".into(),
+                variables,
+            },
+            rows_equal: 300,
+        }
+    }
+
+    const CPU: Cpu = Cpu {
+        aln_batched: Some(1550.0),
+        aln_single: Some(7870.0),
+        simulator: Some(2590.0),
+    };
+
+    #[test]
+    fn a_state_in_nanoseconds_confirms_the_paper_with_its_slowest_variable() {
+        let mut md = String::new();
+        fpga_section(
+            &mut md,
+            &routed(&[Some(8.5), Some(10.75), Some(4.25)]),
+            14,
+            &CPU,
+        );
+        assert!(md.contains("on every one of the 300 test rows"), "{md}");
+        assert!(md.contains("| 59 |"), "{md}");
+        assert!(md.contains("| 14 | 7 | 10.8 | 93.0 million |"), "{md}");
+        assert!(md.contains("| 1550 | 0.645 million |"), "{md}");
+        assert!(md.contains("from 4.25 to 10.8 ns (median 8.50)"), "{md}");
+        assert!(
+            md.contains(
+                "is confirmed:** a state in 10.8 ns on this part (the slowest variable, \
+                         `v.1.x`, through 6 lookup tables), 144× faster than the \
+                         software ALN on one CPU thread (in batches, its quicker path)"
+            ),
+            "{md}"
+        );
+    }
+
+    #[test]
+    fn a_variable_that_does_not_fit_is_named_and_leaves_the_claim_unmeasured() {
+        let mut md = String::new();
+        fpga_section(&mut md, &routed(&[Some(8.5), None]), 14, &CPU);
+        assert!(md.contains("`v.1.x` does not fit: it needs 9000 logic cells, the part has 7680"));
+        assert!(
+            md.contains("not measured on this part:** 1 of 2 variables do not fit"),
+            "{md}"
+        );
+    }
 }

@@ -89,6 +89,8 @@ pub struct VariantInfo {
     pub plan_setup: Option<PlanSetup>,
     /// The circuit stage's figures, if the run had them.
     pub circuit: Option<PathBuf>,
+    /// The circuit stage's place-and-route figures, if the run had them.
+    pub fpga: Option<PathBuf>,
     /// Every replicate of the variant (the first is the one above), when
     /// the experiment runs more than one.
     pub replicates: Vec<Replicate>,
@@ -173,6 +175,9 @@ struct Loaded<'a> {
     /// The synthesized circuit's figures, when the circuit stage measured
     /// them.
     circuit: Option<circuit::Measured>,
+    /// Every variable placed and routed on an FPGA, when the circuit stage
+    /// did it.
+    fpga: Option<alnlab_circuit::routed::Routed>,
     coverage: Coverage,
     /// Bytes the trees take in memory while training: two counters per
     /// internal node, a literal per leaf.
@@ -583,6 +588,10 @@ fn load(info: &VariantInfo) -> Result<Loaded<'_>> {
         hardware,
         circuit: match &info.circuit {
             Some(path) => circuit::read(path)?,
+            None => None,
+        },
+        fpga: match &info.fpga {
+            Some(path) => alnlab_circuit::routed::read(path)?,
             None => None,
         },
         coverage,

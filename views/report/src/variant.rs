@@ -449,7 +449,15 @@ fn hardware(md: &mut String, v: &Loaded) {
     };
     match (&v.circuit, h.kind) {
         (Some(measured), _) => {
-            super::circuit::section(md, measured, (h.pruned_gates, h.max_depth), h.delays())
+            super::circuit::section(md, measured, (h.pruned_gates, h.max_depth), h.delays());
+            if let Some(routed) = &v.fpga {
+                let cpu = super::circuit::Cpu {
+                    aln_batched: v.ns("aln", "batched"),
+                    aln_single: v.aln_single().map(|t| t.ns_per_state),
+                    simulator: v.ns("simulator@1/frame", "single"),
+                };
+                super::circuit::fpga_section(md, routed, measured.depth, &cpu);
+            }
         }
         (None, ModelKind::Threshold) if v.info.circuit.is_some() => {
             let _ = writeln!(
