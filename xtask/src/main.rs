@@ -4,9 +4,10 @@
 //! - `cargo xtask test` — the README's test command: installs what the
 //!   suite needs and the machine lacks ([`setup`]: Debian packages, a Python
 //!   environment of its own), then runs the whole suite ([`suite`]): `cargo
-//!   test --workspace`, the interop check with standard readers, both
-//!   quickstart forests as circuits, the MLflow round trip against a real
-//!   server on loopback and the Snakemake workflow.
+//!   test --workspace`, the interop check with standard readers, the
+//!   quickstart's Gray forest as a circuit placed and routed on an iCE40,
+//!   the MLflow round trip against a real server on loopback and the
+//!   Snakemake workflow.
 //! - `cargo xtask setup` — only the installing.
 
 mod setup;

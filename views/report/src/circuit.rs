@@ -156,6 +156,41 @@ pub(super) fn section(md: &mut String, m: &Measured, pruned: (u64, u32), estimat
     );
 }
 
+/// The first screen's sentence on variant `name`'s forest in hardware:
+/// its ns per state on the FPGA, its gate levels beside the paper's 59, and
+/// the paper's "nanoseconds" judged.
+pub(super) fn in_hardware(name: &str, routed: &Routed, gate_levels: u32) -> String {
+    let state = &routed.state;
+    let time = state.critical_ns().map_or_else(
+        || {
+            let missing = state.variables.iter().filter(|p| p.critical_ns.is_none());
+            format!(
+                "does not fit: {} of its variables are too large",
+                missing.count()
+            )
+        },
+        |ns| format!("predicts a state in {} ns", sig3(ns)),
+    );
+    format!(
+        "**In hardware** (§5): `{name}`'s forest (replicate 1), placed and routed on a {}, {time} \
+         — {gate_levels} gate levels against the paper's estimate of {PAPER_DELAYS} — and equals \
+         the software on all {} test rows it was simulated on: the paper's \"nanoseconds\", {} \
+         (the hardware table is in the appendix, under `{name}`).",
+        state.device.description(),
+        routed.rows_equal,
+        claim(state.critical_ns())
+    )
+}
+
+/// The paper's "nanoseconds" for a state's time (none: it does not fit).
+fn claim(ns: Option<f64>) -> &'static str {
+    match ns {
+        Some(ns) if ns < 1000.0 => "confirmed",
+        Some(_) => "refuted: over a microsecond",
+        None => "not measured on this part",
+    }
+}
+
 /// A variant's CPU figures beside the FPGA's: ns per state on one thread.
 pub(super) struct Cpu {
     /// The software ALN in batches…
@@ -292,21 +327,22 @@ pub(super) fn fpga_section(md: &mut String, routed: &Routed, gate_levels: u32, c
                 })
                 .unwrap_or_default();
             format!(
-                "**The paper's \"nanoseconds\" is confirmed:** a state in {} ns on this part (the \
+                "**The paper's \"nanoseconds\" is {}:** a state in {} ns on this part (the \
                  slowest variable, `{}`, through {} lookup tables){faster}.",
+                claim(Some(ns)),
                 sig3(ns),
                 slowest.variable,
                 slowest.lut_levels
             )
         }
         (Some(ns), _) => format!(
-            "**The paper's \"nanoseconds\" is refuted on this part:** a state takes {} ns, over a \
-             microsecond.",
+            "**The paper's \"nanoseconds\" is {}:** a state takes {} ns on this part.",
+            claim(Some(ns)),
             sig3(ns)
         ),
         (None, _) => format!(
-            "**The paper's \"nanoseconds\" is not measured on this part:** {} of {n} variables do \
-             not fit it.",
+            "**The paper's \"nanoseconds\" is {}:** {} of {n} variables do not fit it.",
+            claim(None),
             state
                 .variables
                 .iter()
@@ -374,6 +410,23 @@ mod tests {
             ),
             "{md}"
         );
+    }
+
+    #[test]
+    fn the_first_screen_says_the_state_in_ns_and_judges_the_claim() {
+        let line = in_hardware("gray", &routed(&[Some(8.5), Some(10.75)]), 21);
+        assert!(
+            line.contains(
+                "`gray`'s forest (replicate 1), placed and routed on a Lattice \
+                               iCE40 HX8K, predicts a state in 10.8 ns — 21 gate levels"
+            ),
+            "{line}"
+        );
+        assert!(line.contains("all 300 test rows"), "{line}");
+        assert!(line.contains("\"nanoseconds\", confirmed"), "{line}");
+        let line = in_hardware("gray", &routed(&[Some(8.5), None]), 21);
+        assert!(line.contains("does not fit: 1 of its variables"), "{line}");
+        assert!(line.contains("not measured on this part"), "{line}");
     }
 
     #[test]

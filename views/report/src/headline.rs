@@ -285,6 +285,15 @@ pub(super) fn first_screen(
             ""
         },
     );
+    for v in variants {
+        if let (Some(routed), Some(circuit)) = (&v.fpga, &v.circuit) {
+            let _ = writeln!(
+                md,
+                "{}\n",
+                super::circuit::in_hardware(&v.info.name, routed, circuit.depth)
+            );
+        }
+    }
     Ok(())
 }
 
