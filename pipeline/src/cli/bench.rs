@@ -110,11 +110,14 @@ pub enum Bench {
         #[arg(long, value_parser = clap::value_parser!(u64).range(1..))]
         rows: Option<u64>,
         /// Also place and route every variable on this FPGA.
-        #[arg(long, value_parser = ["ice40-hx8k"])]
+        #[arg(long, value_parser = clap::builder::PossibleValuesParser::new(
+            alnlab_circuit::Device::ALL.map(alnlab_circuit::Device::name)
+        ))]
         fpga: Option<String>,
-        /// nextpnr's placement seed.
-        #[arg(long, default_value_t = 1)]
-        seed: u64,
+        /// nextpnr's placement seed (default: the run's seed, as the circuit
+        /// stage uses it).
+        #[arg(long)]
+        seed: Option<u64>,
         /// Print one JSON object.
         #[arg(long)]
         json: bool,
@@ -241,17 +244,21 @@ pub fn execute(bench: Bench, quiet: bool) -> Result<()> {
             seed,
             json,
         } => {
+            let seed = match seed {
+                Some(seed) => seed,
+                None => crate::records::read_record(&run_dir)?.seed,
+            };
             let fpga = fpga.map(|name| {
                 let device = alnlab_circuit::Device::named(&name).expect("clap checks the name");
                 (device, seed)
             });
-            let (name, [model, codebook, levels]) = run_artifacts(
+            let (name, [model, codebook, levels, timings]) = run_artifacts(
                 &run_dir,
                 variant.as_deref(),
-                ["model", "codebook", "levels"],
+                ["model", "codebook", "levels", "timings"],
             )?;
             let bar = crate::progress::Bar::new("circuit", quiet);
-            let f = alnlab_circuit::bench::on_run(
+            let circuit = alnlab_circuit::bench::on_run(
                 &model,
                 &codebook,
                 &levels,
@@ -260,7 +267,12 @@ pub fn execute(bench: Bench, quiet: bool) -> Result<()> {
                 &bar,
             )?;
             drop(bar);
-            print_figures(&f, json, |f| {
+            let figures = CircuitBench {
+                cpu_ns_per_state: CpuFigures::of(&alnlab_evaluate::timings::read(&timings)?),
+                circuit,
+            };
+            print_figures(&figures, json, |figures| {
+                let f = &figures.circuit;
                 let [trees, votes, decode] = f.deepest_parts;
                 println!(
                     "{name}: {} variables, {} test rows simulated, every level equal to the software's",
@@ -322,6 +334,7 @@ pub fn execute(bench: Bench, quiet: bool) -> Result<()> {
                         _ => println!("no time for the state: a variable does not fit"),
                     }
                 }
+                figures.print_table();
             });
             Ok(())
         }
@@ -476,6 +489,92 @@ fn run_artifacts<const N: usize>(
     }
     let paths: [PathBuf; N] = paths.try_into().expect("one path per role");
     Ok((chosen.name.clone(), paths))
+}
+
+/// `alnlab bench circuit`'s figures: the circuit's, and the CPU's beside
+/// them from the run's own timings.
+#[derive(serde::Serialize)]
+struct CircuitBench {
+    #[serde(flatten)]
+    circuit: alnlab_circuit::bench::Bench,
+    cpu_ns_per_state: CpuFigures,
+}
+
+/// ns per state on one CPU thread, the median of the test stage's timed
+/// runs (none when the run did not time that model).
+#[derive(serde::Serialize)]
+struct CpuFigures {
+    aln_batched: Option<f64>,
+    aln_single: Option<f64>,
+    simulator_1_per_frame: Option<f64>,
+}
+
+impl CpuFigures {
+    fn of(timings: &[alnlab_evaluate::timings::Row]) -> CpuFigures {
+        let ns = |model: &str, paths: &[&str]| {
+            timings
+                .iter()
+                .find(|t| t.model == model && paths.contains(&t.path.as_str()) && t.threads == 1)
+                .map(|t| t.ns_per_state)
+        };
+        CpuFigures {
+            aln_batched: ns("aln", &["batched"]),
+            aln_single: ns("aln", &["single", "threshold-search"]),
+            simulator_1_per_frame: ns("simulator@1/frame", &["single"]),
+        }
+    }
+}
+
+impl CircuitBench {
+    /// One state's time in hardware beside the paper's estimate and the
+    /// CPU, one table.
+    fn print_table(&self) {
+        let f = &self.circuit;
+        let fpga = f.fpga.as_ref();
+        let ns = f.fpga_ns_per_state;
+        println!(
+            "\n{:44} {:>11} {:>10} {:>12} {:>14}",
+            "one predicted state", "gate levels", "LUT levels", "ns", "states/s"
+        );
+        let row = |name: &str, gates: String, luts: String, ns: Option<f64>| {
+            let (ns, rate) = ns.map_or(("—".into(), "—".into()), |ns| {
+                (format!("{ns:.1}"), format!("{:.3} M", 1e3 / ns))
+            });
+            println!("{name:44} {gates:>11} {luts:>10} {ns:>12} {rate:>14}");
+        };
+        row(
+            "the paper's estimate (§5)",
+            f.paper_estimate.to_string(),
+            "—".into(),
+            None,
+        );
+        let device = fpga.map_or("(no --fpga)", |s| s.device.name());
+        row(
+            &format!("this forest, {device}"),
+            f.depth.to_string(),
+            fpga.map_or("—".into(), |s| s.lut_levels().to_string()),
+            ns,
+        );
+        let cpu = &self.cpu_ns_per_state;
+        row(
+            "software ALN, one thread, batched",
+            "—".into(),
+            "—".into(),
+            cpu.aln_batched,
+        );
+        row(
+            "software ALN, one thread, one at a time",
+            "—".into(),
+            "—".into(),
+            cpu.aln_single,
+        );
+        row(
+            "simulator@1/frame, one thread",
+            "—".into(),
+            "—".into(),
+            cpu.simulator_1_per_frame,
+        );
+    }
 }
 
 /// Prints a benchmark's figures: one JSON object with `--json`, else as

@@ -26,7 +26,9 @@ pub fn write_files(circuit: &Circuit, dir: &Path) -> Result<()> {
 /// every variable placed and routed on an FPGA.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Measurement {
+    /// The synthesized circuit: gates and gate levels per variable.
     pub figures: Figures,
+    /// Every variable placed and routed, when asked.
     pub fpga: Option<fpga::State>,
 }
 
@@ -35,7 +37,8 @@ pub struct Measurement {
 /// exported Verilog and the synthesized netlist of every variable; both
 /// must put out the `expected` levels (`[variable][row]`: the software's),
 /// or the error names the variable, the row and both levels. With `fpga`
-/// (a device and nextpnr's seed), every variable is also mapped, placed
+/// (a device and a seed, taken modulo [`fpga::NEXTPNR_SEEDS`] for nextpnr),
+/// every variable is also mapped, placed
 /// and routed on it ([`fpga::place_and_route`]) and its mapped netlist
 /// held to the same rows. Variables run in parallel on rayon's threads.
 pub fn measure(
@@ -48,6 +51,7 @@ pub fn measure(
     progress: &dyn Progress,
 ) -> Result<Measurement> {
     let tools = tools::versions()?;
+    let fpga = fpga.map(|(device, seed)| (device, seed % fpga::NEXTPNR_SEEDS));
     let fpga_tools = fpga.map(|_| fpga::tool_versions()).transpose()?;
     let cell_models = fpga
         .map(|_| tools::yosys_data(ICE40_MODELS))
@@ -95,7 +99,7 @@ pub fn measure(
         .zip(fpga_tools)
         .map(|((device, seed), tools)| fpga::State {
             device,
-            seed: seed % fpga::NEXTPNR_SEEDS,
+            seed,
             tools,
             variables: placed.into_iter().flatten().collect(),
         });

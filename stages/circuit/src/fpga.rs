@@ -7,17 +7,21 @@
 //! shift register fed from one pin — a state's hundreds of code bits cannot
 //! all be pins (the HX8K's largest package has 206) — and the output
 //! register folds to one pin by XOR, which keeps every output bit live.
-//! Yosys maps the design onto 4-input lookup tables (`synth_ice40`),
-//! nextpnr places and routes it (seeded) and its timing analysis gives the
-//! maximum clock: the critical path is one period. Adders (a walk code's
+//! Yosys maps the design onto 4-input lookup tables (`synth_ice40`), the
+//! predictor kept a module of its own (`keep_hierarchy`) so that its mapped
+//! netlist, which [`crate::check`] simulates on the test rows, is the very
+//! logic placed; nextpnr places and routes it (seeded) and its timing
+//! analysis gives the maximum clock: the critical path is one period. The
+//! clock asked for is 1 MHz, so nextpnr does not push timing and the path
+//! is an upper bound of what the part can do. Adders (a walk code's
 //! popcounts) go into lookup tables too, not the carry chains: with carry
 //! chains nextpnr-ice40 0.4 routed some decoders for over ten minutes
 //! without finishing (a 16-bit walk decoder's 3144 arcs), without them in
-//! two seconds. Lookup-table adders are no faster than carry chains, so
-//! the delay measured is, if anything, longer than the part allows. Each variable takes a
-//! part of its own, the variables side by side, so the state's time is the
-//! slowest variable's. A variable whose lookup tables outnumber the part's
-//! logic cells is reported as not fitting, with the cells it needs.
+//! two seconds; lookup-table adders are no faster than carry chains, so
+//! this too can only lengthen the path. Each variable takes a part of its
+//! own, the variables side by side, so the state's time is the slowest
+//! variable's. A variable whose lookup tables and flip-flops outnumber the
+//! part's logic cells is reported as not fitting, with the cells it needs.
 
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
@@ -39,6 +43,9 @@ pub enum Device {
 }
 
 impl Device {
+    /// Every device, for the names a user may give.
+    pub const ALL: [Device; 1] = [Device::Ice40Hx8k];
+
     /// As manifests and reports name it.
     pub fn name(self) -> &'static str {
         match self {
@@ -55,7 +62,7 @@ impl Device {
 
     /// The device a manifest or a table names.
     pub fn named(name: &str) -> Option<Device> {
-        [Device::Ice40Hx8k].into_iter().find(|d| d.name() == name)
+        Device::ALL.into_iter().find(|d| d.name() == name)
     }
 
     /// nextpnr-ice40's arguments selecting the part.
@@ -76,25 +83,20 @@ impl Device {
 /// One variable on the part.
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct Placed {
+    /// The learned variable, as the codebook names it.
     pub variable: String,
     /// Lookup tables after mapping (`SB_LUT4`).
     pub luts: u64,
     /// The predictor's longest path in lookup tables (Yosys' `ltp`).
     pub lut_levels: u32,
-    /// Logic cells used after packing, or needed when it does not fit.
+    /// Logic cells used after packing; when it does not fit, the lookup
+    /// tables and flip-flops it needs (each at most one cell).
     pub logic_cells: u64,
     /// Of the part.
     pub available: u64,
     /// The critical path, register to register, in ns; none when it does
     /// not fit.
     pub critical_ns: Option<f64>,
-}
-
-impl Placed {
-    /// The maximum clock, MHz; none when it does not fit.
-    pub fn max_mhz(&self) -> Option<f64> {
-        self.critical_ns.map(|ns| 1000.0 / ns)
-    }
 }
 
 /// The top module wrapping variable `v`'s predictor between registers.
@@ -166,7 +168,7 @@ pub fn wrapper(circuit: &Circuit, v: usize) -> String {
 /// Maps variable `v` of `circuit` (its files already written in `dir`, as
 /// [`crate::check::write_files`] does) onto `device`, writes the mapped
 /// netlist ([`mapped_file`]: the one placed) and places and routes it with
-/// nextpnr's `seed`. The predictor stays a module of its own through
+/// nextpnr's `seed` (below [`NEXTPNR_SEEDS`]). The predictor stays a module of its own through
 /// mapping (`keep_hierarchy`), so the netlist simulated on the test rows
 /// is the very logic placed; the registers around it keep synthesis from
 /// merging logic across them either way.
@@ -201,10 +203,17 @@ pub fn place_and_route(
     let path = dir.join(&script_file);
     std::fs::write(&path, script).map_err(|e| Error::io(&path, e))?;
     tools::run("yosys", &["-q", "-s", &script_file], dir)?;
-    let luts = crate::synth::read_stat(&dir.join(&stat))?
-        .values()
-        .filter_map(|cells| cells.get("SB_LUT4"))
-        .sum();
+    let cells = crate::synth::read_stat(&dir.join(&stat))?;
+    let count = |kind: fn(&str) -> bool| -> u64 {
+        cells
+            .values()
+            .flat_map(|by_type| by_type.iter())
+            .filter(|(cell, _)| kind(cell))
+            .map(|(_, n)| n)
+            .sum()
+    };
+    let luts = count(|cell| cell == "SB_LUT4");
+    let flip_flops = count(|cell| cell.starts_with("SB_DFF"));
     let ltp = dir.join(&ltp);
     let lut_levels = *crate::synth::read_depths(&ltp)?
         .get(&c.module)
@@ -214,22 +223,25 @@ pub fn place_and_route(
         variable: c.variable.clone(),
         luts,
         lut_levels,
-        logic_cells: luts,
+        logic_cells: luts + flip_flops,
         available,
         critical_ns: None,
     };
-    if luts > available {
+    // A cell holds a lookup table and a flip-flop, but a shift register's
+    // flip-flops have no table of their own to share one with.
+    if luts + flip_flops > available {
         return Ok(placed);
     }
     let report = format!("{top}_pnr.json");
-    let seed = (seed % NEXTPNR_SEEDS).to_string();
+    let seed = seed.to_string();
     let mut args: Vec<&str> = device.nextpnr_args().to_vec();
     args.extend([
         "--json",
         &netlist,
         "--seed",
         &seed,
-        // A clock every design meets: the figure is what it achieves.
+        // A clock every design meets: the figure is what it achieves (and
+        // one that does not, over 1 µs, is still reported, not failed).
         "--freq",
         "1",
         "--timing-allow-fail",
@@ -302,10 +314,13 @@ pub fn tool_versions() -> Result<String> {
 /// each).
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct State {
+    /// The part, one per variable.
     pub device: Device,
     /// nextpnr's seed.
     pub seed: u64,
+    /// Yosys' and nextpnr's versions.
     pub tools: String,
+    /// Every learned variable, in the codebook's order.
     pub variables: Vec<Placed>,
 }
 

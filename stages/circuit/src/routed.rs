@@ -19,7 +19,9 @@ use crate::fpga::{Device, Placed, State};
 /// was simulated equal to the software on.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Routed {
+    /// Every variable on the part.
     pub state: State,
+    /// The test rows simulated, every mapped netlist equal on each.
     pub rows_equal: u64,
 }
 

@@ -5,7 +5,7 @@
 
 use std::fs::File;
 use std::path::{Path, PathBuf};
-use std::process::{Command, ExitStatus, Output};
+use std::process::{Command, Output, Stdio};
 use std::time::{Duration, Instant};
 
 use alnlab_common::{Error, Result};
@@ -41,13 +41,13 @@ fn not_started(program: &str, e: std::io::Error) -> Error {
     }
 }
 
-/// The error of `program` ended with `status`, quoting the end of what it
-/// `said`.
-fn failed(program: &str, args: &[&str], dir: &Path, status: ExitStatus, said: &str) -> Error {
+/// The error of `program`, which `ended` so (failed with a status, or did
+/// not finish), quoting the end of what it `said`.
+fn failed(program: &str, args: &[&str], dir: &Path, ended: &str, said: &str) -> Error {
     let tail: Vec<&str> = said.lines().rev().take(12).collect();
     let tail: Vec<&str> = tail.into_iter().rev().collect();
     Error::Corrupt(format!(
-        "`{program} {}` in {} failed ({status}):\n{}",
+        "`{program} {}` in {} {ended}:\n{}",
         args.join(" "),
         dir.display(),
         tail.join("\n")
@@ -60,14 +60,15 @@ pub fn run(program: &str, args: &[&str], dir: &Path) -> Result<String> {
     if !output.status.success() {
         let mut said = String::from_utf8_lossy(&output.stdout).into_owned();
         said.push_str(&String::from_utf8_lossy(&output.stderr));
-        return Err(failed(program, args, dir, output.status, &said));
+        let ended = format!("failed ({})", output.status);
+        return Err(failed(program, args, dir, &ended, &said));
     }
     Ok(String::from_utf8_lossy(&output.stdout).into_owned())
 }
 
 /// Runs `program` with `args` in `dir` for at most `limit`, both its
 /// streams into the file `log` there; past the limit it is stopped, and
-/// that is the error.
+/// that is the error (with the end of its log, which lives in `dir`).
 pub fn run_for(program: &str, args: &[&str], dir: &Path, log: &str, limit: Duration) -> Result<()> {
     let path = dir.join(log);
     let file = File::create(&path).map_err(|e| Error::io(&path, e))?;
@@ -75,42 +76,45 @@ pub fn run_for(program: &str, args: &[&str], dir: &Path, log: &str, limit: Durat
     let mut child = Command::new(program)
         .args(args)
         .current_dir(dir)
+        .stdin(Stdio::null())
         .stdout(copy)
         .stderr(file)
         .spawn()
         .map_err(|e| not_started(program, e))?;
     let start = Instant::now();
-    let status = loop {
-        if let Some(status) = child
-            .try_wait()
-            .map_err(|e| Error::io(Path::new(program), e))?
-        {
-            break status;
+    let waited = loop {
+        match child.try_wait() {
+            Ok(Some(status)) => break Ok(status),
+            Ok(None) if start.elapsed() <= limit => std::thread::sleep(Duration::from_millis(20)),
+            Ok(None) => break Err(format!("did not finish in {} s", limit.as_secs_f64())),
+            Err(e) => break Err(format!("could not be waited for ({e})")),
         }
-        if start.elapsed() > limit {
-            // Already ended or killed: either way it is reaped below.
+    };
+    let said = || std::fs::read_to_string(&path).unwrap_or_default();
+    match waited {
+        Ok(status) if status.success() => Ok(()),
+        Ok(status) => Err(failed(
+            program,
+            args,
+            dir,
+            &format!("failed ({status})"),
+            &said(),
+        )),
+        Err(why) => {
+            // Stopped and reaped whatever it was doing (an error here means
+            // it has ended already).
             let _ = child.kill();
             let _ = child.wait();
-            return Err(Error::Corrupt(format!(
-                "`{program} {}` in {} did not finish in {} s",
-                args.join(" "),
-                dir.display(),
-                limit.as_secs()
-            )));
+            Err(failed(program, args, dir, &why, &said()))
         }
-        std::thread::sleep(Duration::from_millis(20));
-    };
-    if !status.success() {
-        let said = std::fs::read_to_string(&path).unwrap_or_default();
-        return Err(failed(program, args, dir, status, &said));
     }
-    Ok(())
 }
 
 /// A file of Yosys' data folder (its scripts' `+/`, which holds e.g. the
 /// iCE40 cells' simulation models), found where Yosys itself looks:
 /// `share/` or `../share/yosys/` beside its own executable, the `yosys` on
-/// PATH with links resolved.
+/// PATH with links resolved. (`yosys-config --datdir` would say it, but
+/// Debian ships that in `yosys-dev`, not with Yosys.)
 pub fn yosys_data(file: &str) -> Result<PathBuf> {
     let path = std::env::var_os("PATH").unwrap_or_default();
     let exe = std::env::split_paths(&path)
@@ -155,4 +159,57 @@ pub fn versions() -> Result<String> {
         yosys.trim(),
         iverilog.lines().next().unwrap_or("").trim()
     ))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_program_past_its_limit_is_stopped_and_a_failing_one_quoted() {
+        let dir = tempfile::tempdir().unwrap();
+        let start = Instant::now();
+        let error = run_for(
+            "sleep",
+            &["30"],
+            dir.path(),
+            "s.log",
+            Duration::from_millis(200),
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(
+            start.elapsed() < Duration::from_secs(10),
+            "stopped, not waited for"
+        );
+        assert!(
+            error.contains("`sleep 30`") && error.contains("did not finish in 0.2 s"),
+            "{error}"
+        );
+        let error = run_for(
+            "sh",
+            &["-c", "echo placing; echo no room >&2; exit 3"],
+            dir.path(),
+            "f.log",
+            Duration::from_secs(30),
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(error.contains("failed (exit status: 3)"), "{error}");
+        assert!(
+            error.contains("placing\nno room"),
+            "both streams, in order: {error}"
+        );
+        run_for("true", &[], dir.path(), "t.log", Duration::from_secs(30)).unwrap();
+        let error = run_for(
+            "no-such-tool",
+            &[],
+            dir.path(),
+            "n.log",
+            Duration::from_secs(1),
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(error.contains("`no-such-tool` was not found"), "{error}");
+    }
 }

@@ -157,10 +157,11 @@ pub(super) fn section(md: &mut String, m: &Measured, pruned: (u64, u32), estimat
 }
 
 /// The first screen's sentence on variant `name`'s forest in hardware:
-/// its ns per state on the FPGA, its gate levels beside the paper's 59, and
-/// the paper's "nanoseconds" judged.
-pub(super) fn in_hardware(name: &str, routed: &Routed, gate_levels: u32) -> String {
+/// its ns per state on the FPGA, its gate levels beside the paper's 59 and
+/// this model's estimate, and the paper's "nanoseconds" judged.
+pub(super) fn in_hardware(name: &str, routed: &Routed, gate_levels: u32, estimate: u64) -> String {
     let state = &routed.state;
+    let n = state.variables.len();
     let time = state.critical_ns().map_or_else(
         || {
             let missing = state.variables.iter().filter(|p| p.critical_ns.is_none());
@@ -172,21 +173,23 @@ pub(super) fn in_hardware(name: &str, routed: &Routed, gate_levels: u32) -> Stri
         |ns| format!("predicts a state in {} ns", sig3(ns)),
     );
     format!(
-        "**In hardware** (§5): `{name}`'s forest (replicate 1), placed and routed on a {}, {time} \
-         — {gate_levels} gate levels against the paper's estimate of {PAPER_DELAYS} — and equals \
-         the software on all {} test rows it was simulated on: the paper's \"nanoseconds\", {} \
-         (the hardware table is in the appendix, under `{name}`).",
+        "**In hardware** (§5): `{name}`'s forest (replicate 1), each of its {n} variables placed \
+         and routed on a {} of its own, {time} — {gate_levels} gate levels against the paper's \
+         estimate of {PAPER_DELAYS} and this model's of {estimate} — and equals the software on \
+         all {} test rows it was simulated on: the paper's \"nanoseconds\", {}. The hardware \
+         table is in the appendix, under `{name}`.",
         state.device.description(),
         routed.rows_equal,
         claim(state.critical_ns())
     )
 }
 
-/// The paper's "nanoseconds" for a state's time (none: it does not fit).
+/// The paper's "nanoseconds" for a state's time (none: it does not fit),
+/// read as: under a microsecond.
 fn claim(ns: Option<f64>) -> &'static str {
     match ns {
-        Some(ns) if ns < 1000.0 => "confirmed",
-        Some(_) => "refuted: over a microsecond",
+        Some(ns) if ns < 1000.0 => "confirmed (under a microsecond)",
+        Some(_) => "refuted (over a microsecond)",
         None => "not measured on this part",
     }
 }
@@ -214,13 +217,17 @@ pub(super) fn fpga_section(md: &mut String, routed: &Routed, gate_levels: u32, c
         "**On an FPGA** ({}, {available} logic cells; {}; nextpnr seed {}). Each variable's \
          predictor — its trees, votes and decoder — sits between an input register (filled bit \
          by bit from one pin: a state's code bits outnumber the part's pins) and an output \
-         register; Yosys maps it whole onto 4-input lookup tables (`synth_ice40`; trees, votes and \
-         decoder optimized together, where the gate count above keeps them apart; adders in \
-         lookup tables too) and nextpnr places and routes it. One prediction takes the critical path \
-         between the registers, from nextpnr's timing analysis. The variables run side by side, \
-         one part each, so a state takes the slowest variable's time. The mapped netlist — the \
-         one placed, not the post-route one — simulated by Icarus Verilog puts out the \
-         software's level on every one of the {} test rows for every variable.\n",
+         register, on a part of its own: {n} parts side by side, so a state takes the slowest \
+         variable's time. Yosys maps the predictor whole onto 4-input lookup tables \
+         (`synth_ice40`; trees, votes and decoder optimized together, where the gate count \
+         above keeps them apart; adders in lookup tables too) and nextpnr places and routes it. \
+         A prediction's latency is the critical path between the registers, from nextpnr's \
+         timing analysis at a 1 MHz target clock, so nextpnr did not push timing: an upper \
+         bound, for one placement seed. States per second are one per clock, as if the inputs \
+         arrived all at once (here they are shifted in one bit per clock). The predictor's \
+         mapped netlist — the one placed, without delays; not the post-route netlist — \
+         simulated by Icarus Verilog puts out the software's level on every one of the {} test \
+         rows for every variable.\n",
         state.device.description(),
         state.tools,
         state.seed,
@@ -274,15 +281,12 @@ pub(super) fn fpga_section(md: &mut String, routed: &Routed, gate_levels: u32, c
         }
     }
     table.write(md);
-    let placed: Vec<f64> = {
-        let mut ns: Vec<f64> = state
-            .variables
-            .iter()
-            .filter_map(|p| p.critical_ns)
-            .collect();
-        ns.sort_by(f64::total_cmp);
-        ns
-    };
+    let mut placed: Vec<f64> = state
+        .variables
+        .iter()
+        .filter_map(|p| p.critical_ns)
+        .collect();
+    placed.sort_by(f64::total_cmp);
     let luts: u64 = state.variables.iter().map(|p| p.luts).sum();
     let largest = state
         .variables
@@ -291,56 +295,48 @@ pub(super) fn fpga_section(md: &mut String, routed: &Routed, gate_levels: u32, c
         .max()
         .unwrap_or(0);
     if let (Some(first), Some(last)) = (placed.first(), placed.last()) {
+        let middle = placed.len() / 2;
+        let median = if placed.len().is_multiple_of(2) {
+            (placed[middle - 1] + placed[middle]) / 2.0
+        } else {
+            placed[middle]
+        };
         let _ = write!(
             md,
             "Per variable, critical paths run from {} to {} ns (median {}); {luts} lookup tables \
              in all, the largest variable taking {largest} of the part's {available} logic cells. ",
             sig3(*first),
             sig3(*last),
-            sig3(placed[placed.len() / 2]),
+            sig3(median),
         );
     }
     for p in state.variables.iter().filter(|p| p.critical_ns.is_none()) {
         let _ = write!(
             md,
-            "`{}` does not fit: it needs {} logic cells, the part has {}. ",
+            "`{}` does not fit: it needs up to {} logic cells (its lookup tables and flip-flops), \
+             the part has {}. ",
             p.variable, p.logic_cells, p.available
         );
     }
-    let verdict = match (ns, state.slowest()) {
-        (Some(ns), Some(slowest)) if ns < 1000.0 => {
-            // The software's quicker path, against one state in hardware.
-            let software = [
-                (cpu.aln_batched, "in batches"),
-                (cpu.aln_single, "one state at a time"),
-            ]
-            .into_iter()
-            .filter_map(|(ns, how)| Some((ns?, how)))
-            .min_by(|a, b| a.0.total_cmp(&b.0));
-            let faster = software
-                .map(|(cpu, how)| {
-                    format!(
-                        ", {}× faster than the software ALN on one CPU thread ({how}, its quicker \
-                         path)",
-                        sig3(cpu / ns)
-                    )
-                })
-                .unwrap_or_default();
-            format!(
-                "**The paper's \"nanoseconds\" is {}:** a state in {} ns on this part (the \
-                 slowest variable, `{}`, through {} lookup tables){faster}.",
-                claim(Some(ns)),
-                sig3(ns),
-                slowest.variable,
-                slowest.lut_levels
-            )
-        }
-        (Some(ns), _) => format!(
-            "**The paper's \"nanoseconds\" is {}:** a state takes {} ns on this part.",
-            claim(Some(ns)),
-            sig3(ns)
+    let software = match (cpu.aln_batched, cpu.aln_single) {
+        (Some(batched), Some(single)) => format!(
+            ", where the software ALN on one CPU thread takes {} ns per state in batches and {} \
+             ns one state at a time",
+            sig3(batched),
+            sig3(single)
         ),
-        (None, _) => format!(
+        _ => String::new(),
+    };
+    let verdict = match (ns, state.slowest()) {
+        (Some(ns), Some(slowest)) => format!(
+            "**The paper's \"nanoseconds\" is {}:** a state in {} ns on this part (the slowest \
+             variable, `{}`, through {} lookup tables){software}.",
+            claim(Some(ns)),
+            sig3(ns),
+            slowest.variable,
+            slowest.lut_levels
+        ),
+        _ => format!(
             "**The paper's \"nanoseconds\" is {}:** {} of {n} variables do not fit it.",
             claim(None),
             state
@@ -402,11 +398,12 @@ mod tests {
         assert!(md.contains("| 14 | 7 | 10.8 | 93.0 million |"), "{md}");
         assert!(md.contains("| 1550 | 0.645 million |"), "{md}");
         assert!(md.contains("from 4.25 to 10.8 ns (median 8.50)"), "{md}");
+        assert!(md.contains("3 parts side by side"), "{md}");
         assert!(
             md.contains(
-                "is confirmed:** a state in 10.8 ns on this part (the slowest variable, \
-                         `v.1.x`, through 6 lookup tables), 144× faster than the \
-                         software ALN on one CPU thread (in batches, its quicker path)"
+                "is confirmed (under a microsecond):** a state in 10.8 ns on this part (the \
+                 slowest variable, `v.1.x`, through 6 lookup tables), where the software ALN on \
+                 one CPU thread takes 1550 ns per state in batches and 7870 ns one state at a time"
             ),
             "{md}"
         );
@@ -414,17 +411,21 @@ mod tests {
 
     #[test]
     fn the_first_screen_says_the_state_in_ns_and_judges_the_claim() {
-        let line = in_hardware("gray", &routed(&[Some(8.5), Some(10.75)]), 21);
+        let line = in_hardware("gray", &routed(&[Some(8.5), Some(10.75)]), 21, 29);
         assert!(
             line.contains(
-                "`gray`'s forest (replicate 1), placed and routed on a Lattice \
-                               iCE40 HX8K, predicts a state in 10.8 ns — 21 gate levels"
+                "`gray`'s forest (replicate 1), each of its 2 variables placed and routed on a \
+                 Lattice iCE40 HX8K of its own, predicts a state in 10.8 ns — 21 gate levels \
+                 against the paper's estimate of 59 and this model's of 29"
             ),
             "{line}"
         );
         assert!(line.contains("all 300 test rows"), "{line}");
-        assert!(line.contains("\"nanoseconds\", confirmed"), "{line}");
-        let line = in_hardware("gray", &routed(&[Some(8.5), None]), 21);
+        assert!(
+            line.contains("\"nanoseconds\", confirmed (under a microsecond)"),
+            "{line}"
+        );
+        let line = in_hardware("gray", &routed(&[Some(8.5), None]), 21, 29);
         assert!(line.contains("does not fit: 1 of its variables"), "{line}");
         assert!(line.contains("not measured on this part"), "{line}");
     }
@@ -433,7 +434,10 @@ mod tests {
     fn a_variable_that_does_not_fit_is_named_and_leaves_the_claim_unmeasured() {
         let mut md = String::new();
         fpga_section(&mut md, &routed(&[Some(8.5), None]), 14, &CPU);
-        assert!(md.contains("`v.1.x` does not fit: it needs 9000 logic cells, the part has 7680"));
+        assert!(md.contains(
+            "`v.1.x` does not fit: it needs up to 9000 logic cells (its lookup tables and \
+             flip-flops), the part has 7680"
+        ));
         assert!(
             md.contains("not measured on this part:** 1 of 2 variables do not fit"),
             "{md}"

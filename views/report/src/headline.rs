@@ -290,7 +290,12 @@ pub(super) fn first_screen(
             let _ = writeln!(
                 md,
                 "{}\n",
-                super::circuit::in_hardware(&v.info.name, routed, circuit.depth)
+                super::circuit::in_hardware(
+                    &v.info.name,
+                    routed,
+                    circuit.depth,
+                    v.hardware.delays()
+                )
             );
         }
     }
