@@ -276,6 +276,18 @@ def check_report(report_dir):
     return len(charts)
 
 
+def learned_variables(artifacts: dict) -> list:
+    """The codebook's learned variables, in its order."""
+    codebook = pq.read_table(artifacts["codebook"]["path"]).to_pylist()
+    return [e["variable"] for e in codebook if e["learned"]]
+
+
+def test_row_count(artifacts: dict) -> int:
+    """The rows of the levels table the test stage predicts."""
+    levels = pq.read_table(artifacts["levels"]["path"], columns=["split"]).column("split").to_pylist()
+    return sum(1 for s in levels if s in ("test", "both"))
+
+
 def check_circuit(artifacts: dict, report_dir: str) -> int:
     """The circuit stage's figures: three parts per learned variable, every
     test row simulated equal, and the longest path the report gives
@@ -285,12 +297,10 @@ def check_circuit(artifacts: dict, report_dir: str) -> int:
     rows = pq.read_table(artifacts["circuit"]["path"]).to_pylist()
     if not rows:
         return 0
-    codebook = pq.read_table(artifacts["codebook"]["path"]).to_pylist()
-    learned = [e["variable"] for e in codebook if e["learned"]]
+    learned = learned_variables(artifacts)
     assert [r["variable"] for r in rows[::3]] == learned, "one variable per learned one"
     assert [r["part"] for r in rows] == ["trees", "votes", "decode"] * len(learned)
-    levels = pq.read_table(artifacts["levels"]["path"], columns=["split"]).column("split").to_pylist()
-    test = sum(1 for s in levels if s in ("test", "both"))
+    test = test_row_count(artifacts)
     assert all(r["rows_equal"] == test for r in rows), (rows[0]["rows_equal"], test)
     depth = max(sum(r["depth"] for r in rows[i:i + 3]) for i in range(0, len(rows), 3))
     report = open(os.path.join(report_dir, "report.md")).read()
@@ -307,10 +317,8 @@ def check_fpga(artifacts: dict, report_dir: str) -> int:
     rows = pq.read_table(artifacts["fpga"]["path"]).to_pylist()
     if not rows:
         return 0
-    codebook = pq.read_table(artifacts["codebook"]["path"]).to_pylist()
-    assert [r["variable"] for r in rows] == [e["variable"] for e in codebook if e["learned"]]
-    levels = pq.read_table(artifacts["levels"]["path"], columns=["split"]).column("split").to_pylist()
-    test = sum(1 for s in levels if s in ("test", "both"))
+    assert [r["variable"] for r in rows] == learned_variables(artifacts)
+    test = test_row_count(artifacts)
     assert all(r["rows_equal"] == test for r in rows), (rows[0]["rows_equal"], test)
     assert all(r["luts"] <= r["logic_cells"] or r["critical_ns"] is None for r in rows)
     report = open(os.path.join(report_dir, "report.md")).read()
