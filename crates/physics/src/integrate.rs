@@ -3,11 +3,11 @@
 //! keep the quaternions unit. All scratch space lives in the [`Stepper`], so
 //! a step allocates nothing.
 
-use nalgebra::{Quaternion, UnitQuaternion, Vector3, Vector6};
+use nalgebra::{Quaternion, UnitQuaternion, Vector3};
 
 use serde::{Deserialize, Serialize};
 
-use crate::dynamics::{Derivative, Kinematics, State, Workspace};
+use crate::dynamics::{Derivative, Kinematics, Loads, State, Workspace};
 use crate::model::Model;
 
 /// The numerical integrator.
@@ -21,34 +21,19 @@ pub enum Integrator {
     Rk4,
 }
 
-/// The forces acting at one instant: fills the hinge torques and the external
-/// spatial forces (link frame, at the hinge; gravity excluded) for a state
-/// whose kinematics are given.
+/// The forces acting at one instant: fills the loads (hinge torques, joint
+/// efforts and external spatial forces, link frame, at the hinge; gravity
+/// excluded) for a state whose kinematics are given.
 pub trait Forces {
-    fn apply(
-        &mut self,
-        model: &Model,
-        state: &State,
-        kin: &Kinematics,
-        tau: &mut [Vector3<f64>],
-        f_ext: &mut [Vector6<f64>],
-    );
+    fn apply(&mut self, model: &Model, state: &State, kin: &Kinematics, loads: &mut Loads);
 }
 
 /// No torques, no external forces.
 pub struct NoForces;
 
 impl Forces for NoForces {
-    fn apply(
-        &mut self,
-        _: &Model,
-        _: &State,
-        _: &Kinematics,
-        tau: &mut [Vector3<f64>],
-        f_ext: &mut [Vector6<f64>],
-    ) {
-        tau.fill(Vector3::zeros());
-        f_ext.fill(Vector6::zeros());
+    fn apply(&mut self, _: &Model, _: &State, _: &Kinematics, loads: &mut Loads) {
+        loads.clear();
     }
 }
 
@@ -59,10 +44,8 @@ pub struct Evaluation {
     pub kin: Kinematics,
     /// The dynamics scratch space (its `accel` holds the last accelerations).
     pub ws: Workspace,
-    /// Hinge torques of the last evaluation.
-    pub tau: Vec<Vector3<f64>>,
-    /// External forces of the last evaluation.
-    pub f_ext: Vec<Vector6<f64>>,
+    /// The loads of the last evaluation.
+    pub loads: Loads,
     /// The derivative of the last evaluation.
     pub deriv: Derivative,
     /// Sum of the external forces and gravity, inertial frame (the rate of
@@ -76,8 +59,7 @@ impl Evaluation {
         Evaluation {
             kin: Kinematics::new(model),
             ws: Workspace::new(model),
-            tau: vec![Vector3::zeros(); model.len()],
-            f_ext: vec![Vector6::zeros(); model.len()],
+            loads: Loads::zeros(model),
             deriv: Derivative::zeros(model),
             external_force: Vector3::zeros(),
         }
@@ -86,17 +68,11 @@ impl Evaluation {
     /// Evaluates kinematics, forces and accelerations of `state`.
     pub fn run(&mut self, model: &Model, state: &State, forces: &mut impl Forces) {
         self.kin.update(model, state);
-        forces.apply(model, state, &self.kin, &mut self.tau, &mut self.f_ext);
-        self.ws.forward(
-            model,
-            state,
-            &self.kin,
-            &self.tau,
-            &self.f_ext,
-            &mut self.deriv,
-        );
+        forces.apply(model, state, &self.kin, &mut self.loads);
+        self.ws
+            .forward(model, state, &self.kin, &self.loads, &mut self.deriv);
         self.external_force = model.gravity * model.total_mass();
-        for (rot, f) in self.kin.rot.iter().zip(&self.f_ext) {
+        for (rot, f) in self.kin.rot.iter().zip(&self.loads.f_ext) {
             self.external_force += rot * f.fixed_rows::<3>(3);
         }
     }
@@ -153,6 +129,12 @@ impl Stepper {
                 state.root_v += d.root_v * dt;
                 for (w, wd) in state.rates.iter_mut().zip(&d.rates) {
                     *w += wd * dt;
+                }
+                for (qd, qdd) in state.qd.iter_mut().zip(&d.qd) {
+                    *qd += qdd * dt;
+                }
+                for (q, qd) in state.q.iter_mut().zip(&state.qd) {
+                    *q += qd * dt;
                 }
                 if model.root == crate::model::Root::Free {
                     state.root_p += self.eval.kin.rot[0] * state.root_v * dt;
@@ -219,6 +201,8 @@ impl Stepper {
             let dq: Quaternion<f64> =
                 (k1.orient[i] + k2.orient[i] * 2.0 + k3.orient[i] * 2.0 + k4.orient[i]) * h;
             state.orient[i] = UnitQuaternion::new_normalize(state.orient[i].into_inner() + dq);
+            state.q[i] += (k1.q[i] + k2.q[i] * 2.0 + k3.q[i] * 2.0 + k4.q[i]) * h;
+            state.qd[i] += (k1.qd[i] + k2.qd[i] * 2.0 + k3.qd[i] * 2.0 + k4.qd[i]) * h;
         }
         force
     }
@@ -232,6 +216,8 @@ fn offset(out: &mut State, base: &State, d: &Derivative, h: f64) {
         out.rates[i] = base.rates[i] + d.rates[i] * h;
         out.orient[i] =
             UnitQuaternion::new_normalize(base.orient[i].into_inner() + d.orient[i] * h);
+        out.q[i] = base.q[i] + d.q[i] * h;
+        out.qd[i] = base.qd[i] + d.qd[i] * h;
     }
 }
 
@@ -240,4 +226,6 @@ fn clone_derivative(out: &mut Derivative, from: &Derivative) {
     out.root_v = from.root_v;
     out.orient.copy_from_slice(&from.orient);
     out.rates.copy_from_slice(&from.rates);
+    out.q.copy_from_slice(&from.q);
+    out.qd.copy_from_slice(&from.qd);
 }

@@ -4,8 +4,9 @@
 //! stage runs scenes with it to write trajectories; the test stage
 //! re-simulates logged frames with it as the simulator baseline.
 //!
-//! - [`spatial`], [`model`], [`dynamics`]: 6D spatial algebra, the link tree,
-//!   the articulated-body algorithm (O(n)), energy and momenta.
+//! - [`spatial`], [`model`], [`dynamics`]: 6D spatial algebra, the link tree
+//!   (ball hinges and one-DOF joints), the articulated-body algorithm (O(n)),
+//!   energy and momenta.
 //! - [`integrate`]: semi-implicit Euler and RK4 over a reusable [`Stepper`].
 //! - [`contact`], [`controller`]: floor and arena wall; hinge torques.
 //! - [`scene`]: a manifest scene, its kind's defaults and initial states.
@@ -13,6 +14,7 @@
 //! - [`runner`]: one scene's runs, frame by frame.
 //! - [`foxglove`]: a scene's motion as Foxglove messages, to watch a log.
 //! - [`replay`]: re-simulating a log's frames from its scene records.
+//! - [`urdf`]: robot descriptions read into a link tree.
 //!
 //! [`Stepper`]: integrate::Stepper
 
@@ -30,6 +32,7 @@ pub mod scene;
 pub mod spatial;
 #[cfg(test)]
 mod tests;
+pub mod urdf;
 pub mod variables;
 
 pub use integrate::Integrator;

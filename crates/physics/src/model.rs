@@ -1,10 +1,13 @@
-//! The articulated body: a tree of rigid links. The root link is either free
-//! (6 DOF) or pinned to the world by a ball hinge (3 DOF); every other link
-//! hangs from its parent by a 3-DOF ball hinge (paper §2).
+//! The articulated body: a tree of rigid links. The root link is free
+//! (6 DOF), pinned to the world by a ball hinge (3 DOF) or welded to it (a
+//! robot's fixed base); every other link hangs from its parent by a joint:
+//! the paper's 3-DOF ball hinge (§2), or a one-degree-of-freedom revolute or
+//! prismatic joint of a robot description (§6: "one-degree-of-freedom
+//! hinges").
 
-use nalgebra::{Matrix3, Matrix6, Vector3};
+use nalgebra::{Matrix3, Matrix6, Vector3, Vector6};
 
-use crate::spatial::rigid_inertia;
+use crate::spatial::{rigid_inertia, spatial};
 
 /// How the root link is held.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -13,6 +16,53 @@ pub enum Root {
     Free,
     /// Turning about a ball hinge fixed in the world (3 DOF).
     Pinned,
+    /// Welded to the world at the root position, turned by the root's
+    /// (constant) orientation (0 DOF).
+    Fixed,
+}
+
+/// How a link hangs from its parent. The joint frame is the child link's
+/// frame; its origin is the link's proximal hinge.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Joint {
+    /// A 3-DOF ball hinge (the paper's): at rest the link's frame is aligned
+    /// with its parent's, and the state's quaternion turns it.
+    Ball,
+    /// Rotation by the joint position q (rad) about a unit `axis` (joint
+    /// frame); `origin` is the joint frame's rotation at q = 0 relative to
+    /// the parent's frame (columns: the joint frame's axes in parent
+    /// coordinates). A URDF revolute or continuous joint.
+    Revolute {
+        origin: Matrix3<f64>,
+        axis: Vector3<f64>,
+    },
+    /// Translation by the joint position q (m) along a unit `axis` (joint
+    /// frame); `origin` as for [`Joint::Revolute`]. A URDF prismatic joint.
+    Prismatic {
+        origin: Matrix3<f64>,
+        axis: Vector3<f64>,
+    },
+}
+
+impl Joint {
+    /// Degrees of freedom.
+    pub fn dof(&self) -> usize {
+        match self {
+            Joint::Ball => 3,
+            Joint::Revolute { .. } | Joint::Prismatic { .. } => 1,
+        }
+    }
+
+    /// The motion subspace of a one-DOF joint (link frame): the spatial
+    /// velocity a unit joint velocity gives the child relative to its
+    /// parent. `None` for a ball hinge.
+    pub fn axis_motion(&self) -> Option<Vector6<f64>> {
+        match self {
+            Joint::Ball => None,
+            Joint::Revolute { axis, .. } => Some(spatial(axis, &Vector3::zeros())),
+            Joint::Prismatic { axis, .. } => Some(spatial(&Vector3::zeros(), axis)),
+        }
+    }
 }
 
 /// One rigid link. Its frame has its origin at the proximal hinge.
@@ -20,14 +70,18 @@ pub enum Root {
 pub struct Link {
     /// Index of the parent link; `None` for the root.
     pub parent: Option<usize>,
+    /// How it hangs from its parent (ignored for the root, which
+    /// [`Model::root`] holds).
+    pub joint: Joint,
     /// Mass (kg).
     pub mass: f64,
     /// From the proximal hinge to the centre of mass, link frame (m).
     pub c: Vector3<f64>,
     /// Rotational inertia about the centre of mass, link frame (kg m²).
     pub inertia_com: Matrix3<f64>,
-    /// From the parent's hinge to this link's hinge, parent frame (m). For a
-    /// pinned root, the pivot in the inertial frame.
+    /// From the parent's hinge to this link's hinge (at joint position 0),
+    /// parent frame (m). Unused for the root, whose hinge is at the state's
+    /// root position.
     pub l: Vector3<f64>,
     /// The distal end point, link frame, if it is a contact point (the free
     /// end of a chain).
@@ -109,6 +163,7 @@ impl Model {
             };
             links.push(Link {
                 parent: i.checked_sub(1),
+                joint: Joint::Ball,
                 mass: *mass,
                 c: Vector3::new(length / 2.0, 0.0, 0.0),
                 inertia_com: shape.inertia_com(*mass),
@@ -140,6 +195,16 @@ impl Model {
 
     /// Number of degrees of freedom.
     pub fn dof(&self) -> usize {
-        3 * self.links.len() + if self.root == Root::Free { 3 } else { 0 }
+        let root = match self.root {
+            Root::Free => 6,
+            Root::Pinned => 3,
+            Root::Fixed => 0,
+        };
+        root + self.links[1..].iter().map(|l| l.joint.dof()).sum::<usize>()
+    }
+
+    /// Whether the root's hinge point stays where it is (pinned or welded).
+    pub fn root_held(&self) -> bool {
+        self.root != Root::Free
     }
 }

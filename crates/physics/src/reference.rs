@@ -5,25 +5,64 @@
 
 use nalgebra::{DMatrix, DVector, Vector3, Vector6};
 
-use crate::dynamics::{Kinematics, State};
+use crate::dynamics::{Kinematics, Loads, State};
 use crate::model::{Model, Root};
-use crate::spatial::{angular, cross_force, cross_motion, spatial};
+use crate::spatial::{cross_force, cross_motion, spatial};
 
-/// Layout of the generalized velocity vector: for a free root, its angular
-/// then linear velocity (6), then 3 per hinge; for a pinned root 3 per link.
-fn offsets(model: &Model) -> Vec<usize> {
+/// The generalized velocity vector's layout: for each link, where its
+/// entries start and how many there are — a free root's angular then linear
+/// velocity (6), a pinned root's 3, a fixed root none; a ball hinge's 3, a
+/// one-DOF joint's 1.
+fn offsets(model: &Model) -> Vec<(usize, usize)> {
     let mut at = 0;
     (0..model.len())
         .map(|i| {
             let here = at;
-            at += if i == 0 && model.root == Root::Free {
-                6
-            } else {
-                3
+            let width = match (i, model.root) {
+                (0, Root::Free) => 6,
+                (0, Root::Pinned) => 3,
+                (0, Root::Fixed) => 0,
+                _ => model.links[i].joint.dof(),
             };
-            here
+            at += width;
+            (here, width)
         })
         .collect()
+}
+
+/// The columns of link `i`'s motion subspace S (link frame): unit joint
+/// velocities in the generalized vector's order.
+fn subspace(model: &Model, i: usize) -> Vec<Vector6<f64>> {
+    let unit = |k: usize| Vector6::from_fn(|r, _| if r == k { 1.0 } else { 0.0 });
+    match (i, model.root) {
+        (0, Root::Free) => (0..6).map(unit).collect(),
+        (0, Root::Pinned) => (0..3).map(unit).collect(),
+        (0, Root::Fixed) => Vec::new(),
+        _ => match model.links[i].joint.axis_motion() {
+            Some(s) => vec![s],
+            None => (0..3).map(unit).collect(),
+        },
+    }
+}
+
+/// The generalized velocities of a state, in [`offsets`]' layout.
+pub fn generalized_velocity(model: &Model, state: &State) -> DVector<f64> {
+    let at = offsets(model);
+    let mut v = DVector::zeros(model.dof());
+    for (i, &(start, width)) in at.iter().enumerate() {
+        let values: Vec<f64> = match width {
+            6 => state.rates[0]
+                .iter()
+                .chain(&state.root_v)
+                .copied()
+                .collect(),
+            3 => state.rates[i].iter().copied().collect(),
+            1 => vec![state.qd[i]],
+            _ => Vec::new(),
+        };
+        v.rows_mut(start, width).copy_from_slice(&values);
+    }
+    v
 }
 
 /// Generalized forces needed for accelerations `qdd` (recursive Newton–Euler).
@@ -36,25 +75,25 @@ fn inverse_dynamics(
 ) -> DVector<f64> {
     let n = model.len();
     let at = offsets(model);
+    let v = generalized_velocity(model, state);
     let mut accel = vec![Vector6::zeros(); n];
     let mut force = vec![Vector6::zeros(); n];
     for i in 0..n {
         let link = &model.links[i];
-        let a = match (link.parent, model.root) {
-            (None, Root::Free) => {
-                let q = qdd.fixed_rows::<6>(0);
-                Vector6::new(q[0], q[1], q[2], q[3], q[4], q[5])
-            }
-            (parent, _) => {
-                let qdd_i = Vector3::new(qdd[at[i]], qdd[at[i] + 1], qdd[at[i] + 2]);
-                let from_parent = parent.map_or(Vector6::zeros(), |p| kin.x[i].motion(&accel[p]));
-                let product = match parent {
-                    Some(_) => {
-                        cross_motion(&kin.vel[i], &spatial(&state.rates[i], &Vector3::zeros()))
-                    }
-                    None => Vector6::zeros(),
-                };
-                from_parent + spatial(&qdd_i, &Vector3::zeros()) + product
+        let s = subspace(model, i);
+        let (start, _) = at[i];
+        let joint_motion = |x: &DVector<f64>| -> Vector6<f64> {
+            s.iter()
+                .enumerate()
+                .map(|(k, col)| col * x[start + k])
+                .sum()
+        };
+        let a = match link.parent {
+            None => joint_motion(qdd),
+            Some(p) => {
+                kin.x[i].motion(&accel[p])
+                    + joint_motion(qdd)
+                    + cross_motion(&kin.vel[i], &joint_motion(&v))
             }
         };
         accel[i] = a;
@@ -66,11 +105,9 @@ fn inverse_dynamics(
     }
     let mut tau = DVector::zeros(model.dof());
     for i in (0..n).rev() {
-        match (model.links[i].parent, model.root) {
-            (None, Root::Free) => tau.fixed_rows_mut::<6>(0).copy_from(&force[i]),
-            _ => tau
-                .fixed_rows_mut::<3>(at[i])
-                .copy_from(&angular(&force[i])),
+        let (start, _) = at[i];
+        for (k, col) in subspace(model, i).iter().enumerate() {
+            tau[start + k] = col.dot(&force[i]);
         }
         if let Some(p) = model.links[i].parent {
             let f = kin.x[i].force_to_parent(&force[i]);
@@ -80,23 +117,23 @@ fn inverse_dynamics(
     tau
 }
 
-/// Generalized accelerations by M q̈ = τ − C, solved densely. `tau` holds the
-/// hinge torques as in [`crate::dynamics::Workspace::forward`].
+/// Generalized accelerations by M q̈ = τ − C, solved densely, in
+/// [`offsets`]' layout.
 pub fn forward_dense(
     model: &Model,
     state: &State,
     kin: &Kinematics,
-    tau: &[Vector3<f64>],
-    f_ext: &[Vector6<f64>],
+    loads: &Loads,
 ) -> DVector<f64> {
     let dof = model.dof();
     let at = offsets(model);
-    let bias = inverse_dynamics(model, state, kin, &DVector::zeros(dof), f_ext);
+    let bias = inverse_dynamics(model, state, kin, &DVector::zeros(dof), &loads.f_ext);
     let mut mass = DMatrix::zeros(dof, dof);
     // M e_k = ID(e_k) − ID(0) with velocity-dependent terms cancelling.
     let still = State {
-        root_v: nalgebra::Vector3::zeros(),
+        root_v: Vector3::zeros(),
         rates: vec![Vector3::zeros(); model.len()],
+        qd: vec![0.0; model.len()],
         ..state.clone()
     };
     let mut kin_still = kin.clone();
@@ -113,12 +150,30 @@ pub fn forward_dense(
         mass.set_column(k, &column);
     }
     let mut applied = DVector::zeros(dof);
-    for i in 0..model.len() {
-        if !(i == 0 && model.root == Root::Free) {
-            applied.fixed_rows_mut::<3>(at[i]).copy_from(&tau[i]);
+    for (i, &(start, width)) in at.iter().enumerate() {
+        match width {
+            3 => applied.rows_mut(start, 3).copy_from(&loads.tau[i]),
+            1 => applied[start] = loads.effort[i],
+            _ => {}
         }
     }
     mass.lu()
         .solve(&(applied - bias))
         .expect("mass matrix is invertible")
+}
+
+/// The accelerations of a derivative, in [`offsets`]' layout.
+pub fn generalized_acceleration(model: &Model, d: &crate::dynamics::Derivative) -> DVector<f64> {
+    let at = offsets(model);
+    let mut a = DVector::zeros(model.dof());
+    for (i, &(start, width)) in at.iter().enumerate() {
+        let values: Vec<f64> = match width {
+            6 => d.rates[0].iter().chain(&d.root_v).copied().collect(),
+            3 => d.rates[i].iter().copied().collect(),
+            1 => vec![d.qd[i]],
+            _ => Vec::new(),
+        };
+        a.rows_mut(start, width).copy_from_slice(&values);
+    }
+    a
 }

@@ -11,7 +11,7 @@ use nalgebra::{Vector3, Vector6};
 
 use crate::contact::{ContactPoint, Surfaces, contact_points};
 use crate::controller::{Controller, ControllerKind};
-use crate::dynamics::{Kinematics, State};
+use crate::dynamics::{Kinematics, Loads, State};
 use crate::integrate::{Evaluation, Forces, Stepper};
 use crate::model::{Model, Root};
 use crate::scene::{self, Scene};
@@ -126,23 +126,18 @@ pub struct SceneForces<'a> {
 }
 
 impl Forces for SceneForces<'_> {
-    fn apply(
-        &mut self,
-        model: &Model,
-        state: &State,
-        kin: &Kinematics,
-        tau: &mut [Vector3<f64>],
-        f_ext: &mut [Vector6<f64>],
-    ) {
-        for ((t, g), w) in tau.iter_mut().zip(&self.g).zip(&state.rates) {
+    fn apply(&mut self, model: &Model, state: &State, kin: &Kinematics, loads: &mut Loads) {
+        for ((t, g), w) in loads.tau.iter_mut().zip(&self.g).zip(&state.rates) {
             *t = -g - w * self.hinge_damping;
         }
         if model.root == Root::Pinned {
-            tau[0] = Vector3::zeros();
+            loads.tau[0] = Vector3::zeros();
         }
-        f_ext.fill(Vector6::zeros());
+        loads.effort.fill(0.0);
+        loads.f_ext.fill(Vector6::zeros());
         if !self.points.is_empty() {
-            self.surfaces.apply(model, self.points, kin, f_ext);
+            self.surfaces
+                .apply(model, self.points, kin, &mut loads.f_ext);
         }
     }
 }
@@ -311,7 +306,7 @@ impl<'a> Runner<'a> {
             &self.eval.kin,
             &self.eval.ws.accel,
             &self.forces.g,
-            &self.eval.f_ext,
+            &self.eval.loads.f_ext,
             &mut frame.variables,
         );
     }

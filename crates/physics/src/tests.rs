@@ -164,7 +164,7 @@ fn simulate_from(
             &eval.kin,
             &eval.ws.accel,
             &forces.g,
-            &eval.f_ext,
+            &eval.loads.f_ext,
             &mut values,
         );
         generalized_state(&p.model, &state, &mut generalized);
@@ -214,7 +214,7 @@ fn stiff_contact_impacts_gain_no_energy() {
             for _ in 0..(1.0 / dt) as usize {
                 eval.run(&p.model, &state, &mut forces);
                 let e = total_energy(&p.model, &eval);
-                let touching = eval.f_ext.iter().any(|f| f.norm() > 0.0);
+                let touching = eval.loads.f_ext.iter().any(|f| f.norm() > 0.0);
                 for point in &p.points {
                     let x = eval.kin.point_position(point.link, &point.offset);
                     let r = p.surfaces.point_radius;

@@ -142,6 +142,8 @@ fn copy_state(to: &mut State, from: &State) {
     to.root_v = from.root_v;
     to.orient.clone_from(&from.orient);
     to.rates.clone_from(&from.rates);
+    to.q.clone_from(&from.q);
+    to.qd.clone_from(&from.qd);
 }
 
 /// A model of the next levels from the current ones, both `[variable][row]`

@@ -1,0 +1,732 @@
+//! Robot descriptions in URDF (wiki.ros.org/urdf/XML): links' inertial
+//! tags and the revolute, continuous, prismatic and fixed joints between
+//! them, read into a [`Model`] whose links are the robot's moving bodies.
+//!
+//! A fixed joint's child is merged into its parent (mass, centre of mass and
+//! inertia combined about the merged centre of mass), so a model link is a
+//! body that moves as one; every URDF link stays reachable as a named
+//! [`Frame`] on its body (for contact points and `/tf`). Links are numbered
+//! depth first from the root, children in the file's joint order — the order
+//! Pinocchio numbers its joints in.
+//!
+//! The XML is read with `roxmltree` rather than a URDF crate: `urdf-rs`
+//! (the maintained one) fills a missing `<inertial>` or `<limit>` with
+//! zeros and reports errors without a position, and both must be told
+//! apart here, where every error names its line and element. Visual and
+//! collision geometry, transmissions and Gazebo tags are not read.
+//!
+//! Checks, each an error naming the element: a joint type other than
+//! revolute, continuous, prismatic or fixed; a mimic joint (refused: its
+//! coupling is a constraint this simulator does not impose); a zero axis; a
+//! revolute or prismatic joint without `<limit>`; duplicate names; a joint
+//! whose parent or child is no link; a link with two parents; two roots; a
+//! cycle; a negative mass or an inertia that is not positive semi-definite;
+//! a moving body (after merging) whose mass is not positive or whose inertia
+//! is not positive definite.
+
+use std::collections::HashMap;
+
+use nalgebra::{Isometry3, Matrix3, Rotation3, Translation3, UnitQuaternion, Vector3};
+
+use crate::model::{Joint, Link, Model, Root};
+
+/// How the robot's root link is held.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Base {
+    /// Welded to the world (an arm on its pedestal).
+    Fixed,
+    /// Free to move and turn (a legged robot, a drone).
+    Free,
+}
+
+/// A one-DOF joint's limits and dynamics as the URDF states them.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct JointSpec {
+    /// Position limits (rad or m); `None` for a continuous joint or when
+    /// both are written as 0 (some descriptions' way of saying "unset").
+    pub range: Option<(f64, f64)>,
+    /// Effort limit (N m or N); `None` when absent or written as 0.
+    pub effort: Option<f64>,
+    /// Velocity limit (rad/s or m/s), if given and positive.
+    pub velocity: Option<f64>,
+    /// Viscous damping (N m s/rad or N s/m).
+    pub damping: f64,
+    /// Coulomb friction (N m or N).
+    pub friction: f64,
+}
+
+/// A URDF link's frame, placed on the body it moves with.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Frame {
+    /// The URDF link's name.
+    pub name: String,
+    /// The model link (body) it is part of.
+    pub body: usize,
+    /// Its pose in the body's frame.
+    pub placement: Isometry3<f64>,
+}
+
+/// A robot read from URDF.
+#[derive(Clone, Debug)]
+pub struct Robot {
+    /// The `<robot name>`.
+    pub name: String,
+    /// The link tree: one link per moving body, the root first.
+    pub model: Model,
+    /// Per model link, the URDF link that heads its body.
+    pub links: Vec<String>,
+    /// Per model link, the URDF joint that moves it (empty for the root).
+    pub joints: Vec<String>,
+    /// Per model link, its joint's limits and dynamics (unused for the root).
+    pub specs: Vec<JointSpec>,
+    /// Every URDF link's frame, in model link order.
+    pub frames: Vec<Frame>,
+}
+
+impl Robot {
+    /// The frame of the URDF link `name`, if there is one.
+    pub fn frame(&self, name: &str) -> Option<&Frame> {
+        self.frames.iter().find(|f| f.name == name)
+    }
+}
+
+/// What is wrong with a description, and where.
+#[derive(Clone, Debug, PartialEq)]
+pub struct UrdfError {
+    /// Line of the element (1-based; 0 when the document is not XML).
+    pub line: u32,
+    /// The element, e.g. `<joint name="elbow">`.
+    pub element: String,
+    /// What is wrong and what was expected.
+    pub message: String,
+}
+
+impl std::fmt::Display for UrdfError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        if self.element.is_empty() {
+            write!(f, "line {}: {}", self.line, self.message)
+        } else {
+            write!(f, "line {}, {}: {}", self.line, self.element, self.message)
+        }
+    }
+}
+
+type Result<T> = std::result::Result<T, UrdfError>;
+
+/// One `<inertial>`: mass, centre of mass and inertia about it, in the link
+/// frame.
+#[derive(Clone, Copy, Debug)]
+struct Inertial {
+    mass: f64,
+    com: Vector3<f64>,
+    inertia: Matrix3<f64>,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Kind {
+    Revolute,
+    Continuous,
+    Prismatic,
+    Fixed,
+}
+
+struct JointTag<'a> {
+    name: &'a str,
+    kind: Kind,
+    parent: &'a str,
+    child: &'a str,
+    origin: Isometry3<f64>,
+    axis: Vector3<f64>,
+    spec: JointSpec,
+    node: roxmltree::Node<'a, 'a>,
+}
+
+struct LinkTag<'a> {
+    name: &'a str,
+    inertial: Option<Inertial>,
+    node: roxmltree::Node<'a, 'a>,
+}
+
+/// Reads a robot from URDF text, with gravity along −z of 9.81 m/s².
+pub fn parse(text: &str, base: Base) -> Result<Robot> {
+    let doc = roxmltree::Document::parse(text).map_err(|e| UrdfError {
+        line: e.pos().row,
+        element: String::new(),
+        message: format!("not well-formed XML: {e}"),
+    })?;
+    let root = doc.root_element();
+    if root.tag_name().name() != "robot" {
+        return Err(at(&root, "expected a <robot> element at the top".into()));
+    }
+    let mut links: Vec<LinkTag> = Vec::new();
+    let mut joints: Vec<JointTag> = Vec::new();
+    for node in root.children().filter(|n| n.is_element()) {
+        match node.tag_name().name() {
+            "link" => links.push(link_tag(node)?),
+            "joint" => joints.push(joint_tag(node)?),
+            _ => {}
+        }
+    }
+    let link_index = unique(&links, |l| (l.name, l.node), "link")?;
+    unique(&joints, |j| (j.name, j.node), "joint")?;
+    // Each link's parent joint.
+    let mut parent_joint: Vec<Option<usize>> = vec![None; links.len()];
+    let mut children: Vec<Vec<usize>> = vec![Vec::new(); links.len()];
+    let mut joint_child = Vec::with_capacity(joints.len());
+    for (j, joint) in joints.iter().enumerate() {
+        let find = |name: &str, role: &str| {
+            link_index.get(name).copied().ok_or_else(|| {
+                at(
+                    &joint.node,
+                    format!("its {role} link `{name}` is not a <link> of this robot"),
+                )
+            })
+        };
+        let (parent, child) = (find(joint.parent, "parent")?, find(joint.child, "child")?);
+        if let Some(other) = parent_joint[child] {
+            return Err(at(
+                &joint.node,
+                format!(
+                    "link `{}` already has a parent joint, `{}`; a link hangs from one joint",
+                    joint.child, joints[other].name
+                ),
+            ));
+        }
+        parent_joint[child] = Some(j);
+        children[parent].push(j);
+        joint_child.push(child);
+    }
+    let roots: Vec<usize> = (0..links.len())
+        .filter(|&l| parent_joint[l].is_none())
+        .collect();
+    let root_link = match roots[..] {
+        [only] => only,
+        [] if links.is_empty() => {
+            return Err(at(&root, "expected at least one <link>".into()));
+        }
+        [] => {
+            return Err(at(
+                &root,
+                "every link has a parent joint, so the joints form a cycle; expected one root link"
+                    .into(),
+            ));
+        }
+        [first, second, ..] => {
+            return Err(at(
+                &links[second].node,
+                format!(
+                    "a second root: links `{}` and `{}` both have no parent joint; expected one tree",
+                    links[first].name, links[second].name
+                ),
+            ));
+        }
+    };
+    let mut builder = Builder {
+        links: &links,
+        joints: &joints,
+        joint_child: &joint_child,
+        children: &children,
+        bodies: Vec::new(),
+        frames: Vec::new(),
+        visited: vec![false; links.len()],
+    };
+    builder.body(root_link, None, None, Isometry3::identity());
+    if let Some(stray) = builder.visited.iter().position(|v| !v) {
+        return Err(at(
+            &links[stray].node,
+            format!(
+                "link `{}` cannot be reached from the root `{}`: its joints form a cycle",
+                links[stray].name, links[root_link].name
+            ),
+        ));
+    }
+    let Builder { bodies, frames, .. } = builder;
+    let root_kind = match base {
+        Base::Fixed => Root::Fixed,
+        Base::Free => Root::Free,
+    };
+    let mut model_links = Vec::with_capacity(bodies.len());
+    for (b, body) in bodies.iter().enumerate() {
+        let moves = b > 0 || base == Base::Free;
+        let (mass, c, inertia_com) = body.mass.about_centre();
+        if moves {
+            check_body(&links[body.head], mass, &inertia_com)?;
+        }
+        model_links.push(Link {
+            parent: body.parent,
+            joint: body.joint,
+            mass,
+            c,
+            inertia_com,
+            l: body.l,
+            tip: None,
+        });
+    }
+    Ok(Robot {
+        name: root.attribute("name").unwrap_or("robot").to_string(),
+        model: Model {
+            root: root_kind,
+            links: model_links,
+            gravity: Vector3::new(0.0, 0.0, -9.81),
+        },
+        links: bodies
+            .iter()
+            .map(|b| links[b.head].name.to_string())
+            .collect(),
+        joints: bodies
+            .iter()
+            .map(|b| b.joint_tag.map_or(String::new(), |j| joints[j].name.into()))
+            .collect(),
+        specs: bodies.iter().map(|b| b.spec).collect(),
+        frames,
+    })
+}
+
+/// Reads a robot from a URDF file; errors name the file.
+pub fn load(path: &std::path::Path, base: Base) -> std::result::Result<Robot, String> {
+    let text = std::fs::read_to_string(path)
+        .map_err(|e| format!("cannot read robot description {}: {e}", path.display()))?;
+    parse(&text, base).map_err(|e| format!("{}: {e}", path.display()))
+}
+
+/// Mass and first and second moments about a body's origin, summed over
+/// the URDF links merged into it.
+#[derive(Clone, Copy, Debug, Default)]
+struct MassMoments {
+    mass: f64,
+    first: Vector3<f64>,
+    second: Matrix3<f64>,
+}
+
+impl MassMoments {
+    /// Adds an inertial placed at `pose` in the body's frame.
+    fn add(&mut self, inertial: &Inertial, pose: &Isometry3<f64>) {
+        let r = pose.rotation.to_rotation_matrix().into_inner();
+        let com = pose * nalgebra::Point3::from(inertial.com);
+        let inertia = r * inertial.inertia * r.transpose();
+        let m = inertial.mass;
+        self.mass += m;
+        self.first += com.coords * m;
+        self.second += inertia + shift(&com.coords) * m;
+    }
+
+    /// Mass, centre of mass and inertia about it.
+    fn about_centre(&self) -> (f64, Vector3<f64>, Matrix3<f64>) {
+        if self.mass <= 0.0 {
+            return (self.mass, Vector3::zeros(), self.second);
+        }
+        let c = self.first / self.mass;
+        let inertia = self.second - shift(&c) * self.mass;
+        (self.mass, c, (inertia + inertia.transpose()) * 0.5)
+    }
+}
+
+/// The parallel-axis term |c|² I − c cᵀ.
+fn shift(c: &Vector3<f64>) -> Matrix3<f64> {
+    Matrix3::identity() * c.norm_squared() - c * c.transpose()
+}
+
+/// A moving body being assembled from a moving joint's child and the links
+/// fixed to it.
+struct Body {
+    head: usize,
+    parent: Option<usize>,
+    joint: Joint,
+    joint_tag: Option<usize>,
+    spec: JointSpec,
+    l: Vector3<f64>,
+    mass: MassMoments,
+}
+
+struct Builder<'t, 'a> {
+    links: &'t [LinkTag<'a>],
+    joints: &'t [JointTag<'a>],
+    /// Per joint, its child link.
+    joint_child: &'t [usize],
+    /// Per link, the joints it is the parent of.
+    children: &'t [Vec<usize>],
+    bodies: Vec<Body>,
+    frames: Vec<Frame>,
+    visited: Vec<bool>,
+}
+
+impl Builder<'_, '_> {
+    /// Starts a body at `link`, hung from body `parent` by joint `joint`
+    /// (whose frame sits at `placement` in the parent body's frame).
+    fn body(
+        &mut self,
+        link: usize,
+        parent: Option<usize>,
+        joint: Option<usize>,
+        placement: Isometry3<f64>,
+    ) {
+        let b = self.bodies.len();
+        let (kind, spec) = match joint {
+            None => (Joint::Ball, no_spec()),
+            Some(j) => {
+                let tag = &self.joints[j];
+                let origin = placement.rotation.to_rotation_matrix().into_inner();
+                let joint = match tag.kind {
+                    Kind::Prismatic => Joint::Prismatic {
+                        origin,
+                        axis: tag.axis,
+                    },
+                    _ => Joint::Revolute {
+                        origin,
+                        axis: tag.axis,
+                    },
+                };
+                (joint, tag.spec)
+            }
+        };
+        self.bodies.push(Body {
+            head: link,
+            parent,
+            joint: kind,
+            joint_tag: joint,
+            spec,
+            l: placement.translation.vector,
+            mass: MassMoments::default(),
+        });
+        self.attach(link, b, Isometry3::identity());
+    }
+
+    /// Adds URDF `link` to body `b` at `pose` (body frame), then its
+    /// children: fixed ones into the same body, moving ones as new bodies.
+    fn attach(&mut self, link: usize, b: usize, pose: Isometry3<f64>) {
+        self.visited[link] = true;
+        if let Some(inertial) = &self.links[link].inertial {
+            self.bodies[b].mass.add(inertial, &pose);
+        }
+        self.frames.push(Frame {
+            name: self.links[link].name.to_string(),
+            body: b,
+            placement: pose,
+        });
+        // Each link has one parent joint, so the walk from the root visits a
+        // link once; links it never visits are on a cycle.
+        for k in 0..self.children[link].len() {
+            let j = self.children[link][k];
+            let tag = &self.joints[j];
+            let (child_pose, child) = (pose * tag.origin, self.joint_child[j]);
+            if tag.kind == Kind::Fixed {
+                self.attach(child, b, child_pose);
+            } else {
+                self.body(child, Some(b), Some(j), child_pose);
+            }
+        }
+    }
+}
+
+fn no_spec() -> JointSpec {
+    JointSpec {
+        range: None,
+        effort: None,
+        velocity: None,
+        damping: 0.0,
+        friction: 0.0,
+    }
+}
+
+/// Checks a moving body's merged mass and inertia.
+fn check_body(head: &LinkTag, mass: f64, inertia: &Matrix3<f64>) -> Result<()> {
+    if mass <= 0.0 {
+        return Err(at(
+            &head.node,
+            format!(
+                "the body headed by link `{}` (with the links fixed to it) has mass {mass}; a \
+                 moving body needs a positive mass in an <inertial>",
+                head.name
+            ),
+        ));
+    }
+    let smallest = inertia.symmetric_eigenvalues().min();
+    if smallest <= 0.0 {
+        return Err(at(
+            &head.node,
+            format!(
+                "the body headed by link `{}` (with the links fixed to it) has an inertia about \
+                 its centre of mass that is not positive definite (smallest eigenvalue \
+                 {smallest:e}); expected ixx, iyy, izz > 0 of a real body",
+                head.name
+            ),
+        ));
+    }
+    Ok(())
+}
+
+/// The element as an error names it: `<tag name="…">`.
+fn describe(node: &roxmltree::Node) -> String {
+    match node.attribute("name") {
+        Some(name) => format!("<{} name=\"{name}\">", node.tag_name().name()),
+        None => format!("<{}>", node.tag_name().name()),
+    }
+}
+
+fn at(node: &roxmltree::Node, message: String) -> UrdfError {
+    UrdfError {
+        line: node.document().text_pos_at(node.range().start).row,
+        element: describe(node),
+        message,
+    }
+}
+
+/// Checks that names are unique; the index of each by name.
+fn unique<'a, T>(
+    items: &[T],
+    key: impl Fn(&T) -> (&'a str, roxmltree::Node<'a, 'a>),
+    what: &str,
+) -> Result<HashMap<&'a str, usize>> {
+    let mut index = HashMap::new();
+    for (i, item) in items.iter().enumerate() {
+        let (name, node) = key(item);
+        if index.insert(name, i).is_some() {
+            return Err(at(
+                &node,
+                format!("a second {what} named `{name}`; names must be unique"),
+            ));
+        }
+    }
+    Ok(index)
+}
+
+fn name<'a>(node: roxmltree::Node<'a, 'a>) -> Result<&'a str> {
+    match node.attribute("name") {
+        Some(n) if !n.is_empty() => Ok(n),
+        _ => Err(at(&node, "expected a non-empty `name` attribute".into())),
+    }
+}
+
+fn child<'a>(node: roxmltree::Node<'a, 'a>, tag: &str) -> Option<roxmltree::Node<'a, 'a>> {
+    node.children()
+        .find(|n| n.is_element() && n.tag_name().name() == tag)
+}
+
+/// A number attribute; `default` when absent.
+fn number(node: roxmltree::Node, attribute: &str, default: Option<f64>) -> Result<f64> {
+    match node.attribute(attribute) {
+        None => default.ok_or_else(|| {
+            at(
+                &node,
+                format!("expected a `{attribute}` attribute (a number)"),
+            )
+        }),
+        Some(text) => match text.trim().parse::<f64>() {
+            Ok(x) if x.is_finite() => Ok(x),
+            _ => Err(at(
+                &node,
+                format!("`{attribute}` is `{text}`; expected a finite number"),
+            )),
+        },
+    }
+}
+
+/// A three-number attribute (`xyz`, `rpy`); `default` when absent.
+fn triple(node: roxmltree::Node, attribute: &str, default: [f64; 3]) -> Result<Vector3<f64>> {
+    let Some(text) = node.attribute(attribute) else {
+        return Ok(Vector3::from(default));
+    };
+    let values: Vec<f64> = text
+        .split_whitespace()
+        .map(|t| t.parse::<f64>())
+        .collect::<std::result::Result<_, _>>()
+        .map_err(|_| {
+            at(
+                &node,
+                format!("`{attribute}` is `{text}`; expected three numbers"),
+            )
+        })?;
+    match values[..] {
+        [x, y, z] if values.iter().all(|v| v.is_finite()) => Ok(Vector3::new(x, y, z)),
+        _ => Err(at(
+            &node,
+            format!("`{attribute}` is `{text}`; expected three finite numbers"),
+        )),
+    }
+}
+
+/// An `<origin xyz rpy>` (identity when absent). Roll, pitch and yaw are
+/// about the fixed x, y and z axes: R = Rz(yaw) Ry(pitch) Rx(roll).
+fn origin(node: roxmltree::Node) -> Result<Isometry3<f64>> {
+    let Some(o) = child(node, "origin") else {
+        return Ok(Isometry3::identity());
+    };
+    let xyz = triple(o, "xyz", [0.0; 3])?;
+    let rpy = triple(o, "rpy", [0.0; 3])?;
+    Ok(Isometry3::from_parts(
+        Translation3::from(xyz),
+        UnitQuaternion::from_rotation_matrix(&Rotation3::from_euler_angles(rpy.x, rpy.y, rpy.z)),
+    ))
+}
+
+fn link_tag<'a>(node: roxmltree::Node<'a, 'a>) -> Result<LinkTag<'a>> {
+    let name = name(node)?;
+    let inertial = match child(node, "inertial") {
+        None => None,
+        Some(tag) => {
+            let pose = origin(tag)?;
+            let mass_tag = child(tag, "mass")
+                .ok_or_else(|| at(&node, "its <inertial> has no <mass>".into()))?;
+            let mass = number(mass_tag, "value", None)?;
+            if mass < 0.0 {
+                return Err(at(&node, format!("mass {mass}; expected a mass ≥ 0 (kg)")));
+            }
+            let i = child(tag, "inertia")
+                .ok_or_else(|| at(&node, "its <inertial> has no <inertia>".into()))?;
+            let get = |a: &str| number(i, a, None);
+            let (xx, xy, xz, yy, yz, zz) = (
+                get("ixx")?,
+                get("ixy")?,
+                get("ixz")?,
+                get("iyy")?,
+                get("iyz")?,
+                get("izz")?,
+            );
+            let inertia = Matrix3::new(xx, xy, xz, xy, yy, yz, xz, yz, zz);
+            let smallest = inertia.symmetric_eigenvalues().min();
+            let scale = inertia.abs().max().max(f64::MIN_POSITIVE);
+            if smallest < -1e-12 * scale {
+                return Err(at(
+                    &node,
+                    format!(
+                        "its inertia is not positive semi-definite (smallest eigenvalue \
+                         {smallest:e}); expected the inertia of a real body about its centre of \
+                         mass"
+                    ),
+                ));
+            }
+            let r = pose.rotation.to_rotation_matrix().into_inner();
+            Some(Inertial {
+                mass,
+                com: pose.translation.vector,
+                // <inertia> is given in the inertial frame; turn it into the
+                // link frame.
+                inertia: r * inertia * r.transpose(),
+            })
+        }
+    };
+    Ok(LinkTag {
+        name,
+        inertial,
+        node,
+    })
+}
+
+fn joint_tag<'a>(node: roxmltree::Node<'a, 'a>) -> Result<JointTag<'a>> {
+    let joint_name = name(node)?;
+    let kind = match node.attribute("type") {
+        Some("revolute") => Kind::Revolute,
+        Some("continuous") => Kind::Continuous,
+        Some("prismatic") => Kind::Prismatic,
+        Some("fixed") => Kind::Fixed,
+        Some(other @ ("floating" | "planar" | "spherical")) => {
+            return Err(at(
+                &node,
+                format!(
+                    "joint type `{other}` is not supported; expected revolute, continuous, \
+                     prismatic or fixed (a free base is the scene's `base = \"free\"`)"
+                ),
+            ));
+        }
+        Some(other) => {
+            return Err(at(
+                &node,
+                format!(
+                    "unknown joint type `{other}`; expected revolute, continuous, prismatic or fixed"
+                ),
+            ));
+        }
+        None => {
+            return Err(at(
+                &node,
+                "expected a `type` attribute (revolute, continuous, prismatic or fixed)".into(),
+            ));
+        }
+    };
+    if child(node, "mimic").is_some() {
+        return Err(at(
+            &node,
+            "a mimic joint is refused: it couples this joint to another, a constraint this \
+             simulator does not impose; remove <mimic> to simulate it as an independent joint"
+                .into(),
+        ));
+    }
+    let link_of = |tag: &str| -> Result<&'a str> {
+        let element =
+            child(node, tag).ok_or_else(|| at(&node, format!("expected a <{tag} link=\"…\"/>")))?;
+        element
+            .attribute("link")
+            .ok_or_else(|| at(&element, "expected a `link` attribute".into()))
+    };
+    let (parent, child_link) = (link_of("parent")?, link_of("child")?);
+    let axis = match child(node, "axis") {
+        None => Vector3::x(),
+        Some(a) => triple(a, "xyz", [1.0, 0.0, 0.0])?,
+    };
+    let norm = axis.norm();
+    if kind != Kind::Fixed && norm <= 1e-9 {
+        return Err(at(
+            &node,
+            format!(
+                "its axis is {} {} {}, a zero vector; expected a direction",
+                axis.x, axis.y, axis.z
+            ),
+        ));
+    }
+    let mut spec = no_spec();
+    if let Some(d) = child(node, "dynamics") {
+        spec.damping = number(d, "damping", Some(0.0))?;
+        spec.friction = number(d, "friction", Some(0.0))?;
+        if spec.damping < 0.0 || spec.friction < 0.0 {
+            return Err(at(&d, "expected damping and friction ≥ 0".into()));
+        }
+    }
+    match child(node, "limit") {
+        None if matches!(kind, Kind::Revolute | Kind::Prismatic) => {
+            return Err(at(
+                &node,
+                "a revolute or prismatic joint needs a <limit lower upper effort velocity/>; \
+                 use type=\"continuous\" for an unlimited revolute joint"
+                    .into(),
+            ));
+        }
+        None => {}
+        Some(limit) => {
+            let effort = number(limit, "effort", Some(0.0))?;
+            let velocity = number(limit, "velocity", Some(0.0))?;
+            if effort < 0.0 || velocity < 0.0 {
+                return Err(at(&limit, "expected effort and velocity ≥ 0".into()));
+            }
+            spec.effort = (effort > 0.0).then_some(effort);
+            spec.velocity = (velocity > 0.0).then_some(velocity);
+            if matches!(kind, Kind::Revolute | Kind::Prismatic) {
+                let lower = number(limit, "lower", Some(0.0))?;
+                let upper = number(limit, "upper", Some(0.0))?;
+                if upper < lower {
+                    return Err(at(
+                        &limit,
+                        format!("upper {upper} is below lower {lower}; expected lower ≤ upper"),
+                    ));
+                }
+                spec.range = (lower != 0.0 || upper != 0.0).then_some((lower, upper));
+            }
+        }
+    }
+    Ok(JointTag {
+        name: joint_name,
+        kind,
+        parent,
+        child: child_link,
+        origin: origin(node)?,
+        axis: if kind == Kind::Fixed {
+            axis
+        } else {
+            axis / norm
+        },
+        spec,
+        node,
+    })
+}
+
+#[cfg(test)]
+mod tests;
