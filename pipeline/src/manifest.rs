@@ -201,7 +201,10 @@ impl Manifest {
         let from_dataset = data.is_some();
         let mut variants = Vec::new();
         if variant_entries.is_empty() {
-            let stages = base_stages;
+            let mut stages = base_stages;
+            if !from_dataset {
+                read_descriptions(&mut stages, &base, &locate, None)?;
+            }
             validate(&stages, &base, &locate, None, from_dataset)?;
             within_budget(&stages, &experiment, &base, &locate, None, from_dataset)?;
             variants.push(Variant {
@@ -216,7 +219,10 @@ impl Manifest {
             let mut merged = base.clone();
             merge(&mut merged, overrides);
             let doc = deserialize(&merged, root_span.clone(), &locate, Some(&name))?;
-            let (_, _, stages) = split(doc);
+            let (_, _, mut stages) = split(doc);
+            if !from_dataset {
+                read_descriptions(&mut stages, &merged, &locate, Some(&name))?;
+            }
             validate(&stages, &merged, &locate, Some(&name), from_dataset)?;
             within_budget(
                 &stages,
@@ -490,6 +496,27 @@ fn check_experiment(
             experiment.name
         ),
     ))
+}
+
+/// Reads the robot descriptions of `urdf` scenes, relative to the
+/// manifest's folder.
+fn read_descriptions(
+    stages: &mut Stages,
+    table: &DeTable,
+    locate: &Locator,
+    variant: Option<&str>,
+) -> Result<(), ManifestError> {
+    let dir = match locate.file.parent() {
+        Some(dir) if !dir.as_os_str().is_empty() => dir,
+        _ => Path::new("."),
+    };
+    stages
+        .simulate
+        .read_descriptions(dir)
+        .map_err(|(key, message)| {
+            let path: Vec<&str> = std::iter::once("simulate").chain(key.split('.')).collect();
+            locate.error(span_of(table, &path), path.join("."), variant, message)
+        })
 }
 
 /// The checks between fields that each stage makes, located in the file.

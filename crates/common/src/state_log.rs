@@ -148,11 +148,17 @@ impl StateLayout {
     }
 }
 
-/// The ROS 2 field name of a dotted alnlab name: dots become underscores and
-/// letters lower case (ROS 2 allows only `[a-z][a-z0-9_]*`), so `f_E.1.x` is
-/// the field `f_e_1_x`.
+/// The ROS 2 field name of a dotted alnlab name: letters lower case and
+/// every other character outside `[a-z0-9_]` (a dot, or a `-` of a robot's
+/// link name) an underscore, as ROS 2 allows only `[a-z][a-z0-9_]*`; so
+/// `f_E.1.x` is the field `f_e_1_x`.
 pub fn field_name(name: &str) -> String {
-    name.replace('.', "_").to_ascii_lowercase()
+    name.chars()
+        .map(|c| match c.to_ascii_lowercase() {
+            c @ ('a'..='z' | '0'..='9' | '_') => c,
+            _ => '_',
+        })
+        .collect()
 }
 
 /// Writes a trajectory log under a temporary name; [`StateLogWriter::finish`]

@@ -1,6 +1,7 @@
 //! Hinge controllers: the control torque g that each hinge's link exerts on
 //! its parent (paper §2), clamped componentwise to the torque limit (paper:
-//! ±150). The link itself feels −g.
+//! ±150). The link itself feels −g. A one-DOF joint of a robot gets one
+//! number, its effort (the first component of its g; the others are zero).
 
 use alnlab_common::params::Positive;
 use nalgebra::Vector3;
@@ -24,15 +25,46 @@ pub enum ControllerKind {
     Random,
 }
 
+/// A hinge's torque amplitude: three components for a ball hinge, one number
+/// for a one-DOF joint.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(untagged)]
+pub enum Amplitude {
+    /// A one-DOF joint's effort amplitude (N m or N).
+    Axis(f64),
+    /// A ball hinge's torque amplitude per axis, link frame (N m).
+    Ball([f64; 3]),
+}
+
+impl Amplitude {
+    /// Component `k` (0..3) as a ball hinge's; a one-DOF amplitude is its
+    /// first component.
+    pub fn component(&self, k: usize) -> f64 {
+        match *self {
+            Amplitude::Ball(a) => a[k],
+            Amplitude::Axis(a) if k == 0 => a,
+            Amplitude::Axis(_) => 0.0,
+        }
+    }
+
+    fn dof(&self) -> usize {
+        match self {
+            Amplitude::Axis(_) => 1,
+            Amplitude::Ball(_) => 3,
+        }
+    }
+}
+
 /// The `controller = { … }` table of a scene. Per-hinge lists hold one entry
-/// per hinge, or one entry for all.
+/// per hinge (a robot's joint), or one entry for all.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct ControllerParams {
     /// Which controller.
     pub kind: ControllerKind,
-    /// Torque amplitude per hinge, link frame (N m).
-    pub amplitude: Vec<[f64; 3]>,
+    /// Torque amplitude per hinge: `[x, y, z]` (link frame, N m) for a ball
+    /// hinge, a number for a one-DOF joint.
+    pub amplitude: Vec<Amplitude>,
     /// Frequency per hinge (Hz), for `sine`.
     pub frequency: Vec<f64>,
     /// Phase per hinge (rad), for `sine`.
@@ -47,7 +79,7 @@ impl Default for ControllerParams {
     fn default() -> Self {
         ControllerParams {
             kind: ControllerKind::None,
-            amplitude: vec![[1.0, 10.0, 10.0]],
+            amplitude: vec![Amplitude::Ball([1.0, 10.0, 10.0])],
             frequency: vec![1.0],
             phase: vec![0.0],
             hold: Positive(0.25),
@@ -57,9 +89,11 @@ impl Default for ControllerParams {
 }
 
 impl ControllerParams {
-    /// Checks list lengths against the number of hinges; on error, the field
-    /// and the message.
-    pub fn validate(&self, hinges: usize) -> Result<(), (&'static str, String)> {
+    /// Checks list lengths against the hinges, each given by its degrees of
+    /// freedom (3 for a ball hinge, 1 for a one-DOF joint); on error, the
+    /// field and the message.
+    pub fn validate(&self, dofs: &[usize]) -> Result<(), (&'static str, String)> {
+        let hinges = dofs.len();
         if self.kind != ControllerKind::None && hinges == 0 {
             return Err((
                 "kind",
@@ -79,14 +113,25 @@ impl ControllerParams {
                 ));
             }
         }
-        let numbers = self
+        let components = self
             .amplitude
             .iter()
-            .flatten()
-            .chain(&self.frequency)
-            .chain(&self.phase);
+            .flat_map(|a| (0..3).map(|k| a.component(k)));
+        let numbers = components.chain(self.frequency.iter().chain(&self.phase).copied());
         if numbers.into_iter().any(|x| !x.is_finite()) {
             return Err(("amplitude", "expected finite numbers".into()));
+        }
+        if self.kind != ControllerKind::None {
+            for (h, &dof) in dofs.iter().enumerate() {
+                let a = self.amplitude[if self.amplitude.len() == 1 { 0 } else { h }];
+                if a.dof() != dof {
+                    let expected = match dof {
+                        1 => "a number (a one-DOF joint's effort)",
+                        _ => "[x, y, z] (a ball hinge's torque)",
+                    };
+                    return Err(("amplitude", format!("hinge {}: expected {expected}", h + 1)));
+                }
+            }
         }
         Ok(())
     }
@@ -122,21 +167,26 @@ impl Controller {
             ControllerKind::None => g.fill(Vector3::zeros()),
             ControllerKind::Constant => {
                 for (h, out) in g.iter_mut().enumerate() {
-                    *out = Vector3::from(Self::pick(&p.amplitude, h));
+                    let a = Self::pick(&p.amplitude, h);
+                    *out = Vector3::from_fn(|k, _| a.component(k));
                 }
             }
             ControllerKind::Sine => {
                 for (h, out) in g.iter_mut().enumerate() {
                     let arg = std::f64::consts::TAU * Self::pick(&p.frequency, h) * t
                         + Self::pick(&p.phase, h);
-                    *out = Vector3::from(Self::pick(&p.amplitude, h)) * arg.sin();
+                    let a = Self::pick(&p.amplitude, h);
+                    *out = Vector3::from_fn(|k, _| a.component(k)) * arg.sin();
                 }
             }
             ControllerKind::Random => {
                 while t >= self.next_draw {
                     for (h, held) in self.held.iter_mut().enumerate() {
                         let a = Self::pick(&p.amplitude, h);
-                        *held = Vector3::from_fn(|k, _| a[k] * self.rng.random_range(-1.0..=1.0));
+                        *held = Vector3::from_fn(|k, _| match k < a.dof() {
+                            true => a.component(k) * self.rng.random_range(-1.0..=1.0),
+                            false => 0.0,
+                        });
                     }
                     self.next_draw += p.hold.get();
                 }
@@ -158,12 +208,12 @@ mod tests {
     fn sine_and_clamp() {
         let params = ControllerParams {
             kind: ControllerKind::Sine,
-            amplitude: vec![[200.0, 10.0, 0.0]],
+            amplitude: vec![Amplitude::Ball([200.0, 10.0, 0.0])],
             frequency: vec![2.0],
             phase: vec![0.0, std::f64::consts::FRAC_PI_2],
             ..ControllerParams::default()
         };
-        params.validate(2).unwrap();
+        params.validate(&[3, 3]).unwrap();
         let mut c = Controller::new(&params, 2, 1);
         let mut g = [Vector3::zeros(); 2];
         c.torques(0.125, &mut g); // quarter period: sin = 1, second hinge cos = 0
@@ -204,11 +254,28 @@ mod tests {
             phase: vec![0.0, 1.0, 2.0],
             ..ControllerParams::default()
         };
-        assert_eq!(params.validate(2).unwrap_err().0, "phase");
+        assert_eq!(params.validate(&[3, 3]).unwrap_err().0, "phase");
         let constant = ControllerParams {
             kind: ControllerKind::Constant,
             ..ControllerParams::default()
         };
-        assert_eq!(constant.validate(0).unwrap_err().0, "kind");
+        assert_eq!(constant.validate(&[]).unwrap_err().0, "kind");
+        let robot = ControllerParams {
+            kind: ControllerKind::Random,
+            amplitude: vec![Amplitude::Axis(5.0)],
+            ..ControllerParams::default()
+        };
+        robot.validate(&[1, 1]).unwrap();
+        assert_eq!(robot.validate(&[1, 3]).unwrap_err().0, "amplitude");
+        let ball = ControllerParams {
+            kind: ControllerKind::Random,
+            ..ControllerParams::default()
+        };
+        assert!(
+            ball.validate(&[1])
+                .unwrap_err()
+                .1
+                .contains("expected a number")
+        );
     }
 }

@@ -8,12 +8,13 @@
 
 use alnlab_common::Result;
 use alnlab_common::state_log::StateLogWriter;
-use nalgebra::{UnitQuaternion, Vector3};
+use nalgebra::{Matrix3, UnitQuaternion, Vector3};
 use serde_json::{Value, json};
 
+use crate::Prepared;
 use crate::dynamics::Kinematics;
-use crate::model::Model;
-use crate::scene::{Scene, SceneKind};
+use crate::scene::SceneKind;
+use crate::urdf::Robot;
 
 /// Topic of the frame transforms.
 pub const TF_TOPIC: &str = "/tf";
@@ -41,25 +42,45 @@ pub fn link_frame(scene: &str, run: u32, i: usize) -> String {
     format!("{scene}/run{run}/link{}", i + 1)
 }
 
-/// One `/tf` message: every link's pose in the `world` frame.
-pub fn transforms(scene: &str, run: u32, kin: &Kinematics, log_time_ns: u64) -> Vec<u8> {
-    let transforms: Vec<Value> = (0..kin.rot.len())
-        .map(|i| {
-            let rotation = UnitQuaternion::from_matrix(&kin.rot[i]);
-            json!({
-                "timestamp": time(log_time_ns),
-                "parent_frame_id": "world",
-                "child_frame_id": link_frame(scene, run, i),
-                "translation": vector(&kin.pos[i]),
-                "rotation": quaternion(&rotation),
-            })
+/// The frame id of a robot's URDF link `name` in a run.
+pub fn robot_frame(scene: &str, run: u32, name: &str) -> String {
+    format!("{scene}/run{run}/{name}")
+}
+
+/// One `/tf` message: every link's pose in the `world` frame — for a robot,
+/// every URDF link's frame, named after it.
+pub fn transforms(p: &Prepared, run: u32, kin: &Kinematics, log_time_ns: u64) -> Vec<u8> {
+    let scene = &p.scene.name;
+    let entry = |id: String, rot: &Matrix3<f64>, pos: &Vector3<f64>| {
+        json!({
+            "timestamp": time(log_time_ns),
+            "parent_frame_id": "world",
+            "child_frame_id": id,
+            "translation": vector(pos),
+            "rotation": quaternion(&UnitQuaternion::from_matrix(rot)),
         })
-        .collect();
+    };
+    let transforms: Vec<Value> = match &p.robot {
+        None => (0..kin.rot.len())
+            .map(|i| entry(link_frame(scene, run, i), &kin.rot[i], &kin.pos[i]))
+            .collect(),
+        Some(robot) => robot
+            .frames
+            .iter()
+            .map(|f| {
+                let (b, placement) = (f.body, &f.placement);
+                let rot = kin.rot[b] * placement.rotation.to_rotation_matrix().into_inner();
+                let pos = kin.point_position(b, &placement.translation.vector);
+                entry(robot_frame(scene, run, &f.name), &rot, &pos)
+            })
+            .collect(),
+    };
     serde_json::to_vec(&json!({ "transforms": transforms })).expect("JSON serializes")
 }
 
 /// One `/scene` message for the start of a run.
-pub fn scene_update(scene: &Scene, model: &Model, run: u32, log_time_ns: u64) -> Vec<u8> {
+pub fn scene_update(p: &Prepared, run: u32, log_time_ns: u64) -> Vec<u8> {
+    let (scene, model) = (&p.scene, &p.model);
     let pose = |p: Vector3<f64>, q: UnitQuaternion<f64>| json!({ "position": vector(&p), "orientation": quaternion(&q) });
     let colour = json!({ "r": 0.85, "g": 0.45, "b": 0.2, "a": 1.0 });
     let mut entities = Vec::new();
@@ -86,6 +107,11 @@ pub fn scene_update(scene: &Scene, model: &Model, run: u32, log_time_ns: u64) ->
                 "color": { "r": 0.3, "g": 0.5, "b": 0.8, "a": 0.2 },
             }],
         }));
+    }
+    if let Some(robot) = &p.robot {
+        entities.extend(robot_bones(p, robot, run, log_time_ns));
+        return serde_json::to_vec(&json!({ "deletions": [], "entities": entities }))
+            .expect("JSON serializes");
     }
     let along_x = UnitQuaternion::from_euler_angles(0.0, std::f64::consts::FRAC_PI_2, 0.0);
     for (i, link) in model.links.iter().enumerate() {
@@ -119,6 +145,36 @@ pub fn scene_update(scene: &Scene, model: &Model, run: u32, log_time_ns: u64) ->
         entities.push(entity);
     }
     serde_json::to_vec(&json!({ "deletions": [], "entities": entities })).expect("JSON serializes")
+}
+
+/// A robot drawn as a stick figure: from each body's origin a cylinder of
+/// the contact radius to each child body's joint, in the body's URDF frame.
+fn robot_bones(p: &Prepared, robot: &Robot, run: u32, log_time_ns: u64) -> Vec<Value> {
+    let radius = p.scene.link_radius.expect("resolved").get();
+    let colour = json!({ "r": 0.85, "g": 0.45, "b": 0.2, "a": 1.0 });
+    let mut entities = Vec::new();
+    for (c, child) in p.model.links.iter().enumerate().skip(1) {
+        let (b, l) = (child.parent.expect("not the root"), child.l);
+        let length = l.norm();
+        if length < 1e-9 {
+            continue;
+        }
+        let turn = UnitQuaternion::rotation_between(&Vector3::z(), &l)
+            .unwrap_or_else(|| UnitQuaternion::from_euler_angles(std::f64::consts::PI, 0.0, 0.0));
+        entities.push(json!({
+            "timestamp": time(log_time_ns),
+            "frame_id": robot_frame(&p.scene.name, run, &robot.links[b]),
+            "id": format!("{}/run{run}/{}", p.scene.name, robot.joints[c]),
+            "frame_locked": true,
+            "cylinders": [{
+                "pose": { "position": vector(&(l / 2.0)), "orientation": quaternion(&turn) },
+                "size": { "x": 2.0 * radius, "y": 2.0 * radius, "z": length },
+                "bottom_scale": 1.0, "top_scale": 1.0,
+                "color": colour,
+            }],
+        }));
+    }
+    entities
 }
 
 /// Adds the `/tf` and `/scene` channels to a trajectory log; their ids.

@@ -9,6 +9,8 @@
 //!   energy and momenta.
 //! - [`integrate`]: semi-implicit Euler and RK4 over a reusable [`Stepper`].
 //! - [`contact`], [`controller`]: floor and arena wall; hinge torques.
+//! - [`joints`]: a robot joint's effort limit, damping, friction and soft
+//!   position limits.
 //! - [`scene`]: a manifest scene, its kind's defaults and initial states.
 //! - [`variables`]: the paper's variables a scene has, names and values.
 //! - [`runner`]: one scene's runs, frame by frame.
@@ -23,6 +25,7 @@ pub mod controller;
 pub mod dynamics;
 pub mod foxglove;
 pub mod integrate;
+pub mod joints;
 pub mod model;
 #[cfg(test)]
 mod reference;

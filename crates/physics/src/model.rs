@@ -94,6 +94,18 @@ impl Link {
         rigid_inertia(self.mass, &self.c, &self.inertia_com)
     }
 
+    /// The link's own inertia about its one-DOF joint's axis through the
+    /// hinge (kg m²), or its mass along a prismatic axis (kg): a lower bound
+    /// of the inertia the joint moves. For a ball hinge, the smallest
+    /// principal inertia about the hinge.
+    pub fn axis_inertia(&self) -> f64 {
+        match self.joint {
+            Joint::Revolute { axis, .. } => axis.dot(&(self.inertia_hinge() * axis)),
+            Joint::Prismatic { .. } => self.mass,
+            Joint::Ball => self.inertia_hinge().symmetric_eigenvalues().min(),
+        }
+    }
+
     /// Rotational inertia about the hinge, link frame (the paper's J).
     pub fn inertia_hinge(&self) -> Matrix3<f64> {
         self.inertia_com

@@ -20,15 +20,20 @@ use crate::{Prepared, Runner, Scene, state_from_generalized};
 /// resolved parameters, its index and the experiment seed.
 pub const SCENE_RECORD: &str = "alnlab.scene";
 
-/// The `alnlab.scene` record of a scene.
+/// The `alnlab.scene` record of a scene; a robot's also holds its
+/// description (`urdf`).
 pub fn scene_record(scene: &Scene, index: usize, seed: u64) -> BTreeMap<String, String> {
     let json = serde_json::to_string(scene).expect("scenes serialize");
-    BTreeMap::from([
+    let mut record = BTreeMap::from([
         ("scene".into(), scene.name.clone()),
         ("index".into(), index.to_string()),
         ("seed".into(), seed.to_string()),
         ("json".into(), json),
-    ])
+    ]);
+    if let Some(text) = &scene.description {
+        record.insert("urdf".into(), text.to_string());
+    }
+    record
 }
 
 /// A logged scene, rebuilt.
@@ -49,8 +54,20 @@ impl SceneReplay {
                     .get(key)
                     .ok_or_else(|| format!("an {SCENE_RECORD} record lacks `{key}`"))
             };
-            let scene: Scene = serde_json::from_str(field("json")?)
+            let mut scene: Scene = serde_json::from_str(field("json")?)
                 .map_err(|e| format!("an {SCENE_RECORD} record does not hold a scene ({e})"))?;
+            if let Some(expected) = &scene.file_sha256 {
+                let text = field("urdf")?;
+                let found = alnlab_common::hash::sha256_hex(text.as_bytes());
+                if &found != expected {
+                    return Err(format!(
+                        "scene `{}`: the robot description in its {SCENE_RECORD} record has \
+                         sha256 {found}, not the {expected} it was simulated from",
+                        scene.name
+                    ));
+                }
+                scene.description = Some(text.as_str().into());
+            }
             let number = |key: &str| -> std::result::Result<u64, String> {
                 field(key)?
                     .parse()

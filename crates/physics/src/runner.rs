@@ -13,14 +13,21 @@ use crate::contact::{ContactPoint, Surfaces, contact_points};
 use crate::controller::{Controller, ControllerKind};
 use crate::dynamics::{Kinematics, Loads, State};
 use crate::integrate::{Evaluation, Forces, Stepper};
+use crate::joints::JointLaw;
 use crate::model::{Model, Root};
 use crate::scene::{self, Scene};
+use crate::urdf::Robot;
 use crate::variables::VariableSet;
 
 /// Everything needed to simulate one scene, built once.
 pub struct Prepared {
     pub scene: Scene,
     pub model: Model,
+    /// A `urdf` scene's robot (names, joint specs, frames).
+    pub robot: Option<Robot>,
+    /// Per link, its one-DOF joint's law (`None` for the root and ball
+    /// hinges).
+    pub laws: Vec<Option<JointLaw>>,
     pub surfaces: Surfaces,
     pub points: Vec<ContactPoint>,
     pub variables: VariableSet,
@@ -28,26 +35,84 @@ pub struct Prepared {
 }
 
 impl Prepared {
-    /// Builds the model and variable set of a (resolved) scene.
+    /// Builds the model and variable set of a (validated) scene.
     pub fn new(scene: &Scene) -> Prepared {
         let scene = scene.clone().resolve();
-        let model = scene.model();
-        let surfaces = scene.surfaces();
-        let points = if surfaces.any() {
-            contact_points(&model)
-        } else {
-            Vec::new()
+        let robot = scene.robot();
+        let model = match &robot {
+            Some(robot) => robot.model.clone(),
+            None => scene.model(),
         };
+        let surfaces = scene.surfaces();
         let controlled = scene.controller().kind != ControllerKind::None;
-        let variables = VariableSet::of(&model, surfaces.any().then_some(&points[..]), controlled);
+        let dt = scene.dt.get();
+        let (points, variables, laws, labels) = match &robot {
+            None => {
+                let points = if surfaces.any() {
+                    contact_points(&model)
+                } else {
+                    Vec::new()
+                };
+                let variables =
+                    VariableSet::of(&model, surfaces.any().then_some(&points[..]), controlled);
+                let numbered: Vec<String> = (1..=model.len()).map(|i| i.to_string()).collect();
+                let laws = vec![None; model.len()];
+                (points, variables, laws, (numbered.clone(), numbered))
+            }
+            Some(robot) => {
+                let frame = |name: &String| robot.frame(name).expect("validated");
+                let points: Vec<ContactPoint> = scene
+                    .contact_links
+                    .iter()
+                    .flatten()
+                    .map(|name| ContactPoint {
+                        link: frame(name).body,
+                        offset: frame(name).placement.translation.vector,
+                    })
+                    .collect();
+                let watched: Vec<usize> = scene
+                    .link_velocities
+                    .iter()
+                    .flatten()
+                    .map(|name| frame(name).body)
+                    .collect();
+                let variables = VariableSet::of_robot(
+                    &model,
+                    &robot.links,
+                    &robot.joints,
+                    &watched,
+                    &points,
+                    controlled,
+                );
+                let added = scene.hinge_damping.expect("resolved");
+                let laws = model
+                    .links
+                    .iter()
+                    .zip(&robot.specs)
+                    .enumerate()
+                    .map(|(i, (link, spec))| {
+                        (i > 0 && link.joint.dof() == 1)
+                            .then(|| JointLaw::new(link, spec, added, dt))
+                    })
+                    .collect();
+                (
+                    points,
+                    variables,
+                    laws,
+                    (robot.links.clone(), robot.joints.clone()),
+                )
+            }
+        };
         let layout = StateLayout {
             scene: scene.name.clone(),
-            state: state_names(&model),
+            state: state_names(&model, &labels.0, &labels.1),
             variables: variables.names(),
         };
         Prepared {
             scene,
             model,
+            robot,
+            laws,
             surfaces,
             points,
             variables,
@@ -58,10 +123,15 @@ impl Prepared {
 
 /// Names of the generalized-state components in the log, in the order of
 /// [`generalized_state`]: root hinge position (inertial) and, for a free root,
-/// velocity (root frame); then per link its orientation quaternion `q.<i>`
-/// (x, y, z, w; the root's to the inertial frame, others to the parent) and
-/// its angular rate `w.<i>` (the root's ω, or the hinge's relative rate).
-pub fn state_names(model: &Model) -> Vec<String> {
+/// velocity (root frame); then per link (named by `links`) its orientation
+/// quaternion `q.<link>` (x, y, z, w; the root's to the inertial frame,
+/// others to the parent) and its angular rate `w.<link>` (the root's ω, or
+/// the hinge's relative rate) — none for a fixed root — or, for a one-DOF
+/// joint (named by `joints`), its position `joint.<joint>.q` and velocity
+/// `joint.<joint>.qd`; last, each one-DOF joint's passive effort
+/// `joint.<joint>.passive` (damping, friction and limits at that instant,
+/// which replay the dynamics; not part of the state).
+pub fn state_names(model: &Model, links: &[String], joints: &[String]) -> Vec<String> {
     let mut names: Vec<String> = ["x", "y", "z"]
         .iter()
         .map(|a| format!("root.p.{a}"))
@@ -69,32 +139,61 @@ pub fn state_names(model: &Model) -> Vec<String> {
     if model.root == Root::Free {
         names.extend(["x", "y", "z"].iter().map(|a| format!("root.v.{a}")));
     }
-    for i in 1..=model.len() {
-        names.extend(["x", "y", "z", "w"].iter().map(|a| format!("q.{i}.{a}")));
-        names.extend(["x", "y", "z"].iter().map(|a| format!("w.{i}.{a}")));
+    for (i, link) in model.links.iter().enumerate() {
+        match (i, model.root, link.joint.dof()) {
+            (0, Root::Fixed, _) => {}
+            (0, _, _) | (_, _, 3) => {
+                let l = &links[i];
+                names.extend(["x", "y", "z", "w"].iter().map(|a| format!("q.{l}.{a}")));
+                names.extend(["x", "y", "z"].iter().map(|a| format!("w.{l}.{a}")));
+            }
+            _ => names.extend(["q", "qd"].map(|x| format!("joint.{}.{x}", joints[i]))),
+        }
     }
+    names.extend(one_dof(model).map(|i| format!("joint.{}.passive", joints[i])));
     names
 }
 
-/// The generalized state as logged (see [`state_names`]).
+/// The links below the root with a one-DOF joint.
+fn one_dof(model: &Model) -> impl Iterator<Item = usize> + '_ {
+    (1..model.len()).filter(|&i| model.links[i].joint.dof() == 1)
+}
+
+/// The generalized state as logged (see [`state_names`]), without the
+/// passive efforts, which the caller appends.
 pub fn generalized_state(model: &Model, state: &State, out: &mut Vec<f64>) {
     out.clear();
     out.extend(state.root_p.iter());
     if model.root == Root::Free {
         out.extend(state.root_v.iter());
     }
-    for (q, w) in state.orient.iter().zip(&state.rates) {
-        out.extend([q.i, q.j, q.k, q.w]);
-        out.extend(w.iter());
+    for (i, link) in model.links.iter().enumerate() {
+        match (i, model.root, link.joint.dof()) {
+            (0, Root::Fixed, _) => {}
+            (0, _, _) | (_, _, 3) => {
+                let (q, w) = (&state.orient[i], &state.rates[i]);
+                out.extend([q.i, q.j, q.k, q.w]);
+                out.extend(w.iter());
+            }
+            _ => out.extend([state.q[i], state.qd[i]]),
+        }
     }
 }
 
 /// The state a logged generalized state stands for (the inverse of
-/// [`generalized_state`]); `None` if `values` has the wrong length.
+/// [`generalized_state`], passive efforts ignored); `None` if `values` has
+/// the wrong length.
 pub fn state_from_generalized(model: &Model, values: &[f64]) -> Option<State> {
     let free = model.root == Root::Free;
-    let expected = if free { 6 } else { 3 } + 7 * model.len();
-    if values.len() != expected {
+    let mut expected = if free { 6 } else { 3 };
+    for (i, link) in model.links.iter().enumerate() {
+        expected += match (i, model.root, link.joint.dof()) {
+            (0, Root::Fixed, _) => 0,
+            (0, _, _) | (_, _, 3) => 7,
+            _ => 3,
+        };
+    }
+    if values.len() != expected + one_dof(model).count() {
         return None;
     }
     let mut state = State::rest(model, Vector3::new(values[0], values[1], values[2]));
@@ -103,26 +202,56 @@ pub fn state_from_generalized(model: &Model, values: &[f64]) -> Option<State> {
         state.root_v = Vector3::new(values[3], values[4], values[5]);
         at = 6;
     }
-    for (q, w) in state.orient.iter_mut().zip(state.rates.iter_mut()) {
-        let v = &values[at..at + 7];
-        *q = nalgebra::Unit::new_unchecked(nalgebra::Quaternion::new(v[3], v[0], v[1], v[2]));
-        *w = Vector3::new(v[4], v[5], v[6]);
-        at += 7;
+    for (i, link) in model.links.iter().enumerate() {
+        match (i, model.root, link.joint.dof()) {
+            (0, Root::Fixed, _) => {}
+            (0, _, _) | (_, _, 3) => {
+                let v = &values[at..at + 7];
+                state.orient[i] = nalgebra::Unit::new_unchecked(nalgebra::Quaternion::new(
+                    v[3], v[0], v[1], v[2],
+                ));
+                state.rates[i] = Vector3::new(v[4], v[5], v[6]);
+                at += 7;
+            }
+            _ => {
+                (state.q[i], state.qd[i]) = (values[at], values[at + 1]);
+                at += 2;
+            }
+        }
     }
     Some(state)
 }
 
-/// The forces of a scene at one instant: control torques (held over a step)
-/// and contacts.
+/// The forces of a scene at one instant: control torques (held over a step),
+/// a robot's joint laws, and contacts.
 pub struct SceneForces<'a> {
     /// The surfaces to touch.
     pub surfaces: &'a Surfaces,
     /// The contact points.
     pub points: &'a [ContactPoint],
-    /// Control torque g of each link on its parent (index 0 unused).
+    /// Control torque g of each link on its parent (index 0 unused); a
+    /// one-DOF joint's effort is its x, already clamped to its limit.
     pub g: Vec<Vector3<f64>>,
-    /// Viscous damping at every hinge (N m s/rad).
+    /// Viscous damping at every ball hinge (N m s/rad).
     pub hinge_damping: f64,
+    /// Per link, its one-DOF joint's law.
+    pub laws: &'a [Option<JointLaw>],
+    /// Per link, the passive effort of the last evaluation.
+    pub passive: Vec<f64>,
+}
+
+impl<'a> SceneForces<'a> {
+    /// The forces of scene `p` with no control torques yet.
+    pub fn new(p: &'a Prepared) -> SceneForces<'a> {
+        SceneForces {
+            surfaces: &p.surfaces,
+            points: &p.points,
+            g: vec![Vector3::zeros(); p.model.len()],
+            hinge_damping: p.scene.hinge_damping.expect("resolved"),
+            laws: &p.laws,
+            passive: vec![0.0; p.model.len()],
+        }
+    }
 }
 
 impl Forces for SceneForces<'_> {
@@ -134,6 +263,12 @@ impl Forces for SceneForces<'_> {
             loads.tau[0] = Vector3::zeros();
         }
         loads.effort.fill(0.0);
+        for (i, law) in self.laws.iter().enumerate() {
+            if let Some(law) = law {
+                self.passive[i] = law.passive(state.q[i], state.qd[i]);
+                loads.effort[i] = self.g[i].x + self.passive[i];
+            }
+        }
         loads.f_ext.fill(Vector6::zeros());
         if !self.points.is_empty() {
             self.surfaces
@@ -218,12 +353,7 @@ impl<'a> Runner<'a> {
                 scene::run_seed(seed ^ 0xC0DE, scene_index, run),
             ),
             driven: None,
-            forces: SceneForces {
-                surfaces: &p.surfaces,
-                points: &p.points,
-                g: vec![Vector3::zeros(); model.len()],
-                hinge_damping: p.scene.hinge_damping.expect("resolved"),
-            },
+            forces: SceneForces::new(p),
             hinge_torques: vec![Vector3::zeros(); hinges],
             stepper: Stepper::new(model),
             eval: Evaluation::new(model),
@@ -286,6 +416,11 @@ impl<'a> Runner<'a> {
             Some(g) => self.hinge_torques.copy_from_slice(g),
             None => self.controller.torques(t, &mut self.hinge_torques),
         }
+        for (torque, law) in self.hinge_torques.iter_mut().zip(&self.p.laws[1..]) {
+            if let Some(law) = law {
+                torque.x = law.clamp(torque.x);
+            }
+        }
         self.forces.g[1..].copy_from_slice(&self.hinge_torques);
     }
 
@@ -301,14 +436,11 @@ impl<'a> Runner<'a> {
         self.torques(t);
         self.eval.run(&p.model, state, &mut self.forces);
         generalized_state(&p.model, state, &mut frame.state);
-        p.variables.values(
-            state,
-            &self.eval.kin,
-            &self.eval.ws.accel,
-            &self.forces.g,
-            &self.eval.loads.f_ext,
-            &mut frame.variables,
-        );
+        frame
+            .state
+            .extend(one_dof(&p.model).map(|i| self.forces.passive[i]));
+        p.variables
+            .values(state, &self.eval, &self.forces.g, &mut frame.variables);
     }
 }
 

@@ -9,6 +9,15 @@
 //! | `chain` | 4 capsules | free | no | no | 0 | 0 | none |
 //! | `pendulum` | 3 capsules | pinned | no | no | −9.81 z | 0 | none |
 //! | `tumbler` | 1 box | free | no | no | 0 | 0 | none |
+//! | `urdf` | the robot's | fixed (`base`) | no | no | −9.81 z | 0 (plus the URDF's) | random |
+//!
+//! A `urdf` scene reads its robot from `file` (a URDF, relative to the
+//! manifest) when the manifest is read ([`Scene::read_description`]); the
+//! description's text travels with the scene (not serialized: the log keeps
+//! it in the scene's record) and its sha256 is a parameter, so an edited
+//! description simulates afresh.
+
+use std::sync::Arc;
 
 use alnlab_common::params::{Count, Positive};
 use nalgebra::{UnitQuaternion, Vector3};
@@ -18,9 +27,10 @@ use serde::{Deserialize, Serialize};
 
 use crate::Integrator;
 use crate::contact::{ContactParams, Surfaces};
-use crate::controller::{ControllerKind, ControllerParams};
+use crate::controller::{Amplitude, ControllerKind, ControllerParams};
 use crate::dynamics::State;
-use crate::model::{Model, Root, Shape};
+use crate::model::{Joint, Model, Root, Shape};
+use crate::urdf::{self, Base, Robot};
 
 /// What a scene simulates.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
@@ -35,6 +45,8 @@ pub enum SceneKind {
     Pendulum,
     /// One free asymmetric box.
     Tumbler,
+    /// A robot from a URDF description.
+    Urdf,
 }
 
 /// One `[[simulate.scene]]` entry. Fields left out take the kind's defaults
@@ -89,8 +101,29 @@ pub struct Scene {
     /// Each run starts with a random linear velocity of up to this speed (m/s).
     pub initial_speed: Option<f64>,
     /// Each run starts with random angular rates of up to this (rad/s) per
-    /// component, at the root and at every hinge.
+    /// component, at the root and at every hinge (a robot: every joint's
+    /// velocity, rad/s or m/s).
     pub initial_spin: Option<f64>,
+    /// `urdf`: the robot description (URDF), relative to the manifest.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub file: Option<String>,
+    /// `urdf`: the description's sha256, filled in when it is read.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub file_sha256: Option<String>,
+    /// `urdf`: how the robot's root link is held (`fixed` or `free`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub base: Option<Base>,
+    /// `urdf`: links (URDF names) whose origin is a contact point, a sphere
+    /// of `link_radius` (a foot).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub contact_links: Option<Vec<String>>,
+    /// `urdf`: links (URDF names, heads of moving bodies) whose v and ω
+    /// (link frame) are variables, besides every joint's.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub link_velocities: Option<Vec<String>>,
+    /// `urdf`: the description's text, read from `file`.
+    #[serde(skip)]
+    pub description: Option<Arc<str>>,
 }
 
 fn two() -> Count {
@@ -130,6 +163,12 @@ impl Default for Scene {
             initial_height: None,
             initial_speed: None,
             initial_spin: None,
+            file: None,
+            file_sha256: None,
+            base: None,
+            contact_links: None,
+            link_velocities: None,
+            description: None,
         }
     }
 }
@@ -142,10 +181,13 @@ impl Scene {
     pub fn resolve(mut self) -> Scene {
         use SceneKind::*;
         let k = self.kind;
+        if k == Urdf {
+            return self.resolve_robot();
+        }
         let default_links = match k {
             Worm | Pendulum => 3,
             Chain => 4,
-            Tumbler => 1,
+            Tumbler | Urdf => 1,
         };
         self.links.get_or_insert(Count(default_links));
         self.link_length
@@ -180,9 +222,89 @@ impl Scene {
             Worm => 2.0,
             Chain => 3.0,
             Pendulum => 1.5,
-            Tumbler => 6.0,
+            Tumbler | Urdf => 6.0,
         });
         self
+    }
+
+    /// A robot's defaults: contact spheres of 2 cm, gravity, no floor or
+    /// wall, no added damping, random efforts of up to 5 (N m or N) held
+    /// for 0.25 s, a welded base at the origin, joints moving at up to
+    /// 0.5 (rad/s or m/s). Its link count is the description's.
+    fn resolve_robot(mut self) -> Scene {
+        self.link_radius.get_or_insert(Positive(0.02));
+        self.gravity.get_or_insert([0.0, 0.0, -9.81]);
+        self.floor.get_or_insert(false);
+        self.arena_radius.get_or_insert(0.0);
+        self.hinge_damping.get_or_insert(0.0);
+        self.controller.get_or_insert_with(|| ControllerParams {
+            kind: ControllerKind::Random,
+            amplitude: vec![Amplitude::Axis(5.0)],
+            ..ControllerParams::default()
+        });
+        self.initial_height.get_or_insert(0.0);
+        self.initial_speed.get_or_insert(0.0);
+        self.initial_spin.get_or_insert(0.5);
+        self.base.get_or_insert(Base::Fixed);
+        self.contact_links.get_or_insert_with(Vec::new);
+        self.link_velocities.get_or_insert_with(Vec::new);
+        self
+    }
+
+    /// Reads a `urdf` scene's description from `file` (relative to `dir`,
+    /// the manifest's folder): keeps its text, fills in its sha256 and the
+    /// link count. Other kinds are left as they are. On error, the field
+    /// and what is wrong.
+    pub fn read_description(&mut self, dir: &std::path::Path) -> Result<(), SceneError> {
+        if self.kind != SceneKind::Urdf {
+            return match (&self.file, &self.base) {
+                (None, None) => Ok(()),
+                (Some(_), _) => Err(("file".into(), "only a `urdf` scene reads a file".into())),
+                (_, Some(_)) => Err(("base".into(), "only a `urdf` scene has a `base`".into())),
+            };
+        }
+        for (field, set) in [
+            ("file_sha256", self.file_sha256.is_some()),
+            ("links", self.links.is_some()),
+            ("link_length", self.link_length.is_some()),
+            ("link_mass", self.link_mass.is_some()),
+        ] {
+            if set {
+                return Err((
+                    field.into(),
+                    "a `urdf` scene takes this from its description; remove it".into(),
+                ));
+            }
+        }
+        let file = self.file.as_ref().ok_or_else(|| {
+            (
+                "file".to_string(),
+                "expected the robot description, file = \"….urdf\" (relative to the manifest)"
+                    .to_string(),
+            )
+        })?;
+        let path = dir.join(file);
+        let text = std::fs::read_to_string(&path).map_err(|e| {
+            (
+                "file".to_string(),
+                format!("cannot read {}: {e}", path.display()),
+            )
+        })?;
+        let robot = urdf::parse(&text, self.base.unwrap_or(Base::Fixed))
+            .map_err(|e| ("file".to_string(), format!("{}: {e}", path.display())))?;
+        self.links = Some(Count(robot.model.len() as u64));
+        self.file_sha256 = Some(alnlab_common::hash::sha256_hex(text.as_bytes()));
+        self.description = Some(text.into());
+        Ok(())
+    }
+
+    /// A `urdf` scene's robot (after [`Scene::read_description`] and
+    /// [`Scene::resolve`]), with the scene's gravity.
+    pub fn robot(&self) -> Option<Robot> {
+        let text = self.description.as_ref()?;
+        let mut robot = urdf::parse(text, self.base.unwrap_or(Base::Fixed)).ok()?;
+        robot.model.gravity = Vector3::from(self.gravity.expect("resolved"));
+        Some(robot)
     }
 
     fn links_n(&self) -> usize {
@@ -266,6 +388,9 @@ impl Scene {
         {
             return err("gravity", "expected three finite numbers".into());
         }
+        if self.kind == SceneKind::Urdf {
+            return self.validate_robot();
+        }
         // Damping is integrated explicitly: b·dt must stay below the smallest
         // rotational inertia of a link, or the hinge's rate overshoots.
         let damping = self.hinge_damping.expect("resolved");
@@ -286,11 +411,82 @@ impl Scene {
                 ),
             );
         }
-        let hinges = n - 1;
         self.controller
             .as_ref()
             .expect("resolved")
-            .validate(hinges)
+            .validate(&vec![3; n - 1])
+            .map_err(|(field, message)| (format!("controller.{field}"), message))
+    }
+
+    /// The checks of a `urdf` scene: its description read, its named links
+    /// there, its controller's amplitudes one per joint, and every joint's
+    /// damping within what explicit integration resolves.
+    fn validate_robot(&self) -> Result<(), SceneError> {
+        let robot = self.robot().ok_or_else(|| {
+            (
+                "file".to_string(),
+                "the robot description was not read (expected file = \"….urdf\")".to_string(),
+            )
+        })?;
+        for (field, names) in [
+            ("contact_links", self.contact_links.as_deref()),
+            ("link_velocities", self.link_velocities.as_deref()),
+        ] {
+            for name in names.unwrap_or_default() {
+                let Some(frame) = robot.frame(name) else {
+                    return Err((
+                        field.into(),
+                        format!(
+                            "robot `{}` has no link `{name}`; its links: {}",
+                            robot.name,
+                            robot
+                                .frames
+                                .iter()
+                                .map(|f| f.name.as_str())
+                                .collect::<Vec<_>>()
+                                .join(", ")
+                        ),
+                    ));
+                };
+                if field == "link_velocities" && robot.links[frame.body] != *name {
+                    return Err((
+                        field.into(),
+                        format!(
+                            "link `{name}` is fixed to `{}`, which moves with it; name the body's \
+                             head, `{}`",
+                            robot.links[frame.body], robot.links[frame.body]
+                        ),
+                    ));
+                }
+            }
+        }
+        let dt = self.dt.get();
+        let added = self.hinge_damping.expect("resolved");
+        for (i, link) in robot.model.links.iter().enumerate().skip(1) {
+            let spec = &robot.specs[i];
+            let damping = spec.damping + added;
+            let inertia = link.axis_inertia();
+            if damping * dt > inertia {
+                return Err((
+                    "dt".into(),
+                    format!(
+                        "joint `{}`: damping {damping} with dt = {dt} is more than explicit \
+                         integration resolves on its link's own inertia about the axis \
+                         ({inertia:.3e}); expected dt ≤ {:.2e}",
+                        robot.joints[i],
+                        inertia / damping
+                    ),
+                ));
+            }
+        }
+        let dofs: Vec<usize> = robot.model.links[1..]
+            .iter()
+            .map(|l| l.joint.dof())
+            .collect();
+        self.controller
+            .as_ref()
+            .expect("resolved")
+            .validate(&dofs)
             .map_err(|(field, message)| (format!("controller.{field}"), message))
     }
 
@@ -306,6 +502,12 @@ impl Scene {
 
     /// The link tree.
     pub fn model(&self) -> Model {
+        if self.kind == SceneKind::Urdf {
+            return self
+                .robot()
+                .expect("a validated urdf scene has its description")
+                .model;
+        }
         let n = self.links_n();
         let (length, radius) = (
             self.link_length.expect("resolved").get(),
@@ -338,6 +540,7 @@ impl Scene {
             dt: self.dt.get(),
             point_radius: match self.kind {
                 SceneKind::Tumbler => 0.0,
+                SceneKind::Urdf => self.link_radius.expect("resolved").get(),
                 _ => self.link_radius.expect("resolved").get(),
             },
         }
@@ -379,6 +582,36 @@ impl Scene {
                 for q in state.orient.iter_mut() {
                     *q = UnitQuaternion::from_scaled_axis(uniform(std::f64::consts::PI));
                 }
+            }
+            SceneKind::Urdf => {
+                state.root_p = Vector3::new(0.0, 0.0, height);
+                let robot = self
+                    .robot()
+                    .expect("a validated urdf scene has its description");
+                for (i, link) in model.links.iter().enumerate().skip(1) {
+                    let (low, high) = match (robot.specs[i].range, link.joint) {
+                        (Some(range), _) => range,
+                        (None, Joint::Revolute { .. }) => {
+                            (-std::f64::consts::PI, std::f64::consts::PI)
+                        }
+                        (None, _) => (0.0, 0.0),
+                    };
+                    let (low, high) = match link.joint {
+                        Joint::Revolute { .. } => (
+                            low.max(-std::f64::consts::PI),
+                            high.min(std::f64::consts::PI),
+                        ),
+                        _ => (low, high),
+                    };
+                    let u = (uniform(1.0).x + 1.0) / 2.0;
+                    state.q[i] = low + (high - low) * u;
+                    state.qd[i] = uniform(spin).x;
+                }
+                if model.root == Root::Free {
+                    state.rates[0] = uniform(spin);
+                    state.root_v = uniform(self.initial_speed.expect("resolved"));
+                }
+                return state;
             }
             SceneKind::Pendulum => {
                 state.root_p = Vector3::new(0.0, 0.0, height);

@@ -5,7 +5,7 @@
 use alnlab_common::params::{Count, Positive};
 use nalgebra::{UnitQuaternion, Vector3};
 
-use crate::controller::{ControllerKind, ControllerParams};
+use crate::controller::{Amplitude, ControllerKind, ControllerParams};
 use crate::dynamics::{State, energy};
 use crate::integrate::{Evaluation, Stepper};
 use crate::model::Model;
@@ -138,10 +138,9 @@ fn simulate_from(
     let mut torques = vec![g; p.model.len()];
     torques[0] = Vector3::zeros();
     let mut forces = SceneForces {
-        surfaces: &p.surfaces,
-        points: &p.points,
         g: torques,
         hinge_damping: 0.0,
+        ..SceneForces::new(p)
     };
     let mut stepper = Stepper::new(&p.model);
     let mut eval = Evaluation::new(&p.model);
@@ -159,14 +158,7 @@ fn simulate_from(
             }
         }
         eval.run(&p.model, &state, &mut forces);
-        p.variables.values(
-            &state,
-            &eval.kin,
-            &eval.ws.accel,
-            &forces.g,
-            &eval.loads.f_ext,
-            &mut values,
-        );
+        p.variables.values(&state, &eval, &forces.g, &mut values);
         generalized_state(&p.model, &state, &mut generalized);
         each(&values, &generalized);
     }
@@ -201,10 +193,8 @@ fn stiff_contact_impacts_gain_no_energy() {
                 Vector3::new(10.0, 0.0, 0.0)
             };
             let mut forces = SceneForces {
-                surfaces: &p.surfaces,
-                points: &p.points,
-                g: vec![Vector3::zeros(); 3],
                 hinge_damping: 0.0,
+                ..SceneForces::new(&p)
             };
             let mut stepper = Stepper::new(&p.model);
             let mut eval = Evaluation::new(&p.model);
@@ -404,7 +394,7 @@ fn driven_torques_stand_in_for_the_controller() {
         Scene {
             controller: Some(ControllerParams {
                 kind,
-                amplitude: torques.to_vec(),
+                amplitude: torques.map(Amplitude::Ball).to_vec(),
                 torque_limit: Positive(5.0),
                 ..ControllerParams::default()
             }),

@@ -31,7 +31,8 @@ use nalgebra::{Isometry3, Matrix3, Rotation3, Translation3, UnitQuaternion, Vect
 use crate::model::{Joint, Link, Model, Root};
 
 /// How the robot's root link is held.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "kebab-case")]
 pub enum Base {
     /// Welded to the world (an arm on its pedestal).
     Fixed,

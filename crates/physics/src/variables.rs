@@ -6,11 +6,19 @@
 //!
 //! Names are stable identifiers: `<quantity>.<link>[.<axis>]`, links counted
 //! from 1 (the root), e.g. `a.1.z`, `omega_dot.3.x`, `g.2.y`, `roll.2`.
+//!
+//! A robot (a `urdf` scene) has, per joint, its position, velocity,
+//! acceleration and (with a controller) the effort driving it, named after
+//! the URDF's joint (`q.shoulder_pan_joint`, `qd.…`, `qdd.…`, `tau.…`); a
+//! free base's v, a, ω and ω̇; v and ω of the links the scene names; and the
+//! contact forces on the bodies that touch — links named after the URDF
+//! (`v.wrist_3_link.x`, `f_E.FL_LOWER_LEG.z`).
 
 use nalgebra::{Matrix3, UnitQuaternion, Vector3};
 
 use crate::contact::ContactPoint;
-use crate::dynamics::{Kinematics, State};
+use crate::dynamics::State;
+use crate::integrate::Evaluation;
 use crate::model::{Model, Root};
 use crate::spatial::{angular, linear};
 
@@ -35,6 +43,14 @@ pub enum Quantity {
     Roll,
     /// Pitch of the hinge (rad).
     Pitch,
+    /// A one-DOF joint's position (rad or m).
+    JointPosition,
+    /// A one-DOF joint's velocity (rad/s or m/s).
+    JointVelocity,
+    /// A one-DOF joint's acceleration (rad/s² or m/s²).
+    JointAcceleration,
+    /// The control effort on a one-DOF joint, parent on child (N m or N).
+    JointEffort,
 }
 
 impl Quantity {
@@ -50,7 +66,23 @@ impl Quantity {
             Quantity::GE => "g_E",
             Quantity::Roll => "roll",
             Quantity::Pitch => "pitch",
+            Quantity::JointPosition => "q",
+            Quantity::JointVelocity => "qd",
+            Quantity::JointAcceleration => "qdd",
+            Quantity::JointEffort => "tau",
         }
+    }
+
+    /// Whether it is one number per joint (rather than a link's vector or
+    /// angle).
+    fn is_joint(self) -> bool {
+        matches!(
+            self,
+            Quantity::JointPosition
+                | Quantity::JointVelocity
+                | Quantity::JointAcceleration
+                | Quantity::JointEffort
+        )
     }
 }
 
@@ -59,6 +91,16 @@ impl Quantity {
 pub struct VariableSet {
     /// (quantity, link index) pairs; vectors stand for three variables.
     pub entries: Vec<(Quantity, usize)>,
+    /// Per link, what its variables' names call it (link quantities) and
+    /// its joint (joint quantities): `1`, `2`, … for the paper's scenes,
+    /// the URDF's names for a robot.
+    link_labels: Vec<String>,
+    joint_labels: Vec<String>,
+}
+
+/// Labels `1`, `2`, … for `n` links.
+fn numbered(n: usize) -> Vec<String> {
+    (1..=n).map(|i| i.to_string()).collect()
 }
 
 impl VariableSet {
@@ -97,34 +139,97 @@ impl VariableSet {
         }
         entries.extend(hinges().map(|i| (Quantity::Roll, i)));
         entries.extend(hinges().map(|i| (Quantity::Pitch, i)));
-        VariableSet { entries }
+        VariableSet {
+            entries,
+            link_labels: numbered(n),
+            joint_labels: numbered(n),
+        }
+    }
+
+    /// A robot's variables: its free base's v, a, ω, ω̇; v and ω of
+    /// `link_velocities` (link indices); per joint q, q̇, q̈ and, if
+    /// `controlled`, its effort; f_E (and g_E away from the origin) of the
+    /// bodies the contact points touch. Named by `links` and `joints`
+    /// (per link: its URDF link and joint names).
+    pub fn of_robot(
+        model: &Model,
+        links: &[String],
+        joints: &[String],
+        link_velocities: &[usize],
+        contacts: &[ContactPoint],
+        controlled: bool,
+    ) -> VariableSet {
+        let n = model.len();
+        let mut entries = Vec::new();
+        if model.root == Root::Free {
+            for q in [
+                Quantity::V,
+                Quantity::A,
+                Quantity::Omega,
+                Quantity::OmegaDot,
+            ] {
+                entries.push((q, 0));
+            }
+        }
+        for &q in &[Quantity::V, Quantity::Omega] {
+            entries.extend(link_velocities.iter().map(|&i| (q, i)));
+        }
+        let mut quantities = vec![
+            Quantity::JointPosition,
+            Quantity::JointVelocity,
+            Quantity::JointAcceleration,
+        ];
+        if controlled {
+            quantities.push(Quantity::JointEffort);
+        }
+        for q in quantities {
+            entries.extend((1..n).map(|i| (q, i)));
+        }
+        let touched = |i: usize, off_origin: bool| {
+            contacts
+                .iter()
+                .any(|p| p.link == i && (!off_origin || p.offset != Vector3::zeros()))
+        };
+        entries.extend(
+            (0..n)
+                .filter(|&i| touched(i, false))
+                .map(|i| (Quantity::FE, i)),
+        );
+        entries.extend(
+            (0..n)
+                .filter(|&i| touched(i, true))
+                .map(|i| (Quantity::GE, i)),
+        );
+        VariableSet {
+            entries,
+            link_labels: links.to_vec(),
+            joint_labels: joints.to_vec(),
+        }
     }
 
     /// The variable names, in order.
     pub fn names(&self) -> Vec<String> {
         let mut names = Vec::new();
         for &(q, i) in &self.entries {
-            let base = format!("{}.{}", q.name(), i + 1);
+            let label = match q.is_joint() {
+                true => &self.joint_labels[i],
+                false => &self.link_labels[i],
+            };
+            let base = format!("{}.{label}", q.name());
             match q {
                 Quantity::Roll | Quantity::Pitch => names.push(base),
+                _ if q.is_joint() => names.push(base),
                 _ => names.extend(["x", "y", "z"].map(|axis| format!("{base}.{axis}"))),
             }
         }
         names
     }
 
-    /// Fills `out` (one value per name) from an evaluated state: kinematics,
-    /// accelerations (link frame), control torques g per link (zero for the
-    /// root) and external forces (link frame, at the hinge).
-    pub fn values(
-        &self,
-        state: &State,
-        kin: &Kinematics,
-        accel: &[nalgebra::Vector6<f64>],
-        g: &[Vector3<f64>],
-        f_ext: &[nalgebra::Vector6<f64>],
-        out: &mut Vec<f64>,
-    ) {
+    /// Fills `out` (one value per name) from an evaluation of `state`
+    /// (kinematics, accelerations, external forces) and the control torques
+    /// g per link (zero for the root; a one-DOF joint's effort is its x).
+    pub fn values(&self, state: &State, eval: &Evaluation, g: &[Vector3<f64>], out: &mut Vec<f64>) {
+        let (kin, accel, f_ext) = (&eval.kin, &eval.ws.accel, &eval.loads.f_ext);
         out.clear();
         for &(q, i) in &self.entries {
             let v = kin.vel[i];
@@ -136,6 +241,22 @@ impl VariableSet {
                 Quantity::G => g[i],
                 Quantity::FE => linear(&f_ext[i]),
                 Quantity::GE => angular(&f_ext[i]),
+                Quantity::JointPosition => {
+                    out.push(state.q[i]);
+                    continue;
+                }
+                Quantity::JointVelocity => {
+                    out.push(state.qd[i]);
+                    continue;
+                }
+                Quantity::JointAcceleration => {
+                    out.push(eval.deriv.qd[i]);
+                    continue;
+                }
+                Quantity::JointEffort => {
+                    out.push(g[i].x);
+                    continue;
+                }
                 Quantity::Roll | Quantity::Pitch => {
                     let (roll, pitch) = roll_pitch(&state.orient[i]);
                     out.push(if q == Quantity::Roll { roll } else { pitch });

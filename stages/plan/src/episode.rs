@@ -168,7 +168,9 @@ mod tests {
         Prepared::new(&Scene {
             controller: Some(ControllerParams {
                 kind: ControllerKind::Random,
-                amplitude: vec![[1.0, 10.0, 10.0]],
+                amplitude: vec![alnlab_physics::controller::Amplitude::Ball([
+                    1.0, 10.0, 10.0,
+                ])],
                 ..ControllerParams::default()
             }),
             ..Scene::default()

@@ -192,6 +192,16 @@ impl Params {
                 ),
             )
         })?;
+        if scene.kind == alnlab_physics::SceneKind::Urdf {
+            return Err((
+                "scene".to_string(),
+                format!(
+                    "scene `{}` is a robot (kind = \"urdf\"); planning drives ball hinges \
+                     only, so plan a worm, chain or pendulum scene",
+                    scene.name
+                ),
+            ));
+        }
         Ok(Prepared::new(scene).variables.names())
     }
 }
@@ -268,7 +278,7 @@ impl View {
         self.log.write_json(
             self.scene,
             self.log_time_ns,
-            &foxglove::scene_update(&p.scene, &p.model, run, self.log_time_ns),
+            &foxglove::scene_update(p, run, self.log_time_ns),
         )?;
         let mut runner = Runner::new(p, 0, 0, 0);
         runner.observe(start, 0.0, &mut self.frame);
@@ -285,7 +295,7 @@ impl View {
         self.log.write_json(
             self.tf,
             self.log_time_ns,
-            &foxglove::transforms(&p.scene.name, run, kin, self.log_time_ns),
+            &foxglove::transforms(p, run, kin, self.log_time_ns),
         )?;
         self.log_time_ns += (p.scene.frame_dt.get() * 1e9).round() as u64;
         Ok(())
@@ -629,7 +639,7 @@ fn bounds_of(p: &Prepared) -> Result<Bounds> {
     let high: Vec<f64> = (0..3 * hinges)
         .map(|k| {
             let a = &controller.amplitude;
-            let amplitude = a[if a.len() == 1 { 0 } else { k / 3 }][k % 3];
+            let amplitude = a[if a.len() == 1 { 0 } else { k / 3 }].component(k % 3);
             amplitude.abs().min(limit)
         })
         .collect();

@@ -6,7 +6,6 @@ use std::time::Instant;
 
 use alnlab_common::params::{Count, Positive};
 use alnlab_common::{Error, Provenance, Result, Silent};
-use nalgebra::Vector3;
 use serde::Serialize;
 
 use crate::Params;
@@ -41,12 +40,7 @@ pub fn ns_per_step(scene: &Scene, steps: usize, repeat: usize) -> Result<f64> {
     let p = Prepared::new(scene);
     let timed = |steps: usize| {
         let mut state = p.scene.initial_state(&p.model, &mut run_rng(1, 0, 0));
-        let mut forces = SceneForces {
-            surfaces: &p.surfaces,
-            points: &p.points,
-            g: vec![Vector3::zeros(); p.model.len()],
-            hinge_damping: p.scene.hinge_damping.expect("resolved"),
-        };
+        let mut forces = SceneForces::new(&p);
         let mut stepper = Stepper::new(&p.model);
         let dt = p.scene.dt.get();
         let clock = Instant::now();

@@ -21,7 +21,7 @@ use std::path::Path;
 use alnlab_common::params::{self, ParamError, Positive};
 use alnlab_common::state_log::{StateLayout, StateLogWriter};
 use alnlab_common::{Progress, Provenance, Result};
-use alnlab_physics::model::Root;
+use alnlab_physics::model::{Joint, Root};
 use alnlab_physics::{Prepared, simulate_run};
 use alnlab_physics::{foxglove, replay};
 use serde::{Deserialize, Serialize};
@@ -70,6 +70,17 @@ impl Default for Params {
 }
 
 impl Params {
+    /// Reads the robot description of every `urdf` scene (paths relative to
+    /// `dir`, the manifest's folder); on error, the field and what is wrong.
+    pub fn read_descriptions(&mut self, dir: &Path) -> std::result::Result<(), ParamError> {
+        for (i, scene) in self.scene.iter_mut().enumerate() {
+            scene
+                .read_description(dir)
+                .map_err(|(field, message)| (format!("scene.{i}.{field}"), message))?;
+        }
+        Ok(())
+    }
+
     /// Fills every scene's kind defaults (so the resolved manifest shows them).
     pub fn resolve(mut self) -> Params {
         self.scene = self.scene.into_iter().map(Scene::resolve).collect();
@@ -156,7 +167,7 @@ pub fn run(
             log.write_json(
                 scene_channel,
                 log_time_ns,
-                &foxglove::scene_update(&p.scene, &p.model, run, log_time_ns),
+                &foxglove::scene_update(p, run, log_time_ns),
             )?;
             simulate_run(p, seed, scene_index, run, |frame, kin| {
                 stats.add(&p.layout.variables, &frame.variables);
@@ -165,7 +176,7 @@ pub fn run(
                     log.write_json(
                         tf,
                         log_time_ns,
-                        &foxglove::transforms(&p.scene.name, run, kin, log_time_ns),
+                        &foxglove::transforms(p, run, kin, log_time_ns),
                     )?;
                 }
                 log_time_ns += frame_ns;
@@ -188,18 +199,34 @@ fn model_record(p: &Prepared) -> std::collections::BTreeMap<String, String> {
         .model
         .links
         .iter()
-        .map(|link| {
-            serde_json::json!({
+        .enumerate()
+        .map(|(i, link)| {
+            let mut entry = serde_json::json!({
                 "parent": link.parent.map_or(-1, |p| p as i64),
-                "joint": match (link.parent, p.model.root) {
-                    (None, Root::Free) => "free",
+                "joint": match (link.parent, p.model.root, link.joint) {
+                    (None, Root::Free, _) => "free",
+                    (None, Root::Fixed, _) => "fixed",
+                    (Some(_), _, Joint::Revolute { .. }) => "revolute",
+                    (Some(_), _, Joint::Prismatic { .. }) => "prismatic",
                     _ => "ball",
                 },
                 "mass": link.mass,
                 "c": link.c.as_slice(),
                 "J": link.inertia_hinge().transpose().as_slice(),
                 "l": link.l.as_slice(),
-            })
+            });
+            if let Some(robot) = &p.robot {
+                let fields = entry.as_object_mut().expect("object");
+                fields.insert("link".into(), robot.links[i].clone().into());
+                fields.insert("joint_name".into(), robot.joints[i].clone().into());
+                if let Joint::Revolute { origin, axis } | Joint::Prismatic { origin, axis } =
+                    link.joint
+                {
+                    fields.insert("axis".into(), axis.as_slice().into());
+                    fields.insert("origin".into(), origin.transpose().as_slice().into());
+                }
+            }
+            entry
         })
         .collect();
     let json = serde_json::json!({
@@ -232,6 +259,20 @@ fn model_record(p: &Prepared) -> std::collections::BTreeMap<String, String> {
                            rotation; at pitch = ±90° roll is defined as 0",
         },
     });
+    let mut json = json;
+    if let Some(robot) = &p.robot {
+        json["robot"] = robot.name.clone().into();
+        json["base"] = serde_json::json!(scene.base);
+        json["robot_conventions"] = serde_json::json!({
+            "origin": "the joint frame's rotation at q = 0 relative to the parent link, row-major",
+            "axis": "unit joint axis, joint (= link) frame",
+            "q": "joint position (rad or m)", "qd": "joint velocity", "qdd": "joint acceleration",
+            "tau": "control effort, parent on child, clamped to the URDF's effort limit",
+            "passive": "damping, friction and soft-limit effort at the frame's state; the joint's \
+                        total effort is tau + passive",
+            "links": "model links are the URDF's moving bodies; links fixed to one are merged into it",
+        });
+    }
     [
         ("scene".to_string(), scene.name.clone()),
         ("json".to_string(), json.to_string()),

@@ -1,0 +1,146 @@
+//! A robot's one-DOF joints as its description states them: the effort
+//! limit clamping the controller's command, and the passive efforts —
+//! viscous damping, Coulomb friction and soft position limits — added to it.
+//!
+//! - Damping: −b q̇, b the URDF's `damping` plus the scene's
+//!   `hinge_damping`.
+//! - Friction: −μ q̇ / max(|q̇|, 0.01), Coulomb above a slip speed of 0.01
+//!   rad/s (or m/s) and viscous below it, its viscous coefficient capped at
+//!   I / (2 dt) (I the link's own inertia about the axis) as an explicit
+//!   step cannot resolve a stiffer one.
+//! - Limits: past a bound by d > 0, a spring–damper pushing back,
+//!   max(0, k d + c ḋ), that never pulls; k = I (2π / (20 dt))² (a period of
+//!   20 integration steps on the link's own inertia, so the stiffest spring
+//!   stays resolved) and c = 2 √(k I), critical damping.
+//! - Effort: the command clamped to ± the URDF's `effort` (when it gives
+//!   one above 0).
+
+use crate::model::Link;
+use crate::urdf::JointSpec;
+
+/// Below this joint speed (rad/s or m/s), friction is viscous.
+pub const FRICTION_SLIP_SPEED: f64 = 0.01;
+
+/// Integration steps per period of a limit's spring on the link's own
+/// inertia.
+pub const LIMIT_PERIOD_STEPS: f64 = 20.0;
+
+/// One joint's limits and passive dynamics, ready to apply.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct JointLaw {
+    /// Viscous damping b.
+    pub damping: f64,
+    /// Coulomb friction μ.
+    pub friction: f64,
+    /// The largest viscous coefficient friction may take.
+    pub friction_cap: f64,
+    /// Position limits, if any.
+    pub range: Option<(f64, f64)>,
+    /// The limit spring's stiffness k and damping c.
+    pub stiffness: f64,
+    pub limit_damping: f64,
+    /// The effort limit (infinite when the description gives none).
+    pub effort: f64,
+}
+
+impl JointLaw {
+    /// The law of `link`'s joint as `spec` states it, with `added_damping`,
+    /// for integration steps of `dt`.
+    pub fn new(link: &Link, spec: &JointSpec, added_damping: f64, dt: f64) -> JointLaw {
+        let inertia = link.axis_inertia();
+        let omega = std::f64::consts::TAU / (LIMIT_PERIOD_STEPS * dt);
+        let stiffness = inertia * omega * omega;
+        JointLaw {
+            damping: spec.damping + added_damping,
+            friction: spec.friction,
+            friction_cap: inertia / (2.0 * dt),
+            range: spec.range,
+            stiffness,
+            limit_damping: 2.0 * (stiffness * inertia).sqrt(),
+            effort: spec.effort.unwrap_or(f64::INFINITY),
+        }
+    }
+
+    /// The command clamped to the effort limit.
+    pub fn clamp(&self, command: f64) -> f64 {
+        command.clamp(-self.effort, self.effort)
+    }
+
+    /// The passive effort at position `q` and velocity `qd`: damping,
+    /// friction and the limits' springs.
+    pub fn passive(&self, q: f64, qd: f64) -> f64 {
+        let viscous = (self.friction / qd.abs().max(FRICTION_SLIP_SPEED)).min(self.friction_cap);
+        let mut effort = -(self.damping + viscous) * qd;
+        if let Some((low, high)) = self.range {
+            if q > high {
+                effort -= (self.stiffness * (q - high) + self.limit_damping * qd).max(0.0);
+            } else if q < low {
+                effort += (self.stiffness * (low - q) - self.limit_damping * qd).max(0.0);
+            }
+        }
+        effort
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::model::Joint;
+    use nalgebra::{Matrix3, Vector3};
+
+    fn law(range: Option<(f64, f64)>) -> JointLaw {
+        let link = Link {
+            parent: Some(0),
+            joint: Joint::Revolute {
+                origin: Matrix3::identity(),
+                axis: Vector3::z(),
+            },
+            mass: 2.0,
+            c: Vector3::new(0.5, 0.0, 0.0),
+            inertia_com: Matrix3::identity() * 0.1,
+            l: Vector3::zeros(),
+            tip: None,
+        };
+        let spec = JointSpec {
+            range,
+            effort: Some(10.0),
+            velocity: None,
+            damping: 0.5,
+            friction: 0.2,
+        };
+        JointLaw::new(&link, &spec, 0.25, 1e-3)
+    }
+
+    #[test]
+    fn damping_friction_and_effort_as_stated() {
+        let law = law(None);
+        // I about z through the hinge: 0.1 + 2 · 0.5² = 0.6.
+        assert!((law.friction_cap - 0.6 / 2e-3).abs() < 1e-9);
+        assert_eq!(law.clamp(25.0), 10.0);
+        assert_eq!(law.clamp(-3.0), -3.0);
+        // Fast: Coulomb 0.2 against the motion, plus 0.75 · q̇.
+        assert!((law.passive(0.0, 2.0) - (-0.75 * 2.0 - 0.2)).abs() < 1e-12);
+        // Slow: viscous 0.2 / 0.01 below the slip speed.
+        assert!((law.passive(0.0, 0.005) - (-(0.75 + 20.0) * 0.005)).abs() < 1e-12);
+        assert_eq!(law.passive(0.0, 0.0), 0.0);
+    }
+
+    #[test]
+    fn limits_push_back_and_never_pull() {
+        let law = law(Some((-1.0, 1.0)));
+        let free = law.passive(0.5, 0.0);
+        assert_eq!(free, 0.0);
+        // Past the upper bound at rest: −k d.
+        let pushed = law.passive(1.01, 0.0);
+        assert!((pushed + law.stiffness * 0.01).abs() < 1e-9 * law.stiffness);
+        // Leaving the bound fast: the damper would pull, so nothing (but
+        // damping and friction).
+        let leaving = law.passive(1.001, -5.0);
+        assert!((leaving - law.passive(0.0, -5.0)).abs() < 1e-12);
+        // Past the lower bound: pushed up.
+        assert!(law.passive(-1.02, 0.0) > 0.0);
+        // k: a period of 20 steps of 1 ms on I = 0.6.
+        let period = std::f64::consts::TAU * (0.6 / law.stiffness).sqrt();
+        assert!((period - 0.02).abs() < 1e-12);
+    }
+}

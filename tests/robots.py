@@ -1,0 +1,233 @@
+"""Robots from URDF, verified against Pinocchio (issue 35).
+
+Usage: python tests/robots.py ALNLAB WORK_DIR [--json FILE]
+
+For every robot below — the two vendored under robots/ and further robots
+of PyPI's example-robot-data, read from the installed package — writes a
+manifest of one 10 s run with a random controller into WORK_DIR, runs
+`ALNLAB simulate` on it, and checks every logged frame with Pinocchio (PyPI
+`pin`), which loads the same URDF on its own:
+
+- joint accelerations: `pinocchio.aba` from the logged state, with each
+  joint's total effort (the control effort `tau.<joint>` plus the passive
+  effort `joint.<joint>.passive` logged beside the state: damping, friction,
+  limit springs) and, for a robot on the floor, the contact forces
+  (`f_E`, `g_E`) as external forces; a free base's accelerations too;
+- link velocities `v.<link>`, `omega.<link>` with `getFrameVelocity`
+  (LOCAL);
+- every URDF link's frame on /tf with `updateFramePlacements`.
+
+Errors are relative: |Δ| / max(1, |reference|) per frame. Fails when an
+acceleration is off by more than 1e-10 or a velocity or pose by more than
+1e-12, and prints the worst figures per robot.
+"""
+
+import json
+import math
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pinocchio as pin
+from mcap.reader import make_reader
+from mcap_ros2.decoder import DecoderFactory
+
+ROOT = Path(__file__).resolve().parent.parent
+ACCELERATION_TOLERANCE = 1e-10
+KINEMATICS_TOLERANCE = 1e-12
+
+
+def installed_robots() -> Path:
+    """The robots folder of the installed example-robot-data wheel."""
+    for entry in sys.path:
+        candidate = Path(entry) / "cmeel.prefix/share/example-robot-data/robots"
+        if candidate.is_dir():
+            return candidate
+    raise SystemExit("example-robot-data is not installed (pip install example-robot-data)")
+
+
+def robots():
+    """(name, URDF path, scene fields) of every robot checked."""
+    data = installed_robots()
+    feet = ["FL_FOOT", "FR_FOOT", "HL_FOOT", "HR_FOOT"]
+    return [
+        ("ur5", ROOT / "robots/ur5/ur5_robot.urdf",
+         {"link_velocities": ["wrist_3_link", "forearm_link"], "amplitude": 30.0}),
+        ("solo12", ROOT / "robots/solo12/solo12.urdf",
+         {"base": "free", "floor": True, "contact_links": feet, "initial_height": 0.4,
+          "contact": {"stiffness": 3000.0, "damping": 5.0},
+          "link_velocities": ["FL_LOWER_LEG"], "amplitude": 1.0}),
+        ("double_pendulum", data / "double_pendulum_description/urdf/double_pendulum_continuous.urdf",
+         {"link_velocities": ["link2"], "amplitude": 0.5}),
+        ("kinova", data / "kinova_description/robots/kinova.urdf",
+         {"amplitude": 2.0, "integrator": "rk4", "link_velocities": ["j2s6s200_link_6"]}),
+        ("xarm7", data / "xarm_description/urdf/xarm7.urdf",
+         {"amplitude": 5.0, "dt": 5e-5, "link_velocities": ["link7"]}),
+        ("gantry", ROOT / "tests/data/gantry.urdf",
+         {"amplitude": 5.0, "link_velocities": ["slide", "arm"]}),
+        ("anymal", data / "anymal_c_simple_description/urdf/anymal.urdf",
+         {"base": "free", "amplitude": 5.0, "initial_height": 1.0, "link_velocities": ["LF_SHANK"]}),
+    ]
+
+
+def manifest(name: str, urdf: Path, fields: dict) -> str:
+    lines = [
+        "[experiment]", f'name = "{name}"', "seed = 35", "",
+        "[[simulate.scene]]", f'name = "{name}"', 'kind = "urdf"', f'file = "{urdf}"',
+        "runs = 1", "duration = 10.0",
+        f'controller = {{ kind = "random", amplitude = [{fields["amplitude"]}] }}',
+    ]
+    for key, value in fields.items():
+        if key == "amplitude":
+            continue
+        if isinstance(value, dict):
+            value = "{ " + ", ".join(f"{k} = {json.dumps(v)}" for k, v in value.items()) + " }"
+        else:
+            value = json.dumps(value)
+        lines.append(f"{key} = {value}")
+    return "\n".join(lines) + "\n"
+
+
+def read_log(path: Path):
+    """The scene record, model record and every frame (state and variables
+    by name, with its log time) of a one-scene log; /tf transforms by log
+    time."""
+    frames, tf = [], {}
+    with open(path, "rb") as f:
+        reader = make_reader(f, decoder_factories=[DecoderFactory()])
+        records = {m.name: m.metadata for m in reader.iter_metadata()}
+        for _, _, message in reader.iter_messages(topics=["/tf"]):
+            tf[message.log_time] = json.loads(message.data)["transforms"]
+        for _, channel, message, decoded in reader.iter_decoded_messages(topics=["/state"]):
+            names = channel.metadata["state"].split(",") + channel.metadata["variables"].split(",")
+            values = {n: getattr(decoded, field(n)) for n in names}
+            frames.append((message.log_time, values))
+    return records["alnlab.scene"], json.loads(records["alnlab.model"]["json"]), frames, tf
+
+
+def field(name: str) -> str:
+    return "".join(c if c.isalnum() or c == "_" else "_" for c in name.lower())
+
+
+def check(name: str, log: Path) -> dict:
+    scene_record, model_record, frames, tf = read_log(log)
+    scene = json.loads(scene_record["json"])
+    urdf = scene_record["urdf"]
+    free = scene["base"] == "free"
+    model = pin.buildModelFromXML(urdf, pin.JointModelFreeFlyer()) if free else pin.buildModelFromXML(urdf)
+    model.gravity.linear = np.array(scene["gravity"])
+    data = model.createData()
+    links = model_record["links"]
+    joints = [l["joint_name"] for l in links[1:]]
+    root_link = links[0]["link"]
+    # Which Pinocchio joint each model link is.
+    ids = {j: model.getJointId(j) for j in joints}
+    assert all(i < model.njoints for i in ids.values()), f"{name}: joints Pinocchio does not have"
+    assert model.nv == len(joints) + (6 if free else 0), (model.nv, len(joints))
+    worst = {"acceleration": 0.0, "velocity": 0.0, "pose": 0.0}
+    compared = {"velocity": 0, "pose": 0}
+    largest_acceleration = 0.0
+    for log_time, x in frames:
+        q = pin.neutral(model)
+        v = np.zeros(model.nv)
+        tau = np.zeros(model.nv)
+        logged = np.zeros(model.nv)
+        if free:
+            q[0:3] = [x[f"root.p.{a}"] for a in "xyz"]
+            q[3:7] = [x[f"q.{root_link}.{a}"] for a in "xyzw"]
+            v[0:3] = [x[f"root.v.{a}"] for a in "xyz"]
+            v[3:6] = [x[f"w.{root_link}.{a}"] for a in "xyz"]
+            # The base's logged a is the acceleration of its origin
+            # (a_spatial + ω × v); Pinocchio's ddq is the spatial one.
+            omega, vel = v[3:6], v[0:3]
+            a = np.array([x[f"a.{root_link}.{c}"] for c in "xyz"])
+            logged[0:3] = a - np.cross(omega, vel)
+            logged[3:6] = [x[f"omega_dot.{root_link}.{c}"] for c in "xyz"]
+        for j in joints:
+            joint = model.joints[ids[j]]
+            angle, rate = x[f"joint.{j}.q"], x[f"joint.{j}.qd"]
+            if joint.nq == 2:  # continuous: cos, sin
+                q[joint.idx_q:joint.idx_q + 2] = [math.cos(angle), math.sin(angle)]
+            else:
+                q[joint.idx_q] = angle
+            v[joint.idx_v] = rate
+            tau[joint.idx_v] = x.get(f"tau.{j}", 0.0) + x[f"joint.{j}.passive"]
+            logged[joint.idx_v] = x[f"qdd.{j}"]
+        fext = [pin.Force.Zero() for _ in range(model.njoints)]
+        for i, link in enumerate(links):
+            key = link["link"]
+            if f"f_E.{key}.x" in x:
+                force = np.array([x[f"f_E.{key}.{c}"] for c in "xyz"])
+                torque = np.array([x.get(f"g_E.{key}.{c}", 0.0) for c in "xyz"])
+                joint_id = 1 if i == 0 else ids[link["joint_name"]]
+                fext[joint_id] = pin.Force(force, torque)
+        ddq = pin.aba(model, data, q, v, tau, fext)
+        scale = max(1.0, float(np.max(np.abs(ddq))))
+        largest_acceleration = max(largest_acceleration, float(np.max(np.abs(ddq))))
+        worst["acceleration"] = max(worst["acceleration"], float(np.max(np.abs(ddq - logged))) / scale)
+        pin.forwardKinematics(model, data, q, v)
+        pin.updateFramePlacements(model, data)
+        for key in x:
+            if key.startswith("v.") and key.endswith(".x") and key.count(".") == 2:
+                link = key.split(".")[1]
+                motion = pin.getFrameVelocity(model, data, model.getFrameId(link, pin.BODY), pin.LOCAL)
+                for reference, prefix in ((motion.linear, "v"), (motion.angular, "omega")):
+                    got = np.array([x[f"{prefix}.{link}.{c}"] for c in "xyz"])
+                    error = float(np.max(np.abs(got - reference))) / max(1.0, float(np.max(np.abs(reference))))
+                    worst["velocity"] = max(worst["velocity"], error)
+                    compared["velocity"] += 1
+        for t in tf.get(log_time, []):
+            link = t["child_frame_id"].split("/", 2)[2]
+            placement = data.oMf[model.getFrameId(link, pin.BODY)]
+            position = np.array([t["translation"][c] for c in "xyz"])
+            r = t["rotation"]
+            rotation = pin.Quaternion(r["w"], r["x"], r["y"], r["z"]).toRotationMatrix()
+            error = max(float(np.max(np.abs(position - placement.translation))),
+                        float(np.max(np.abs(rotation - placement.rotation))))
+            worst["pose"] = max(worst["pose"], error / max(1.0, float(np.max(np.abs(placement.translation)))))
+            compared["pose"] += 1
+    assert compared["pose"] > 0 and compared["velocity"] > 0, (name, compared)
+    return {"robot": name, "frames": len(frames), "velocities": compared["velocity"],
+            "poses": compared["pose"], "nv": model.nv,
+            "largest_acceleration": largest_acceleration, **{f"worst_{k}": v for k, v in worst.items()}}
+
+
+def main(alnlab: str, work: str, json_out=None) -> int:
+    work_dir = Path(work)
+    work_dir.mkdir(parents=True, exist_ok=True)
+    results, failed = [], []
+    for name, urdf, fields in robots():
+        path = work_dir / f"{name}.toml"
+        path.write_text(manifest(name, urdf, fields))
+        out = work_dir / name
+        run = subprocess.run([alnlab, "-q", "simulate", "--manifest", str(path), "--out", str(out)],
+                             capture_output=True, text=True)
+        if run.returncode != 0:
+            failed.append(f"{name}: alnlab simulate failed: {run.stderr.strip()}")
+            continue
+        result = check(name, out / "trajectory.mcap")
+        results.append(result)
+        print(f"{name}: {result['frames']} frames, nv {result['nv']}, |q̈| up to {result['largest_acceleration']:.3g}; "
+              f"worst relative error: accelerations {result['worst_acceleration']:.2e}, "
+              f"link velocities {result['worst_velocity']:.2e} ({result['velocities']} compared), "
+              f"poses {result['worst_pose']:.2e} ({result['poses']} frames on /tf)")
+        if result["worst_acceleration"] > ACCELERATION_TOLERANCE:
+            failed.append(f"{name}: accelerations off by {result['worst_acceleration']:.2e}")
+        if max(result["worst_velocity"], result["worst_pose"]) > KINEMATICS_TOLERANCE:
+            failed.append(f"{name}: kinematics off by {max(result['worst_velocity'], result['worst_pose']):.2e}")
+    if json_out:
+        Path(json_out).write_text(json.dumps(results, indent=1) + "\n")
+    for f in failed:
+        print("FAILED", f, file=sys.stderr)
+    return 1 if failed else 0
+
+
+if __name__ == "__main__":
+    args = sys.argv[1:]
+    json_out = None
+    if "--json" in args:
+        i = args.index("--json")
+        json_out = args[i + 1]
+        del args[i:i + 2]
+    sys.exit(main(*args, json_out=json_out))
