@@ -34,6 +34,10 @@ const STEPS: &[Step] = &[
         quickstart_circuit,
     ),
     (
+        "robots from URDF: seven robots' logs against Pinocchio",
+        robots_against_pinocchio,
+    ),
+    (
         "MLflow: runs exported to a real server and read back",
         mlflow_round_trip,
     ),
@@ -119,6 +123,20 @@ fn quickstart_circuit(suite: &Suite) -> Result<(), String> {
             .args(["-q", "bench", "circuit", "--run"])
             .arg(runs(suite).join("quickstart"))
             .args(["--variant", "gray", "--fpga", "ice40-hx8k"]),
+    )
+}
+
+/// The vendored robots and further robots of the installed
+/// example-robot-data, each simulated for 10 s and every frame checked
+/// with Pinocchio (`tests/robots.py`).
+fn robots_against_pinocchio(suite: &Suite) -> Result<(), String> {
+    let dir = suite.work.join("robots");
+    let _ = std::fs::remove_dir_all(&dir);
+    run_in_root(
+        Command::new(&suite.python)
+            .arg("tests/robots.py")
+            .arg(target_dir().join("debug/alnlab"))
+            .arg(&dir),
     )
 }
 

@@ -16,8 +16,23 @@ use arrow_array::{Array, BooleanArray, Float64Array, StringArray, UInt16Array, U
 use crate::codes::{Code, Codec};
 use crate::walk::WalkSpec;
 
-/// The variable groups of DESIGN.md §6 (roll and pitch form the group `R`).
-pub const GROUPS: [&str; 8] = ["a", "f_E", "g_E", "g", "R", "omega", "omega_dot", "v"];
+/// The variable groups of DESIGN.md §6 (roll and pitch form the group `R`),
+/// and a robot's per-joint groups: position, velocity, acceleration and
+/// control effort.
+pub const GROUPS: [&str; 12] = [
+    "a",
+    "f_E",
+    "g_E",
+    "g",
+    "R",
+    "omega",
+    "omega_dot",
+    "v",
+    "q",
+    "qd",
+    "qdd",
+    "tau",
+];
 
 /// The group of a variable name (`omega_dot.3.x` → `omega_dot`, `roll.2` → `R`).
 pub fn group_of(variable: &str) -> &str {
@@ -27,8 +42,9 @@ pub fn group_of(variable: &str) -> &str {
     }
 }
 
-/// The SI unit of a variable of the paper's groups (§4.1), by its name's
-/// quantity; empty for a name of no known quantity.
+/// The SI unit of a variable of the paper's groups (§4.1) or a robot's, by
+/// its name's quantity (a robot joint's: revolute or prismatic); empty for a
+/// name of no known quantity.
 pub fn unit_of(variable: &str) -> &'static str {
     match variable.split('.').next().unwrap_or("") {
         "v" => "m/s",
@@ -38,6 +54,10 @@ pub fn unit_of(variable: &str) -> &'static str {
         "g" | "g_E" => "N·m",
         "f_E" => "N",
         "roll" | "pitch" => "rad",
+        "q" => "rad or m",
+        "qd" => "rad/s or m/s",
+        "qdd" => "rad/s² or m/s²",
+        "tau" => "N·m or N",
         _ => "",
     }
 }

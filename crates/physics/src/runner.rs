@@ -190,7 +190,7 @@ pub fn state_from_generalized(model: &Model, values: &[f64]) -> Option<State> {
         expected += match (i, model.root, link.joint.dof()) {
             (0, Root::Fixed, _) => 0,
             (0, _, _) | (_, _, 3) => 7,
-            _ => 3,
+            _ => 2,
         };
     }
     if values.len() != expected + one_dof(model).count() {

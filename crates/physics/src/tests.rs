@@ -423,3 +423,96 @@ fn driven_torques_stand_in_for_the_controller() {
     assert_eq!(final_state(&constant, false), final_state(&none, true));
     assert_ne!(final_state(&none, false), final_state(&none, true));
 }
+
+/// A robot scene from the vendored UR5: its description read relative to
+/// the workspace, a random controller.
+fn ur5(duration: f64) -> Scene {
+    let mut scene = Scene {
+        name: "ur5".into(),
+        kind: SceneKind::Urdf,
+        file: Some("robots/ur5/ur5_robot.urdf".into()),
+        runs: Count(1),
+        duration: Positive(duration),
+        link_velocities: Some(vec!["wrist_3_link".into()]),
+        ..Scene::default()
+    };
+    let workspace = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
+    scene.read_description(&workspace).unwrap();
+    let scene = scene.resolve();
+    scene.validate().unwrap();
+    scene
+}
+
+/// A robot's logged frames: names after its URDF, the state read back
+/// from the log (passive efforts after it), efforts within their limits.
+#[test]
+fn a_robot_logs_named_variables_and_its_state_reads_back() {
+    let scene = ur5(1.0);
+    let p = Prepared::new(&scene);
+    assert_eq!(p.model.dof(), 6);
+    let variables = &p.layout.variables;
+    for name in [
+        "q.shoulder_pan_joint",
+        "qd.elbow_joint",
+        "qdd.wrist_3_joint",
+        "tau.wrist_1_joint",
+        "v.wrist_3_link.x",
+        "omega.wrist_3_link.z",
+    ] {
+        assert!(
+            variables.contains(&name.to_string()),
+            "{name} in {variables:?}"
+        );
+    }
+    assert_eq!(variables.len(), 6 * 4 + 6);
+    assert_eq!(p.layout.state.len(), 3 + 6 * 2 + 6);
+    assert_eq!(
+        p.layout.state.last().unwrap(),
+        "joint.wrist_3_joint.passive"
+    );
+    let tau = variables
+        .iter()
+        .position(|n| n == "tau.wrist_1_joint")
+        .unwrap();
+    let mut frames = 0;
+    simulate_run(&p, 5, 0, 0, |frame, _| {
+        let state = state_from_generalized(&p.model, &frame.state).expect("fits");
+        let mut again = Vec::new();
+        generalized_state(&p.model, &state, &mut again);
+        assert_eq!(again[..], frame.state[..again.len()]);
+        // The UR5's wrist is limited to 28 N m; the controller's amplitude
+        // is 5.
+        assert!(frame.variables[tau].abs() <= 5.0);
+        frames += 1;
+        Ok(())
+    })
+    .unwrap();
+    assert_eq!(frames, 101);
+    assert!(state_from_generalized(&p.model, &[0.0; 20]).is_none());
+}
+
+/// A robot's effort limit clamps what the controller (or a planner) asks.
+#[test]
+fn a_robot_joint_effort_is_clamped_to_its_limit() {
+    let mut scene = ur5(0.1);
+    scene.controller = Some(ControllerParams {
+        kind: ControllerKind::Constant,
+        amplitude: vec![Amplitude::Axis(100.0)],
+        torque_limit: Positive(1000.0),
+        ..ControllerParams::default()
+    });
+    let p = Prepared::new(&scene);
+    let mut runner = Runner::new(&p, 1, 0, 0);
+    let state = scene.initial_state(&p.model, &mut crate::scene::run_rng(1, 0, 0));
+    let mut frame = alnlab_common::state_log::StateFrame {
+        time: 0.0,
+        run: 0,
+        frame: 0,
+        state: Vec::new(),
+        variables: Vec::new(),
+    };
+    runner.observe(&state, 0.0, &mut frame);
+    let efforts: Vec<f64> = runner.hinge_torques().iter().map(|t| t.x).collect();
+    // Shoulder and elbow allow 150 N m, the wrists 28.
+    assert_eq!(efforts, [100.0, 100.0, 100.0, 28.0, 28.0, 28.0]);
+}

@@ -150,12 +150,22 @@ fn simulate(
         let replayer = replayers.get_mut(row.scene).ok_or_else(missing)?;
         let mut blown = false;
         for (h, at_h) in levels.iter_mut().enumerate() {
-            blown = blown || replayer.next_frame(&current, steps, &mut next).is_err();
+            if !blown {
+                // Only a blow-up scores as one; a log that does not fit its
+                // model is an error.
+                match replayer.next_frame(&current, steps, &mut next) {
+                    Ok(()) => {}
+                    Err(Error::Diverged(_)) => blown = true,
+                    Err(e) => return Err(e),
+                }
+            }
             for (v, entry) in learned.iter().enumerate() {
-                at_h[v][k] = match (blown, frames.level(row.scene, &next, v, entry)) {
-                    (false, Some(level)) => level,
-                    _ => farthest(truth(v, k, h), entry.quantizer.levels),
-                };
+                // A blown-up frame was not written: score it the farthest.
+                let level = (!blown)
+                    .then(|| frames.level(row.scene, &next, v, entry))
+                    .flatten();
+                at_h[v][k] =
+                    level.unwrap_or_else(|| farthest(truth(v, k, h), entry.quantizer.levels));
             }
             std::mem::swap(&mut current, &mut next);
         }

@@ -149,9 +149,10 @@ impl PwlParams {
 }
 
 /// Whether a variable is a control the planner sets: the controller's
-/// hinge torques `g.<link>.<axis>`.
+/// hinge torques `g.<link>.<axis>`, or a robot's joint efforts
+/// `tau.<joint>`.
 pub fn is_control(variable: &str) -> bool {
-    alnlab_codes::codebook::group_of(variable) == "g"
+    matches!(alnlab_codes::codebook::group_of(variable), "g" | "tau")
 }
 
 /// One trained output: its variable, the variables its tree reads

@@ -7,8 +7,9 @@ use alnlab_codes::unit_of;
 use super::Loaded;
 use super::format::{Align, MdTable};
 
-/// The paper's quantities (§4.1), by a variable name's first part.
-const QUANTITIES: [(&str, &str); 9] = [
+/// The paper's quantities (§4.1) and a robot's joint quantities, by a
+/// variable name's first part.
+const QUANTITIES: [(&str, &str); 13] = [
     ("v", "velocity of the link's hinge"),
     ("a", "acceleration of the link's hinge"),
     ("omega", "angular velocity of the link (ω)"),
@@ -21,6 +22,16 @@ const QUANTITIES: [(&str, &str); 9] = [
     ("g_E", "external (contact) torque about the link's hinge"),
     ("roll", "roll angle of the link's hinge (group R)"),
     ("pitch", "pitch angle of the link's hinge (group R)"),
+    (
+        "q",
+        "a robot joint's position (angle, or travel of a prismatic joint)",
+    ),
+    ("qd", "a robot joint's velocity"),
+    ("qdd", "a robot joint's acceleration"),
+    (
+        "tau",
+        "control effort on a robot joint, parent on child (clamped to its limit)",
+    ),
 ];
 
 /// Writes the glossary of the variables the report names.
@@ -42,10 +53,10 @@ pub(super) fn section(md: &mut String, variants: &[Loaded]) {
     let _ = writeln!(
         md,
         "## Glossary of variables\n\nA variable is named `<quantity>.<link>[.<axis>]`: links are \
-         numbered from 1 at the root of the body's tree; x, y and z are components in the link's \
-         own frame (fixed to the link, origin at its hinge). Errors are in quantization levels \
-         of each variable's own range; a level's size in SI units is in each variant's table by \
-         group.\n"
+         numbered from 1 at the root of the body's tree (a robot's links and joints go by their \
+         URDF names); x, y and z are components in the link's own frame (fixed to the link, \
+         origin at its hinge). Errors are in quantization levels of each variable's own range; \
+         a level's size in SI units is in each variant's table by group.\n"
     );
     let mut table = MdTable::new(&["quantity"])
         .column("what it is", Align::Left)
@@ -61,13 +72,17 @@ pub(super) fn section(md: &mut String, variants: &[Loaded]) {
         if of.is_empty() {
             continue;
         }
-        let mut links: Vec<u32> = of.iter().filter_map(|p| p.get(1)?.parse().ok()).collect();
+        // Numbered links in order, then named ones (a robot's) by name.
+        let mut links: Vec<(u32, &str)> = of
+            .iter()
+            .filter_map(|p| p.get(1).map(|l| (l.parse().unwrap_or(u32::MAX), *l)))
+            .collect();
         links.sort_unstable();
         links.dedup();
         let mut axes: Vec<&str> = of.iter().filter_map(|p| p.get(2).copied()).collect();
         axes.sort_unstable();
         axes.dedup();
-        let links: Vec<String> = links.iter().map(u32::to_string).collect();
+        let links: Vec<String> = links.iter().map(|(_, l)| l.to_string()).collect();
         table.row(vec![
             format!("`{quantity}`"),
             meaning.into(),
