@@ -506,10 +506,7 @@ fn read_descriptions(
     locate: &Locator,
     variant: Option<&str>,
 ) -> Result<(), ManifestError> {
-    let dir = match locate.file.parent() {
-        Some(dir) if !dir.as_os_str().is_empty() => dir,
-        _ => Path::new("."),
-    };
+    let dir = locate.file.parent().unwrap_or(Path::new(""));
     stages
         .simulate
         .read_descriptions(dir)
