@@ -7,7 +7,8 @@ use std::process::{Command, Stdio};
 
 use crate::{Failure, root, target_dir};
 
-/// A program the suite runs, and the Debian package that has it.
+/// A program the suite runs (or, given by an absolute path, a file it
+/// compiles against), and the Debian package that has it.
 struct Program {
     command: &'static str,
     package: &'static str,
@@ -46,6 +47,21 @@ const PROGRAMS: &[Program] = &[
         command: "python3",
         package: "python3",
         needed_by: "for the interop check, MLflow and Snakemake",
+    },
+    Program {
+        command: "g++",
+        package: "g++",
+        needed_by: "to build the Pinocchio harness of `alnlab bench sim`",
+    },
+    Program {
+        command: "/usr/include/eigen3/Eigen/Core",
+        package: "libeigen3-dev",
+        needed_by: "to build the Pinocchio harness of `alnlab bench sim`",
+    },
+    Program {
+        command: "/usr/include/urdf_model/model.h",
+        package: "liburdfdom-headers-dev",
+        needed_by: "to build the Pinocchio harness of `alnlab bench sim`",
     },
 ];
 
@@ -186,6 +202,9 @@ fn python_environment(install: bool) -> Result<PathBuf, Failure> {
 /// Whether `command` is an executable file in a folder of PATH.
 fn on_path(command: &str) -> bool {
     use std::os::unix::fs::PermissionsExt;
+    if command.starts_with('/') {
+        return Path::new(command).is_file();
+    }
     std::env::var_os("PATH").is_some_and(|path| {
         std::env::split_paths(&path).any(|dir| {
             std::fs::metadata(dir.join(command))

@@ -34,7 +34,7 @@ const STEPS: &[Step] = &[
         quickstart_circuit,
     ),
     (
-        "robots from URDF: seven robots' logs against Pinocchio",
+        "robots from URDF: seven robots' logs against Pinocchio, and bench sim beside it",
         robots_against_pinocchio,
     ),
     (
@@ -128,7 +128,9 @@ fn quickstart_circuit(suite: &Suite) -> Result<(), String> {
 
 /// The vendored robots and further robots of the installed
 /// example-robot-data, each simulated for 10 s and every frame checked
-/// with Pinocchio (`tests/robots.py`).
+/// with Pinocchio (`tests/robots.py`); then the Pinocchio harness built and
+/// `alnlab bench sim` run beside it, which must report both robots' figures
+/// (how fast is the benchmark's to say, not a test's).
 fn robots_against_pinocchio(suite: &Suite) -> Result<(), String> {
     let dir = suite.work.join("robots");
     let _ = std::fs::remove_dir_all(&dir);
@@ -137,7 +139,41 @@ fn robots_against_pinocchio(suite: &Suite) -> Result<(), String> {
             .arg("tests/robots.py")
             .arg(target_dir().join("debug/alnlab"))
             .arg(&dir),
-    )
+    )?;
+    let harness = dir.join("pinocchio-aba");
+    run_in_root(
+        Command::new("bash")
+            .arg("bench/pinocchio/build.sh")
+            .arg(&harness)
+            .env("PYTHON", &suite.python),
+    )?;
+    let bench = alnlab()
+        .args(["bench", "sim", "--repeat", "1", "--json", "--pinocchio"])
+        .arg(&harness)
+        .current_dir(root())
+        .output()
+        .map_err(|e| format!("alnlab bench sim: {e}"))?;
+    if !bench.status.success() {
+        return Err(format!(
+            "alnlab bench sim: {}",
+            String::from_utf8_lossy(&bench.stderr)
+        ));
+    }
+    let figures: serde_json::Value = serde_json::from_slice(&bench.stdout)
+        .map_err(|e| format!("alnlab bench sim --json: {e}"))?;
+    let timed: Vec<&str> = figures["robots"]
+        .as_array()
+        .into_iter()
+        .flatten()
+        .filter(|r| r["pinocchio_aba_ns"].is_array() && r["aba_ns"].is_array())
+        .filter_map(|r| r["robot"].as_str())
+        .collect();
+    match timed[..] {
+        ["ur5", "solo12"] => Ok(()),
+        _ => Err(format!(
+            "bench sim timed {timed:?} beside Pinocchio, expected ur5 and solo12"
+        )),
+    }
 }
 
 fn interop(suite: &Suite, record: &Path, report: &Path) -> Result<(), String> {

@@ -290,8 +290,16 @@ impl Scene {
                 format!("cannot read {}: {e}", path.display()),
             )
         })?;
-        let robot = urdf::parse(&text, self.base.unwrap_or(Base::Fixed))
-            .map_err(|e| ("file".to_string(), format!("{}: {e}", path.display())))?;
+        self.set_description(&text)
+            .map_err(|e| ("file".to_string(), format!("{}: {e}", path.display())))
+    }
+
+    /// Gives a `urdf` scene its description's text (what
+    /// [`Scene::read_description`] reads from the file): keeps it, fills in
+    /// its sha256 and the link count; an error if the text is not a robot
+    /// this simulator takes.
+    pub fn set_description(&mut self, text: &str) -> Result<(), urdf::UrdfError> {
+        let robot = urdf::parse(text, self.base.unwrap_or(Base::Fixed))?;
         self.links = Some(Count(robot.model.len() as u64));
         self.file_sha256 = Some(alnlab_common::hash::sha256_hex(text.as_bytes()));
         self.description = Some(text.into());

@@ -14,10 +14,16 @@ use crate::run::{RunOptions, run};
 #[derive(Debug, Subcommand)]
 pub enum Bench {
     /// Time the simulator: ns per step for the worm with and without
-    /// contacts and for free chains of 1 to 64 links, and the simulate
-    /// stage's throughput with MCAP writing. Medians of REPEAT runs, one core.
-    #[command(after_help = "Example:
-  alnlab bench sim --json")]
+    /// contacts and for free chains of 1 to 64 links, the simulate stage's
+    /// throughput with MCAP writing, and for each vendored robot (UR5, Solo
+    /// 12) ns per articulated-body call and per step on the states of a
+    /// simulated run — beside Pinocchio's `aba` on the same states when
+    /// given its harness, timed in interleaved rounds. Medians of REPEAT
+    /// runs (at least 5 rounds for the robots), one core.
+    #[command(after_help = "Examples:
+  alnlab bench sim --json
+  bash bench/pinocchio/build.sh target/pinocchio-aba    # needs pin, Eigen and g++
+  alnlab bench sim --pinocchio target/pinocchio-aba")]
     Sim {
         /// How many timed runs per figure.
         #[arg(long, default_value_t = 5)]
@@ -25,6 +31,10 @@ pub enum Bench {
         /// Print one JSON object.
         #[arg(long)]
         json: bool,
+        /// The Pinocchio harness (`bench/pinocchio/build.sh` builds it), to
+        /// time `pinocchio::aba` on the robots' states beside ours.
+        #[arg(long, value_name = "HARNESS")]
+        pinocchio: Option<PathBuf>,
     },
     /// Time quantization and coding: values quantized and walk-encoded into
     /// a bit matrix per second, and walk nearest-code decodes per second
@@ -440,8 +450,13 @@ pub fn execute(bench: Bench, quiet: bool) -> Result<()> {
             });
             Ok(())
         }
-        Bench::Sim { repeat, json } => {
-            let figures = alnlab_simulate::bench::run(repeat.max(1))?;
+        Bench::Sim {
+            repeat,
+            json,
+            pinocchio,
+        } => {
+            let harness = pinocchio.map(|harness| alnlab_simulate::bench::Pinocchio { harness });
+            let figures = alnlab_simulate::bench::run(repeat.max(1), harness.as_ref())?;
             print_figures(&figures, json, |figures| {
                 println!(
                     "worm without contacts: {:8.0} ns/step",
@@ -458,6 +473,25 @@ pub fn execute(bench: Bench, quiet: bool) -> Result<()> {
                     "simulate stage:        {:8.0} steps/s",
                     figures.stage_steps_per_s
                 );
+                for r in &figures.robots {
+                    let range = |x: &[f64; 3]| format!("{:.0} ns ({:.0}–{:.0})", x[0], x[1], x[2]);
+                    print!(
+                        "{} ({} DOF, {} states): ABA {}, step {}",
+                        r.robot,
+                        r.dof,
+                        r.states,
+                        range(&r.aba_ns),
+                        range(&r.step_ns)
+                    );
+                    match &r.pinocchio_aba_ns {
+                        Some(p) => println!(
+                            "; pinocchio::aba {}: {:.2}× Pinocchio's",
+                            range(p),
+                            r.aba_ns[0] / p[0]
+                        ),
+                        None => println!(),
+                    }
+                }
             });
             Ok(())
         }
