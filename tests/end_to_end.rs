@@ -685,6 +685,12 @@ fn cut_down(text: &str) -> String {
             for scene in scenes.iter_mut().filter_map(toml::Value::as_table_mut) {
                 cap(scene, "runs", 1);
                 cap_float(scene, "duration", 20.0);
+                // A robot's description, relative to experiments/, from
+                // wherever the cut-down manifest is run.
+                if let Some(toml::Value::String(file)) = scene.get_mut("file") {
+                    let experiments = Path::new(env!("CARGO_MANIFEST_DIR")).join("experiments");
+                    *file = experiments.join(&*file).display().to_string();
+                }
             }
         }
         cap(table, "train_rows", 60);
