@@ -160,6 +160,8 @@ def check(name: str, log: Path) -> dict:
             if f"f_E.{key}.x" in x:
                 force = np.array([x[f"f_E.{key}.{c}"] for c in "xyz"])
                 torque = np.array([x.get(f"g_E.{key}.{c}", 0.0) for c in "xyz"])
+                if i == 0 and not free:
+                    continue  # a welded base does not move, whatever touches it
                 joint_id = 1 if i == 0 else ids[link["joint_name"]]
                 fext[joint_id] = pin.Force(force, torque)
         ddq = pin.aba(model, data, q, v, tau, fext)

@@ -1,7 +1,10 @@
 //! Hinge controllers: the control torque g that each hinge's link exerts on
 //! its parent (paper §2), clamped componentwise to the torque limit (paper:
 //! ±150). The link itself feels −g. A one-DOF joint of a robot gets one
-//! number, its effort (the first component of its g; the others are zero).
+//! number instead, its effort (the first component of its g; the others are
+//! zero), which acts the other way, as ROS's joint efforts do: from the
+//! parent on the child, positive along the joint's axis. It is clamped to
+//! the joint's own effort limit (its URDF's), not to the torque limit.
 
 use alnlab_common::params::Positive;
 use nalgebra::Vector3;
@@ -71,7 +74,8 @@ pub struct ControllerParams {
     pub phase: Vec<f64>,
     /// Hold time (s), for `random`.
     pub hold: Positive,
-    /// Componentwise limit of every torque (N m).
+    /// Componentwise limit of every ball hinge's torque (N m); a robot
+    /// joint's effort is clamped to its own limit instead.
     pub torque_limit: Positive,
 }
 
@@ -97,7 +101,7 @@ impl ControllerParams {
         if self.kind != ControllerKind::None && hinges == 0 {
             return Err((
                 "kind",
-                "a controller needs hinges; this scene has one link".into(),
+                "a controller needs hinges or joints; this scene has one moving body".into(),
             ));
         }
         let lists = [
@@ -194,8 +198,10 @@ impl Controller {
             }
         }
         let limit = p.torque_limit.get();
-        for out in g.iter_mut() {
-            *out = out.map(|x| x.clamp(-limit, limit));
+        for (h, out) in g.iter_mut().enumerate() {
+            if let Amplitude::Ball(_) = Self::pick(&p.amplitude, h) {
+                *out = out.map(|x| x.clamp(-limit, limit));
+            }
         }
     }
 }

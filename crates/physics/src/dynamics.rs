@@ -336,8 +336,11 @@ impl Workspace {
                 }
             };
             self.accel[i] = a;
-            out.orient[i] =
-                *state.orient[i].quaternion() * Quaternion::from_imag(state.rates[i]) * 0.5;
+            out.orient[i] = match (i, model.root) {
+                // A welded root keeps its orientation whatever its rate says.
+                (0, Root::Fixed) => Quaternion::identity() * 0.0,
+                _ => *state.orient[i].quaternion() * Quaternion::from_imag(state.rates[i]) * 0.5,
+            };
         }
         out.root_p = match model.root {
             Root::Free => kin.rot[0] * state.root_v,

@@ -10,8 +10,10 @@
 //!   step cannot resolve a stiffer one.
 //! - Limits: past a bound by d > 0, a spring–damper pushing back,
 //!   max(0, k d + c ḋ), that never pulls; k = I (2π / (20 dt))² (a period of
-//!   20 integration steps on the link's own inertia, so the stiffest spring
-//!   stays resolved) and c = 2 √(k I), critical damping.
+//!   20 of the scene's integration steps on the link's own inertia) and
+//!   c = 2 √(k I), critical damping. The laws are the scene's: re-simulating
+//!   its frames with coarser steps keeps them, and may not resolve them (a
+//!   blow-up the test stage scores as one).
 //! - Effort: the command clamped to ± the URDF's `effort` (when it gives
 //!   one above 0).
 

@@ -68,6 +68,18 @@ impl SceneReplay {
                 }
                 scene.description = Some(text.as_str().into());
             }
+            // What the simulate stage checked, checked again: a record it
+            // did not write must not reach the simulator.
+            scene
+                .clone()
+                .resolve()
+                .validate()
+                .map_err(|(field, message)| {
+                    format!(
+                        "scene `{}` in an {SCENE_RECORD} record: `{field}`: {message}",
+                        scene.name
+                    )
+                })?;
             let number = |key: &str| -> std::result::Result<u64, String> {
                 field(key)?
                     .parse()

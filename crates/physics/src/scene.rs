@@ -257,10 +257,19 @@ impl Scene {
     /// and what is wrong.
     pub fn read_description(&mut self, dir: &std::path::Path) -> Result<(), SceneError> {
         if self.kind != SceneKind::Urdf {
-            return match (&self.file, &self.base) {
-                (None, None) => Ok(()),
-                (Some(_), _) => Err(("file".into(), "only a `urdf` scene reads a file".into())),
-                (_, Some(_)) => Err(("base".into(), "only a `urdf` scene has a `base`".into())),
+            let robot_only = [
+                ("file", self.file.is_some()),
+                ("file_sha256", self.file_sha256.is_some()),
+                ("base", self.base.is_some()),
+                ("contact_links", self.contact_links.is_some()),
+                ("link_velocities", self.link_velocities.is_some()),
+            ];
+            return match robot_only.iter().find(|(_, set)| *set) {
+                None => Ok(()),
+                Some((field, _)) => Err((
+                    field.to_string(),
+                    "only a `urdf` scene (a robot) has this".into(),
+                )),
             };
         }
         for (field, set) in [
@@ -325,7 +334,13 @@ impl Scene {
         let err = |field: &str, message: String| Err((field.to_string(), message));
         let n = self.links_n();
         if n > 64 {
-            return err("links", format!("expected 1 to 64 links, found {n}"));
+            return match self.kind {
+                SceneKind::Urdf => err(
+                    "file",
+                    format!("the robot has {n} moving bodies; at most 64 are simulated"),
+                ),
+                _ => err("links", format!("expected 1 to 64 links, found {n}")),
+            };
         }
         if self.kind == SceneKind::Tumbler && n != 1 {
             return err("links", format!("a tumbler is one body, found links = {n}"));
@@ -468,6 +483,26 @@ impl Scene {
                 }
             }
         }
+        let watched = self.link_velocities.as_deref().unwrap_or_default();
+        if let Some(twice) = watched
+            .iter()
+            .enumerate()
+            .find(|(k, n)| watched[..*k].contains(n))
+        {
+            return Err((
+                "link_velocities".into(),
+                format!("link `{}` is named twice", twice.1),
+            ));
+        }
+        if self.base == Some(Base::Free) && watched.contains(&robot.links[0]) {
+            return Err((
+                "link_velocities".into(),
+                format!(
+                    "`{}` is the free base, whose v and ω are variables already",
+                    robot.links[0]
+                ),
+            ));
+        }
         let dt = self.dt.get();
         let added = self.hinge_damping.expect("resolved");
         for (i, link) in robot.model.links.iter().enumerate().skip(1) {
@@ -495,7 +530,25 @@ impl Scene {
             .as_ref()
             .expect("resolved")
             .validate(&dofs)
-            .map_err(|(field, message)| (format!("controller.{field}"), message))
+            .map_err(|(field, message)| (format!("controller.{field}"), message))?;
+        // The log's fields are the names lower-cased, other characters
+        // made `_`: two names of the robot must not become one.
+        let layout = crate::Prepared::new(self).layout;
+        let mut fields = std::collections::BTreeMap::new();
+        for name in layout.state.iter().chain(&layout.variables) {
+            let field = alnlab_common::state_log::field_name(name);
+            if let Some(other) = fields.insert(field.clone(), name) {
+                return Err((
+                    "file".into(),
+                    format!(
+                        "`{other}` and `{name}` would both be the log's field `{field}` (names \
+                         are lower-cased and other characters than letters, digits and `_` \
+                         become `_`); rename a link or joint"
+                    ),
+                ));
+            }
+        }
+        Ok(())
     }
 
     /// Integration steps per logged frame.
@@ -604,11 +657,13 @@ impl Scene {
                         }
                         (None, _) => (0.0, 0.0),
                     };
+                    // A wide revolute range is narrowed to one turn about 0,
+                    // unless that leaves nothing of it.
+                    let pi = std::f64::consts::PI;
                     let (low, high) = match link.joint {
-                        Joint::Revolute { .. } => (
-                            low.max(-std::f64::consts::PI),
-                            high.min(std::f64::consts::PI),
-                        ),
+                        Joint::Revolute { .. } if low.max(-pi) < high.min(pi) => {
+                            (low.max(-pi), high.min(pi))
+                        }
                         _ => (low, high),
                     };
                     let u = (uniform(1.0).x + 1.0) / 2.0;

@@ -516,3 +516,81 @@ fn a_robot_joint_effort_is_clamped_to_its_limit() {
     // Shoulder and elbow allow 150 N m, the wrists 28.
     assert_eq!(efforts, [100.0, 100.0, 100.0, 28.0, 28.0, 28.0]);
 }
+
+/// A robot scene of `text`, with `edit` applied, checked.
+fn robot_scene(text: &str, edit: impl FnOnce(&mut Scene)) -> Result<(), (String, String)> {
+    let mut scene = Scene {
+        name: "r".into(),
+        kind: SceneKind::Urdf,
+        ..Scene::default()
+    };
+    edit(&mut scene);
+    scene
+        .set_description(text)
+        .map_err(|e| ("file".to_string(), e.to_string()))?;
+    scene.resolve().validate()
+}
+
+/// What a robot scene refuses besides its description's faults.
+#[test]
+fn robot_scenes_refuse_what_would_break_their_log() {
+    let inertial = r#"<inertial><mass value="1"/><inertia ixx="1" ixy="0" ixz="0" iyy="1" iyz="0" izz="1"/></inertial>"#;
+    let robot = |joints: [&str; 2]| {
+        format!(
+            r#"<robot name="r"><link name="base">{inertial}</link><link name="a">{inertial}</link><link name="b">{inertial}</link>
+            <joint name="{}" type="continuous"><parent link="base"/><child link="a"/></joint>
+            <joint name="{}" type="continuous"><parent link="a"/><child link="b"/></joint></robot>"#,
+            joints[0], joints[1]
+        )
+    };
+    let ok = robot(["j1", "j2"]);
+    robot_scene(&ok, |_| {}).unwrap();
+    let (field, message) = robot_scene(&robot(["Elbow", "elbow"]), |_| {}).unwrap_err();
+    assert_eq!(field, "file");
+    assert!(
+        message.contains("`joint.Elbow.q` and `joint.elbow.q`"),
+        "{message}"
+    );
+    let twice = robot_scene(&ok, |s| {
+        s.link_velocities = Some(vec!["a".into(), "a".into()]);
+    });
+    assert_eq!(twice.unwrap_err().0, "link_velocities");
+    let base = robot_scene(&ok, |s| {
+        s.base = Some(crate::urdf::Base::Free);
+        s.link_velocities = Some(vec!["base".into()]);
+    });
+    assert!(base.unwrap_err().1.contains("the free base"));
+    // A worm takes none of a robot's fields.
+    let mut worm = Scene {
+        link_velocities: Some(vec!["a".into()]),
+        ..Scene::default()
+    };
+    let (field, _) = worm
+        .read_description(std::path::Path::new("."))
+        .unwrap_err();
+    assert_eq!(field, "link_velocities");
+}
+
+/// A welded root stays where and how it is, whatever its state's rate says.
+#[test]
+fn a_fixed_root_does_not_turn() {
+    let model = Model::chain(
+        crate::model::Root::Fixed,
+        &[(crate::model::Shape::Box([0.4, 0.1, 0.1]), 1.0); 2],
+        Vector3::new(0.0, 0.0, -9.81),
+    );
+    let mut state = State::rest(&model, Vector3::new(0.0, 0.0, 1.0));
+    state.rates[0] = Vector3::new(0.0, 0.0, 3.0);
+    let mut stepper = Stepper::new(&model);
+    for _ in 0..100 {
+        stepper.step(
+            &model,
+            &mut state,
+            1e-3,
+            Integrator::Rk4,
+            &mut crate::integrate::NoForces,
+        );
+    }
+    assert_eq!(state.orient[0], UnitQuaternion::identity());
+    assert_eq!(state.root_p, Vector3::new(0.0, 0.0, 1.0));
+}

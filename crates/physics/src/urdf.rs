@@ -6,8 +6,8 @@
 //! inertia combined about the merged centre of mass), so a model link is a
 //! body that moves as one; every URDF link stays reachable as a named
 //! [`Frame`] on its body (for contact points and `/tf`). Links are numbered
-//! depth first from the root, children in the file's joint order — the order
-//! Pinocchio numbers its joints in.
+//! depth first from the root, children in the file's joint order (Pinocchio
+//! may order siblings otherwise: match joints by name).
 //!
 //! The XML is read with `roxmltree` rather than a URDF crate: `urdf-rs`
 //! (the maintained one) fills a missing `<inertial>` or `<limit>` with
@@ -251,7 +251,7 @@ pub fn parse(text: &str, base: Base) -> Result<Robot> {
         let moves = b > 0 || base == Base::Free;
         let (mass, c, inertia_com) = body.mass.about_centre();
         if moves {
-            check_body(&links[body.head], mass, &inertia_com)?;
+            check_body(&links[body.head], mass, &c, &inertia_com)?;
         }
         model_links.push(Link {
             parent: body.parent,
@@ -429,8 +429,19 @@ fn no_spec() -> JointSpec {
     }
 }
 
-/// Checks a moving body's merged mass and inertia.
-fn check_body(head: &LinkTag, mass: f64, inertia: &Matrix3<f64>) -> Result<()> {
+/// Checks a moving body's merged mass, centre of mass and inertia.
+fn check_body(head: &LinkTag, mass: f64, c: &Vector3<f64>, inertia: &Matrix3<f64>) -> Result<()> {
+    if !(c.iter().chain(inertia.iter()).all(|x| x.is_finite()) && mass.is_finite()) {
+        return Err(at(
+            &head.node,
+            format!(
+                "the body headed by link `{}` (with the links fixed to it) has a mass, centre of \
+                 mass or inertia beyond floating point (its numbers are too large); expected a \
+                 real body's",
+                head.name
+            ),
+        ));
+    }
     if mass <= 0.0 {
         return Err(at(
             &head.node,

@@ -262,6 +262,17 @@ fn malformed_descriptions_name_the_element() {
         ),
         (
             robot(
+                &format!(
+                    "{}<link name=\"b\"><inertial><origin xyz=\"1e200 0 0\"/><mass value=\"1\"/><inertia ixx=\"1\" ixy=\"0\" ixz=\"0\" iyy=\"1\" iyz=\"0\" izz=\"1\"/></inertial></link>",
+                    link("a")
+                ),
+                &joint("j", "continuous", "a", "b", ""),
+            ),
+            "<link name=\"b\">",
+            "beyond floating point",
+        ),
+        (
+            robot(
                 &format!("{}{}", two, link("a")),
                 &joint("j", "continuous", "a", "b", ""),
             ),
