@@ -559,6 +559,19 @@ mod tests {
         }
     }
 
+    /// The relative error of the articulated-body algorithm's accelerations
+    /// against the dense formulation's.
+    fn error_against_dense(model: &Model, state: &State, loads: &Loads) -> f64 {
+        let mut kin = Kinematics::new(model);
+        kin.update(model, state);
+        let mut ws = Workspace::new(model);
+        let mut out = Derivative::zeros(model);
+        ws.forward(model, state, &kin, loads, &mut out);
+        let dense = forward_dense(model, state, &kin, loads);
+        let aba = generalized_acceleration(model, &out);
+        (&aba - &dense).norm() / dense.norm().max(1e-12)
+    }
+
     /// The articulated-body algorithm over mixed joints and every kind of
     /// root against M q̈ = τ − C.
     #[test]
@@ -570,14 +583,7 @@ mod tests {
             let root = [Root::Free, Root::Pinned, Root::Fixed][case % 3];
             let (model, state) = random_mixed(&mut rng, n, root);
             let loads = random_loads(&mut rng, n);
-            let mut kin = Kinematics::new(&model);
-            kin.update(&model, &state);
-            let mut ws = Workspace::new(&model);
-            let mut out = Derivative::zeros(&model);
-            ws.forward(&model, &state, &kin, &loads, &mut out);
-            let dense = forward_dense(&model, &state, &kin, &loads);
-            let aba = generalized_acceleration(&model, &out);
-            let error = (&aba - &dense).norm() / dense.norm().max(1e-12);
+            let error = error_against_dense(&model, &state, &loads);
             worst = worst.max(error);
             assert!(
                 error <= 1e-9,
@@ -608,14 +614,7 @@ mod tests {
                     .map(|_| spatial(&vec3(&mut rng, 10.0), &vec3(&mut rng, 50.0)))
                     .collect(),
             };
-            let mut kin = Kinematics::new(&model);
-            kin.update(&model, &state);
-            let mut ws = Workspace::new(&model);
-            let mut out = Derivative::zeros(&model);
-            ws.forward(&model, &state, &kin, &loads, &mut out);
-            let dense = forward_dense(&model, &state, &kin, &loads);
-            let aba = generalized_acceleration(&model, &out);
-            let error = (&aba - &dense).norm() / dense.norm().max(1e-12);
+            let error = error_against_dense(&model, &state, &loads);
             worst = worst.max(error);
             assert!(
                 error <= 1e-9,
