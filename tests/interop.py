@@ -32,6 +32,12 @@ from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 
 
+def field_name(name: str) -> str:
+    """The /state field of a variable, as alnlab names it: lower case, every
+    character but letters, digits and `_` made `_` (`f_E.1.x` → `f_e_1_x`)."""
+    return re.sub(r"[^a-z0-9_]", "_", name.lower())
+
+
 def quantile(xs, q):
     """numpy's default (linear) percentile of sorted xs."""
     pos = q * (len(xs) - 1)
@@ -375,7 +381,7 @@ def main(run_json: str, report_dir: str) -> int:
             for schema, channel, message, decoded in reader.iter_decoded_messages(topics=["/state"]):
                 assert schema.encoding == "ros2msg" and channel.message_encoding == "cdr"
                 names = channel.metadata["variables"].split(",")
-                values = {n: getattr(decoded, n.replace(".", "_").lower()) for n in names}
+                values = {n: getattr(decoded, field_name(n)) for n in names}
                 assert all(math.isfinite(v) for v in values.values())
                 frames[(channel.metadata["scene"], decoded.run, decoded.frame)] = values
         assert frames, "no /state messages"

@@ -33,6 +33,8 @@ import pinocchio as pin
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 
+from interop import field_name
+
 ROOT = Path(__file__).resolve().parent.parent
 ACCELERATION_TOLERANCE = 1e-10
 KINEMATICS_TOLERANCE = 1e-12
@@ -101,13 +103,9 @@ def read_log(path: Path):
             tf[message.log_time] = json.loads(message.data)["transforms"]
         for _, channel, message, decoded in reader.iter_decoded_messages(topics=["/state"]):
             names = channel.metadata["state"].split(",") + channel.metadata["variables"].split(",")
-            values = {n: getattr(decoded, field(n)) for n in names}
+            values = {n: getattr(decoded, field_name(n)) for n in names}
             frames.append((message.log_time, values))
     return records["alnlab.scene"], json.loads(records["alnlab.model"]["json"]), frames, tf
-
-
-def field(name: str) -> str:
-    return "".join(c if c.isalnum() or c == "_" else "_" for c in name.lower())
 
 
 def check(name: str, log: Path) -> dict:

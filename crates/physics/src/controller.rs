@@ -127,7 +127,7 @@ impl ControllerParams {
         }
         if self.kind != ControllerKind::None {
             for (h, &dof) in dofs.iter().enumerate() {
-                let a = self.amplitude[if self.amplitude.len() == 1 { 0 } else { h }];
+                let a = pick(&self.amplitude, h);
                 if a.dof() != dof {
                     let expected = match dof {
                         1 => "a number (a one-DOF joint's effort)",
@@ -139,6 +139,11 @@ impl ControllerParams {
         }
         Ok(())
     }
+}
+
+/// A per-hinge list's entry for `hinge`: its own, or the one for all.
+fn pick<T: Copy>(list: &[T], hinge: usize) -> T {
+    list[if list.len() == 1 { 0 } else { hinge }]
 }
 
 /// A running controller for one run.
@@ -160,10 +165,6 @@ impl Controller {
         }
     }
 
-    fn pick<T: Copy>(list: &[T], hinge: usize) -> T {
-        list[if list.len() == 1 { 0 } else { hinge }]
-    }
-
     /// Fills `g` (one per hinge) for time `t`.
     pub fn torques(&mut self, t: f64, g: &mut [Vector3<f64>]) {
         let p = &self.params;
@@ -171,22 +172,21 @@ impl Controller {
             ControllerKind::None => g.fill(Vector3::zeros()),
             ControllerKind::Constant => {
                 for (h, out) in g.iter_mut().enumerate() {
-                    let a = Self::pick(&p.amplitude, h);
+                    let a = pick(&p.amplitude, h);
                     *out = Vector3::from_fn(|k, _| a.component(k));
                 }
             }
             ControllerKind::Sine => {
                 for (h, out) in g.iter_mut().enumerate() {
-                    let arg = std::f64::consts::TAU * Self::pick(&p.frequency, h) * t
-                        + Self::pick(&p.phase, h);
-                    let a = Self::pick(&p.amplitude, h);
+                    let arg = std::f64::consts::TAU * pick(&p.frequency, h) * t + pick(&p.phase, h);
+                    let a = pick(&p.amplitude, h);
                     *out = Vector3::from_fn(|k, _| a.component(k)) * arg.sin();
                 }
             }
             ControllerKind::Random => {
                 while t >= self.next_draw {
                     for (h, held) in self.held.iter_mut().enumerate() {
-                        let a = Self::pick(&p.amplitude, h);
+                        let a = pick(&p.amplitude, h);
                         *held = Vector3::from_fn(|k, _| match k < a.dof() {
                             true => a.component(k) * self.rng.random_range(-1.0..=1.0),
                             false => 0.0,
@@ -199,7 +199,7 @@ impl Controller {
         }
         let limit = p.torque_limit.get();
         for (h, out) in g.iter_mut().enumerate() {
-            if let Amplitude::Ball(_) = Self::pick(&p.amplitude, h) {
+            if let Amplitude::Ball(_) = pick(&p.amplitude, h) {
                 *out = out.map(|x| x.clamp(-limit, limit));
             }
         }

@@ -7,7 +7,7 @@
 
 use nalgebra::{Matrix3, Matrix6, Vector3, Vector6};
 
-use crate::spatial::{rigid_inertia, spatial};
+use crate::spatial::{parallel_axis, rigid_inertia, spatial};
 
 /// How the root link is held.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -108,9 +108,7 @@ impl Link {
 
     /// Rotational inertia about the hinge, link frame (the paper's J).
     pub fn inertia_hinge(&self) -> Matrix3<f64> {
-        self.inertia_com
-            + (Matrix3::identity() * self.c.norm_squared() - self.c * self.c.transpose())
-                * self.mass
+        self.inertia_com + parallel_axis(&self.c) * self.mass
     }
 }
 

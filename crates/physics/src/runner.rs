@@ -139,19 +139,39 @@ pub fn state_names(model: &Model, links: &[String], joints: &[String]) -> Vec<St
     if model.root == Root::Free {
         names.extend(["x", "y", "z"].iter().map(|a| format!("root.v.{a}")));
     }
-    for (i, link) in model.links.iter().enumerate() {
-        match (i, model.root, link.joint.dof()) {
-            (0, Root::Fixed, _) => {}
-            (0, _, _) | (_, _, 3) => {
+    for i in 0..model.len() {
+        match logged(model, i) {
+            Logged::Nothing => {}
+            Logged::Rotation => {
                 let l = &links[i];
                 names.extend(["x", "y", "z", "w"].iter().map(|a| format!("q.{l}.{a}")));
                 names.extend(["x", "y", "z"].iter().map(|a| format!("w.{l}.{a}")));
             }
-            _ => names.extend(["q", "qd"].map(|x| format!("joint.{}.{x}", joints[i]))),
+            Logged::Axis => names.extend(["q", "qd"].map(|x| format!("joint.{}.{x}", joints[i]))),
         }
     }
     names.extend(one_dof(model).map(|i| format!("joint.{}.passive", joints[i])));
     names
+}
+
+/// What the logged state holds of a link.
+#[derive(Clone, Copy)]
+enum Logged {
+    /// Nothing: a welded root.
+    Nothing,
+    /// Its orientation quaternion and angular rate (7 numbers): the root,
+    /// a ball hinge.
+    Rotation,
+    /// Its one-DOF joint's position and velocity (2 numbers).
+    Axis,
+}
+
+fn logged(model: &Model, i: usize) -> Logged {
+    match (i, model.root, model.links[i].joint.dof()) {
+        (0, Root::Fixed, _) => Logged::Nothing,
+        (0, _, _) | (_, _, 3) => Logged::Rotation,
+        _ => Logged::Axis,
+    }
 }
 
 /// The links below the root with a one-DOF joint.
@@ -167,15 +187,15 @@ pub fn generalized_state(model: &Model, state: &State, out: &mut Vec<f64>) {
     if model.root == Root::Free {
         out.extend(state.root_v.iter());
     }
-    for (i, link) in model.links.iter().enumerate() {
-        match (i, model.root, link.joint.dof()) {
-            (0, Root::Fixed, _) => {}
-            (0, _, _) | (_, _, 3) => {
+    for i in 0..model.len() {
+        match logged(model, i) {
+            Logged::Nothing => {}
+            Logged::Rotation => {
                 let (q, w) = (&state.orient[i], &state.rates[i]);
                 out.extend([q.i, q.j, q.k, q.w]);
                 out.extend(w.iter());
             }
-            _ => out.extend([state.q[i], state.qd[i]]),
+            Logged::Axis => out.extend([state.q[i], state.qd[i]]),
         }
     }
 }
@@ -186,11 +206,11 @@ pub fn generalized_state(model: &Model, state: &State, out: &mut Vec<f64>) {
 pub fn state_from_generalized(model: &Model, values: &[f64]) -> Option<State> {
     let free = model.root == Root::Free;
     let mut expected = if free { 6 } else { 3 };
-    for (i, link) in model.links.iter().enumerate() {
-        expected += match (i, model.root, link.joint.dof()) {
-            (0, Root::Fixed, _) => 0,
-            (0, _, _) | (_, _, 3) => 7,
-            _ => 2,
+    for i in 0..model.len() {
+        expected += match logged(model, i) {
+            Logged::Nothing => 0,
+            Logged::Rotation => 7,
+            Logged::Axis => 2,
         };
     }
     if values.len() != expected + one_dof(model).count() {
@@ -202,10 +222,10 @@ pub fn state_from_generalized(model: &Model, values: &[f64]) -> Option<State> {
         state.root_v = Vector3::new(values[3], values[4], values[5]);
         at = 6;
     }
-    for (i, link) in model.links.iter().enumerate() {
-        match (i, model.root, link.joint.dof()) {
-            (0, Root::Fixed, _) => {}
-            (0, _, _) | (_, _, 3) => {
+    for i in 0..model.len() {
+        match logged(model, i) {
+            Logged::Nothing => {}
+            Logged::Rotation => {
                 let v = &values[at..at + 7];
                 state.orient[i] = nalgebra::Unit::new_unchecked(nalgebra::Quaternion::new(
                     v[3], v[0], v[1], v[2],
@@ -213,7 +233,7 @@ pub fn state_from_generalized(model: &Model, values: &[f64]) -> Option<State> {
                 state.rates[i] = Vector3::new(v[4], v[5], v[6]);
                 at += 7;
             }
-            _ => {
+            Logged::Axis => {
                 (state.q[i], state.qd[i]) = (values[at], values[at + 1]);
                 at += 2;
             }

@@ -75,6 +75,12 @@ impl Transform {
     }
 }
 
+/// The parallel-axis term |c|² I − c cᵀ: a unit mass at `c` adds this to a
+/// rotational inertia about the origin.
+pub fn parallel_axis(c: &Vector3<f64>) -> Matrix3<f64> {
+    Matrix3::identity() * c.norm_squared() - c * c.transpose()
+}
+
 /// The spatial inertia at the hinge of a body of `mass`, centre of mass `c`
 /// and rotational inertia `inertia_com` about the centre of mass.
 pub fn rigid_inertia(mass: f64, c: &Vector3<f64>, inertia_com: &Matrix3<f64>) -> Matrix6<f64> {

@@ -29,6 +29,7 @@ use std::collections::HashMap;
 use nalgebra::{Isometry3, Matrix3, Rotation3, Translation3, UnitQuaternion, Vector3};
 
 use crate::model::{Joint, Link, Model, Root};
+use crate::spatial::parallel_axis;
 
 /// How the robot's root link is held.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
@@ -308,7 +309,7 @@ impl MassMoments {
         let m = inertial.mass;
         self.mass += m;
         self.first += com.coords * m;
-        self.second += inertia + shift(&com.coords) * m;
+        self.second += inertia + parallel_axis(&com.coords) * m;
     }
 
     /// Mass, centre of mass and inertia about it.
@@ -317,14 +318,9 @@ impl MassMoments {
             return (self.mass, Vector3::zeros(), self.second);
         }
         let c = self.first / self.mass;
-        let inertia = self.second - shift(&c) * self.mass;
+        let inertia = self.second - parallel_axis(&c) * self.mass;
         (self.mass, c, (inertia + inertia.transpose()) * 0.5)
     }
-}
-
-/// The parallel-axis term |c|² I − c cᵀ.
-fn shift(c: &Vector3<f64>) -> Matrix3<f64> {
-    Matrix3::identity() * c.norm_squared() - c * c.transpose()
 }
 
 /// A moving body being assembled from a moving joint's child and the links
