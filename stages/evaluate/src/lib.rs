@@ -29,7 +29,6 @@ pub mod timing;
 pub mod timings;
 
 use std::path::Path;
-use std::sync::Arc;
 
 use alnlab_aln::model::{Model, Reads};
 use alnlab_aln::pwl::predict::{Predictor, real_values, states};
@@ -39,22 +38,23 @@ use alnlab_codes::codes::Codec;
 use alnlab_codes::{Codebook, Entry, level_rows, split_rows};
 use alnlab_common::params::{self, Count, Fraction, ParamError};
 use alnlab_common::state_log::StateLog;
-use alnlab_common::table::{self, Table};
+use alnlab_common::table::Table;
 use alnlab_common::{Error, Progress, Provenance, Result};
-use arrow_array::types::UInt16Type;
-use arrow_array::{Array, BooleanArray, DictionaryArray, StringArray, UInt16Array, UInt32Array};
+use alnlab_tables::predictions::Predictions;
+use alnlab_tables::rollout::Rollout;
+use arrow_array::{StringArray, UInt32Array};
 use serde::{Deserialize, Serialize};
 
 /// Version of what this stage writes (part of every cache key; 5: the
 /// robust linear baseline of the change, piecewise-linear models).
 pub const FORMAT_VERSION: u32 = 5;
 
-/// File name of the predictions table.
-pub const PREDICTIONS_FILE: &str = "predictions.parquet";
+/// File name of the predictions table ([`alnlab_tables::predictions`]).
+pub const PREDICTIONS_FILE: &str = alnlab_tables::predictions::FILE;
 /// File name of the timings table.
 pub const TIMINGS_FILE: &str = "timings.parquet";
-/// File name of the closed-loop rollout table.
-pub const ROLLOUT_FILE: &str = "rollout.parquet";
+/// File name of the closed-loop rollout table ([`alnlab_tables::rollout`]).
+pub const ROLLOUT_FILE: &str = alnlab_tables::rollout::FILE;
 
 /// The `[test]` table of a manifest.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -415,36 +415,31 @@ pub fn run(
             .zip(&resimulated_levels)
             .map(|(r, levels)| (r.name.as_str(), levels)),
     );
-    let scored_test = TestRows {
-        rows: test.rows.clone(),
-        held_out: test.held_out.clone(),
-        x: Vec::new(),
-        y: pick(&test.y, &scored),
-    };
-    write_predictions(
-        &out_dir.join(PREDICTIONS_FILE),
-        &names,
-        &scored_test,
-        &models,
-        provenance,
-    )?;
-    let start_rows: Vec<u32> = truth.starts.iter().map(|&k| test.rows[k] as u32).collect();
-    let truth = rollout::Truth {
-        levels: each(truth.levels),
-        starts: truth.starts,
-    };
-    let rolled: Vec<(&str, &Vec<Vec<Vec<u16>>>)> = rolled
-        .iter()
-        .map(|(name, levels)| (name.as_str(), levels))
-        .collect();
-    write_rollout(
-        &out_dir.join(ROLLOUT_FILE),
-        &names,
-        &start_rows,
-        &truth,
-        &rolled,
-        provenance,
-    )?;
+    let test_rows: Vec<u32> = test.rows.iter().map(|&r| r as u32).collect();
+    let mut predictions =
+        Predictions::new(&names, &test_rows, &test.held_out, &pick(&test.y, &scored));
+    for (name, levels) in &models {
+        predictions.push_model(name, levels);
+    }
+    predictions.write(&out_dir.join(PREDICTIONS_FILE), provenance)?;
+    let start_rows: Vec<u32> = truth.starts.iter().map(|&k| test_rows[k]).collect();
+    let true_levels = each(truth.levels);
+    let mut rollout = Rollout::new(&names, &start_rows, horizon as u16);
+    for (name, levels) in &rolled {
+        let errors: Vec<Vec<Vec<u16>>> = levels
+            .iter()
+            .zip(&true_levels)
+            .map(|(predicted, truth)| {
+                predicted
+                    .iter()
+                    .zip(truth)
+                    .map(|(p, t)| p.iter().zip(t).map(|(&p, &t)| p.abs_diff(t)).collect())
+                    .collect()
+            })
+            .collect();
+        rollout.push_model(name, &errors);
+    }
+    rollout.write(&out_dir.join(ROLLOUT_FILE), provenance)?;
     let rows: Vec<timings::Row> = timings.iter().map(timings::Row::measured).collect();
     timings::write(&out_dir.join(TIMINGS_FILE), &rows, provenance)
 }
@@ -495,91 +490,4 @@ fn linear_inputs(data: &Data, learned: &[&Entry], scored: &[usize]) -> Result<Ve
             })
         })
         .collect()
-}
-
-/// `rollout.parquet`: one row per model, variable, horizon and start.
-fn write_rollout(
-    path: &Path,
-    names: &[&str],
-    start_rows: &[u32],
-    truth: &rollout::Truth,
-    rolled: &[(&str, &Vec<Vec<Vec<u16>>>)],
-    provenance: &Provenance,
-) -> Result<()> {
-    let (mut model, mut variable, mut horizon) = (Vec::new(), Vec::new(), Vec::new());
-    let (mut start, mut error) = (Vec::new(), Vec::new());
-    for (m, (_, levels)) in rolled.iter().enumerate() {
-        for v in 0..names.len() {
-            for (h, (predicted, true_levels)) in levels.iter().zip(&truth.levels).enumerate() {
-                for (s, &row) in start_rows.iter().enumerate() {
-                    model.push(m as u16);
-                    variable.push(v as u16);
-                    horizon.push(h as u16 + 1);
-                    start.push(row);
-                    error.push(predicted[v][s].abs_diff(true_levels[v][s]));
-                }
-            }
-        }
-    }
-    let model_names: Vec<&str> = rolled.iter().map(|(name, _)| *name).collect();
-    let batch = table::batch(vec![
-        (
-            "model",
-            Arc::new(dictionary(model, &model_names)) as Arc<dyn Array>,
-        ),
-        ("variable", Arc::new(dictionary(variable, names))),
-        ("horizon", Arc::new(UInt16Array::from(horizon))),
-        ("start", Arc::new(UInt32Array::from(start))),
-        ("error", Arc::new(UInt16Array::from(error))),
-    ]);
-    table::write_parquet(path, &batch, provenance)
-}
-
-/// A dictionary-encoded string column: small keys, quick to group by.
-fn dictionary(keys: Vec<u16>, values: &[&str]) -> DictionaryArray<UInt16Type> {
-    DictionaryArray::new(
-        UInt16Array::from(keys),
-        Arc::new(StringArray::from(values.to_vec())),
-    )
-}
-
-/// `predictions.parquet`: one row per model, variable and test row.
-fn write_predictions(
-    path: &Path,
-    names: &[&str],
-    test: &TestRows,
-    predicted: &[(&str, &Vec<Vec<u16>>)],
-    provenance: &Provenance,
-) -> Result<()> {
-    let (mut model, mut variable, mut row) = (Vec::new(), Vec::new(), Vec::new());
-    let (mut truth, mut guess, mut error) = (Vec::new(), Vec::new(), Vec::new());
-    let mut held_out = Vec::new();
-    for (m, (_, levels)) in predicted.iter().enumerate() {
-        for v in 0..names.len() {
-            for (k, &r) in test.rows.iter().enumerate() {
-                let (t, p) = (test.y[v][k], levels[v][k]);
-                model.push(m as u16);
-                variable.push(v as u16);
-                row.push(r as u32);
-                held_out.push(test.held_out[k]);
-                truth.push(t);
-                guess.push(p);
-                error.push(t.abs_diff(p));
-            }
-        }
-    }
-    let model_names: Vec<&str> = predicted.iter().map(|(name, _)| *name).collect();
-    let batch = table::batch(vec![
-        (
-            "model",
-            Arc::new(dictionary(model, &model_names)) as Arc<dyn Array>,
-        ),
-        ("variable", Arc::new(dictionary(variable, names))),
-        ("row", Arc::new(UInt32Array::from(row))),
-        ("held_out", Arc::new(BooleanArray::from(held_out))),
-        ("true_level", Arc::new(UInt16Array::from(truth))),
-        ("predicted_level", Arc::new(UInt16Array::from(guess))),
-        ("error", Arc::new(UInt16Array::from(error))),
-    ]);
-    table::write_parquet(path, &batch, provenance)
 }

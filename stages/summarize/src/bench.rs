@@ -4,12 +4,11 @@
 //! 100 starts per model and variable): read, summarized and written.
 
 use std::collections::BTreeMap;
-use std::sync::Arc;
 use std::time::Instant;
 
-use alnlab_common::table;
 use alnlab_common::{Error, Provenance, Result, Silent};
-use arrow_array::{Array, DictionaryArray, StringArray, UInt16Array, UInt32Array};
+use alnlab_tables::predictions::Predictions;
+use alnlab_tables::rollout::Rollout;
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde::Serialize;
@@ -36,72 +35,71 @@ pub fn run() -> Result<SummarizeBench> {
         inputs: BTreeMap::new(),
     };
     let mut rng = ChaCha8Rng::seed_from_u64(1);
-    let total = MODELS.len() * VARIABLES * ROWS;
-    let (mut model, mut variable) = (Vec::with_capacity(total), Vec::with_capacity(total));
-    let mut error = Vec::with_capacity(total);
-    for m in 0..MODELS.len() {
-        for v in 0..VARIABLES {
-            for _ in 0..ROWS {
-                model.push(m as u16);
-                variable.push(v as u16);
-                // Geometric-ish: each further level a third as likely.
-                let mut e = 0u16;
-                while e < 213 && rng.random_bool(1.0 / 3.0) {
-                    e += 1;
-                }
-                error.push(e);
-            }
-        }
-    }
     let names: Vec<String> = (0..VARIABLES).map(|v| format!("v.{v}.x")).collect();
-    let dictionary = |keys: Vec<u16>, values: Vec<&str>| {
-        DictionaryArray::new(UInt16Array::from(keys), Arc::new(StringArray::from(values)))
-    };
-    let rows: Vec<u32> = (0..total).map(|i| (i % ROWS) as u32).collect();
     let names: Vec<&str> = names.iter().map(String::as_str).collect();
+    let rows: Vec<u32> = (0..ROWS as u32).collect();
+    // Every row held out, every true level 100: a prediction's error is its
+    // distance from 100.
+    let mut predictions = Predictions::new(
+        &names,
+        &rows,
+        &[true; ROWS],
+        &vec![vec![100; ROWS]; VARIABLES],
+    );
     // The rollout: the first 1000 errors of each model and variable, as 10
     // horizons × 100 starts.
-    let keep: Vec<usize> = (0..total).filter(|i| i % ROWS < 1000).collect();
-    let pick = |column: &[u16]| -> Vec<u16> { keep.iter().map(|&i| column[i]).collect() };
-    let horizons = keep.iter().map(|i| (i % ROWS / 100) as u16 + 1);
-    let starts = keep.iter().map(|i| (i % 100) as u32);
-    let rollout = table::batch(vec![
-        (
-            "model",
-            Arc::new(dictionary(pick(&model), MODELS.to_vec())) as Arc<dyn Array>,
-        ),
-        (
-            "variable",
-            Arc::new(dictionary(pick(&variable), names.clone())),
-        ),
-        ("horizon", Arc::new(UInt16Array::from_iter_values(horizons))),
-        ("start", Arc::new(UInt32Array::from_iter_values(starts))),
-        ("error", Arc::new(UInt16Array::from(pick(&error)))),
-    ]);
-    let rollout_path = dir.path().join("rollout.parquet");
-    table::write_parquet(&rollout_path, &rollout, &provenance)?;
-    let batch = table::batch(vec![
-        (
-            "model",
-            Arc::new(dictionary(model, MODELS.to_vec())) as Arc<dyn Array>,
-        ),
-        ("variable", Arc::new(dictionary(variable, names))),
-        ("row", Arc::new(UInt32Array::from(rows))),
-        ("error", Arc::new(UInt16Array::from(error))),
-    ]);
-    let predictions = dir.path().join("predictions.parquet");
-    table::write_parquet(&predictions, &batch, &provenance)?;
+    let starts: Vec<u32> = (0..100).collect();
+    let mut rollout = Rollout::new(&names, &starts, 10);
+    for model in MODELS {
+        let levels: Vec<Vec<u16>> = (0..VARIABLES)
+            .map(|_| {
+                (0..ROWS)
+                    .map(|_| {
+                        // Geometric-ish: each further level a third as likely.
+                        let mut e = 0u16;
+                        while e < 213 && rng.random_bool(1.0 / 3.0) {
+                            e += 1;
+                        }
+                        if rng.random_bool(0.5) {
+                            100 + e
+                        } else {
+                            100 - e.min(100)
+                        }
+                    })
+                    .collect()
+            })
+            .collect();
+        let errors: Vec<Vec<Vec<u16>>> = (0..10)
+            .map(|h| {
+                levels
+                    .iter()
+                    .map(|l| {
+                        l[100 * h..100 * (h + 1)]
+                            .iter()
+                            .map(|&p| p.abs_diff(100))
+                            .collect()
+                    })
+                    .collect()
+            })
+            .collect();
+        predictions.push_model(model, &levels);
+        rollout.push_model(model, &errors);
+    }
+    let rollout_path = dir.path().join(alnlab_tables::rollout::FILE);
+    rollout.write(&rollout_path, &provenance)?;
+    let predictions_path = dir.path().join(alnlab_tables::predictions::FILE);
+    predictions.write(&predictions_path, &provenance)?;
 
     let clock = Instant::now();
     crate::run(
-        &predictions,
+        &predictions_path,
         &rollout_path,
         &provenance,
         dir.path(),
         &Silent,
     )?;
     let seconds = clock.elapsed().as_secs_f64();
-    let errors = (total + keep.len()) as u64;
+    let errors = (MODELS.len() * VARIABLES * (ROWS + 1000)) as u64;
     Ok(SummarizeBench {
         seconds,
         errors,

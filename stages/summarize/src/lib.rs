@@ -26,11 +26,9 @@ use std::sync::Arc;
 use alnlab_codes::group_of;
 use alnlab_common::table::{self, Table};
 use alnlab_common::{Error, Progress, Provenance, Result};
-use arrow_array::cast::AsArray;
-use arrow_array::types::UInt16Type;
+use alnlab_tables::rollout::Rollout;
 use arrow_array::{
-    Array, BooleanArray, DictionaryArray, Float64Array, StringArray, UInt16Array, UInt32Array,
-    UInt64Array,
+    Array, BooleanArray, Float64Array, StringArray, UInt16Array, UInt32Array, UInt64Array,
 };
 
 use crate::paired::Interval;
@@ -150,34 +148,28 @@ pub fn summarize_horizons(
     rollout_path: &Path,
     held_out: &BTreeSet<u32>,
 ) -> Result<Vec<HorizonRow>> {
-    let table = Table::read_columns(rollout_path, &["model", "horizon", "start", "error"])?;
-    let models = table.column::<DictionaryArray<UInt16Type>>("model")?;
-    let horizons = table.column::<UInt16Array>("horizon")?.values();
-    let starts = table.column::<UInt32Array>("start")?.values();
-    let errors = table.column::<UInt16Array>("error")?.values();
-    let names = dictionary_names(models, rollout_path)?;
-    let last = horizons.iter().copied().max().unwrap_or(0) as usize;
-    let per_set = names.len() * (last + 1);
-    // [all | held out] × model × horizon.
-    let mut counts = vec![ErrorCounts::default(); 2 * per_set];
-    let keys = models.keys().values();
-    for i in 0..table.num_rows() {
-        let k = usize::from(keys[i]) * (last + 1) + usize::from(horizons[i]);
-        let e = u32::from(errors[i]);
-        counts[k].add(e, 1);
-        if held_out.contains(&starts[i]) {
-            counts[per_set + k].add(e, 1);
-        }
-    }
+    let rollout = Rollout::read(rollout_path)?;
+    let held: Vec<bool> = rollout
+        .starts()
+        .iter()
+        .map(|s| held_out.contains(s))
+        .collect();
     let mut rows = Vec::new();
     for (set, rows_of) in [Rows::All, Rows::HeldOut].into_iter().enumerate() {
-        for (m, model) in names.iter().enumerate() {
-            for h in 0..=last {
-                if let Some(stats) = counts[set * per_set + m * (last + 1) + h].stats() {
+        for (m, model) in rollout.models().iter().enumerate() {
+            for h in 1..=rollout.horizons() {
+                let mut counts = ErrorCounts::default();
+                for v in 0..rollout.variables().len() {
+                    let errors = rollout.errors(m, v, h).iter().zip(&held);
+                    for (&e, _) in errors.filter(|&(_, &held)| set == 0 || held) {
+                        counts.add(u32::from(e), 1);
+                    }
+                }
+                if let Some(stats) = counts.stats() {
                     rows.push(HorizonRow {
                         rows: rows_of,
                         model: model.clone(),
-                        horizon: h as u16,
+                        horizon: h,
                         stats,
                     });
                 }
@@ -185,18 +177,6 @@ pub fn summarize_horizons(
         }
     }
     Ok(rows)
-}
-
-/// The strings of a dictionary column's values.
-fn dictionary_names(column: &DictionaryArray<UInt16Type>, path: &Path) -> Result<Vec<String>> {
-    let values = column
-        .values()
-        .as_string_opt::<i32>()
-        .ok_or_else(|| Error::bad_file(path, "model and variable must be string dictionaries"))?;
-    Ok(values
-        .iter()
-        .map(|v| v.unwrap_or_default().to_string())
-        .collect())
 }
 
 fn write_horizons(path: &Path, rows: &[HorizonRow], provenance: &Provenance) -> Result<()> {
@@ -295,68 +275,26 @@ pub struct Predictions {
 }
 
 impl Predictions {
-    /// Reads `predictions.parquet`; every model and variable must have an
-    /// error for the same rows.
+    /// Reads `predictions.parquet` ([`alnlab_tables::predictions`]).
     pub fn read(path: &Path) -> Result<Predictions> {
-        let table = Table::read_columns(
-            path,
-            &[
-                "model",
-                "variable",
-                "row",
-                "held_out",
-                "true_level",
-                "error",
-            ],
-        )?;
-        let models = table.column::<DictionaryArray<UInt16Type>>("model")?;
-        let variables = table.column::<DictionaryArray<UInt16Type>>("variable")?;
-        let rows = table.column::<UInt32Array>("row")?.values();
-        let held_out = table.column::<BooleanArray>("held_out")?;
-        let errors = table.column::<UInt16Array>("error")?.values();
-        let true_levels = table.column::<UInt16Array>("true_level")?.values();
-        let (models_names, variable_names) = (
-            dictionary_names(models, path)?,
-            dictionary_names(variables, path)?,
-        );
-        let per_model = variable_names.len();
-        let mut grouped = vec![Vec::new(); models_names.len() * per_model];
-        let mut row_of = vec![Vec::new(); grouped.len()];
-        let (model_keys, variable_keys) = (models.keys().values(), variables.keys().values());
-        let mut held = Vec::new();
-        let mut truth = vec![Vec::new(); per_model];
-        for i in 0..table.num_rows() {
-            let k = usize::from(model_keys[i]) * per_model + usize::from(variable_keys[i]);
-            if k == 0 {
-                held.push(held_out.value(i));
-            }
-            if k < per_model {
-                truth[k].push(true_levels[i]);
-            }
-            grouped[k].push(errors[i]);
-            row_of[k].push(rows[i]);
+        Ok(Predictions::of(
+            &alnlab_tables::predictions::Predictions::read(path)?,
+        ))
+    }
+
+    /// The errors of `table`'s predictions.
+    pub fn of(table: &alnlab_tables::predictions::Predictions) -> Predictions {
+        let (models, variables) = (table.models().len(), table.variables().len());
+        Predictions {
+            models: table.models().to_vec(),
+            variables: table.variables().to_vec(),
+            errors: (0..models * variables)
+                .map(|k| table.errors(k / variables, k % variables).collect())
+                .collect(),
+            held_out: table.held_out().to_vec(),
+            row_ids: table.rows().to_vec(),
+            truth: (0..variables).map(|v| table.truth(v).to_vec()).collect(),
         }
-        if let Some(k) = (1..grouped.len()).find(|&k| row_of[k] != row_of[0]) {
-            return Err(Error::bad_file(
-                path,
-                format!(
-                    "model `{}` has errors for other test rows on `{}` than model `{}` on `{}`: \
-                     every model must predict the same rows",
-                    models_names[k / per_model],
-                    variable_names[k % per_model],
-                    models_names[0],
-                    variable_names[0],
-                ),
-            ));
-        }
-        Ok(Predictions {
-            models: models_names,
-            variables: variable_names,
-            errors: grouped,
-            held_out: held,
-            row_ids: row_of.swap_remove(0),
-            truth,
-        })
     }
 
     /// The test rows (in `levels.parquet`) held out of training.
@@ -738,57 +676,35 @@ mod tests {
             (1, 1, [0, 0, 0]),
             (1, 2, [1, 1, 1]),
         ];
-        let (mut m, mut v, mut e) = (Vec::new(), Vec::new(), Vec::new());
-        let (mut row, mut held_out, mut truth) = (Vec::new(), Vec::new(), Vec::new());
-        for (model, variable, list) in errors {
-            for (r, x) in list.into_iter().enumerate() {
-                m.push(model);
-                v.push(variable);
-                e.push(x);
-                row.push(10 + r as u32);
-                held_out.push(r > 0);
-                truth.push(20 + 2 * r as u16);
-            }
+        let mut table = alnlab_tables::predictions::Predictions::new(
+            &["a.1.x", "a.2.x", "v.1.x"],
+            &[10, 11, 12],
+            &[false, true, true],
+            &vec![vec![20, 22, 24]; 3],
+        );
+        for (m, name) in ["aln", "persistence"].into_iter().enumerate() {
+            // Predicted above the truth by the error.
+            let levels: Vec<Vec<u16>> = errors[3 * m..3 * m + 3]
+                .iter()
+                .map(|(_, _, list)| list.iter().zip([20, 22, 24]).map(|(e, t)| t + e).collect())
+                .collect();
+            table.push_model(name, &levels);
         }
-        let dictionary = |keys: Vec<u16>, values: Vec<&str>| {
-            DictionaryArray::new(UInt16Array::from(keys), Arc::new(StringArray::from(values)))
-        };
-        let batch = table::batch(vec![
-            (
-                "model",
-                Arc::new(dictionary(m, vec!["aln", "persistence"])) as Arc<dyn Array>,
-            ),
-            (
-                "variable",
-                Arc::new(dictionary(v, vec!["a.1.x", "a.2.x", "v.1.x"])),
-            ),
-            ("row", Arc::new(UInt32Array::from(row))),
-            ("held_out", Arc::new(BooleanArray::from(held_out))),
-            ("true_level", Arc::new(UInt16Array::from(truth))),
-            ("error", Arc::new(UInt16Array::from(e))),
-        ]);
         let predictions = dir.path().join("predictions.parquet");
-        table::write_parquet(&predictions, &batch, &provenance).unwrap();
-        // The rollout: model 0 after 1 and 2 steps, model 1 after 1.
-        let rollout = table::batch(vec![
-            (
-                "model",
-                Arc::new(dictionary(vec![0, 0, 0, 1], vec!["aln", "persistence"]))
-                    as Arc<dyn Array>,
-            ),
-            (
-                "variable",
-                Arc::new(dictionary(
-                    vec![0, 1, 0, 0],
-                    vec!["a.1.x", "a.2.x", "v.1.x"],
-                )),
-            ),
-            ("horizon", Arc::new(UInt16Array::from(vec![1, 1, 2, 1]))),
-            ("start", Arc::new(UInt32Array::from(vec![11, 10, 11, 12]))),
-            ("error", Arc::new(UInt16Array::from(vec![1, 3, 5, 0]))),
-        ]);
+        table.write(&predictions, &provenance).unwrap();
+        // The rollout, two steps from starts 10 and 11 (held out): errors
+        // by model, then step, then variable.
+        let mut rollout = Rollout::new(&["a.1.x", "a.2.x", "v.1.x"], &[10, 11], 2);
+        rollout.push_model(
+            "aln",
+            &[
+                vec![vec![3, 1], vec![0, 0], vec![2, 2]],
+                vec![vec![9, 5], vec![0, 0], vec![0, 0]],
+            ],
+        );
+        rollout.push_model("persistence", &[vec![vec![0, 0]; 3], vec![vec![1, 1]; 3]]);
         let rollout_path = dir.path().join("rollout.parquet");
-        table::write_parquet(&rollout_path, &rollout, &provenance).unwrap();
+        rollout.write(&rollout_path, &provenance).unwrap();
         let silent = alnlab_common::Silent;
         run(
             &predictions,
@@ -799,20 +715,23 @@ mod tests {
         )
         .unwrap();
         let horizons = read_horizons(&dir.path().join(HORIZONS_FILE)).unwrap();
-        // Over all starts; over the held-out ones (rows 11 and 12, not 10).
+        // Over all starts' variables (six errors a step); over the held-out
+        // start's (row 11, not 10: three errors a step).
         let figures: Vec<_> = horizons
             .iter()
-            .map(|h| (h.rows, h.model.as_str(), h.horizon, h.n, h.mean, h.p95))
+            .map(|h| (h.rows, h.model.as_str(), h.horizon, h.n, h.mean))
             .collect();
         assert_eq!(
             figures,
             [
-                (Rows::All, "aln", 1, 2, 2.0, 2.9),
-                (Rows::All, "aln", 2, 1, 5.0, 5.0),
-                (Rows::All, "persistence", 1, 1, 0.0, 0.0),
-                (Rows::HeldOut, "aln", 1, 1, 1.0, 1.0),
-                (Rows::HeldOut, "aln", 2, 1, 5.0, 5.0),
-                (Rows::HeldOut, "persistence", 1, 1, 0.0, 0.0),
+                (Rows::All, "aln", 1, 6, 8.0 / 6.0),
+                (Rows::All, "aln", 2, 6, 14.0 / 6.0),
+                (Rows::All, "persistence", 1, 6, 0.0),
+                (Rows::All, "persistence", 2, 6, 1.0),
+                (Rows::HeldOut, "aln", 1, 3, 1.0),
+                (Rows::HeldOut, "aln", 2, 3, 5.0 / 3.0),
+                (Rows::HeldOut, "persistence", 1, 3, 0.0),
+                (Rows::HeldOut, "persistence", 2, 3, 1.0),
             ]
         );
         let rows = read(&dir.path().join(SUMMARY_FILE)).unwrap();

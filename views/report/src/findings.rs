@@ -439,15 +439,6 @@ fn against_the_paper(md: &mut String, variants: &[Loaded]) {
 
 #[cfg(test)]
 mod tests {
-    use std::collections::BTreeMap;
-    use std::sync::Arc;
-
-    use alnlab_common::{Provenance, table};
-    use arrow_array::types::UInt16Type;
-    use arrow_array::{
-        Array, BooleanArray, DictionaryArray, StringArray, UInt16Array, UInt32Array,
-    };
-
     use super::*;
     use alnlab_summarize::Predictions;
 
@@ -470,45 +461,24 @@ mod tests {
             .enumerate()
             .map(|(r, &e)| e + (r % 2) as u16)
             .collect();
-        let models = [&aln, &same, &noisy, &worse];
-        let (mut m, mut v, mut row, mut error) = (vec![], vec![], vec![], vec![]);
-        for (k, errors) in models.iter().enumerate() {
-            for variable in 0..2u16 {
-                for (r, &e) in errors.iter().enumerate() {
-                    m.push(k as u16);
-                    v.push(variable);
-                    row.push(r as u32);
-                    error.push(e);
-                }
-            }
+        let rows_ids: Vec<u32> = (0..rows).collect();
+        let truth = vec![vec![7u16; rows as usize]; 2];
+        let mut table = alnlab_tables::predictions::Predictions::new(
+            &["a.1.x", "v.1.x"],
+            &rows_ids,
+            &vec![true; rows as usize],
+            &truth,
+        );
+        for (name, errors) in [
+            ("aln", &aln),
+            ("same", &same),
+            ("noisy", &noisy),
+            ("worse", &worse),
+        ] {
+            let levels: Vec<u16> = errors.iter().map(|e| 7 + e).collect();
+            table.push_model(name, &[levels.clone(), levels]);
         }
-        let n = m.len();
-        let dictionary = |keys: Vec<u16>, values: Vec<&str>| {
-            DictionaryArray::<UInt16Type>::new(
-                UInt16Array::from(keys),
-                Arc::new(StringArray::from(values)),
-            )
-        };
-        let batch = table::batch(vec![
-            (
-                "model",
-                Arc::new(dictionary(m, vec!["aln", "same", "noisy", "worse"])) as Arc<dyn Array>,
-            ),
-            ("variable", Arc::new(dictionary(v, vec!["a.1.x", "v.1.x"]))),
-            ("row", Arc::new(UInt32Array::from(row))),
-            ("held_out", Arc::new(BooleanArray::from(vec![true; n]))),
-            ("true_level", Arc::new(UInt16Array::from(vec![7u16; n]))),
-            ("error", Arc::new(UInt16Array::from(error))),
-        ]);
-        let dir = tempfile::tempdir().unwrap();
-        let path = dir.path().join("predictions.parquet");
-        let provenance = Provenance {
-            stage: "test".into(),
-            params: serde_json::Value::Null,
-            inputs: BTreeMap::new(),
-        };
-        table::write_parquet(&path, &batch, &provenance).unwrap();
-        let comparisons = Predictions::read(&path).unwrap().compare("aln");
+        let comparisons = Predictions::of(&table).compare("aln");
         let word = |against: &str| {
             let c = comparisons
                 .iter()

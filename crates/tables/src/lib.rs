@@ -1,0 +1,12 @@
+//! The tables one stage writes and another stage (or the report) reads.
+//! Stages never depend on each other, so such a table's contract cannot
+//! live in its writer's crate: each module here holds one table's file name,
+//! its columns, its one writer and its one reader, and every other crate
+//! sees the table only as the typed value the reader returns.
+//!
+//! A table written and read by its own stage alone (`training.parquet`,
+//! `timings.parquet`, …) stays with that stage.
+
+mod dictionary;
+pub mod predictions;
+pub mod rollout;

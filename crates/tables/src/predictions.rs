@@ -1,0 +1,386 @@
+//! `predictions.parquet`, written by the test stage and read by summarize:
+//! every model's predicted level of every scored variable on every test row.
+//!
+//! One table row per model, variable and test row, in that order: `model`
+//! and `variable` (dictionaries of names), `row` (the test row's row in
+//! `levels.parquet`), `held_out` (whether training never saw it),
+//! `true_level`, `predicted_level` and `error` (their absolute difference,
+//! kept so that a reader of the file need not recompute it).
+
+use std::path::Path;
+use std::sync::Arc;
+
+use alnlab_common::table::{self, Table};
+use alnlab_common::{Error, Provenance, Result};
+use arrow_array::{Array, BooleanArray, UInt16Array, UInt32Array};
+
+use crate::dictionary;
+
+/// The file's name in the test stage's artifact.
+pub const FILE: &str = "predictions.parquet";
+
+/// Every model's predictions on the same test rows.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Predictions {
+    models: Vec<String>,
+    variables: Vec<String>,
+    rows: Vec<u32>,
+    held_out: Vec<bool>,
+    /// Variable v's true level on test row k at `[v * rows + k]`.
+    truth: Vec<u16>,
+    /// Model m's level of variable v on test row k at
+    /// `[(m * variables + v) * rows + k]`.
+    predicted: Vec<u16>,
+}
+
+impl Predictions {
+    /// No model yet: the scored `variables`, the test rows (`rows[k]` their
+    /// rows in `levels.parquet`, `held_out[k]` whether training never saw
+    /// them) and `truth[v][k]`, variable v's true level on test row k.
+    ///
+    /// # Panics
+    /// When the lengths disagree: a caller's bug, not a file's.
+    pub fn new(variables: &[&str], rows: &[u32], held_out: &[bool], truth: &[Vec<u16>]) -> Self {
+        assert_eq!(rows.len(), held_out.len(), "a held-out flag per test row");
+        assert_eq!(truth.len(), variables.len(), "true levels per variable");
+        assert!(
+            truth.iter().all(|t| t.len() == rows.len()),
+            "a true level per test row"
+        );
+        Predictions {
+            models: Vec::new(),
+            variables: variables.iter().map(|v| v.to_string()).collect(),
+            rows: rows.to_vec(),
+            held_out: held_out.to_vec(),
+            truth: truth.concat(),
+            predicted: Vec::new(),
+        }
+    }
+
+    /// Adds a model's predictions, `levels[v][k]` for variable v on test
+    /// row k.
+    ///
+    /// # Panics
+    /// When the shape is not that of the true levels.
+    pub fn push_model(&mut self, name: &str, levels: &[Vec<u16>]) {
+        assert_eq!(levels.len(), self.variables.len(), "levels per variable");
+        assert!(
+            levels.iter().all(|l| l.len() == self.rows.len()),
+            "a level per test row"
+        );
+        self.models.push(name.to_string());
+        for l in levels {
+            self.predicted.extend_from_slice(l);
+        }
+    }
+
+    /// The models, in the order they were added.
+    pub fn models(&self) -> &[String] {
+        &self.models
+    }
+
+    /// The scored variables.
+    pub fn variables(&self) -> &[String] {
+        &self.variables
+    }
+
+    /// Per test row, its row in `levels.parquet`.
+    pub fn rows(&self) -> &[u32] {
+        &self.rows
+    }
+
+    /// Per test row, whether it was held out of training.
+    pub fn held_out(&self) -> &[bool] {
+        &self.held_out
+    }
+
+    /// Variable `v`'s true level on every test row.
+    pub fn truth(&self, v: usize) -> &[u16] {
+        let n = self.rows.len();
+        &self.truth[v * n..(v + 1) * n]
+    }
+
+    /// Model `m`'s level of variable `v` on every test row.
+    pub fn predicted(&self, m: usize, v: usize) -> &[u16] {
+        let n = self.rows.len();
+        let start = (m * self.variables.len() + v) * n;
+        &self.predicted[start..start + n]
+    }
+
+    /// Model `m`'s error in levels on variable `v`, per test row.
+    pub fn errors(&self, m: usize, v: usize) -> impl ExactSizeIterator<Item = u16> + '_ {
+        self.predicted(m, v)
+            .iter()
+            .zip(self.truth(v))
+            .map(|(&p, &t)| p.abs_diff(t))
+    }
+
+    /// Writes the table to `path` (atomically).
+    pub fn write(&self, path: &Path, provenance: &Provenance) -> Result<()> {
+        let (n, per_model) = (self.rows.len(), self.variables.len());
+        let total = self.models.len() * per_model * n;
+        let (mut model, mut variable) = (Vec::with_capacity(total), Vec::with_capacity(total));
+        let (mut row, mut held_out) = (Vec::with_capacity(total), Vec::with_capacity(total));
+        let (mut truth, mut error) = (Vec::with_capacity(total), Vec::with_capacity(total));
+        for m in 0..self.models.len() {
+            for v in 0..per_model {
+                model.extend(std::iter::repeat_n(m as u16, n));
+                variable.extend(std::iter::repeat_n(v as u16, n));
+                row.extend_from_slice(&self.rows);
+                held_out.extend_from_slice(&self.held_out);
+                truth.extend_from_slice(self.truth(v));
+                error.extend(self.errors(m, v));
+            }
+        }
+        let batch = table::batch(vec![
+            (
+                "model",
+                Arc::new(dictionary::column(model, &self.models)) as Arc<dyn Array>,
+            ),
+            (
+                "variable",
+                Arc::new(dictionary::column(variable, &self.variables)),
+            ),
+            ("row", Arc::new(UInt32Array::from(row))),
+            ("held_out", Arc::new(BooleanArray::from(held_out))),
+            ("true_level", Arc::new(UInt16Array::from(truth))),
+            (
+                "predicted_level",
+                Arc::new(UInt16Array::from(self.predicted.clone())),
+            ),
+            ("error", Arc::new(UInt16Array::from(error))),
+        ]);
+        table::write_parquet(path, &batch, provenance)
+    }
+
+    /// Reads the table at `path`. Every model must predict every variable on
+    /// the same test rows, with the same true levels, and each `error` must
+    /// be the distance of its levels; rows may come in any order.
+    pub fn read(path: &Path) -> Result<Predictions> {
+        let table = Table::read(path)?;
+        table.require_no_nulls()?;
+        let (models, model_keys) = dictionary::read(&table, "model")?;
+        let (variables, variable_keys) = dictionary::read(&table, "variable")?;
+        let row_ids = table.column::<UInt32Array>("row")?.values();
+        let held = table.column::<BooleanArray>("held_out")?;
+        let true_levels = table.column::<UInt16Array>("true_level")?.values();
+        let predicted_levels = table.column::<UInt16Array>("predicted_level")?.values();
+        let errors = table.column::<UInt16Array>("error")?.values();
+        let per_model = variables.len();
+        // Table rows of each (model, variable) block, in file order.
+        let mut blocks = vec![Vec::new(); models.len() * per_model];
+        for i in 0..table.num_rows() {
+            if errors[i] != true_levels[i].abs_diff(predicted_levels[i]) {
+                return Err(Error::bad_file(
+                    path,
+                    format!(
+                        "row {i}: error {} is not the distance of true level {} and predicted \
+                         level {}",
+                        errors[i], true_levels[i], predicted_levels[i]
+                    ),
+                ));
+            }
+            blocks[usize::from(model_keys[i]) * per_model + usize::from(variable_keys[i])].push(i);
+        }
+        let first = blocks.first().cloned().unwrap_or_default();
+        let name = |k: usize| {
+            format!(
+                "model `{}` on `{}`",
+                models[k / per_model],
+                variables[k % per_model]
+            )
+        };
+        for (k, block) in blocks.iter().enumerate() {
+            let same = block.len() == first.len()
+                && block
+                    .iter()
+                    .zip(&first)
+                    .all(|(&i, &j)| row_ids[i] == row_ids[j] && held.value(i) == held.value(j));
+            if !same {
+                return Err(Error::bad_file(
+                    path,
+                    format!(
+                        "{} has other test rows than {}: every model must predict every \
+                         variable on the same rows",
+                        name(k),
+                        name(0)
+                    ),
+                ));
+            }
+        }
+        for (k, block) in blocks.iter().enumerate() {
+            let truth = &blocks[k % per_model];
+            if let Some(r) = block
+                .iter()
+                .zip(truth)
+                .find_map(|(&i, &j)| (true_levels[i] != true_levels[j]).then_some(i))
+            {
+                return Err(Error::bad_file(
+                    path,
+                    format!(
+                        "row {r}: {} disagrees with {} on the true level",
+                        name(k),
+                        name(k % per_model)
+                    ),
+                ));
+            }
+        }
+        let truth = blocks[..per_model.min(blocks.len())].iter().flatten();
+        let read = Predictions {
+            rows: first.iter().map(|&i| row_ids[i]).collect(),
+            held_out: first.iter().map(|&i| held.value(i)).collect(),
+            truth: truth.map(|&i| true_levels[i]).collect(),
+            predicted: blocks
+                .iter()
+                .flatten()
+                .map(|&i| predicted_levels[i])
+                .collect(),
+            models,
+            variables,
+        };
+        Ok(read)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use arrow_array::RecordBatch;
+
+    fn provenance() -> Provenance {
+        Provenance {
+            stage: "test".into(),
+            params: serde_json::Value::Null,
+            inputs: Default::default(),
+        }
+    }
+
+    fn two_models() -> Predictions {
+        let mut p = Predictions::new(
+            &["a.x", "b.y"],
+            &[4, 9, 11],
+            &[true, false, true],
+            &[vec![1, 2, 3], vec![10, 20, 30]],
+        );
+        p.push_model("aln", &[vec![1, 5, 3], vec![12, 20, 29]]);
+        p.push_model("persistence", &[vec![0, 2, 3], vec![10, 10, 10]]);
+        p
+    }
+
+    #[test]
+    fn a_table_reads_back_as_written() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join(FILE);
+        let written = two_models();
+        written.write(&path, &provenance()).unwrap();
+        let read = Predictions::read(&path).unwrap();
+        assert_eq!(read, written);
+        assert_eq!(read.errors(1, 1).collect::<Vec<_>>(), [0, 10, 20]);
+        assert_eq!(read.predicted(0, 0), [1, 5, 3]);
+        assert_eq!(read.truth(1), [10, 20, 30]);
+    }
+
+    /// The file's rows, reordered (or dropped) by `order`, written back.
+    fn reordered(path: &Path, order: &[u32]) {
+        let table = Table::read(path).unwrap();
+        let indices = UInt32Array::from(order.to_vec());
+        let columns = table
+            .batch
+            .columns()
+            .iter()
+            .map(|c| arrow_select::take::take(c, &indices, None).unwrap())
+            .collect::<Vec<_>>();
+        let batch = RecordBatch::try_new(table.batch.schema(), columns).unwrap();
+        table::write_parquet(path, &batch, &provenance()).unwrap();
+    }
+
+    #[test]
+    fn rows_in_another_order_read_the_same() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join(FILE);
+        let written = two_models();
+        written.write(&path, &provenance()).unwrap();
+        let order: Vec<u32> = (0..12).rev().collect();
+        reordered(&path, &order);
+        let read = Predictions::read(&path).unwrap();
+        // Names come in the order the rows first give them, and each block's
+        // rows in file order: here all reversed.
+        assert_eq!(read.models(), ["persistence", "aln"]);
+        assert_eq!(read.variables(), ["b.y", "a.x"]);
+        assert_eq!(read.rows(), [11, 9, 4]);
+        assert_eq!(read.predicted(1, 1), [3, 5, 1]);
+        assert_eq!(read.truth(0), [30, 20, 10]);
+    }
+
+    #[test]
+    fn a_model_missing_a_row_is_refused_naming_it() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join(FILE);
+        two_models().write(&path, &provenance()).unwrap();
+        // Drop persistence's last row of b.y.
+        reordered(&path, &(0..11).collect::<Vec<_>>());
+        let message = Predictions::read(&path).unwrap_err().to_string();
+        assert!(
+            message.contains(
+                "model `persistence` on `b.y` has other test rows than model `aln` on `a.x`"
+            ),
+            "{message}"
+        );
+    }
+
+    #[test]
+    fn an_error_that_is_not_the_distance_is_refused() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join(FILE);
+        two_models().write(&path, &provenance()).unwrap();
+        let table = Table::read(&path).unwrap();
+        let mut columns = table.batch.columns().to_vec();
+        let mut errors: Vec<u16> = columns[6]
+            .as_any()
+            .downcast_ref::<UInt16Array>()
+            .unwrap()
+            .values()
+            .to_vec();
+        errors[4] += 1;
+        columns[6] = Arc::new(UInt16Array::from(errors));
+        let batch = RecordBatch::try_new(table.batch.schema(), columns).unwrap();
+        table::write_parquet(&path, &batch, &provenance()).unwrap();
+        let message = Predictions::read(&path).unwrap_err().to_string();
+        assert!(
+            message.contains(
+                "row 4: error 1 is not the distance of true level 20 and predicted level 20"
+            ),
+            "{message}"
+        );
+    }
+
+    #[test]
+    fn models_disagreeing_on_the_truth_are_refused() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join(FILE);
+        two_models().write(&path, &provenance()).unwrap();
+        let table = Table::read(&path).unwrap();
+        let mut columns = table.batch.columns().to_vec();
+        let column = |c: usize| {
+            columns[c]
+                .as_any()
+                .downcast_ref::<UInt16Array>()
+                .unwrap()
+                .values()
+                .to_vec()
+        };
+        let (mut truth, predicted, mut errors) = (column(4), column(5), column(6));
+        // Persistence's first row of a.x: another truth, its error consistent.
+        truth[6] += 1;
+        errors[6] = truth[6].abs_diff(predicted[6]);
+        columns[4] = Arc::new(UInt16Array::from(truth));
+        columns[6] = Arc::new(UInt16Array::from(errors));
+        let batch = RecordBatch::try_new(table.batch.schema(), columns).unwrap();
+        table::write_parquet(&path, &batch, &provenance()).unwrap();
+        let message = Predictions::read(&path).unwrap_err().to_string();
+        assert!(
+            message.contains("row 6: model `persistence` on `a.x` disagrees with model `aln` on `a.x` on the true level"),
+            "{message}"
+        );
+    }
+}
