@@ -494,6 +494,7 @@ mod tests {
             variant: "base".into(),
             manifest: "m.toml".into(),
             manifest_sha256: "00".repeat(32),
+            replicate: Some(1),
             seed: 7,
             alnlab_version: "0.1.0".into(),
             git_commit: String::new(),

@@ -506,7 +506,8 @@ fn run_artifacts<const N: usize>(
     roles: [&str; N],
 ) -> Result<(String, [PathBuf; N])> {
     let record = crate::records::read_record(run_dir)?;
-    let chosen = super::dataset::pick_variant(&record.variants, variant, &roles, run_dir)?;
+    // A variant's first replicate stands for it, as in the report.
+    let chosen = super::dataset::pick_variant(&record.variants, variant, Some(1), &roles, run_dir)?;
     let mut paths = Vec::with_capacity(N);
     for role in roles {
         let path = chosen

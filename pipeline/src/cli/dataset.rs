@@ -19,14 +19,19 @@ pub enum DatasetCommand {
     /// --with-levels also its codebook and levels) as a new version of NAME;
     /// content already archived is stored once.
     #[command(after_help = "Example:
-  alnlab dataset archive --run runs/quickstart --variant walk --name worm-small")]
+  alnlab dataset archive --run runs/quickstart --variant walk --replicate 1 --name worm-small")]
     Archive {
         /// The run's folder, `<out>/<experiment>`, holding run.json.
         #[arg(long)]
         run: PathBuf,
-        /// The variant whose data to archive (needed when the run has several).
+        /// The variant whose data to archive (needed when the run's variants'
+        /// data differ).
         #[arg(long)]
         variant: Option<String>,
+        /// The replicate whose data to archive, from 1 (needed when the
+        /// variant's replicates' data differ: each has its own seed).
+        #[arg(long, value_parser = clap::value_parser!(u32).range(1..))]
+        replicate: Option<u32>,
         /// The dataset's name: letters, digits, `-`, `_`.
         #[arg(long)]
         name: String,
@@ -88,9 +93,17 @@ pub fn execute(datasets: &Path, command: DatasetCommand) -> Result<()> {
         DatasetCommand::Archive {
             run,
             variant,
+            replicate,
             name,
             with_levels,
-        } => archive_run(&archive, &run, variant.as_deref(), &name, with_levels),
+        } => archive_run(
+            &archive,
+            &run,
+            variant.as_deref(),
+            replicate,
+            &name,
+            with_levels,
+        ),
         DatasetCommand::List => {
             let catalog = archive.catalog()?;
             if catalog.datasets.is_empty() {
@@ -167,6 +180,7 @@ fn archive_run(
     archive: &Archive,
     run_dir: &Path,
     variant: Option<&str>,
+    replicate: Option<u32>,
     name: &str,
     with_levels: bool,
 ) -> Result<()> {
@@ -177,7 +191,7 @@ fn archive_run(
     } else {
         BASE_ROLES.to_vec()
     };
-    let chosen = pick_variant(&record.variants, variant, &roles, run_dir)?;
+    let chosen = pick_variant(&record.variants, variant, replicate, &roles, run_dir)?;
     let mut sources = Vec::new();
     for &role in &roles {
         let artifact = chosen.artifacts.get(role).ok_or_else(|| {
@@ -203,7 +217,8 @@ fn archive_run(
         variant: chosen.name.clone(),
         manifest: record.manifest_path.clone(),
         manifest_sha256: record.manifest_sha256.clone(),
-        seed: record.seed,
+        replicate: Some(chosen.replicate + 1),
+        seed: chosen.seed,
         alnlab_version: record.alnlab_version.clone(),
         git_commit: record.git_commit.clone().unwrap_or_default(),
     };
@@ -221,29 +236,47 @@ fn archive_run(
     Ok(())
 }
 
-/// The variant to archive: the one named, the only one, or any when all
-/// variants share the same data files.
+/// The variant and replicate to archive: the one named (`replicate` counts
+/// from 1), or — where several are left — the first when they all share the
+/// same data files. Otherwise an error listing every variant and its
+/// replicates, so that the choice is the user's.
 pub(crate) fn pick_variant<'a>(
     variants: &'a [VariantRecord],
     name: Option<&str>,
+    replicate: Option<u32>,
     roles: &[&str],
     run_dir: &Path,
 ) -> Result<&'a VariantRecord> {
-    let names = || {
-        variants
-            .iter()
-            .map(|v| v.name.as_str())
-            .collect::<Vec<_>>()
-            .join(", ")
+    let run_has = || {
+        format!(
+            "the run has {}",
+            describe(&variants.iter().collect::<Vec<_>>())
+        )
     };
-    if let Some(name) = name {
-        return variants.iter().find(|v| v.name == name).ok_or_else(|| {
-            Error::Invalid(format!(
-                "{}: no variant `{name}`; the run has: {}",
-                run_dir.display(),
-                names()
-            ))
-        });
+    let named: Vec<&VariantRecord> = variants
+        .iter()
+        .filter(|v| name.is_none_or(|n| v.name == n))
+        .collect();
+    if let (Some(name), []) = (name, named.as_slice()) {
+        return Err(Error::Invalid(format!(
+            "{}: no variant `{name}`; {}",
+            run_dir.display(),
+            run_has()
+        )));
+    }
+    let chosen: Vec<&VariantRecord> = named
+        .iter()
+        .copied()
+        .filter(|v| replicate.is_none_or(|r| v.replicate + 1 == r))
+        .collect();
+    if let (Some(replicate), []) = (replicate, chosen.as_slice()) {
+        return Err(Error::Invalid(format!(
+            "{}: no replicate {replicate}{}; {}",
+            run_dir.display(),
+            name.map(|n| format!(" of variant `{n}`"))
+                .unwrap_or_default(),
+            run_has()
+        )));
     }
     let data = |v: &VariantRecord| -> Vec<Option<String>> {
         roles
@@ -251,18 +284,51 @@ pub(crate) fn pick_variant<'a>(
             .map(|r| v.artifacts.get(*r).map(|a| a.sha256.clone()))
             .collect()
     };
-    match variants {
+    match chosen.as_slice() {
         [] => Err(Error::bad_file(
             &run_dir.join("run.json"),
             "the run has no variants",
         )),
         [first, rest @ ..] if rest.iter().all(|v| data(v) == data(first)) => Ok(first),
         _ => Err(Error::Invalid(format!(
-            "{}: the variants' data differ; choose one with --variant ({})",
+            "{}: the data of {} differ; choose one with --variant and --replicate ({})",
             run_dir.display(),
-            names()
+            describe(&chosen),
+            run_has()
         ))),
     }
+}
+
+/// Variants with their replicates and seeds, for people: `walk
+/// (replicates 1, 2 — seeds 7, 8), gray (replicate 1 — seed 7)`.
+fn describe(variants: &[&VariantRecord]) -> String {
+    let mut names: Vec<&str> = Vec::new();
+    for v in variants {
+        if !names.contains(&v.name.as_str()) {
+            names.push(&v.name);
+        }
+    }
+    let each: Vec<String> = names
+        .iter()
+        .map(|&name| {
+            let of: Vec<&VariantRecord> = variants
+                .iter()
+                .copied()
+                .filter(|v| v.name == name)
+                .collect();
+            let join = |f: &dyn Fn(&VariantRecord) -> String| {
+                of.iter().map(|v| f(v)).collect::<Vec<_>>().join(", ")
+            };
+            format!(
+                "variant `{name}`: replicate{} {} with seed{} {}",
+                if of.len() == 1 { "" } else { "s" },
+                join(&|v| (v.replicate + 1).to_string()),
+                if of.len() == 1 { "" } else { "s" },
+                join(&|v| v.seed.to_string()),
+            )
+        })
+        .collect();
+    each.join("; ")
 }
 
 /// A catalog entry for people.
@@ -270,7 +336,7 @@ fn show(entry: &Entry) -> String {
     let p = &entry.provenance;
     let mut text = format!(
         "dataset     {}\nsha256      {}\ncreated     {}\nsize        {}\n\
-         experiment  {} (variant {})\nmanifest    {} (sha256 {})\nseed        {}\n\
+         experiment  {} (variant {}{})\nmanifest    {} (sha256 {})\nseed        {}\n\
          alnlab      {}\ngit commit  {}\nfiles:\n",
         entry.label(),
         entry.sha256,
@@ -278,6 +344,9 @@ fn show(entry: &Entry) -> String {
         human_bytes(entry.bytes),
         p.experiment,
         p.variant,
+        p.replicate
+            .map(|r| format!(", replicate {r}"))
+            .unwrap_or_default(),
         p.manifest,
         p.manifest_sha256,
         p.seed,

@@ -51,6 +51,11 @@ pub struct DatasetProvenance {
     /// The producing manifest's path, as the run recorded it.
     pub manifest: String,
     pub manifest_sha256: String,
+    /// Which replicate of the variant the data are (from 1); absent in
+    /// entries archived before replicates were named.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub replicate: Option<u32>,
+    /// The seed that made the data: the replicate's own.
     pub seed: u64,
     pub alnlab_version: String,
     /// Empty when the run was not made in a git checkout.
