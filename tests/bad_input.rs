@@ -13,8 +13,7 @@ use alnlab_common::Provenance;
 use alnlab_common::table::{Table, batch, write_parquet};
 use arrow_array::{Array, Float64Array, RecordBatch, StringArray, UInt16Array};
 
-mod common;
-use common::{TINY, alnlab, case, check_all, stderr};
+use crate::common::{TINY, alnlab, case, check_all, stderr};
 
 /// The tiny experiment's artifacts, by role.
 fn tiny_run(dir: &Path) -> RunRecord {

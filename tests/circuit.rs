@@ -8,14 +8,12 @@
 //! export verilog` writing readable modules, and refusing what it cannot
 //! do.
 
-mod common;
-
 use std::path::Path;
 
 use alnlab_common::table::Table;
 use arrow_array::{UInt32Array, UInt64Array};
 
-use common::{alnlab, stderr, write_manifest};
+use crate::common::{alnlab, stderr, write_manifest};
 
 const CIRCUIT: &str = r#"
 [experiment]

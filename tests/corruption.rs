@@ -8,8 +8,7 @@ use std::path::Path;
 
 use alnlab::records::RunRecord;
 
-mod common;
-use common::{TINY, alnlab, artifact_bytes, stderr};
+use crate::common::{TINY, alnlab, artifact_bytes, stderr};
 
 /// Positions per artifact: spread evenly from the first byte to the last.
 const POSITIONS: usize = 20;

@@ -5,8 +5,7 @@ use std::path::Path;
 
 use alnlab::records::RunRecord;
 
-mod common;
-use common::{MANIFEST, alnlab, run_ok, stderr, write_manifest};
+use crate::common::{MANIFEST, alnlab, run_ok, stderr, write_manifest};
 
 /// [`MANIFEST`] with its simulate and stride tables replaced by `[data]`.
 fn from_dataset(reference: &str, keep_quantize: bool) -> String {
@@ -33,6 +32,41 @@ fn ok(dir: &Path, args: &[&str]) -> String {
     let out = alnlab(dir, args);
     assert!(out.status.success(), "alnlab {args:?}: {}", stderr(&out));
     String::from_utf8(out.stdout).unwrap()
+}
+
+#[test]
+fn a_replicated_run_archives_the_replicate_named_and_says_which() {
+    let dir = tempfile::tempdir().unwrap();
+    let replicated = MANIFEST.replace("seed = 11\n", "seed = 11\nreplicates = 2\n");
+    write_manifest(dir.path(), "m.toml", &replicated);
+    let record = run_ok(dir.path(), &["m.toml"]);
+    let seeds: Vec<u64> = record.variants.iter().map(|v| v.seed).collect();
+    assert_eq!(seeds.len(), 2);
+
+    // Two replicates, two seeds, different data: no silent pick.
+    let archive = ["dataset", "archive", "--run", "runs/e2e", "--name", "box"];
+    let out = alnlab(dir.path(), &archive);
+    assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
+    let expected = format!(
+        "choose one with --variant and --replicate (the run has variant `base`: replicates 1, 2 \
+         with seeds {}, {})",
+        seeds[0], seeds[1]
+    );
+    assert!(stderr(&out).contains(&expected), "{}", stderr(&out));
+    let out = alnlab(dir.path(), &[&archive[..], &["--replicate", "3"]].concat());
+    assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
+    assert!(stderr(&out).contains("no replicate 3"), "{}", stderr(&out));
+
+    ok(dir.path(), &[&archive[..], &["--replicate", "2"]].concat());
+    let show = ok(dir.path(), &["dataset", "show", "box@1"]);
+    assert!(
+        show.contains("experiment  e2e (variant base, replicate 2)")
+            && show.contains(&format!("seed        {}\n", seeds[1])),
+        "{show}"
+    );
+    let pairs = &record.variants[1].artifacts["pairs"].sha256;
+    assert!(show.contains(pairs.as_str()), "replicate 2's pairs: {show}");
+    assert!(!show.contains(record.variants[0].artifacts["pairs"].sha256.as_str()));
 }
 
 #[test]
@@ -75,7 +109,8 @@ fn a_run_from_an_archived_dataset_gives_the_same_bytes() {
     );
     let show = ok(dir.path(), &["dataset", "show", "box@1"]);
     assert!(
-        show.contains("experiment  e2e (variant base)") && show.contains("pairs.parquet"),
+        show.contains("experiment  e2e (variant base, replicate 1)")
+            && show.contains("pairs.parquet"),
         "{show}"
     );
     ok(dir.path(), &["dataset", "verify"]);

@@ -6,12 +6,10 @@
 //! numpy and scipy; the abstract quotes the table; and `reports/README.md`
 //! quotes no number its report's first screen does not.
 
-mod common;
-
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
-use common::committed_reports;
+use crate::common::committed_reports;
 
 fn reports_root() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("reports")

@@ -12,8 +12,7 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use std::time::{Duration, Instant};
 
-mod common;
-use common::{TINY, alnlab, case, check_all, stderr};
+use crate::common::{TINY, alnlab, case, check_all, stderr};
 
 /// A worm with two tasks; each case below breaks one thing of it.
 const PLANNED: &str = r#"

@@ -2,8 +2,6 @@
 //! tasks, planned with every forward model and planner; the tables' shape,
 //! and the same bytes again (decision times aside).
 
-mod common;
-
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
@@ -11,7 +9,7 @@ use alnlab_common::state_log::StateLog;
 use alnlab_common::table::Table;
 use arrow_array::{Array, Float64Array, ListArray, UInt32Array};
 
-use common::{alnlab, stderr, table_without, write_manifest};
+use crate::common::{alnlab, stderr, table_without, write_manifest};
 
 const PLANNED: &str = r#"
 [experiment]

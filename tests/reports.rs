@@ -2,11 +2,9 @@
 //! inside the canvas with no two labels overlapping, and every report's
 //! HTML, opened in a real browser (headless Chromium), loads every chart.
 
-mod common;
-
 use std::process::Command;
 
-use common::committed_reports;
+use crate::common::committed_reports;
 
 /// A text element's box on the canvas (px), estimated from its font size:
 /// sans-serif glyphs are at most about 0.6 em wide on average.

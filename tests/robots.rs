@@ -7,8 +7,7 @@
 
 use std::path::Path;
 
-mod common;
-use common::{alnlab, case, check_all, stderr};
+use crate::common::{alnlab, case, check_all, stderr};
 
 const UR5: &str = include_str!("../robots/ur5/ur5_robot.urdf");
 

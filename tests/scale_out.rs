@@ -6,8 +6,7 @@ use std::path::Path;
 
 use alnlab::records::RunRecord;
 
-mod common;
-use common::{MANIFEST, alnlab, run_ok, stderr, write_manifest};
+use crate::common::{MANIFEST, alnlab, run_ok, stderr, write_manifest};
 
 fn ok(dir: &Path, args: &[&str]) -> String {
     let out = alnlab(dir, args);

@@ -1,11 +1,9 @@
 //! Tracking across runs, on the real binary: records kept per run, `runs
 //! list`, `show` and `diff`, filters, and records of the first format.
 
-mod common;
-
 use std::path::Path;
 
-use common::{alnlab, stderr, write_manifest};
+use crate::common::{alnlab, stderr, write_manifest};
 use serde_json::Value;
 
 /// `alnlab <args>` in `dir`, which must succeed; its stdout.
@@ -165,7 +163,7 @@ fn runs_are_kept_listed_and_compared() {
 #[test]
 fn first_format_records_still_list_and_newer_ones_are_refused() {
     let dir = tempfile::tempdir().unwrap();
-    let manifest = write_manifest(dir.path(), "tiny.toml", common::TINY);
+    let manifest = write_manifest(dir.path(), "tiny.toml", crate::common::TINY);
     ok(dir.path(), &["-q", "run", manifest.to_str().unwrap()]);
     let latest = dir.path().join("runs/tiny/run.json");
     let mut record: Value = serde_json::from_slice(&std::fs::read(&latest).unwrap()).unwrap();

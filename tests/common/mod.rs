@@ -1,7 +1,5 @@
 //! What the end-to-end test files share: a small manifest and running the
 //! real `alnlab` binary on it.
-// Each test file uses its own subset of these.
-#![allow(dead_code)]
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
