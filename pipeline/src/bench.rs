@@ -134,6 +134,8 @@ pub fn shards(manifest_path: &Path, variant: &str, shards: u32) -> Result<ShardB
                 .arg(codebook)
                 .arg("--levels")
                 .arg(levels)
+                .arg("--pairs")
+                .arg(&inputs["pairs"])
                 .arg("--out")
                 .arg(out)
                 .stdout(std::process::Stdio::null())

@@ -6,6 +6,7 @@
 
 use std::io::{Read, Write};
 use std::net::{TcpListener, TcpStream};
+use std::os::unix::process::CommandExt;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
@@ -36,6 +37,10 @@ const STEPS: &[Step] = &[
     (
         "robots from URDF: seven robots' logs against Pinocchio, and bench sim beside it",
         robots_against_pinocchio,
+    ),
+    (
+        "every other alnlab bench subcommand once, on the quickstart where it takes a run",
+        every_bench,
     ),
     (
         "MLflow: runs exported to a real server and read back",
@@ -176,6 +181,83 @@ fn robots_against_pinocchio(suite: &Suite) -> Result<(), String> {
     }
 }
 
+/// Each `alnlab bench` subcommand the other steps do not run (they run
+/// `sim` and `circuit`), once and with the fewest repeats it takes, on the
+/// quickstart's runs where it needs a run or a manifest. A bench must exit
+/// 0 and its `--json` hold the figures it promises; how fast is the
+/// benchmark's to say, not a test's. Sharded training must still give the
+/// one-process model byte for byte.
+fn every_bench(suite: &Suite) -> Result<(), String> {
+    let quickstart = runs(suite).join("quickstart");
+    let quickstart = quickstart.to_str().ok_or("a non-UTF-8 target folder")?;
+    let runs = runs(suite);
+    let runs = runs.to_str().ok_or("a non-UTF-8 target folder")?;
+    let manifest = "experiments/quickstart.toml";
+    let benches: [(&[&str], &[&str]); 7] = [
+        (
+            &["quantize", "--repeat", "1"],
+            &["quantize_encode_values_per_s", "walk_decodes_per_s"],
+        ),
+        (&["train"], &["node_updates_per_s", "worm"]),
+        (&["summarize"], &["errors", "errors_per_s"]),
+        (
+            &["predict"],
+            &["batched_ns_per_state", "single_ns_per_state"],
+        ),
+        (
+            &[
+                "predict",
+                "--run",
+                quickstart,
+                "--variant",
+                "walk",
+                "--repeat",
+                "1",
+            ],
+            &[
+                "aln_batched_one_thread_ns",
+                "simulator_one_step_one_thread_ns",
+            ],
+        ),
+        (&["shards", manifest], &["processes_seconds", "identical"]),
+        (
+            &["cache", manifest, "--out", runs, "--repeat", "1"],
+            &["cached_run_median_s"],
+        ),
+    ];
+    for (args, keys) in benches {
+        let shown = format!("alnlab bench {}", args.join(" "));
+        println!("-- {shown}");
+        let out = alnlab()
+            .args(["-q", "bench"])
+            .args(args)
+            .arg("--json")
+            .current_dir(root())
+            .stdin(Stdio::null())
+            .output()
+            .map_err(|e| format!("{shown}: {e}"))?;
+        if !out.status.success() {
+            return Err(format!(
+                "{shown} failed ({}): {}",
+                out.status,
+                String::from_utf8_lossy(&out.stderr)
+            ));
+        }
+        let figures: serde_json::Value = serde_json::from_slice(&out.stdout)
+            .map_err(|e| format!("{shown} --json printed no JSON object: {e}"))?;
+        if let Some(key) = keys.iter().find(|k| figures.get(**k).is_none()) {
+            return Err(format!("{shown} --json has no `{key}`: {figures}"));
+        }
+        if figures.get("identical").is_some_and(|i| i != true) {
+            return Err(format!(
+                "{shown}: the sharded model differs from one process's"
+            ));
+        }
+        println!("{figures}");
+    }
+    Ok(())
+}
+
 fn interop(suite: &Suite, record: &Path, report: &Path) -> Result<(), String> {
     run_in_root(
         Command::new(&suite.python)
@@ -235,7 +317,7 @@ fn mlflow_round_trip(suite: &Suite) -> Result<(), String> {
                 .arg(&uri),
         )?;
     }
-    Ok(())
+    server.stop()
 }
 
 fn snakemake(suite: &Suite) -> Result<(), String> {
@@ -250,7 +332,10 @@ fn snakemake(suite: &Suite) -> Result<(), String> {
     )
 }
 
-/// An MLflow tracking server on a free loopback port, stopped when dropped.
+/// An MLflow tracking server on a free loopback port, in a process group of
+/// its own: `mlflow server` runs uvicorn and job-runner consumers as its
+/// children, which stopping the server alone would leave orphaned. The whole
+/// group is stopped by [`MlflowServer::stop`], or killed when dropped.
 struct MlflowServer {
     child: Child,
     port: u16,
@@ -275,6 +360,7 @@ impl MlflowServer {
             .arg(dir.join("artifacts"))
             .args(["--host", "127.0.0.1", "--port", &port.to_string()])
             .args(["--workers", "1"])
+            .process_group(0)
             .stdout(log_file.try_clone().map_err(|e| e.to_string())?)
             .stderr(log_file)
             .spawn()
@@ -294,11 +380,69 @@ impl MlflowServer {
     }
 }
 
+impl MlflowServer {
+    /// Stops every process of the server's group (SIGTERM, then SIGKILL for
+    /// any still there after ten seconds); an error when one outlives that.
+    fn stop(mut self) -> Result<(), String> {
+        let group = self.child.id();
+        signal_group(group, "TERM");
+        let _ = self.child.wait();
+        let deadline = Instant::now() + Duration::from_secs(10);
+        while group_alive(group) && Instant::now() < deadline {
+            std::thread::sleep(Duration::from_millis(100));
+        }
+        if group_alive(group) {
+            signal_group(group, "KILL");
+            std::thread::sleep(Duration::from_millis(500));
+        }
+        if group_alive(group) {
+            return Err(format!(
+                "the MLflow server's process group {group} outlived SIGTERM and SIGKILL"
+            ));
+        }
+        Ok(())
+    }
+}
+
 impl Drop for MlflowServer {
     fn drop(&mut self) {
-        let _ = self.child.kill();
+        let group = self.child.id();
+        if group_alive(group) {
+            signal_group(group, "KILL");
+        }
         let _ = self.child.wait();
     }
+}
+
+/// Sends `signal` to every process of the group `group` (with `kill`, the
+/// command: the suite needs no binding to libc for two signals).
+fn signal_group(group: u32, signal: &str) {
+    let _ = Command::new("kill")
+        .arg(format!("-{signal}"))
+        .arg("--")
+        .arg(format!("-{group}"))
+        .stderr(Stdio::null())
+        .status();
+}
+
+/// Whether any process of the group `group` is still there, read from
+/// `/proc`, zombies aside: a process that has exited but whose parent, init, has not
+/// yet reaped it is gone for this purpose.
+fn group_alive(group: u32) -> bool {
+    let Ok(entries) = std::fs::read_dir("/proc") else {
+        return false;
+    };
+    entries.flatten().any(|entry| {
+        // /proc/PID/stat: "PID (COMM) STATE PPID PGRP ..."; COMM may hold
+        // spaces or parentheses, so the fields are read after the last ')'.
+        let stat = std::fs::read_to_string(entry.path().join("stat")).unwrap_or_default();
+        let Some((_, after)) = stat.rsplit_once(')') else {
+            return false;
+        };
+        let fields: Vec<&str> = after.split_whitespace().collect();
+        matches!(fields.as_slice(), [state, _ppid, pgrp, ..]
+            if *state != "Z" && pgrp.parse() == Ok(group))
+    })
 }
 
 /// Whether an HTTP server on the loopback port answers `GET /health` 200.
