@@ -12,6 +12,7 @@ mod end_to_end;
 mod headlines;
 mod hostile;
 mod plan;
+mod provenance;
 mod reports;
 mod robots;
 mod scale_out;

@@ -29,6 +29,7 @@ pub fn worm_training() -> Result<TrainBench> {
         quiet: true,
         datasets: dir.path().join("datasets"),
         until: None,
+        reports: None,
     };
     let record = run::run(&manifest, &options)?;
     let variant = &record.variants[0];
@@ -88,6 +89,7 @@ pub fn shards(manifest_path: &Path, variant: &str, shards: u32) -> Result<ShardB
         quiet: true,
         datasets: Path::new("datasets").to_path_buf(),
         until: None,
+        reports: None,
     };
     let run::TrainInputs { inputs, provenance } = run::up_to_train(&manifest, &options, variant)?;
     let (codebook, levels) = (&inputs["codebook"], &inputs["levels"]);

@@ -11,6 +11,7 @@ pub mod cache;
 pub mod cli;
 pub mod dataset;
 pub mod export;
+pub mod git;
 pub mod manifest;
 pub mod mlflow;
 pub mod progress;

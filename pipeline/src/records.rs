@@ -49,6 +49,11 @@ pub struct RunRecord {
     pub seed: u64,
     pub alnlab_version: String,
     pub git_commit: Option<String>,
+    /// The paths of the checkout that differed from `git_commit` when the
+    /// run started (the reports folder it published into aside); a report
+    /// lists them. Empty for a clean checkout, and in records before it.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub git_changes: Vec<String>,
     pub started: String,
     pub finished: String,
     pub wall_seconds: f64,

@@ -83,6 +83,7 @@ pub fn render(record: &RunRecord, dir: &Path) -> Result<PathBuf> {
         seed: record.seed,
         alnlab_version: record.alnlab_version.clone(),
         git_commit: record.git_commit.clone(),
+        git_changes: record.git_changes.clone(),
         started: record.started.clone(),
         wall_seconds: record.wall_seconds,
         variants,

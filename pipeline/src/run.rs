@@ -44,6 +44,9 @@ pub struct RunOptions {
     /// report.
     /// How a workflow engine runs the graph one stage at a time.
     pub until: Option<String>,
+    /// Where the report is published (`--reports`), if anywhere: the
+    /// checkout's changes the record keeps leave that folder out.
+    pub reports: Option<PathBuf>,
 }
 
 /// Version of the `dataset` artifact's layout (part of its cache key).
@@ -87,6 +90,9 @@ impl OutLock {
 /// Runs the manifest's variants (or the one chosen) and writes the run record.
 pub fn run(manifest: &Manifest, options: &RunOptions) -> Result<RunRecord> {
     let started = SystemTime::now();
+    // The checkout as the run found it: what its record and report name.
+    let git_commit = crate::git::commit(&manifest.path);
+    let git_changes = crate::git::changes(&manifest.path, options.reports.as_deref());
     let clock = Instant::now();
     let variants: Vec<&Variant> = match &options.variant {
         Some(name) => vec![manifest.variant(name)?],
@@ -180,11 +186,12 @@ pub fn run(manifest: &Manifest, options: &RunOptions) -> Result<RunRecord> {
         format: records::FORMAT,
         id: records::new_id(started, &manifest.experiment.name, &manifest.sha256),
         experiment: manifest.experiment.name.clone(),
-        manifest_path: repository_path(&manifest.path),
+        manifest_path: crate::git::repository_path(&manifest.path),
         manifest_sha256: manifest.sha256.clone(),
         seed: manifest.experiment.seed,
         alnlab_version: ALNLAB_VERSION.into(),
-        git_commit: git_commit(&manifest.path),
+        git_commit,
+        git_changes,
         started: humantime::format_rfc3339_seconds(started).to_string(),
         finished: humantime::format_rfc3339_seconds(SystemTime::now()).to_string(),
         wall_seconds: clock.elapsed().as_secs_f64(),
@@ -404,40 +411,6 @@ impl Graph<'_> {
         });
         Ok(artifact)
     }
-}
-
-/// The commit of the git checkout holding `path`, if there is one.
-fn git_commit(path: &Path) -> Option<String> {
-    git(path, &["rev-parse", "HEAD"])
-}
-
-/// `path` relative to the root of the git repository holding it (so a
-/// record reads the same on every checkout), or as given outside one.
-fn repository_path(path: &Path) -> String {
-    let relative = || {
-        let root = PathBuf::from(git(path, &["rev-parse", "--show-toplevel"])?);
-        let absolute = std::fs::canonicalize(path).ok()?;
-        let root = std::fs::canonicalize(root).ok()?;
-        Some(absolute.strip_prefix(root).ok()?.display().to_string())
-    };
-    relative().unwrap_or_else(|| path.display().to_string())
-}
-
-/// What `git -C <path's folder> <args>` prints, trimmed, if it succeeds.
-fn git(path: &Path, args: &[&str]) -> Option<String> {
-    let dir = path
-        .parent()
-        .filter(|p| !p.as_os_str().is_empty())
-        .unwrap_or(Path::new("."));
-    let output = std::process::Command::new("git")
-        .arg("-C")
-        .arg(dir)
-        .args(args)
-        .stderr(std::process::Stdio::null())
-        .output()
-        .ok()?;
-    let text = String::from_utf8(output.stdout).ok()?.trim().to_string();
-    (output.status.success() && !text.is_empty()).then_some(text)
 }
 
 /// Where sharded stages keep their parts: `<out>/shards/<stage>/<stage

@@ -639,6 +639,7 @@ fn bench_cache(
         quiet,
         datasets: PathBuf::from("datasets"),
         until: None,
+        reports: None,
     };
     let warm = Manifest::load(manifest)?;
     run(&warm, &options)?;

@@ -204,6 +204,9 @@ pub fn execute(matches: &ArgMatches) -> Result<()> {
             train_shard,
         } => {
             let manifest = Manifest::load(&manifest)?;
+            if let (Some(folder), None) = (&reports, &until) {
+                crate::git::check_publishable(folder, &[])?;
+            }
             let options = RunOptions {
                 out,
                 force,
@@ -211,6 +214,7 @@ pub fn execute(matches: &ArgMatches) -> Result<()> {
                 quiet,
                 datasets,
                 until,
+                reports: reports.clone(),
             };
             if let Some(shard) = train_shard {
                 let variant = match &options.variant {
@@ -265,6 +269,9 @@ pub fn execute(matches: &ArgMatches) -> Result<()> {
         }
         Command::Report { run_dir, reports } => {
             let record = crate::records::read_record(&run_dir)?;
+            if let Some(folder) = &reports {
+                crate::git::check_publishable(folder, &record.git_changes)?;
+            }
             let report = crate::report::render(&record, &report_dir(&run_dir, reports, &record))?;
             println!("report: {}", report.display());
             Ok(())

@@ -50,6 +50,8 @@ pub struct RunInfo {
     pub seed: u64,
     pub alnlab_version: String,
     pub git_commit: Option<String>,
+    /// The paths that differed from `git_commit` when the run started.
+    pub git_changes: Vec<String>,
     pub started: String,
     pub wall_seconds: f64,
     pub variants: Vec<VariantInfo>,
@@ -782,7 +784,29 @@ fn reproducibility(md: &mut String, run: &RunInfo, variants: &[Loaded]) {
         .git_commit
         .as_deref()
         .unwrap_or("(not in a git checkout)");
-    add("git commit", format!("`{commit}`"));
+    add(
+        "git commit",
+        if run.git_changes.is_empty() {
+            format!("`{commit}`")
+        } else {
+            format!(
+                "`{commit}`, with uncommitted changes to {} path{}: {}",
+                run.git_changes.len(),
+                if run.git_changes.len() == 1 { "" } else { "s" },
+                run.git_changes
+                    .iter()
+                    .take(10)
+                    .map(|p| format!("`{p}`"))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+                    + if run.git_changes.len() > 10 {
+                        ", …"
+                    } else {
+                        ""
+                    }
+            )
+        },
+    );
     add("machine", machine);
     add("started", run.started.clone());
     add("wall time", format!("{} s", format::sig3(run.wall_seconds)));
