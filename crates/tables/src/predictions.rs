@@ -4,12 +4,16 @@
 //! One table row per model, variable and test row, in that order: `model`
 //! and `variable` (dictionaries of names), `row` (the test row's row in
 //! `levels.parquet`), `held_out` (whether training never saw it),
-//! `true_level`, `predicted_level` and `error` (their absolute difference,
-//! kept so that a reader of the file need not recompute it).
+//! `true_level`, `predicted_level`, `period` (for an angle that wraps, the
+//! circle in levels; 0 for every other variable) and `error`: the levels
+//! between the two, the shorter way round the circle where the variable
+//! wraps — a roll predicted at +179° for a true −179° is 2° off, not 358° —
+//! kept so that a reader of the file need not recompute it.
 
 use std::path::Path;
 use std::sync::Arc;
 
+use alnlab_codes::residual::change;
 use alnlab_common::table::{self, Table};
 use alnlab_common::{Error, Provenance, Result};
 use arrow_array::{Array, BooleanArray, UInt16Array, UInt32Array};
@@ -24,6 +28,8 @@ pub const FILE: &str = "predictions.parquet";
 pub struct Predictions {
     models: Vec<String>,
     variables: Vec<String>,
+    /// Per variable, the circle in levels for an angle that wraps.
+    periods: Vec<Option<u32>>,
     rows: Vec<u32>,
     held_out: Vec<bool>,
     /// Variable v's true level on test row k at `[v * rows + k]`.
@@ -34,15 +40,23 @@ pub struct Predictions {
 }
 
 impl Predictions {
-    /// No model yet: the scored `variables`, the test rows (`rows[k]` their
-    /// rows in `levels.parquet`, `held_out[k]` whether training never saw
-    /// them) and `truth[v][k]`, variable v's true level on test row k.
+    /// No model yet: the scored `variables` (`periods[v]`, the circle in
+    /// levels of one that wraps, `Entry::period`), the test rows (`rows[k]`
+    /// their rows in `levels.parquet`, `held_out[k]` whether training never
+    /// saw them) and `truth[v][k]`, variable v's true level on test row k.
     ///
     /// # Panics
     /// When the lengths disagree: a caller's bug, not a file's.
-    pub fn new(variables: &[&str], rows: &[u32], held_out: &[bool], truth: &[Vec<u16>]) -> Self {
+    pub fn new(
+        variables: &[&str],
+        periods: &[Option<u32>],
+        rows: &[u32],
+        held_out: &[bool],
+        truth: &[Vec<u16>],
+    ) -> Self {
         assert_eq!(rows.len(), held_out.len(), "a held-out flag per test row");
         assert_eq!(truth.len(), variables.len(), "true levels per variable");
+        assert_eq!(periods.len(), variables.len(), "a period per variable");
         assert!(
             truth.iter().all(|t| t.len() == rows.len()),
             "a true level per test row"
@@ -50,6 +64,7 @@ impl Predictions {
         Predictions {
             models: Vec::new(),
             variables: variables.iter().map(|v| v.to_string()).collect(),
+            periods: periods.to_vec(),
             rows: rows.to_vec(),
             held_out: held_out.to_vec(),
             truth: truth.concat(),
@@ -107,12 +122,18 @@ impl Predictions {
         &self.predicted[start..start + n]
     }
 
-    /// Model `m`'s error in levels on variable `v`, per test row.
+    /// Per variable, the circle in levels of an angle that wraps.
+    pub fn periods(&self) -> &[Option<u32>] {
+        &self.periods
+    }
+
+    /// Model `m`'s error in levels on variable `v`, per test row ([`error`]).
     pub fn errors(&self, m: usize, v: usize) -> impl ExactSizeIterator<Item = u16> + '_ {
+        let period = self.periods[v];
         self.predicted(m, v)
             .iter()
             .zip(self.truth(v))
-            .map(|(&p, &t)| p.abs_diff(t))
+            .map(move |(&p, &t)| error(t, p, period))
     }
 
     /// Writes the table to `path` (atomically).
@@ -122,6 +143,7 @@ impl Predictions {
         let (mut model, mut variable) = (Vec::with_capacity(total), Vec::with_capacity(total));
         let (mut row, mut held_out) = (Vec::with_capacity(total), Vec::with_capacity(total));
         let (mut truth, mut error) = (Vec::with_capacity(total), Vec::with_capacity(total));
+        let mut period = Vec::with_capacity(total);
         for m in 0..self.models.len() {
             for v in 0..per_model {
                 model.extend(std::iter::repeat_n(m as u16, n));
@@ -129,6 +151,7 @@ impl Predictions {
                 row.extend_from_slice(&self.rows);
                 held_out.extend_from_slice(&self.held_out);
                 truth.extend_from_slice(self.truth(v));
+                period.extend(std::iter::repeat_n(self.periods[v].unwrap_or(0), n));
                 error.extend(self.errors(m, v));
             }
         }
@@ -148,14 +171,16 @@ impl Predictions {
                 "predicted_level",
                 Arc::new(UInt16Array::from(self.predicted.clone())),
             ),
+            ("period", Arc::new(UInt32Array::from(period))),
             ("error", Arc::new(UInt16Array::from(error))),
         ]);
         table::write_parquet(path, &batch, provenance)
     }
 
     /// Reads the table at `path`. Every model must predict every variable on
-    /// the same test rows, with the same true levels, and each `error` must
-    /// be the distance of its levels; rows may come in any order.
+    /// the same test rows, with the same true levels, every row of a
+    /// variable must give it the same period, and each `error` must be the
+    /// distance of its levels ([`error`]); rows may come in any order.
     pub fn read(path: &Path) -> Result<Predictions> {
         let table = Table::read(path)?;
         table.require_no_nulls()?;
@@ -165,18 +190,40 @@ impl Predictions {
         let held = table.column::<BooleanArray>("held_out")?;
         let true_levels = table.column::<UInt16Array>("true_level")?.values();
         let predicted_levels = table.column::<UInt16Array>("predicted_level")?.values();
+        let period_column = table.column::<UInt32Array>("period")?.values();
         let errors = table.column::<UInt16Array>("error")?.values();
         let per_model = variables.len();
+        let mut periods: Vec<Option<Option<u32>>> = vec![None; per_model];
         // Table rows of each (model, variable) block, in file order.
         let mut blocks = vec![Vec::new(); models.len() * per_model];
         for i in 0..table.num_rows() {
-            if errors[i] != true_levels[i].abs_diff(predicted_levels[i]) {
+            let v = usize::from(variable_keys[i]);
+            let period = (period_column[i] > 0).then_some(period_column[i]);
+            match periods[v] {
+                None => periods[v] = Some(period),
+                Some(seen) if seen != period => {
+                    return Err(Error::bad_file(
+                        path,
+                        format!(
+                            "row {i}: `{}` has period {}, where an earlier row gave it {}",
+                            variables[v],
+                            period_column[i],
+                            seen.unwrap_or(0)
+                        ),
+                    ));
+                }
+                Some(_) => {}
+            }
+            if errors[i] != error(true_levels[i], predicted_levels[i], period) {
                 return Err(Error::bad_file(
                     path,
                     format!(
                         "row {i}: error {} is not the distance of true level {} and predicted \
-                         level {}",
-                        errors[i], true_levels[i], predicted_levels[i]
+                         level {}{}",
+                        errors[i],
+                        true_levels[i],
+                        predicted_levels[i],
+                        period.map_or(String::new(), |p| format!(" on a circle of {p} levels"))
                     ),
                 ));
             }
@@ -235,11 +282,19 @@ impl Predictions {
                 .flatten()
                 .map(|&i| predicted_levels[i])
                 .collect(),
+            periods: periods.into_iter().map(Option::flatten).collect(),
             models,
             variables,
         };
         Ok(read)
     }
+}
+
+/// A prediction's error in levels: how far `predicted` is from `truth`, the
+/// shorter way round the circle of `period` levels for an angle that wraps.
+pub fn error(truth: u16, predicted: u16, period: Option<u32>) -> u16 {
+    let steps = change(truth, predicted, period).unsigned_abs();
+    u16::try_from(steps).expect("two levels are at most 65 535 apart")
 }
 
 #[cfg(test)]
@@ -258,6 +313,7 @@ mod tests {
     fn two_models() -> Predictions {
         let mut p = Predictions::new(
             &["a.x", "b.y"],
+            &[None, None],
             &[4, 9, 11],
             &[true, false, true],
             &[vec![1, 2, 3], vec![10, 20, 30]],
@@ -335,14 +391,14 @@ mod tests {
         two_models().write(&path, &provenance()).unwrap();
         let table = Table::read(&path).unwrap();
         let mut columns = table.batch.columns().to_vec();
-        let mut errors: Vec<u16> = columns[6]
+        let mut errors: Vec<u16> = columns[7]
             .as_any()
             .downcast_ref::<UInt16Array>()
             .unwrap()
             .values()
             .to_vec();
         errors[4] += 1;
-        columns[6] = Arc::new(UInt16Array::from(errors));
+        columns[7] = Arc::new(UInt16Array::from(errors));
         let batch = RecordBatch::try_new(table.batch.schema(), columns).unwrap();
         table::write_parquet(&path, &batch, &provenance()).unwrap();
         let message = Predictions::read(&path).unwrap_err().to_string();
@@ -369,12 +425,12 @@ mod tests {
                 .values()
                 .to_vec()
         };
-        let (mut truth, predicted, mut errors) = (column(4), column(5), column(6));
+        let (mut truth, predicted, mut errors) = (column(4), column(5), column(7));
         // Persistence's first row of a.x: another truth, its error consistent.
         truth[6] += 1;
         errors[6] = truth[6].abs_diff(predicted[6]);
         columns[4] = Arc::new(UInt16Array::from(truth));
-        columns[6] = Arc::new(UInt16Array::from(errors));
+        columns[7] = Arc::new(UInt16Array::from(errors));
         let batch = RecordBatch::try_new(table.batch.schema(), columns).unwrap();
         table::write_parquet(&path, &batch, &provenance()).unwrap();
         let message = Predictions::read(&path).unwrap_err().to_string();
@@ -382,5 +438,35 @@ mod tests {
             message.contains("row 6: model `persistence` on `a.x` disagrees with model `aln` on `a.x` on the true level"),
             "{message}"
         );
+    }
+
+    /// A roll near ±π: with 214 levels over (−π, π], a period of 213 (the
+    /// circle over the spacing). Level 1 is just above −π, level 211 just
+    /// below +π: three levels apart round the circle, not 210.
+    #[test]
+    fn an_angle_predicted_across_the_wrap_is_off_by_the_short_way() {
+        assert_eq!(error(1, 211, Some(213)), 3);
+        assert_eq!(error(211, 1, Some(213)), 3);
+        assert_eq!(error(1, 211, None), 210);
+        assert_eq!(error(100, 100, Some(213)), 0);
+        // Half the circle is the farthest an angle can be.
+        assert_eq!(error(0, 106, Some(213)), 106);
+        assert_eq!(error(0, 107, Some(213)), 106);
+
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join(FILE);
+        let mut p = Predictions::new(
+            &["roll.1", "v.1.x"],
+            &[Some(213), None],
+            &[0, 1],
+            &[true, true],
+            &[vec![1, 212], vec![1, 212]],
+        );
+        p.push_model("aln", &[vec![211, 2], vec![211, 2]]);
+        p.write(&path, &provenance()).unwrap();
+        let read = Predictions::read(&path).unwrap();
+        assert_eq!(read, p);
+        assert_eq!(read.errors(0, 0).collect::<Vec<_>>(), [3, 3]);
+        assert_eq!(read.errors(0, 1).collect::<Vec<_>>(), [210, 210]);
     }
 }

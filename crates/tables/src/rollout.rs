@@ -5,7 +5,8 @@
 //! One table row per model, variable, horizon and start, in that order:
 //! `model` and `variable` (dictionaries of names), `horizon` (steps fed
 //! back, from 1), `start` (the start's row in `levels.parquet`) and
-//! `error` (levels from the logged trajectory).
+//! `error` (levels from the logged trajectory, the shorter way round the
+//! circle for an angle that wraps, as [`crate::predictions::error`]).
 
 use std::path::Path;
 use std::sync::Arc;

@@ -40,14 +40,15 @@ use alnlab_common::params::{self, Count, Fraction, ParamError};
 use alnlab_common::state_log::StateLog;
 use alnlab_common::table::Table;
 use alnlab_common::{Error, Progress, Provenance, Result};
-use alnlab_tables::predictions::Predictions;
+use alnlab_tables::predictions::{self, Predictions};
 use alnlab_tables::rollout::Rollout;
 use arrow_array::{StringArray, UInt32Array};
 use serde::{Deserialize, Serialize};
 
 /// Version of what this stage writes (part of every cache key; 5: the
-/// robust linear baseline of the change, piecewise-linear models).
-pub const FORMAT_VERSION: u32 = 5;
+/// robust linear baseline of the change, piecewise-linear models; 6: an
+/// angle that wraps scored on the circle, its period in the predictions).
+pub const FORMAT_VERSION: u32 = 6;
 
 /// File name of the predictions table ([`alnlab_tables::predictions`]).
 pub const PREDICTIONS_FILE: &str = alnlab_tables::predictions::FILE;
@@ -249,6 +250,8 @@ pub fn run(
         .iter()
         .map(|&v| learned[v].variable.as_str())
         .collect();
+    // An angle that wraps is scored on the circle: +179° for −179° is 2° off.
+    let periods: Vec<Option<u32>> = scored.iter().map(|&v| learned[v].period()).collect();
 
     progress.start("test", 4, "steps");
     let windows = params.windows(codecs);
@@ -416,8 +419,13 @@ pub fn run(
             .map(|(r, levels)| (r.name.as_str(), levels)),
     );
     let test_rows: Vec<u32> = test.rows.iter().map(|&r| r as u32).collect();
-    let mut predictions =
-        Predictions::new(&names, &test_rows, &test.held_out, &pick(&test.y, &scored));
+    let mut predictions = Predictions::new(
+        &names,
+        &periods,
+        &test_rows,
+        &test.held_out,
+        &pick(&test.y, &scored),
+    );
     for (name, levels) in &models {
         predictions.push_model(name, levels);
     }
@@ -433,7 +441,13 @@ pub fn run(
                 predicted
                     .iter()
                     .zip(truth)
-                    .map(|(p, t)| p.iter().zip(t).map(|(&p, &t)| p.abs_diff(t)).collect())
+                    .zip(&periods)
+                    .map(|((p, t), &period)| {
+                        p.iter()
+                            .zip(t)
+                            .map(|(&p, &t)| predictions::error(t, p, period))
+                            .collect()
+                    })
                     .collect()
             })
             .collect();

@@ -42,6 +42,7 @@ pub fn run() -> Result<SummarizeBench> {
     // distance from 100.
     let mut predictions = Predictions::new(
         &names,
+        &[None; VARIABLES],
         &rows,
         &[true; ROWS],
         &vec![vec![100; ROWS]; VARIABLES],

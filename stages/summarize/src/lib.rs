@@ -678,6 +678,7 @@ mod tests {
         ];
         let mut table = alnlab_tables::predictions::Predictions::new(
             &["a.1.x", "a.2.x", "v.1.x"],
+            &[None; 3],
             &[10, 11, 12],
             &[false, true, true],
             &vec![vec![20, 22, 24]; 3],

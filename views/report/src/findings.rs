@@ -99,7 +99,9 @@ pub(super) fn definitions(md: &mut String) {
          - **Level**: a variable's range is cut into L evenly spaced values (its quantization \
          levels; L and the size of one level in SI units are in each variant's group table). An \
          error is how many levels a prediction lands from the true next value's level, 0 being \
-         exact; every error is averaged over a model's variables — the primary metric.\n\
+         exact — for an angle that wraps (a roll over the whole circle), the shorter way round, \
+         so +179° for −179° is 2° off; every error is averaged over a model's variables — the \
+         primary metric.\n\
          - **Held-out rows**: test rows not trained on. Where the split lets test rows be \
          training rows too (the paper's protocol), the figure over all of them is given once per \
          variant, apart.\n\
@@ -465,6 +467,7 @@ mod tests {
         let truth = vec![vec![7u16; rows as usize]; 2];
         let mut table = alnlab_tables::predictions::Predictions::new(
             &["a.1.x", "v.1.x"],
+            &[None, None],
             &rows_ids,
             &vec![true; rows as usize],
             &truth,
