@@ -97,7 +97,7 @@ pub(super) fn definitions(md: &mut String) {
         md,
         "## Definitions\n\n\
          - **Level**: a variable's range is cut into L evenly spaced values (its quantization \
-         levels; L and the size of one level in SI units are in each variant's group table). An \
+         levels; the size of one level in SI units is in each variant's group table). An \
          error is how many levels a prediction lands from the true next value's level, 0 being \
          exact — for an angle that wraps (a roll over the whole circle), the shorter way round, \
          so +179° for −179° is 2° off; every error is averaged over a model's variables — the \

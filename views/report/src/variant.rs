@@ -149,7 +149,7 @@ fn by_group(md: &mut String, v: &Loaded) {
         md,
         "### Error by group (paper §4.6)\n\nThe ALN's best and worst variable of each group over \
          the held-out test rows, in quantization levels (the mean also in SI units: levels × the \
-         size of one level).\n"
+         size of one level, which is given beside it).\n"
     );
     let judged = v.judged().0;
     let aln: Vec<&SummaryRow> = judged.iter().filter(|r| r.model == "aln").collect();
@@ -174,6 +174,7 @@ fn by_group(md: &mut String, v: &Loaded) {
     let mut table = MdTable::new(&keys).numbers(&[
         "mean",
         "mean (SI)",
+        "one level",
         "std dev",
         "std err",
         "5% trim",
@@ -183,15 +184,21 @@ fn by_group(md: &mut String, v: &Loaded) {
     ]);
     for &(group, which, r) in &picked {
         let s = &r.stats;
-        let si = v.si(&r.variable).map_or("—".into(), |(step, unit)| {
-            format!("{} {unit}", sig3(s.mean * step))
-        });
+        let (si, level) = v
+            .si(&r.variable)
+            .map_or(("—".into(), "—".into()), |(step, unit)| {
+                (
+                    format!("{} {unit}", sig3(s.mean * step)),
+                    format!("{} {unit}", sig3(step)),
+                )
+            });
         table.row(vec![
             group.into(),
             which.into(),
             format!("`{}`", r.variable),
             sig3(s.mean),
             si,
+            level,
             sig3(s.std_dev),
             sig3(s.std_err),
             sig3(s.trimmed_mean),
