@@ -338,9 +338,15 @@ pub fn render(run: &RunInfo, dir: &Path) -> Result<PathBuf> {
             histogram_variable,
         )?;
         if let Some(rows) = v.planning.first() {
-            plan::section(&mut md, rows, v.info.plan_setup.as_ref(), dir, |chart| {
-                variant::file_name(&v.info.name, chart)
-            })?;
+            let replicates = v.planning.len();
+            plan::section(
+                &mut md,
+                rows,
+                replicates,
+                v.info.plan_setup.as_ref(),
+                dir,
+                |chart| variant::file_name(&v.info.name, chart),
+            )?;
         }
     }
     glossary::section(&mut md, &variants);

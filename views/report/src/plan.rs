@@ -70,15 +70,19 @@ impl Policy<'_> {
             .collect()
     }
 
-    /// The paired difference of this policy's episode costs from `other`'s
-    /// with the verdict its interval allows, as a table cell.
-    fn against(&self, other: &Policy) -> String {
+    /// The paired difference of this policy's episode costs from `other`'s,
+    /// as a table cell: with the verdict its interval allows where `words`
+    /// (the run's only replicate), the interval alone where the episodes are
+    /// one replicate's of several — a verdict there is the first screen's,
+    /// across replicates, and one replicate's word could contradict it.
+    fn against(&self, other: &Policy, words: bool) -> String {
         let diffs = self.differences(other);
         match Interval::of(&diffs) {
-            Some(d) if diffs.len() > 1 => {
+            Some(d) if diffs.len() > 1 && words => {
                 let word = d.verdict().as_str();
                 format!("{word}: {}", interval(d.mean, d.low, d.high))
             }
+            Some(d) if diffs.len() > 1 => interval(d.mean, d.low, d.high),
             _ => "— (one episode)".into(),
         }
     }
@@ -248,7 +252,7 @@ pub(super) fn within_real_time(
                 policies_1.iter().find(|p| p.model == "zero").map(|zero| {
                     format!(
                         "{} over the episodes of one replicate",
-                        chosen.against(zero)
+                        chosen.against(zero, true)
                     )
                 })
             };
@@ -293,6 +297,7 @@ fn style_name(model: &str) -> String {
 pub(super) fn section(
     md: &mut String,
     rows: &[Episode],
+    replicates: usize,
     setup: Option<&PlanSetup>,
     dir: &Path,
     chart_name: impl Fn(&str) -> String,
@@ -306,10 +311,19 @@ pub(super) fn section(
          every frame a planner searches torque sequences with a forward model, the simulator \
          executes the first frame's torques, and the task's cost of the frame reached adds up \
          over the episode. Every policy ran the same episodes (the same start states), so each \
-         is compared with zero torques episode by episode. The tables and charts are replicate \
-         1's; the first screen pairs every replicate. Cost: mean over episodes [95% interval]; \
-         time: median ms per decision on one thread.\n"
+         is compared with zero torques episode by episode. {} Cost: mean over episodes [95% \
+         interval]; time: median ms per decision on one thread.\n",
+        if replicates > 1 {
+            format!(
+                "The tables and charts are replicate 1's of {replicates}: their differences are \
+                 intervals over its episodes, with no verdict word — the verdicts are the first \
+                 screen's, which pairs every replicate."
+            )
+        } else {
+            "Lower, higher, indistinguishable: the verdict the interval allows.".into()
+        }
     );
+    let words = replicates <= 1;
     for task in tasks(rows) {
         let policies = policies(rows, task);
         let (Some(zero), Some(random)) = (
@@ -352,7 +366,7 @@ pub(super) fn section(
                 if p.model == reference.model {
                     "—".to_string()
                 } else {
-                    p.against(reference)
+                    p.against(reference, words)
                 }
             };
             let planned = p.planned();
@@ -391,7 +405,7 @@ pub(super) fn section(
              of the task's variables one frame ahead under the torques chosen, against what the \
              simulator then did, in the variables' units (angles on the circle).\n"
         );
-        at_equal_time(md, &policies, zero, random, real_time);
+        at_equal_time(md, &policies, (zero, random), real_time, words);
 
         // Cost against time per decision, one curve per model and planner.
         let mut series: Vec<Series> = Vec::new();
@@ -475,9 +489,9 @@ pub(super) fn section(
 fn at_equal_time(
     md: &mut String,
     policies: &[Policy],
-    zero: &Policy,
-    random: &Policy,
+    (zero, random): (&Policy, &Policy),
     real_time: f64,
+    words: bool,
 ) {
     if real_time <= 0.0 {
         return;
@@ -495,6 +509,11 @@ fn at_equal_time(
         .column("the ALN's lowest", Align::Left)
         .column("ALN against zero torques", Align::Left)
         .column("ALN against random torques", Align::Left);
+    let aln_missing = if methods.iter().any(|&(model, _)| model == "aln") {
+        "— (none fits)"
+    } else {
+        "— (not run)"
+    };
     let mut rows = 0;
     for factor in [0.1, 0.3, 1.0, 3.0, 10.0] {
         let limit = factor * real_time;
@@ -516,8 +535,11 @@ fn at_equal_time(
         };
         let name = |p: &Policy| format!("{} {} ({})", p.model, p.planner, p.budget);
         let next = match lowest_of(&|p| p.model != best.model) {
-            Some(next) => format!("{}, vs {}", best.against(next), name(next)),
-            None => "— (no other model fits)".into(),
+            Some(next) => format!("{}, vs {}", best.against(next, words), name(next)),
+            None if methods.iter().any(|&(model, _)| model != best.model) => {
+                "— (no other model fits)".into()
+            }
+            None => "— (no other forward model was run)".into(),
         };
         let aln = lowest_of(&|p| p.model == "aln");
         table.row(vec![
@@ -525,12 +547,12 @@ fn at_equal_time(
             name(best),
             best.cost_cell(),
             next,
-            aln.map_or("— (none fits)".into(), |a| {
+            aln.map_or(aln_missing.into(), |a| {
                 let c = Interval::of(&a.costs()).expect("episodes");
                 format!("{}: {}", name(a), estimate(c.mean, c.low, c.high))
             }),
-            aln.map_or("—".into(), |a| a.against(zero)),
-            aln.map_or("—".into(), |a| a.against(random)),
+            aln.map_or("—".into(), |a| a.against(zero, words)),
+            aln.map_or("—".into(), |a| a.against(random, words)),
         ]);
         rows += 1;
     }
@@ -545,4 +567,69 @@ fn at_equal_time(
          lowest of every other forward model, paired by episode.\n"
     );
     table.write(md);
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Four episodes of `model` (with `planner` when it planned), costs
+    /// `base` + the episode, each decision `ms` long, a frame 10 ms.
+    fn episodes(model: &str, planner: &str, base: f64, ms: f64) -> Vec<Episode> {
+        (0..4)
+            .map(|k| Episode {
+                task: "bend".into(),
+                model: model.into(),
+                planner: planner.into(),
+                budget: if planner.is_empty() { 0 } else { 64 },
+                episode: k,
+                evaluations: 640,
+                cost: base + f64::from(k) * if planner.is_empty() { 1.0 } else { 1.1 },
+                ms_per_decision: ms,
+                ms_min: ms,
+                ms_max: ms,
+                real_time_ms: 10.0,
+                prediction_rms: 0.1,
+            })
+            .collect()
+    }
+
+    /// The ALN alone planned, well below zero torques on every episode.
+    fn aln_only() -> Vec<Episode> {
+        [
+            episodes("zero", "", 50.0, 0.0),
+            episodes("random", "", 80.0, 0.0),
+            episodes("aln", "cem", 10.0, 1.0),
+        ]
+        .concat()
+    }
+
+    fn rendered(replicates: usize) -> String {
+        let dir = tempfile::tempdir().unwrap();
+        let mut md = String::new();
+        section(&mut md, &aln_only(), replicates, None, dir.path(), |c| {
+            format!("{c}.svg")
+        })
+        .unwrap();
+        md
+    }
+
+    #[test]
+    fn one_replicate_of_several_gets_no_verdict_words() {
+        let several = rendered(3);
+        assert!(several.contains("replicate 1's of 3"), "{several}");
+        for word in ["lower:", "higher:", "indistinguishable:"] {
+            assert!(!several.contains(word), "{word} in {several}");
+        }
+        // The run's only replicate: the verdict its interval allows.
+        let one = rendered(1);
+        assert!(one.contains("lower: "), "{one}");
+    }
+
+    #[test]
+    fn a_model_not_run_is_said_to_be_not_run() {
+        let md = rendered(1);
+        assert!(md.contains("— (no other forward model was run)"), "{md}");
+        assert!(!md.contains("no other model fits"), "{md}");
+    }
 }
