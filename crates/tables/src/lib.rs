@@ -10,3 +10,5 @@
 mod dictionary;
 pub mod predictions;
 pub mod rollout;
+#[cfg(test)]
+mod testing;

@@ -300,15 +300,7 @@ pub fn error(truth: u16, predicted: u16, period: Option<u32>) -> u16 {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use arrow_array::RecordBatch;
-
-    fn provenance() -> Provenance {
-        Provenance {
-            stage: "test".into(),
-            params: serde_json::Value::Null,
-            inputs: Default::default(),
-        }
-    }
+    use crate::testing::{edit_u16_columns, provenance, take_rows};
 
     fn two_models() -> Predictions {
         let mut p = Predictions::new(
@@ -336,20 +328,6 @@ mod tests {
         assert_eq!(read.truth(1), [10, 20, 30]);
     }
 
-    /// The file's rows, reordered (or dropped) by `order`, written back.
-    fn reordered(path: &Path, order: &[u32]) {
-        let table = Table::read(path).unwrap();
-        let indices = UInt32Array::from(order.to_vec());
-        let columns = table
-            .batch
-            .columns()
-            .iter()
-            .map(|c| arrow_select::take::take(c, &indices, None).unwrap())
-            .collect::<Vec<_>>();
-        let batch = RecordBatch::try_new(table.batch.schema(), columns).unwrap();
-        table::write_parquet(path, &batch, &provenance()).unwrap();
-    }
-
     #[test]
     fn rows_in_another_order_read_the_same() {
         let dir = tempfile::tempdir().unwrap();
@@ -357,7 +335,7 @@ mod tests {
         let written = two_models();
         written.write(&path, &provenance()).unwrap();
         let order: Vec<u32> = (0..12).rev().collect();
-        reordered(&path, &order);
+        take_rows(&path, &order);
         let read = Predictions::read(&path).unwrap();
         // Names come in the order the rows first give them, and each block's
         // rows in file order: here all reversed.
@@ -374,7 +352,7 @@ mod tests {
         let path = dir.path().join(FILE);
         two_models().write(&path, &provenance()).unwrap();
         // Drop persistence's last row of b.y.
-        reordered(&path, &(0..11).collect::<Vec<_>>());
+        take_rows(&path, &(0..11).collect::<Vec<_>>());
         let message = Predictions::read(&path).unwrap_err().to_string();
         assert!(
             message.contains(
@@ -389,18 +367,8 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join(FILE);
         two_models().write(&path, &provenance()).unwrap();
-        let table = Table::read(&path).unwrap();
-        let mut columns = table.batch.columns().to_vec();
-        let mut errors: Vec<u16> = columns[7]
-            .as_any()
-            .downcast_ref::<UInt16Array>()
-            .unwrap()
-            .values()
-            .to_vec();
-        errors[4] += 1;
-        columns[7] = Arc::new(UInt16Array::from(errors));
-        let batch = RecordBatch::try_new(table.batch.schema(), columns).unwrap();
-        table::write_parquet(&path, &batch, &provenance()).unwrap();
+        // Row 4 (aln on b.y, test row 9): true 20, predicted 20, error 0 → 1.
+        edit_u16_columns(&path, |columns| columns[7].as_mut().unwrap()[4] += 1);
         let message = Predictions::read(&path).unwrap_err().to_string();
         assert!(
             message.contains(
@@ -415,24 +383,14 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join(FILE);
         two_models().write(&path, &provenance()).unwrap();
-        let table = Table::read(&path).unwrap();
-        let mut columns = table.batch.columns().to_vec();
-        let column = |c: usize| {
-            columns[c]
-                .as_any()
-                .downcast_ref::<UInt16Array>()
-                .unwrap()
-                .values()
-                .to_vec()
-        };
-        let (mut truth, predicted, mut errors) = (column(4), column(5), column(7));
         // Persistence's first row of a.x: another truth, its error consistent.
-        truth[6] += 1;
-        errors[6] = truth[6].abs_diff(predicted[6]);
-        columns[4] = Arc::new(UInt16Array::from(truth));
-        columns[7] = Arc::new(UInt16Array::from(errors));
-        let batch = RecordBatch::try_new(table.batch.schema(), columns).unwrap();
-        table::write_parquet(&path, &batch, &provenance()).unwrap();
+        edit_u16_columns(&path, |columns| {
+            let predicted = columns[5].as_ref().unwrap()[6];
+            let truth = &mut columns[4].as_mut().unwrap()[6];
+            *truth += 1;
+            let error = truth.abs_diff(predicted);
+            columns[7].as_mut().unwrap()[6] = error;
+        });
         let message = Predictions::read(&path).unwrap_err().to_string();
         assert!(
             message.contains("row 6: model `persistence` on `a.x` disagrees with model `aln` on `a.x` on the true level"),

@@ -195,15 +195,7 @@ impl Rollout {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use arrow_array::RecordBatch;
-
-    fn provenance() -> Provenance {
-        Provenance {
-            stage: "test".into(),
-            params: serde_json::Value::Null,
-            inputs: Default::default(),
-        }
-    }
+    use crate::testing::{provenance, take_rows};
 
     /// Two models, two variables, three horizons, two starts: every error
     /// a different number, 100 m + 10 v + h, plus the start.
@@ -251,18 +243,9 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join(FILE);
         rolled().write(&path, &provenance()).unwrap();
-        let table = Table::read(&path).unwrap();
         // Every row but linear's on `b` at horizon 2 (rows 20 and 21).
         let keep: Vec<u32> = (0..24).filter(|r| !(20..22).contains(r)).collect();
-        let indices = UInt32Array::from(keep);
-        let columns = table
-            .batch
-            .columns()
-            .iter()
-            .map(|c| arrow_select::take::take(c, &indices, None).unwrap())
-            .collect::<Vec<_>>();
-        let batch = RecordBatch::try_new(table.batch.schema(), columns).unwrap();
-        table::write_parquet(&path, &batch, &provenance()).unwrap();
+        take_rows(&path, &keep);
         let message = Rollout::read(&path).unwrap_err().to_string();
         assert!(
             message.contains("model `linear` on `b` at horizon 2 has other starts"),
