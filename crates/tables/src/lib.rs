@@ -1,4 +1,6 @@
-//! The tables one stage writes and another stage (or the report) reads.
+//! The tables one stage writes and another stage (or the report) reads:
+//! `stats` (simulate → quantize), `predictions` and `rollout` (test →
+//! summarize).
 //! Stages never depend on each other, so such a table's contract cannot
 //! live in its writer's crate: each module here holds one table's file name,
 //! its columns, its one writer and its one reader, and every other crate
@@ -10,5 +12,6 @@
 mod dictionary;
 pub mod predictions;
 pub mod rollout;
+pub mod stats;
 #[cfg(test)]
 mod testing;

@@ -183,7 +183,7 @@ pub fn run(
         .validate()
         .map_err(|e| params::invalid("quantize", e))?;
     let pairs = Table::read(pairs_path)?;
-    let stats = Table::read(stats_path)?;
+    let stats = alnlab_tables::stats::read(stats_path)?;
     let variables: Vec<String> = pairs
         .batch
         .schema()
@@ -202,7 +202,7 @@ pub fn run(
             )));
         }
     }
-    let observed = observed_ranges(&stats)?;
+    let observed = observed_ranges(&stats);
     let scales = group_scales(&observed);
     progress.start("quantize", variables.len() as u64, "variables");
 
@@ -342,28 +342,12 @@ fn group_scales<'a>(observed: &BTreeMap<&'a str, (f64, f64)>) -> BTreeMap<&'a st
     scales
 }
 
-/// (min, max) per variable from `stats.parquet`.
-/// Every row's variable names one, finite min ≤ max, each variable once.
-fn observed_ranges(stats: &Table) -> Result<BTreeMap<&str, (f64, f64)>> {
-    let names = stats.column::<StringArray>("variable")?;
-    let (min, max) = (stats.f64_column("min")?, stats.f64_column("max")?);
-    check_finite(stats, "min", min)?;
-    check_finite(stats, "max", max)?;
-    let mut ranges = BTreeMap::new();
-    for r in 0..stats.num_rows() {
-        let bad = |what: String| Err(Error::bad_file(stats.path(), format!("row {r}: {what}")));
-        if names.is_null(r) {
-            return bad("`variable` is null, expected a variable's name".into());
-        }
-        let (lo, hi) = (min.value(r), max.value(r));
-        if lo > hi {
-            return bad(format!("min {lo} is above max {hi}"));
-        }
-        if ranges.insert(names.value(r), (lo, hi)).is_some() {
-            return bad(format!("`{}` appears a second time", names.value(r)));
-        }
-    }
-    Ok(ranges)
+/// (min, max) per variable from `stats.parquet`'s rows.
+fn observed_ranges(stats: &[alnlab_tables::stats::Row]) -> BTreeMap<&str, (f64, f64)> {
+    stats
+        .iter()
+        .map(|r| (r.variable.as_str(), (r.min, r.max)))
+        .collect()
 }
 
 /// A null, NaN or infinite value is an error naming its row and column.
@@ -565,8 +549,9 @@ mod tests {
         );
         quantize(&Params::default(), dir.path()).unwrap();
         let codebook = Codebook::read(&dir.path().join(CODEBOOK_FILE)).unwrap();
-        let stats = Table::read(&dir.path().join(alnlab_simulate::STATS_FILE)).unwrap();
-        let observed = observed_ranges(&stats).unwrap();
+        let stats =
+            alnlab_tables::stats::read(&dir.path().join(alnlab_simulate::STATS_FILE)).unwrap();
+        let observed = observed_ranges(&stats);
         let round_off: Vec<&str> = codebook
             .entries
             .iter()

@@ -35,8 +35,8 @@ pub const FORMAT_VERSION: u32 = 4;
 
 /// File name of the trajectory log.
 pub const TRAJECTORY_FILE: &str = "trajectory.mcap";
-/// File name of the statistics table.
-pub const STATS_FILE: &str = "stats.parquet";
+/// File name of the statistics table ([`alnlab_tables::stats`]).
+pub const STATS_FILE: &str = alnlab_tables::stats::FILE;
 /// Name of the metadata records holding each scene's model.
 pub const MODEL_RECORD: &str = "alnlab.model";
 

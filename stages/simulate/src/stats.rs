@@ -2,10 +2,9 @@
 //! numerically stable running update.
 
 use std::path::Path;
-use std::sync::Arc;
 
-use alnlab_common::{Provenance, Result, table};
-use arrow_array::{Float64Array, StringArray, UInt64Array};
+use alnlab_common::{Provenance, Result};
+use alnlab_tables::stats::Row;
 
 #[derive(Clone, Copy, Debug)]
 struct Running {
@@ -69,25 +68,22 @@ impl VariableStats {
         }
     }
 
-    /// Writes `stats.parquet`: variable, n, min, max, mean, std.
+    /// Writes `stats.parquet` ([`alnlab_tables::stats`]).
     pub fn write(&self, path: &Path, provenance: &Provenance) -> Result<()> {
-        let col = |f: fn(&Running) -> f64| -> Arc<Float64Array> {
-            Arc::new(self.running.iter().map(f).collect::<Vec<_>>().into())
-        };
-        let batch = table::batch(vec![
-            ("variable", Arc::new(StringArray::from(self.names.clone()))),
-            (
-                "n",
-                Arc::new(UInt64Array::from(
-                    self.running.iter().map(|r| r.n).collect::<Vec<_>>(),
-                )),
-            ),
-            ("min", col(|r| r.min)),
-            ("max", col(|r| r.max)),
-            ("mean", col(|r| r.mean)),
-            ("std", col(Running::std)),
-        ]);
-        table::write_parquet(path, &batch, provenance)
+        let rows: Vec<Row> = self
+            .names
+            .iter()
+            .zip(&self.running)
+            .map(|(name, r)| Row {
+                variable: name.clone(),
+                n: r.n,
+                min: r.min,
+                max: r.max,
+                mean: r.mean,
+                std: r.std(),
+            })
+            .collect();
+        alnlab_tables::stats::write(path, &rows, provenance)
     }
 }
 
