@@ -76,6 +76,26 @@ fn an_edited_manifest_is_not_published_into_a_committed_folder() {
         "{report}"
     );
 
+    // A manifest from outside the checkout: no commit could hold it.
+    let elsewhere = tempfile::tempdir().unwrap();
+    let outside = write_manifest(elsewhere.path(), "m.toml", TINY);
+    let out = alnlab(
+        d,
+        &[
+            "-q",
+            "run",
+            outside.to_str().unwrap(),
+            "--reports",
+            "reports",
+        ],
+    );
+    assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
+    assert!(
+        stderr(&out).contains("is not in its checkout"),
+        "{}",
+        stderr(&out)
+    );
+
     // Re-rendering that run into the committed folder is refused even once
     // the checkout is clean again: the run itself came from the edit.
     git(d, &["checkout", "-q", "m.toml"]);

@@ -36,8 +36,12 @@ pub fn changes(path: &Path, except: Option<&Path>) -> Vec<String> {
         let Some(path) = entry.get(3..).filter(|p| !p.is_empty()) else {
             continue;
         };
-        // A rename or copy is followed by the path it came from.
-        if entry.starts_with(['R', 'C']) {
+        // A rename or copy (in the index or the work tree) is followed by
+        // the path it came from.
+        if entry
+            .get(..2)
+            .is_some_and(|status| status.contains(['R', 'C']))
+        {
             entries.next();
         }
         let excluded = except
@@ -80,15 +84,55 @@ pub fn committable(folder: &Path) -> bool {
         .is_ok_and(|s| s.code() == Some(1))
 }
 
-/// Refuses to publish a report into `folder` when git would commit it and
-/// the report could not be reproduced from the commit it names: the
-/// checkout differs from its commit now (the reports folder aside), or the
-/// run was made from a checkout that did (`run_changes`, as its record
-/// kept them).
-pub fn check_publishable(folder: &Path, run_changes: &[String]) -> Result<()> {
+/// Refuses to publish the report of a run of `manifest` into `folder` when
+/// git would commit it there and the commit the report names could not
+/// reproduce it: the manifest lies outside that checkout, or the checkout
+/// differs from its commit (the reports folder aside).
+pub fn check_run_publishable(folder: &Path, manifest: &Path) -> Result<()> {
     if !committable(folder) {
         return Ok(());
     }
+    let root = |path: &Path| {
+        let root = git(&existing_folder(path), &["rev-parse", "--show-toplevel"])?;
+        std::fs::canonicalize(root).ok()
+    };
+    if root(manifest) != root(folder) {
+        return Err(refusal(
+            folder,
+            &format!(
+                "the manifest {} is not in its checkout, so the report could name no commit \
+                 that holds it",
+                manifest.display()
+            ),
+        ));
+    }
+    check_clean(folder, &[])
+}
+
+/// Refuses to publish a recorded run's report into `folder` when git would
+/// commit it there and the commit the report names could not reproduce it:
+/// the run was made outside a checkout (`commit` is `None`) or from one that
+/// differed from its commit (`run_changes`), or the checkout differs now.
+pub fn check_record_publishable(
+    folder: &Path,
+    commit: Option<&str>,
+    run_changes: &[String],
+) -> Result<()> {
+    if !committable(folder) {
+        return Ok(());
+    }
+    if commit.is_none() {
+        return Err(refusal(
+            folder,
+            "the run was not made in a git checkout, so the report could name no commit",
+        ));
+    }
+    check_clean(folder, run_changes)
+}
+
+/// The refusal when the checkout differs from its commit now (the reports
+/// folder aside), or the run was made from one that did (`run_changes`).
+fn check_clean(folder: &Path, run_changes: &[String]) -> Result<()> {
     let now = changes(folder, Some(folder));
     let (when, paths) = match (now.is_empty(), run_changes.is_empty()) {
         (true, true) => return Ok(()),
@@ -99,13 +143,23 @@ pub fn check_publishable(folder: &Path, run_changes: &[String]) -> Result<()> {
         ),
     };
     let commit = commit(folder).unwrap_or_else(|| "(no commit yet)".into());
-    Err(Error::Invalid(format!(
-        "{}: refusing to publish a report into a folder git would commit: {when} ({commit}) in \
-         {}. A published report names its commit, which must reproduce it: commit (or stash) \
-         these and run again, or publish into a folder git ignores, where the report lists them",
-        folder.display(),
-        list(&paths)
-    )))
+    Err(refusal(
+        folder,
+        &format!(
+            "{when} ({commit}) in {}. A published report names its commit, which must \
+             reproduce it: commit (or stash) these and run again",
+            list(&paths)
+        ),
+    ))
+}
+
+/// Why a report is not published into `folder`, and where it could go.
+fn refusal(folder: &Path, why: &str) -> Error {
+    Error::Invalid(format!(
+        "{}: refusing to publish a report into a folder git would commit: {why}; or publish into \
+         a folder git ignores, where the report says what it came from",
+        folder.display()
+    ))
 }
 
 /// `paths` for people: the first few, then how many more.
@@ -175,8 +229,9 @@ fn git_raw(dir: &Path, args: &[&str]) -> Option<String> {
         .stderr(std::process::Stdio::null())
         .output()
         .ok()?;
+    // Lossy: a path that is not UTF-8 is still a change.
     output
         .status
         .success()
-        .then_some(String::from_utf8(output.stdout).ok()?)
+        .then(|| String::from_utf8_lossy(&output.stdout).into_owned())
 }

@@ -345,7 +345,9 @@ fn snakemake(suite: &Suite) -> Result<(), String> {
 /// An MLflow tracking server on a free loopback port, in a process group of
 /// its own: `mlflow server` runs uvicorn and job-runner consumers as its
 /// children, which stopping the server alone would leave orphaned. The whole
-/// group is stopped by [`MlflowServer::stop`], or killed when dropped.
+/// group is stopped by [`MlflowServer::stop`], or killed when dropped. (Out
+/// of the terminal's foreground group, it misses a Ctrl-C that ends the
+/// suite: `pkill -f "mlflow server"` then stops it.)
 struct MlflowServer {
     child: Child,
     port: u16,
@@ -396,9 +398,14 @@ impl MlflowServer {
     fn stop(mut self) -> Result<(), String> {
         let group = self.child.id();
         signal_group(group, "TERM");
-        let _ = self.child.wait();
+        // Polled, not waited for: a server slow to heed SIGTERM must not
+        // hold the suite past the deadline.
         let deadline = Instant::now() + Duration::from_secs(10);
-        while group_alive(group) && Instant::now() < deadline {
+        while Instant::now() < deadline {
+            let _ = self.child.try_wait();
+            if !group_alive(group) {
+                break;
+            }
             std::thread::sleep(Duration::from_millis(100));
         }
         if group_alive(group) {

@@ -303,6 +303,26 @@ impl Table {
         self.column::<Float64Array>(name)
     }
 
+    /// The f64 column `name`, every value present and finite: a null, NaN or
+    /// infinite value is an error naming its row and column.
+    pub fn finite_f64_column(&self, name: &str) -> Result<&Float64Array> {
+        let values = self.f64_column(name)?;
+        match (0..values.len()).find(|&r| values.is_null(r) || !values.value(r).is_finite()) {
+            Some(row) => Err(Error::bad_file(
+                &self.path,
+                format!(
+                    "row {row}, column `{name}`: {} is not a finite number",
+                    if values.is_null(row) {
+                        "null".to_string()
+                    } else {
+                        values.value(row).to_string()
+                    }
+                ),
+            )),
+            None => Ok(values),
+        }
+    }
+
     /// The path the table was read from.
     pub fn path(&self) -> &Path {
         &self.path

@@ -23,6 +23,9 @@ use crate::dictionary;
 /// The file's name in the test stage's artifact.
 pub const FILE: &str = "predictions.parquet";
 
+/// The largest circle in levels: levels are 16-bit.
+const MAX_PERIOD: u32 = 1 << 16;
+
 /// Every model's predictions on the same test rows.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Predictions {
@@ -193,9 +196,35 @@ impl Predictions {
         let period_column = table.column::<UInt32Array>("period")?.values();
         let errors = table.column::<UInt16Array>("error")?.values();
         let per_model = variables.len();
+        // Every block holds a row at least: more blocks than rows is damage,
+        // and must not size an allocation.
+        let blocks = models
+            .len()
+            .checked_mul(per_model)
+            .filter(|&b| b <= table.num_rows().max(1))
+            .ok_or_else(|| {
+                Error::bad_file(
+                    path,
+                    format!(
+                        "{} models × {} variables cannot fit in {} rows",
+                        models.len(),
+                        per_model,
+                        table.num_rows()
+                    ),
+                )
+            })?;
+        if let Some(r) = period_column.iter().position(|&p| p > MAX_PERIOD) {
+            return Err(Error::bad_file(
+                path,
+                format!(
+                    "row {r}: period {}, expected at most {MAX_PERIOD} levels",
+                    period_column[r]
+                ),
+            ));
+        }
         let mut periods: Vec<Option<Option<u32>>> = vec![None; per_model];
         // Table rows of each (model, variable) block, in file order.
-        let mut blocks = vec![Vec::new(); models.len() * per_model];
+        let mut blocks = vec![Vec::new(); blocks];
         for i in 0..table.num_rows() {
             let v = usize::from(variable_keys[i]);
             let period = (period_column[i] > 0).then_some(period_column[i]);

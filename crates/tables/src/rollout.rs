@@ -153,7 +153,24 @@ impl Rollout {
         }
         let horizons = horizon.iter().copied().max().unwrap_or(0);
         let per_model = variables.len() * usize::from(horizons);
-        let mut blocks = vec![Vec::new(); models.len() * per_model];
+        // Every block holds a row at least: more blocks than rows is damage,
+        // and must not size an allocation.
+        let blocks = models
+            .len()
+            .checked_mul(per_model)
+            .filter(|&b| b <= table.num_rows().max(1))
+            .ok_or_else(|| {
+                Error::bad_file(
+                    path,
+                    format!(
+                        "{} models × {} variables × {horizons} horizons cannot fit in {} rows",
+                        models.len(),
+                        variables.len(),
+                        table.num_rows()
+                    ),
+                )
+            })?;
+        let mut blocks = vec![Vec::new(); blocks];
         for i in 0..table.num_rows() {
             let k = (usize::from(model_keys[i]) * variables.len() + usize::from(variable_keys[i]))
                 * usize::from(horizons)
@@ -249,6 +266,23 @@ mod tests {
         let message = Rollout::read(&path).unwrap_err().to_string();
         assert!(
             message.contains("model `linear` on `b` at horizon 2 has other starts"),
+            "{message}"
+        );
+    }
+
+    /// Names that promise more blocks than there are rows are damage: they
+    /// are refused before any block is allocated.
+    #[test]
+    fn more_blocks_than_rows_is_refused() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join(FILE);
+        rolled().write(&path, &provenance()).unwrap();
+        // Linear's last row alone (the file keeps only the names its rows
+        // use): one model and variable, but horizon 3 asks for three blocks.
+        take_rows(&path, &[23]);
+        let message = Rollout::read(&path).unwrap_err().to_string();
+        assert!(
+            message.contains("1 models × 1 variables × 3 horizons cannot fit in 1 rows"),
             "{message}"
         );
     }

@@ -217,8 +217,9 @@ fn archive_run(
         variant: chosen.name.clone(),
         manifest: record.manifest_path.clone(),
         manifest_sha256: record.manifest_sha256.clone(),
-        replicate: Some(chosen.replicate + 1),
-        seed: chosen.seed,
+        replicate: Some(chosen.replicate.saturating_add(1)),
+        // Records from before replicates had seeds of their own hold 0 here.
+        seed: crate::manifest::replicate_seed(record.seed, chosen.replicate),
         alnlab_version: record.alnlab_version.clone(),
         git_commit: record.git_commit.clone().unwrap_or_default(),
     };
@@ -267,7 +268,7 @@ pub(crate) fn pick_variant<'a>(
     let chosen: Vec<&VariantRecord> = named
         .iter()
         .copied()
-        .filter(|v| replicate.is_none_or(|r| v.replicate + 1 == r))
+        .filter(|v| replicate.is_none_or(|r| v.replicate == r - 1))
         .collect();
     if let (Some(replicate), []) = (replicate, chosen.as_slice()) {
         return Err(Error::Invalid(format!(
@@ -322,7 +323,7 @@ fn describe(variants: &[&VariantRecord]) -> String {
             format!(
                 "variant `{name}`: replicate{} {} with seed{} {}",
                 if of.len() == 1 { "" } else { "s" },
-                join(&|v| (v.replicate + 1).to_string()),
+                join(&|v| (u64::from(v.replicate) + 1).to_string()),
                 if of.len() == 1 { "" } else { "s" },
                 join(&|v| v.seed.to_string()),
             )

@@ -205,7 +205,7 @@ pub fn execute(matches: &ArgMatches) -> Result<()> {
         } => {
             let manifest = Manifest::load(&manifest)?;
             if let (Some(folder), None) = (&reports, &until) {
-                crate::git::check_publishable(folder, &[])?;
+                crate::git::check_run_publishable(folder, &manifest.path)?;
             }
             let options = RunOptions {
                 out,
@@ -270,7 +270,11 @@ pub fn execute(matches: &ArgMatches) -> Result<()> {
         Command::Report { run_dir, reports } => {
             let record = crate::records::read_record(&run_dir)?;
             if let Some(folder) = &reports {
-                crate::git::check_publishable(folder, &record.git_changes)?;
+                crate::git::check_record_publishable(
+                    folder,
+                    record.git_commit.as_deref(),
+                    &record.git_changes,
+                )?;
             }
             let report = crate::report::render(&record, &report_dir(&run_dir, reports, &record))?;
             println!("report: {}", report.display());

@@ -96,7 +96,14 @@ impl Default for Params {
 
 impl Params {
     /// Checks the parameters (every value the types admit is allowed).
+    /// A horizon is counted in a table column of 16 bits.
     pub fn validate(&self) -> std::result::Result<(), ParamError> {
+        if self.horizon.get() > usize::from(u16::MAX) {
+            return Err((
+                "horizon".into(),
+                format!("expected at most {} steps", u16::MAX),
+            ));
+        }
         Ok(())
     }
 
@@ -432,6 +439,7 @@ pub fn run(
     predictions.write(&out_dir.join(PREDICTIONS_FILE), provenance)?;
     let start_rows: Vec<u32> = truth.starts.iter().map(|&k| test_rows[k]).collect();
     let true_levels = each(truth.levels);
+    // `validate` bounds the horizon to a u16.
     let mut rollout = Rollout::new(&names, &start_rows, horizon as u16);
     for (name, levels) in &rolled {
         let errors: Vec<Vec<Vec<u16>>> = levels

@@ -19,7 +19,7 @@ use std::sync::Arc;
 use alnlab_common::params::{self, Count, ParamError};
 use alnlab_common::table::{self, Table};
 use alnlab_common::{Error, Progress, Provenance, Result};
-use arrow_array::{Array, Float64Array, StringArray, UInt16Array, UInt32Array};
+use arrow_array::{Array, StringArray, UInt16Array, UInt32Array};
 use serde::{Deserialize, Serialize};
 
 use alnlab_codes::codes::{Code, binary_width};
@@ -209,10 +209,8 @@ pub fn run(
     let mut entries = Vec::new();
     let mut columns: Vec<(String, Arc<dyn Array>)> = Vec::new();
     for v in &variables {
-        let x = pairs.f64_column(&format!("x.{v}"))?;
-        let y = pairs.f64_column(&format!("y.{v}"))?;
-        check_finite(&pairs, &format!("x.{v}"), x)?;
-        check_finite(&pairs, &format!("y.{v}"), y)?;
+        let x = pairs.finite_f64_column(&format!("x.{v}"))?;
+        let y = pairs.finite_f64_column(&format!("y.{v}"))?;
         let (lo, hi) = observed
             .get(v.as_str())
             .copied()
@@ -350,29 +348,12 @@ fn observed_ranges(stats: &[alnlab_tables::stats::Row]) -> BTreeMap<&str, (f64, 
         .collect()
 }
 
-/// A null, NaN or infinite value is an error naming its row and column.
-fn check_finite(table: &Table, column: &str, values: &Float64Array) -> Result<()> {
-    match (0..values.len()).find(|&r| values.is_null(r) || !values.value(r).is_finite()) {
-        Some(row) => Err(Error::bad_file(
-            table.path(),
-            format!(
-                "row {row}, column `{column}`: {} is not a finite number",
-                if values.is_null(row) {
-                    "null".to_string()
-                } else {
-                    values.value(row).to_string()
-                }
-            ),
-        )),
-        None => Ok(()),
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
     use alnlab_common::Silent;
     use alnlab_common::params::Positive;
+    use arrow_array::Float64Array;
 
     /// Simulates a short worm run and strides it; returns the folder.
     /// Simulates `scene` with `seed` and strides it; returns the folder.
