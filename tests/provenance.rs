@@ -95,6 +95,24 @@ fn an_edited_manifest_is_not_published_into_a_committed_folder() {
         "{}",
         stderr(&out)
     );
+    // … nor may its run, made outside any checkout, be published there.
+    let runs = elsewhere.path().join("runs");
+    let out = alnlab(
+        elsewhere.path(),
+        &["-q", "run", "m.toml", "--out", runs.to_str().unwrap()],
+    );
+    assert!(out.status.success(), "{}", stderr(&out));
+    let run = runs.join("tiny");
+    let out = alnlab(
+        d,
+        &["report", run.to_str().unwrap(), "--reports", "reports"],
+    );
+    assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
+    assert!(
+        stderr(&out).contains("the run was not made in a git checkout"),
+        "{}",
+        stderr(&out)
+    );
 
     // Re-rendering that run into the committed folder is refused even once
     // the checkout is clean again: the run itself came from the edit.
