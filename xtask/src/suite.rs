@@ -13,15 +13,12 @@ use std::time::{Duration, Instant};
 
 use crate::{Failure, root, target_dir};
 
-/// What the steps share: the interpreter of the suite's environment, where
-/// their files go, and the processes of this session there were before.
+/// What the steps share: the interpreter of the suite's environment and
+/// where their files go.
 struct Suite {
     python: PathBuf,
     /// `target/xtask`.
     work: PathBuf,
-    /// The processes of the suite's session when it started: any other one
-    /// still there at the end was started by a step and left behind.
-    before: Vec<u32>,
 }
 
 /// One step: its name and what it does.
@@ -55,10 +52,6 @@ const STEPS: &[Step] = &[
         "Snakemake: the exported workflow, sharded, failing, resumed",
         snakemake,
     ),
-    (
-        "nothing left running: no process a step started outlives the suite",
-        nothing_left_running,
-    ),
 ];
 
 /// Runs every step in order, stopping at the first that fails; prints each
@@ -67,7 +60,6 @@ pub fn run(python: &Path) -> Result<(), Failure> {
     let suite = Suite {
         python: python.to_path_buf(),
         work: target_dir().join("xtask"),
-        before: session_processes(),
     };
     let mut times = Vec::new();
     let mut failure = None;
@@ -431,75 +423,6 @@ impl Drop for MlflowServer {
     }
 }
 
-/// Fails when a process of the suite's session that was not there when the
-/// suite began is still running ten seconds after the last step: a server,
-/// a browser or a tool that a step started and did not stop. (A process a
-/// step moved to a session of its own would escape this; none does.)
-fn nothing_left_running(suite: &Suite) -> Result<(), String> {
-    let left = leftovers(&suite.before, Duration::from_secs(10));
-    if left.is_empty() {
-        Ok(())
-    } else {
-        Err(format!(
-            "still running, started during the suite (by a step, or beside it in the same \
-             terminal session):\n  {}",
-            left.join("\n  ")
-        ))
-    }
-}
-
-/// The processes of this session, other than this one, not among `before`
-/// and still there after waiting up to `wait` for them to end: each as its
-/// pid and command line.
-fn leftovers(before: &[u32], wait: Duration) -> Vec<String> {
-    let me = std::process::id();
-    let left = || -> Vec<u32> {
-        session_processes()
-            .into_iter()
-            .filter(|pid| *pid != me && !before.contains(pid))
-            .collect()
-    };
-    let deadline = Instant::now() + wait;
-    while !left().is_empty() && Instant::now() < deadline {
-        std::thread::sleep(Duration::from_millis(200));
-    }
-    left()
-        .into_iter()
-        .map(|pid| {
-            let command = std::fs::read(format!("/proc/{pid}/cmdline")).unwrap_or_default();
-            let command = String::from_utf8_lossy(&command).replace('\0', " ");
-            format!("{pid}: {}", command.trim())
-        })
-        .collect()
-}
-
-/// The processes of this process's session (zombies aside), from `/proc`.
-fn session_processes() -> Vec<u32> {
-    let stat_of = |pid: &str| -> Option<(char, u32)> {
-        let stat = std::fs::read_to_string(format!("/proc/{pid}/stat")).ok()?;
-        // "PID (COMM) STATE PPID PGRP SESSION ...": COMM may hold spaces.
-        let (_, after) = stat.rsplit_once(')')?;
-        let fields: Vec<&str> = after.split_whitespace().collect();
-        Some((
-            fields.first()?.chars().next()?,
-            fields.get(3)?.parse().ok()?,
-        ))
-    };
-    let Some((_, session)) = stat_of("self") else {
-        return Vec::new();
-    };
-    let Ok(entries) = std::fs::read_dir("/proc") else {
-        return Vec::new();
-    };
-    entries
-        .flatten()
-        .filter_map(|e| e.file_name().to_str()?.parse::<u32>().ok())
-        .filter(|pid| {
-            stat_of(&pid.to_string()).is_some_and(|(state, s)| state != 'Z' && s == session)
-        })
-        .collect()
-}
-
 /// Sends `signal` to every process of the group `group` (with `kill`, the
 /// command: the suite needs no binding to libc for two signals).
 fn signal_group(group: u32, signal: &str) {
@@ -571,26 +494,5 @@ fn run_in_root(command: &mut Command) -> Result<(), String> {
         Ok(())
     } else {
         Err(format!("{shown} failed ({status})"))
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn a_process_started_and_left_running_is_found_and_one_stopped_is_not() {
-        let before = session_processes();
-        let mut child = Command::new("sleep").arg("30").spawn().unwrap();
-        let left = leftovers(&before, Duration::from_millis(300));
-        assert!(
-            left.iter()
-                .any(|l| l.starts_with(&format!("{}: sleep 30", child.id()))),
-            "{left:?}"
-        );
-        child.kill().unwrap();
-        child.wait().unwrap();
-        let left = leftovers(&before, Duration::from_millis(300));
-        assert!(!left.iter().any(|l| l.contains("sleep 30")), "{left:?}");
     }
 }
