@@ -57,3 +57,28 @@ pub(crate) fn null(path: &Path, row: usize, column: &str) -> Error {
         format!("row {row}: `{column}` is null, expected a value"),
     )
 }
+
+/// How many blocks of rows `counts` (each a count and what it counts)
+/// multiply to — every model's, variable's, … own rows. Every block holds a
+/// row at least, so more blocks than `table` has rows is damage, refused
+/// before it can size an allocation.
+pub(crate) fn blocks(table: &Table, counts: &[(usize, &str)]) -> Result<usize> {
+    counts
+        .iter()
+        .try_fold(1usize, |product, &(n, _)| product.checked_mul(n))
+        .filter(|&b| b <= table.num_rows().max(1))
+        .ok_or_else(|| {
+            let what: Vec<String> = counts
+                .iter()
+                .map(|(n, what)| format!("{n} {what}"))
+                .collect();
+            Error::bad_file(
+                table.path(),
+                format!(
+                    "{} cannot fit in {} rows",
+                    what.join(" × "),
+                    table.num_rows()
+                ),
+            )
+        })
+}

@@ -196,23 +196,10 @@ impl Predictions {
         let period_column = table.column::<UInt32Array>("period")?.values();
         let errors = table.column::<UInt16Array>("error")?.values();
         let per_model = variables.len();
-        // Every block holds a row at least: more blocks than rows is damage,
-        // and must not size an allocation.
-        let blocks = models
-            .len()
-            .checked_mul(per_model)
-            .filter(|&b| b <= table.num_rows().max(1))
-            .ok_or_else(|| {
-                Error::bad_file(
-                    path,
-                    format!(
-                        "{} models × {} variables cannot fit in {} rows",
-                        models.len(),
-                        per_model,
-                        table.num_rows()
-                    ),
-                )
-            })?;
+        let blocks = dictionary::blocks(
+            &table,
+            &[(models.len(), "models"), (per_model, "variables")],
+        )?;
         if let Some(r) = period_column.iter().position(|&p| p > MAX_PERIOD) {
             return Err(Error::bad_file(
                 path,

@@ -153,23 +153,14 @@ impl Rollout {
         }
         let horizons = horizon.iter().copied().max().unwrap_or(0);
         let per_model = variables.len() * usize::from(horizons);
-        // Every block holds a row at least: more blocks than rows is damage,
-        // and must not size an allocation.
-        let blocks = models
-            .len()
-            .checked_mul(per_model)
-            .filter(|&b| b <= table.num_rows().max(1))
-            .ok_or_else(|| {
-                Error::bad_file(
-                    path,
-                    format!(
-                        "{} models × {} variables × {horizons} horizons cannot fit in {} rows",
-                        models.len(),
-                        variables.len(),
-                        table.num_rows()
-                    ),
-                )
-            })?;
+        let blocks = dictionary::blocks(
+            &table,
+            &[
+                (models.len(), "models"),
+                (variables.len(), "variables"),
+                (usize::from(horizons), "horizons"),
+            ],
+        )?;
         let mut blocks = vec![Vec::new(); blocks];
         for i in 0..table.num_rows() {
             let k = (usize::from(model_keys[i]) * variables.len() + usize::from(variable_keys[i]))
