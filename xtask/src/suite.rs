@@ -168,17 +168,22 @@ fn robots_against_pinocchio(suite: &Suite) -> Result<(), String> {
     }
     let figures: serde_json::Value = serde_json::from_slice(&bench.stdout)
         .map_err(|e| format!("alnlab bench sim --json: {e}"))?;
-    let timed: Vec<&str> = figures["robots"]
-        .as_array()
-        .into_iter()
-        .flatten()
-        .filter(|r| r["pinocchio_aba_ns"].is_array() && r["aba_ns"].is_array())
-        .filter_map(|r| r["robot"].as_str())
+    let models = figures["models"].as_array().into_iter().flatten();
+    let batched: Vec<&str> = models
+        .clone()
+        .filter(|m| m["aba_ns"].is_array() && m["batched_aba_ns"].is_array())
+        .filter(|m| m["held_step_ns"].is_array() && m["batched_step_ns"].is_array())
+        .filter_map(|m| m["model"].as_str())
         .collect();
-    match timed[..] {
-        ["ur5", "solo12"] => Ok(()),
+    let timed: Vec<&str> = models
+        .filter(|m| m["pinocchio_aba_ns"].is_array())
+        .filter_map(|m| m["model"].as_str())
+        .collect();
+    match (&batched[..], &timed[..]) {
+        (["worm", "ur5", "solo12"], ["ur5", "solo12"]) => Ok(()),
         _ => Err(format!(
-            "bench sim timed {timed:?} beside Pinocchio, expected ur5 and solo12"
+            "bench sim timed {batched:?} one at a time and batched, expected worm, ur5 \
+             and solo12; {timed:?} beside Pinocchio, expected ur5 and solo12"
         )),
     }
 }

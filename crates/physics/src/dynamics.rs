@@ -465,7 +465,7 @@ pub fn angular_momentum(model: &Model, kin: &Kinematics) -> Vector3<f64> {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use crate::Integrator;
     use crate::integrate::{Evaluation, Forces, NoForces, Stepper};
@@ -523,7 +523,7 @@ mod tests {
 
     /// A random tree of ball, revolute and prismatic joints with turned
     /// joint frames, and a state with every joint moving.
-    fn random_mixed(rng: &mut ChaCha8Rng, n: usize, root: Root) -> (Model, State) {
+    pub(crate) fn random_mixed(rng: &mut ChaCha8Rng, n: usize, root: Root) -> (Model, State) {
         let mut model = random_model(rng, n, root);
         for link in model.links.iter_mut().skip(1) {
             let origin = *nalgebra::Rotation3::from_scaled_axis(vec3(rng, 3.0)).matrix();
@@ -549,7 +549,7 @@ mod tests {
         (model, state)
     }
 
-    fn random_loads(rng: &mut ChaCha8Rng, n: usize) -> Loads {
+    pub(crate) fn random_loads(rng: &mut ChaCha8Rng, n: usize) -> Loads {
         Loads {
             tau: (0..n).map(|_| vec3(rng, 20.0)).collect(),
             effort: (0..n).map(|_| rng.random_range(-20.0..20.0)).collect(),

@@ -8,6 +8,8 @@
 //!   (ball hinges and one-DOF joints), the articulated-body algorithm (O(n)),
 //!   energy and momenta.
 //! - [`integrate`]: semi-implicit Euler and RK4 over a reusable [`Stepper`].
+//! - [`batch`]: many states at once on one thread (SIMD lanes), the
+//!   articulated-body algorithm and the semi-implicit Euler step.
 //! - [`contact`], [`controller`]: floor and arena wall; hinge torques.
 //! - [`joints`]: a robot joint's effort limit, damping, friction and soft
 //!   position limits.
@@ -20,6 +22,7 @@
 //!
 //! [`Stepper`]: integrate::Stepper
 
+pub mod batch;
 pub mod contact;
 pub mod controller;
 pub mod dynamics;

@@ -2,40 +2,59 @@
 //! Algorithms* (2008): motion vectors `[ω; v]` and force vectors `[n; f]`,
 //! angular part first, in the coordinates of a link frame whose origin is the
 //! link's proximal hinge.
+//!
+//! Generic over the scalar: `f64` for one state, a SIMD vector of `f64`
+//! lanes for [`crate::batch`]'s many states at once.
 
-use nalgebra::{Matrix3, Matrix6, Vector3, Vector6};
+use nalgebra::{Matrix3, Matrix6, SimdRealField, Vector3, Vector6};
 
 /// The skew-symmetric matrix of `v`: `skew(v) * u = v × u`.
-pub fn skew(v: &Vector3<f64>) -> Matrix3<f64> {
-    Matrix3::new(0.0, -v.z, v.y, v.z, 0.0, -v.x, -v.y, v.x, 0.0)
+pub fn skew<T: SimdRealField>(v: &Vector3<T>) -> Matrix3<T> {
+    let (x, y, z) = (v.x.clone(), v.y.clone(), v.z.clone());
+    Matrix3::new(
+        T::zero(),
+        -z.clone(),
+        y.clone(),
+        z,
+        T::zero(),
+        -x.clone(),
+        -y,
+        x,
+        T::zero(),
+    )
 }
 
 /// Angular part of a spatial vector.
-pub fn angular(m: &Vector6<f64>) -> Vector3<f64> {
+pub fn angular<T: SimdRealField>(m: &Vector6<T>) -> Vector3<T> {
     m.fixed_rows::<3>(0).into_owned()
 }
 
 /// Linear part of a spatial vector.
-pub fn linear(m: &Vector6<f64>) -> Vector3<f64> {
+pub fn linear<T: SimdRealField>(m: &Vector6<T>) -> Vector3<T> {
     m.fixed_rows::<3>(3).into_owned()
 }
 
 /// A spatial vector from its angular and linear parts.
-pub fn spatial(angular: &Vector3<f64>, linear: &Vector3<f64>) -> Vector6<f64> {
+pub fn spatial<T: SimdRealField>(angular: &Vector3<T>, linear: &Vector3<T>) -> Vector6<T> {
     Vector6::new(
-        angular.x, angular.y, angular.z, linear.x, linear.y, linear.z,
+        angular.x.clone(),
+        angular.y.clone(),
+        angular.z.clone(),
+        linear.x.clone(),
+        linear.y.clone(),
+        linear.z.clone(),
     )
 }
 
 /// Motion cross product `v ×m m`.
-pub fn cross_motion(v: &Vector6<f64>, m: &Vector6<f64>) -> Vector6<f64> {
+pub fn cross_motion<T: SimdRealField>(v: &Vector6<T>, m: &Vector6<T>) -> Vector6<T> {
     let (w, v0) = (angular(v), linear(v));
     let (mw, mv) = (angular(m), linear(m));
     spatial(&w.cross(&mw), &(w.cross(&mv) + v0.cross(&mw)))
 }
 
 /// Force cross product `v ×* f`.
-pub fn cross_force(v: &Vector6<f64>, f: &Vector6<f64>) -> Vector6<f64> {
+pub fn cross_force<T: SimdRealField>(v: &Vector6<T>, f: &Vector6<T>) -> Vector6<T> {
     let (w, v0) = (angular(v), linear(v));
     let (n, f0) = (angular(f), linear(f));
     spatial(&(w.cross(&n) + v0.cross(&f0)), &w.cross(&f0))
@@ -45,27 +64,27 @@ pub fn cross_force(v: &Vector6<f64>, f: &Vector6<f64>) -> Vector6<f64> {
 /// free vector has coordinates `e * u_A` in B) and has its origin at `r`
 /// (A coordinates).
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Transform {
-    pub e: Matrix3<f64>,
-    pub r: Vector3<f64>,
+pub struct Transform<T: SimdRealField = f64> {
+    pub e: Matrix3<T>,
+    pub r: Vector3<T>,
 }
 
-impl Transform {
+impl<T: SimdRealField + Copy> Transform<T> {
     /// Transforms a motion vector from A to B coordinates.
-    pub fn motion(&self, m: &Vector6<f64>) -> Vector6<f64> {
+    pub fn motion(&self, m: &Vector6<T>) -> Vector6<T> {
         let (w, v) = (angular(m), linear(m));
         spatial(&(self.e * w), &(self.e * (v - self.r.cross(&w))))
     }
 
     /// Transforms a force vector from B back to A coordinates (`Xᵀ f`).
-    pub fn force_to_parent(&self, f: &Vector6<f64>) -> Vector6<f64> {
+    pub fn force_to_parent(&self, f: &Vector6<T>) -> Vector6<T> {
         let n = self.e.transpose() * angular(f);
         let f0 = self.e.transpose() * linear(f);
         spatial(&(n + self.r.cross(&f0)), &f0)
     }
 
     /// The 6×6 motion transform matrix.
-    pub fn matrix(&self) -> Matrix6<f64> {
+    pub fn matrix(&self) -> Matrix6<T> {
         let mut x = Matrix6::zeros();
         x.fixed_view_mut::<3, 3>(0, 0).copy_from(&self.e);
         x.fixed_view_mut::<3, 3>(3, 3).copy_from(&self.e);
@@ -115,7 +134,7 @@ mod tests {
     #[test]
     fn power_is_invariant_under_transforms() {
         // f_B · v_B = (Xᵀ f_B) · v_A
-        let x = Transform {
+        let x: Transform = Transform {
             e: *Rotation3::from_euler_angles(-0.7, 0.4, 0.1).matrix(),
             r: Vector3::new(-1.0, 0.3, 0.2),
         };

@@ -15,11 +15,12 @@ use crate::run::{RunOptions, run};
 pub enum Bench {
     /// Time the simulator: ns per step for the worm with and without
     /// contacts and for free chains of 1 to 64 links, the simulate stage's
-    /// throughput with MCAP writing, and for each vendored robot (UR5, Solo
-    /// 12) ns per articulated-body call and per step on the states of a
-    /// simulated run — beside Pinocchio's `aba` on the same states when
-    /// given its harness, timed in interleaved rounds. Medians of REPEAT
-    /// runs (at least 5 rounds for the robots), one core.
+    /// throughput with MCAP writing; and for the worm and each vendored
+    /// robot (UR5, Solo 12), on 256 states of a simulated run, ns per state
+    /// of the articulated-body algorithm and of a step, one state at a time
+    /// and all 256 at once (SIMD lanes) — beside Pinocchio's `aba` on the
+    /// same states when given its harness, timed in interleaved rounds.
+    /// Medians of REPEAT runs (at least 5 rounds for the models), one core.
     #[command(after_help = "Examples:
   alnlab bench sim --json
   bash bench/pinocchio/build.sh target/pinocchio-aba    # needs pin, Eigen and g++
@@ -473,23 +474,34 @@ pub fn execute(bench: Bench, quiet: bool) -> Result<()> {
                     "simulate stage:        {:8.0} steps/s",
                     figures.stage_steps_per_s
                 );
-                for r in &figures.robots {
-                    let range = |x: &[f64; 3]| format!("{:.0} ns ({:.0}–{:.0})", x[0], x[1], x[2]);
-                    print!(
-                        "{} ({} DOF, {} states): ABA {}, step {}",
-                        r.robot,
-                        r.dof,
-                        r.states,
-                        range(&r.aba_ns),
-                        range(&r.step_ns)
+                let range = |x: &[f64; 3]| format!("{:.0} ({:.0}–{:.0})", x[0], x[1], x[2]);
+                for m in &figures.models {
+                    println!(
+                        "{} ({} DOF), ns per state over {} states, one thread:",
+                        m.model, m.dof, m.states
                     );
-                    match &r.pinocchio_aba_ns {
-                        Some(p) => println!(
-                            "; pinocchio::aba {}: {:.2}× Pinocchio's",
+                    println!(
+                        "  ABA   one at a time {}, batched {}: {:.2}× faster batched",
+                        range(&m.aba_ns),
+                        range(&m.batched_aba_ns),
+                        m.aba_ns[0] / m.batched_aba_ns[0]
+                    );
+                    println!(
+                        "  step (held loads) one at a time {}, batched {}: {:.2}× faster batched",
+                        range(&m.held_step_ns),
+                        range(&m.batched_step_ns),
+                        m.held_step_ns[0] / m.batched_step_ns[0]
+                    );
+                    if let Some(step) = &m.step_ns {
+                        println!("  step with controller and joint laws {}", range(step));
+                    }
+                    if let Some(p) = &m.pinocchio_aba_ns {
+                        println!(
+                            "  pinocchio::aba {}: ours one at a time {:.2}×, batched {:.2}× its time",
                             range(p),
-                            r.aba_ns[0] / p[0]
-                        ),
-                        None => println!(),
+                            m.aba_ns[0] / p[0],
+                            m.batched_aba_ns[0] / p[0]
+                        );
                     }
                 }
             });

@@ -9,9 +9,11 @@ use alnlab_common::{Error, Provenance, Result, Silent};
 use serde::Serialize;
 
 use crate::Params;
+use alnlab_physics::batch::Batch;
 use alnlab_physics::controller::{Amplitude, ControllerKind, ControllerParams};
 use alnlab_physics::dynamics::{Derivative, Kinematics, Loads, State, Workspace};
-use alnlab_physics::integrate::{Evaluation, Stepper};
+use alnlab_physics::integrate::{Evaluation, Forces, Stepper};
+use alnlab_physics::model::Model;
 use alnlab_physics::scene::{Scene, SceneKind, run_rng};
 use alnlab_physics::urdf::Base;
 use alnlab_physics::{Integrator, Prepared, SceneForces, state_from_generalized};
@@ -29,31 +31,44 @@ pub struct SimBench {
     pub chain_ns_per_step: BTreeMap<usize, f64>,
     /// The whole simulate stage (worm, contacts, MCAP and stats writing).
     pub stage_steps_per_s: f64,
-    /// Each vendored robot: the articulated-body algorithm and a whole step.
-    pub robots: Vec<RobotBench>,
+    /// The worm in its arena and each vendored robot: the articulated-body
+    /// algorithm and a step, one state at a time and many at once.
+    pub models: Vec<ModelBench>,
 }
 
-/// One robot's figures: ns per call of the articulated-body algorithm
-/// (kinematics and forward dynamics, as `pinocchio.aba` computes them) on
-/// the states of a simulated run, and ns per integration step with its
-/// controller and joint laws; each the median, with the range, of the
-/// rounds; beside them Pinocchio's `aba` on the same states, timed by a
-/// harness in the same rounds, interleaved, when one is given.
+/// One model's figures on the [`BATCH`] states of a simulated run, on one
+/// thread, each the median with the fastest and slowest of interleaved
+/// rounds: ns per state of the articulated-body algorithm (kinematics and
+/// forward dynamics, as `pinocchio.aba` computes them) one state at a time
+/// and all states at once ([`alnlab_physics::batch`]); ns per state of a
+/// semi-implicit Euler step under each state's loads held, both ways; a
+/// robot's whole step with its controller and joint laws; and Pinocchio's
+/// `aba` on the same states, timed by a harness in the same rounds, when
+/// one is given.
 #[derive(Debug, Serialize)]
-pub struct RobotBench {
-    /// The robot (the vendored file's name).
-    pub robot: String,
+pub struct ModelBench {
+    /// The model: `worm`, or a vendored robot's file name.
+    pub model: String,
     /// Degrees of freedom (a free base's 6 included).
     pub dof: usize,
     /// How many states each round times, each once per pass.
     pub states: usize,
-    /// ns per ABA call: median, fastest and slowest round.
+    /// ns per state, the articulated-body algorithm one state at a time.
     pub aba_ns: [f64; 3],
-    /// ns per semi-implicit Euler step (ABA, joint laws, controller).
-    pub step_ns: [f64; 3],
-    /// Pinocchio's `aba` on the same states: median, fastest, slowest.
+    /// ns per state, the articulated-body algorithm on all states at once.
+    pub batched_aba_ns: [f64; 3],
+    /// ns per state, a semi-implicit Euler step (held loads) one at a time.
+    pub held_step_ns: [f64; 3],
+    /// ns per state, the same step on all states at once.
+    pub batched_step_ns: [f64; 3],
+    /// A robot's: ns per step of its scene (controller and joint laws).
+    pub step_ns: Option<[f64; 3]>,
+    /// Pinocchio's `aba` on the same states, ns per call.
     pub pinocchio_aba_ns: Option<[f64; 3]>,
 }
+
+/// How many states the model benchmarks time, one at a time and batched.
+pub const BATCH: usize = 256;
 
 /// The vendored robots, by name: their description, base and random
 /// controller's amplitude (N m; Solo 12's legs weigh grams).
@@ -169,19 +184,18 @@ pub fn run(repeat: usize, pinocchio: Option<&Pinocchio>) -> Result<SimBench> {
         seconds.push(clock.elapsed().as_secs_f64());
         let _ = std::fs::remove_dir_all(&dir);
     }
-    let robots = ROBOTS
-        .iter()
-        .map(|&(name, text, base, amplitude)| {
-            let scene = robot_scene(name, text, base, amplitude)?;
-            robot(&scene, text, base, repeat.max(5), pinocchio)
-        })
-        .collect::<Result<_>>()?;
+    let mut models = vec![model_bench(&worm(true), None, repeat.max(5), None)?];
+    for &(name, text, base, amplitude) in &ROBOTS {
+        let scene = robot_scene(name, text, base, amplitude)?;
+        let robot = pinocchio.map(|harness| (harness, text, base));
+        models.push(model_bench(&scene, Some(20_000), repeat.max(5), robot)?);
+    }
     Ok(SimBench {
         worm_no_contact_ns_per_step,
         worm_contact_ns_per_step,
         chain_ns_per_step,
         stage_steps_per_s: total_steps / median(seconds),
-        robots,
+        models,
     })
 }
 
@@ -205,70 +219,143 @@ fn robot_scene(name: &str, text: &str, base: Base, amplitude: f64) -> Result<Sce
     Ok(scene.resolve())
 }
 
-/// Times one robot in `rounds` interleaved rounds: ours, then Pinocchio's
-/// harness (if any) on the same states.
-fn robot(
+/// Times one model in `rounds` interleaved rounds (after one to warm up):
+/// ours one at a time, ours batched, the scene's whole step (`scene_steps`
+/// steps a round, if given) and Pinocchio's harness (a robot's, if given)
+/// on the same states.
+fn model_bench(
     scene: &Scene,
-    text: &str,
-    base: Base,
+    scene_steps: Option<usize>,
     rounds: usize,
-    pinocchio: Option<&Pinocchio>,
-) -> Result<RobotBench> {
+    pinocchio: Option<(&Pinocchio, &str, Base)>,
+) -> Result<ModelBench> {
     let name = scene.name.as_str();
     let p = Prepared::new(scene);
-    // The states of a 2 s run, one per frame, with the efforts acting.
+    // BATCH states of a simulated run, with the loads acting on each.
     let mut states = Vec::new();
-    alnlab_physics::simulate_run(&p, 1, 0, 0, |frame, _| {
-        states.push(frame.state.clone());
-        Ok(())
-    })?;
-    states.truncate(200);
+    let mut run = 0;
+    while states.len() < BATCH {
+        alnlab_physics::simulate_run(&p, 1, 0, run, |frame, _| {
+            states.push(frame.state.clone());
+            Ok(())
+        })?;
+        run += 1;
+    }
+    states.truncate(BATCH);
     let mut eval = Evaluation::new(&p.model);
     let mut forces = SceneForces::new(&p);
-    let cases: Vec<(State, Loads)> = states
+    let (states, loads): (Vec<State>, Vec<Loads>) = states
         .iter()
         .map(|values| {
             let state = state_from_generalized(&p.model, values).expect("its own log");
             eval.run(&p.model, &state, &mut forces);
             (state, eval.loads.clone())
         })
-        .collect();
-    let passes = 200_000 / cases.len();
-    let harness_input = pinocchio.map(|_| harness_states(&p, &cases));
-    let (mut ours, mut theirs, mut steps) = (Vec::new(), Vec::new(), Vec::new());
+        .unzip();
+    let passes = 100_000 / BATCH;
+    let per_state = |clock: Instant| clock.elapsed().as_nanos() as f64 / (passes * BATCH) as f64;
+    let harness_input = pinocchio.map(|_| harness_states(&p, &states, &loads));
     let mut kin = Kinematics::new(&p.model);
     let mut ws = Workspace::new(&p.model);
     let mut out = Derivative::zeros(&p.model);
+    let mut stepper = Stepper::new(&p.model);
+    let start = Batch::pack(&p.model, &states, &loads);
+    let dt = p.scene.dt.get();
+    let mut times: [Vec<f64>; 6] = Default::default();
     for round in 0..=rounds {
+        let mut batch = Batch::pack(&p.model, &states, &loads);
         let clock = Instant::now();
         for _ in 0..passes {
-            for (state, loads) in &cases {
+            for (state, loads) in states.iter().zip(&loads) {
                 kin.update(&p.model, state);
                 ws.forward(&p.model, state, &kin, loads, &mut out);
                 std::hint::black_box(&out);
             }
         }
-        let aba = clock.elapsed().as_nanos() as f64 / (passes * cases.len()) as f64;
-        let step = ns_per_step(scene, 20_000, 1)?;
+        let aba = per_state(clock);
+        let clock = Instant::now();
+        for _ in 0..passes {
+            for g in 0..batch.states.len() {
+                std::hint::black_box(batch.accelerations(&p.model, g));
+            }
+        }
+        let batched_aba = per_state(clock);
+        // Each pass steps every state once from where it started (held
+        // loads would carry a state far from them), the copy timed both ways.
+        let mut stepped = states.clone();
+        let clock = Instant::now();
+        for _ in 0..passes {
+            for ((state, start), loads) in stepped.iter_mut().zip(&states).zip(&loads) {
+                state.clone_from(start);
+                stepper.restart();
+                let mut held = Held(loads);
+                stepper.step(
+                    &p.model,
+                    state,
+                    dt,
+                    Integrator::SemiImplicitEuler,
+                    &mut held,
+                );
+            }
+        }
+        let held_step = per_state(clock);
+        let clock = Instant::now();
+        for _ in 0..passes {
+            batch.copy_states_from(&start);
+            batch.step(&p.model, dt);
+        }
+        let batched_step = per_state(clock);
+        let step = scene_steps
+            .map(|steps| ns_per_step(scene, steps, 1))
+            .transpose()?;
         let pinocchio_ns = match (pinocchio, &harness_input) {
-            (Some(harness), Some(input)) => Some(harness.time(name, text, base, input, passes)?),
+            (Some((harness, text, base)), Some(input)) => {
+                Some(harness.time(name, text, base, input, passes)?)
+            }
             _ => None,
         };
+        let mut batched = states.clone();
+        batch.unpack(&mut batched);
+        if !stepped.iter().chain(&batched).all(State::is_finite) {
+            return Err(Error::Diverged(format!("benchmark model `{name}` blew up")));
+        }
         // Round 0 warms up.
         if round > 0 {
-            ours.push(aba);
-            steps.push(step);
-            theirs.extend(pinocchio_ns);
+            let figures = [
+                Some(aba),
+                Some(batched_aba),
+                Some(held_step),
+                Some(batched_step),
+                step,
+                pinocchio_ns,
+            ];
+            for (list, x) in times.iter_mut().zip(figures) {
+                list.extend(x);
+            }
         }
     }
-    Ok(RobotBench {
-        robot: name.into(),
+    let [aba, batched_aba, held_step, batched_step, step, theirs] = times;
+    let optional = |xs: Vec<f64>| (!xs.is_empty()).then(|| spread(xs));
+    Ok(ModelBench {
+        model: name.into(),
         dof: p.model.dof(),
-        states: cases.len(),
-        aba_ns: spread(ours),
-        step_ns: spread(steps),
-        pinocchio_aba_ns: (!theirs.is_empty()).then(|| spread(theirs)),
+        states: BATCH,
+        aba_ns: spread(aba),
+        batched_aba_ns: spread(batched_aba),
+        held_step_ns: spread(held_step),
+        batched_step_ns: spread(batched_step),
+        step_ns: optional(step),
+        pinocchio_aba_ns: optional(theirs),
     })
+}
+
+/// Each state's loads held through a step, as a batch steps.
+struct Held<'a>(&'a Loads);
+
+impl Forces for Held<'_> {
+    fn apply(&mut self, _: &Model, _: &State, _: &Kinematics, loads: &mut Loads) {
+        loads.clone_from(self.0);
+    }
 }
 
 /// Pinocchio's `aba` timed by a harness program (`bench/pinocchio/aba.cpp`,
@@ -325,15 +412,15 @@ impl Pinocchio {
 /// The harness's input: the joints by name, then per state the free
 /// base's position, orientation (x, y, z, w), linear and angular velocity
 /// (root frame), and each joint's position, velocity and effort.
-fn harness_states(p: &Prepared, cases: &[(State, Loads)]) -> String {
+fn harness_states(p: &Prepared, states: &[State], loads: &[Loads]) -> String {
     use std::fmt::Write as _;
     let robot = p.robot.as_ref().expect("a robot scene");
     let mut text = format!("joints {}", robot.joints.len() - 1);
     for joint in &robot.joints[1..] {
         let _ = write!(text, " {joint}");
     }
-    let _ = writeln!(text, "\nstates {}", cases.len());
-    for (state, loads) in cases {
+    let _ = writeln!(text, "\nstates {}", states.len());
+    for (state, loads) in states.iter().zip(loads) {
         if p.model.root == alnlab_physics::model::Root::Free {
             let q = state.orient[0];
             for x in state.root_p.iter().chain([q.i, q.j, q.k, q.w].iter()) {
