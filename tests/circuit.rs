@@ -303,7 +303,7 @@ fn a_small_forest_placed_and_routed_on_an_ice40_equals_the_software_in_nanosecon
         "{report}"
     );
     assert!(
-        report.contains("| the software ALN, one CPU thread, in batches |"),
+        report.contains("| the software ALN, one CPU thread, every test state at once |"),
         "{report}"
     );
     let row: Vec<&str> = report

@@ -43,6 +43,7 @@ pub fn render(record: &RunRecord, dir: &Path) -> Result<PathBuf> {
                         summary: artifact(r, "summary")?,
                         comparisons: artifact(r, "comparisons")?,
                         horizons: artifact(r, "horizons")?,
+                        timings: artifact(r, "timings")?,
                         planning: r.artifacts.get("planning").map(|a| PathBuf::from(&a.path)),
                     })
                 })

@@ -145,6 +145,17 @@ Training in two shards, then a run that merges them instead of training:
         #[arg(long)]
         reports: Option<PathBuf>,
     },
+    /// Draw the chart across reports: every report's ALNs and simulator
+    /// settings, mean error over persistence's against µs per state one at a
+    /// time, from each `<REPORTS>/<name>/frontier.csv` (written with the
+    /// report) into `<REPORTS>/synthesis.svg`.
+    #[command(after_help = "Example:
+  alnlab synthesis reports      # after refreshing reports with --reports reports")]
+    Synthesis {
+        /// The folder of published reports.
+        #[arg(default_value = "reports")]
+        reports: PathBuf,
+    },
     /// Validate a manifest and print it fully resolved, once per variant.
     ///
     /// Errors name the file, line and column, the key, and what is allowed;
@@ -278,6 +289,11 @@ pub fn execute(matches: &ArgMatches) -> Result<()> {
             }
             let report = crate::report::render(&record, &report_dir(&run_dir, reports, &record))?;
             println!("report: {}", report.display());
+            Ok(())
+        }
+        Command::Synthesis { reports } => {
+            let (chart, drawn) = alnlab_report::synthesis::render_synthesis(&reports)?;
+            println!("{} ({})", chart.display(), drawn.join(", "));
             Ok(())
         }
         Command::Check { manifest } => {

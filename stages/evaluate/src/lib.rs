@@ -47,8 +47,9 @@ use serde::{Deserialize, Serialize};
 
 /// Version of what this stage writes (part of every cache key; 5: the
 /// robust linear baseline of the change, piecewise-linear models; 6: an
-/// angle that wraps scored on the circle, its period in the predictions).
-pub const FORMAT_VERSION: u32 = 6;
+/// angle that wraps scored on the circle, its period in the predictions; 7:
+/// the robust linear fit timed one state at a time too).
+pub const FORMAT_VERSION: u32 = 7;
 
 /// File name of the predictions table ([`alnlab_tables::predictions`]).
 pub const PREDICTIONS_FILE: &str = alnlab_tables::predictions::FILE;
@@ -312,7 +313,13 @@ pub fn run(
         .collect::<Result<_>>()?;
     let timings = {
         let mut timed = aln_paths;
-        timed.extend(linear_paths.into_iter().filter(|p| p.path == "batched"));
+        // The robust linear fit all at once and one state at a time (its
+        // plain path, the quickest), as a practitioner would run it.
+        timed.extend(
+            linear_paths
+                .into_iter()
+                .filter(|p| p.path == "batched" || p.path == "pwl-plain"),
+        );
         if let Some(peer) = &peer {
             let (learned, x, rows, pool) = (&learned, &real_x, &test.rows, &pool);
             timed.push(timing::Path {

@@ -9,9 +9,10 @@ use std::path::Path;
 
 use alnlab_common::{Result, atomic};
 
-use super::format::{Align, MdTable, interval, micros, sig3};
+use super::format::{Align, MdTable, interval, sig3};
 use super::{
-    Loaded, Spread, baseline_models, closed_loop, normalized, overall, worse_than_persistence,
+    Loaded, Spread, Timing, baseline_models, closed_loop, normalized, overall,
+    worse_than_persistence,
 };
 use crate::charts::{self, Axis, Plot, Point, Series, style_of};
 use alnlab_summarize::paired::Interval;
@@ -121,7 +122,7 @@ pub(super) fn charts(md: &mut String, variants: &[Loaded], shared: bool, dir: &P
             let how = match t.path.strip_prefix("pwl-") {
                 Some(path) => format!("one at a time, {path}"),
                 None if single => "one at a time".into(),
-                None => "batched".into(),
+                None => "all at once".into(),
             };
             series.push(Series {
                 name: format!("{}, {how}", aln_name(v, n)),
@@ -132,7 +133,7 @@ pub(super) fn charts(md: &mut String, variants: &[Loaded], shared: bool, dir: &P
                     ..Point::at(t.ns_per_state / 1000.0, y)
                 }],
                 joined: false,
-                hollow: single,
+                hollow: !single,
             });
         }
     }
@@ -146,8 +147,18 @@ pub(super) fn charts(md: &mut String, variants: &[Loaded], shared: bool, dir: &P
             let Some((y, y_range)) = y_of(v, &t.model) else {
                 continue;
             };
+            // The simulator is timed frame by frame alone; a learned
+            // baseline both ways.
+            let all_at_once = t.path == "batched";
+            let name = if t.model.starts_with("simulator@") {
+                t.model.clone()
+            } else if all_at_once {
+                format!("{}, all at once", t.model)
+            } else {
+                format!("{}, one at a time", t.model)
+            };
             series.push(Series {
-                name: t.model.clone(),
+                name,
                 style: style_of(&t.model, 0),
                 points: vec![Point {
                     x_range: Some((t.ns_min / 1000.0, t.ns_max / 1000.0)),
@@ -155,7 +166,7 @@ pub(super) fn charts(md: &mut String, variants: &[Loaded], shared: bool, dir: &P
                     ..Point::at(t.ns_per_state / 1000.0, y)
                 }],
                 joined: false,
-                hollow: false,
+                hollow: all_at_once,
             });
         }
     }
@@ -181,10 +192,10 @@ pub(super) fn charts(md: &mut String, variants: &[Loaded], shared: bool, dir: &P
         atomic::write_bytes(&dir.join(SPEED), chart.as_bytes())?;
         let whose = if shared {
             "error averaged over the variables on the held-out rows, for every variant's ALN \
-             (filled: batched; hollow: one state at a time) and the timed baselines. The dashed \
+             (filled: one state at a time; hollow: every test state at once) and the timed baselines. The dashed \
              staircase is the Pareto front: no point beats one on it in both speed and error."
         } else {
-            "every variant's ALN (filled: batched; hollow: one state at a time) by its mean \
+            "every variant's ALN (filled: one state at a time; hollow: every test state at once) by its mean \
              error minus persistence's on its own held-out rows: the variants ran on different \
              data, so their errors are not set side by side, no front is drawn across them, and \
              the baselines are in each variant's section."
@@ -314,7 +325,11 @@ pub(super) fn side_by_side(md: &mut String, variants: &[Loaded], shared: bool) {
             ""
         }
     );
-    let mut columns = vec!["ALN batched", "ALN one at a time", "hardware (gate delays)"];
+    let mut columns = vec![
+        "ALN all at once (µs)",
+        "ALN one at a time (µs)",
+        "hardware (gate delays)",
+    ];
     if measured {
         columns.push("circuit (gate levels)");
     }
@@ -324,11 +339,11 @@ pub(super) fn side_by_side(md: &mut String, variants: &[Loaded], shared: bool) {
     columns.extend(["training (s)", "trees (MiB)"]);
     let mut table = MdTable::new(&["variant"]).numbers(&columns);
     for v in variants {
-        let time = |t: Option<f64>| t.map_or("—".into(), micros);
+        let time = |t: Option<&Timing>| t.map_or("—".into(), |t| t.spread().replace(" µs", ""));
         let mut row = vec![
             format!("`{}`", v.info.name),
-            time(v.ns("aln", "batched")),
-            time(v.aln_single().map(|t| t.ns_per_state)),
+            time(v.all_at_once("aln")),
+            time(v.aln_single()),
             match v.hardware.delays() {
                 // No gates: a piecewise-linear model computes with numbers.
                 0 => "—".to_string(),
@@ -386,7 +401,8 @@ pub(super) fn baselines_table(md: &mut String, v: &Loaded, with_aln: bool) {
         table = table.column("ALN − model [95%]", Align::Left);
     }
     table = table
-        .column("µs per state (range)", Align::Left)
+        .column("µs per state, one at a time", Align::Left)
+        .column("µs per state, all at once", Align::Left)
         .numbers(&["failed"]);
     let mut models = baseline_models(judged);
     if with_aln {
@@ -395,10 +411,7 @@ pub(super) fn baselines_table(md: &mut String, v: &Loaded, with_aln: bool) {
     for model in models {
         let rows: Vec<_> = judged.iter().filter(|r| r.model == model).collect();
         let max = rows.iter().map(|r| r.stats.max).max().unwrap_or(0);
-        let timing = v
-            .timings
-            .iter()
-            .find(|t| t.model == model && t.threads == 1);
+        let (single, batched) = (v.single(model), v.all_at_once(model));
         let mut cells = vec![
             format!("`{model}`"),
             overall(judged, model).map_or("—".into(), |(m, _)| sig3(m)),
@@ -412,8 +425,10 @@ pub(super) fn baselines_table(md: &mut String, v: &Loaded, with_aln: bool) {
                     .map_or("—".into(), |d| interval(d.mean, d.low, d.high)),
             );
         }
-        cells.push(timing.map_or("—".into(), |t| format!("{} ({})", t.spread(), t.path)));
-        cells.push(timing.map_or(0, |t| t.failed).to_string());
+        cells.push(single.map_or("—".into(), |t| t.spread()));
+        cells.push(batched.map_or("—".into(), |t| t.spread()));
+        let failed = single.into_iter().chain(batched).map(|t| t.failed).max();
+        cells.push(failed.unwrap_or(0).to_string());
         table.row(cells);
     }
     table.write(md);

@@ -75,6 +75,25 @@ pub fn micros(ns: f64) -> String {
     format!("{} µs", sig3(ns / 1000.0))
 }
 
+/// A measured time in µs with its range, to the precision the range
+/// supports: three significant figures while the range spans under 10% of
+/// the median, two under 100%, one beyond — "2.64 µs (2.62–2.71)", "2.8 µs
+/// (2.6–3.0)"; the same decimals for all three.
+pub fn timing(ns: f64, ns_min: f64, ns_max: f64) -> String {
+    let (median, low, high) = (ns / 1000.0, ns_min / 1000.0, ns_max / 1000.0);
+    let spread = (high - low) / median;
+    let figures = if !(spread.is_finite() && spread > 0.0) {
+        3
+    } else {
+        (1 - spread.log10().floor() as i32).clamp(1, 3)
+    };
+    if !(median.is_finite() && median > 0.0) {
+        return format!("{} µs", sig3(median));
+    }
+    let decimals = (figures - 1 - median.log10().floor() as i32).max(0) as usize;
+    format!("{median:.decimals$} µs ({low:.decimals$}–{high:.decimals$})")
+}
+
 /// A column's alignment.
 #[derive(Clone, Copy)]
 pub enum Align {
@@ -165,6 +184,15 @@ impl MdTable {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_timing_is_written_to_the_precision_of_its_range() {
+        assert_eq!(timing(2640.0, 2620.0, 2710.0), "2.64 µs (2.62–2.71)");
+        assert_eq!(timing(2800.0, 2620.0, 2970.0), "2.8 µs (2.6–3.0)");
+        assert_eq!(timing(2800.0, 1000.0, 5000.0), "3 µs (1–5)");
+        assert_eq!(timing(252_000.0, 251_000.0, 252_600.0), "252 µs (251–253)");
+        assert_eq!(timing(479.0, 479.0, 479.0), "0.479 µs (0.479–0.479)");
+    }
 
     #[test]
     fn three_significant_figures() {

@@ -17,14 +17,15 @@ use alnlab_evaluate::timing::REPEATS;
 use alnlab_summarize::paired::Interval;
 
 use super::charts::{self, Axis, Plot, Point, Rule, Series, style_of};
-use super::findings::{accuracy_word, speed_verdict};
-use super::format::{MdTable, estimate, interval, micros, sig3};
-use super::{Loaded, RunInfo, Timing, overall};
+use super::findings::accuracy_word;
+use super::format::{MdTable, estimate, interval, sig3};
+use super::{Loaded, RunInfo, Spread, Timing, overall};
 
 /// File name of the figure.
 const FIGURE: &str = "headline.svg";
-/// Rows of the results table, at most.
-const TABLE_ROWS: usize = 8;
+/// Rows of the results table, at most: room for two ALNs, three learned or
+/// trivial baselines and four simulator settings.
+const TABLE_ROWS: usize = 10;
 
 /// What an estimate's interval is over.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -95,7 +96,10 @@ struct Entry<'a> {
     /// Persistence's mean error on the same rows and variables.
     persistence: Option<Estimate>,
     against_persistence: Option<Estimate>,
-    timing: Option<&'a Timing>,
+    /// One state (or the simulator's frame) at a time, one thread.
+    single: Option<&'a Timing>,
+    /// Every test state at once, one thread.
+    batched: Option<&'a Timing>,
 }
 
 impl Entry<'_> {
@@ -144,10 +148,9 @@ fn entry<'a>(v: &'a Loaded<'a>, place: usize, model: &'a str) -> Option<Entry<'a
     } else {
         overall(judged, "persistence").map(|(p, _)| Estimate::point(mean - p))
     };
-    let timing = match model {
-        "aln" | "linear" | "boosted" => v.timing(model, "batched"),
-        "persistence" => None,
-        _ => v.timing(model, "single"),
+    let (single, batched) = match model {
+        "persistence" => (None, None),
+        _ => (v.single(model), v.all_at_once(model)),
     };
     Some(Entry {
         variant: v,
@@ -157,14 +160,16 @@ fn entry<'a>(v: &'a Loaded<'a>, place: usize, model: &'a str) -> Option<Entry<'a
         error,
         persistence,
         against_persistence,
-        timing,
+        single,
+        batched,
     })
 }
 
 /// The models on the first screen: every variant's ALN (the best first),
 /// then the best variant's baselines — persistence, the robust linear fit,
-/// the learned peer where there is one, and the simulator at its fewest
-/// steps a frame — at most [`TABLE_ROWS`] in all.
+/// the learned peer where there is one, and the simulator at every step
+/// count it measured (its frontier of error against time) — at most
+/// [`TABLE_ROWS`] in all.
 fn entries<'a>(variants: &'a [Loaded<'a>]) -> Vec<Entry<'a>> {
     let mut alns: Vec<Entry> = variants
         .iter()
@@ -175,10 +180,12 @@ fn entries<'a>(variants: &'a [Loaded<'a>]) -> Vec<Entry<'a>> {
     let Some(best) = alns.first().map(|e| (e.variant, e.place)) else {
         return alns;
     };
-    let coarsest = super::findings::coarsest_simulator(best.0).map(|(name, _)| name);
+    let simulators = super::findings::simulators(best.0)
+        .into_iter()
+        .map(|(name, _)| name);
     let baselines: Vec<Entry> = ["persistence", "linear", "boosted"]
         .into_iter()
-        .chain(coarsest)
+        .chain(simulators)
         .filter_map(|m| entry(best.0, best.1, m))
         .collect();
     let keep_alns = TABLE_ROWS.saturating_sub(baselines.len()).max(1);
@@ -238,6 +245,7 @@ pub(super) fn first_screen(
     figure(md, variants.len(), &entries, dir)?;
     let decisions = Decisions::of(variants, &entries);
     table(md, variants.len(), &entries, decisions.as_ref());
+    super::synthesis::write_frontier(dir, &frontier_rows(&entries))?;
     let (test, held_out) = best.variant.rows;
     let paired = if best.variant.replicates.len() > 1 {
         "replicate by replicate"
@@ -261,6 +269,12 @@ pub(super) fn first_screen(
             .into(),
         _ => "one replicate: no intervals".into(),
     };
+    let runs = best
+        .single
+        .or(best.batched)
+        .map_or(format!("{REPEATS} interleaved runs"), |t| {
+            super::findings::runs_words(best.variant, t)
+        });
     let _ = writeln!(
         md,
         "Errors: mean over a model's variables of its mean error in levels on the {held_out} \
@@ -268,10 +282,9 @@ pub(super) fn first_screen(
          rows and variables, {paired}.{baselines} Models: persistence predicts no change; \
          linear is a robust linear fit of the change; simulator@k/frame re-steps each frame \
          from its logged state with k integration steps (exact at the scene's own step \
-         count). Times: replicate 1, the learned models predicting every test state at once, \
-         the simulator re-stepping one frame at a time; median and range of {REPEATS} \
-         interleaved runs; a baseline several variants share is timed once (by the first), \
-         and that one timing is quoted throughout.{decisions} Levels, baselines and intervals \
+         count). Times, one thread: one state (the simulator: one frame) at a time, and every \
+         test state at once; median and range of {runs}; a baseline several variants share is \
+         timed by the first, and that timing is quoted throughout.{decisions} Levels, baselines and intervals \
          are defined under Definitions, at the end.\n",
         also = if test > held_out {
             format!("; the other {} were also trained on", test - held_out)
@@ -345,11 +358,12 @@ fn abstract_(
             d.difference_cell()
         );
     }
-    // The best other model (the simulator's exact step is never on the
-    // first screen), and the robust linear fit, the practitioner's first try.
+    // The best other learned model (the simulator has a sentence of its
+    // own), and the robust linear fit, the practitioner's first try.
     let rival = entries
         .iter()
         .filter(|e| e.model != "aln" && e.model != "persistence")
+        .filter(|e| !e.model.starts_with("simulator@"))
         .min_by(|a, b| a.error.mean.total_cmp(&b.error.mean));
     let against = |other: &Entry| -> String {
         let values: Option<Vec<f64>> = (best.variant.replicates.len() > 1)
@@ -373,9 +387,9 @@ fn abstract_(
     };
     if let Some(rival) = rival {
         if best.variant.replicates.len() > 1 {
-            let _ = write!(md, " and {}, the best other model", against(rival));
+            let _ = write!(md, " and {}, the best other learned model", against(rival));
         } else {
-            let _ = write!(md, "; the best other model is {}", against(rival));
+            let _ = write!(md, "; the best other learned model is {}", against(rival));
         }
         if let Some(linear) = entries.iter().find(|e| e.model == "linear")
             && rival.model != "linear"
@@ -403,25 +417,34 @@ fn abstract_(
         }
         return;
     }
-    let simulator = entries
-        .iter()
-        .filter(|e| e.model.starts_with("simulator@"))
-        .find_map(|e| Some((e, e.timing?)));
-    if let (Some(aln), Some((sim, sim_time))) = (best.timing, simulator) {
-        let word = speed_verdict(aln, sim_time);
-        let against = if word.starts_with("indistinguishable") {
-            format!("indistinguishable in speed from {}", sim.model)
-        } else {
-            format!("{word} than {}", sim.model)
-        };
+    let aln = best.variant;
+    let single = aln.aln_single();
+    let batched = aln.all_at_once("aln");
+    match (single, super::findings::simulator_rival(aln)) {
+        (Some(one), Some(rival)) => {
+            let _ = write!(
+                md,
+                " One state at a time it predicts in {} on one thread; {}.",
+                one.spread(),
+                super::findings::against_simulator(one, &rival)
+            );
+        }
+        (Some(one), None) => {
+            let _ = write!(
+                md,
+                " One state at a time it predicts in {} on one thread.",
+                one.spread()
+            );
+        }
+        _ => {}
+    }
+    if let Some(all) = batched {
         let _ = write!(
             md,
-            " It predicts a state in {} on one thread (all {} test states at once), {against} \
-             re-stepping each frame ({}, error {}).",
-            micros(aln.ns_per_state),
-            aln.states,
-            micros(sim_time.ns_per_state),
-            sim.error.cell()
+            " All {} test states at once, it takes {} a state (no simulator was timed all at \
+             once).",
+            all.states,
+            all.spread()
         );
     }
     md.push_str("\n\n");
@@ -430,25 +453,42 @@ fn abstract_(
 /// The main figure: every entry's difference from persistence (its
 /// interval) against its time per state on one thread (its range).
 fn figure(md: &mut String, variants: usize, entries: &[Entry], dir: &Path) -> Result<()> {
-    let series: Vec<Series> = entries
-        .iter()
-        .filter_map(|e| {
-            let d = e.against_persistence?;
-            let t = e.timing?;
-            Some(Series {
-                name: e.label(variants).replace('`', ""),
+    let point = |e: &Entry, t: &Timing| -> Option<Point> {
+        let d = e.against_persistence?;
+        Some(Point {
+            x: t.ns_per_state / 1000.0,
+            y: d.mean,
+            x_range: Some((t.ns_min / 1000.0, t.ns_max / 1000.0)),
+            y_range: d.interval,
+        })
+    };
+    let mut series: Vec<Series> = Vec::new();
+    for e in entries {
+        let name = e.label(variants).replace('`', "");
+        if let Some(p) = e.single.and_then(|t| point(e, t)) {
+            series.push(Series {
+                // The simulator is timed frame by frame alone.
+                name: if e.batched.is_some() {
+                    format!("{name}, one at a time")
+                } else {
+                    name.clone()
+                },
                 style: style_of(e.model, e.place),
-                points: vec![Point {
-                    x: t.ns_per_state / 1000.0,
-                    y: d.mean,
-                    x_range: Some((t.ns_min / 1000.0, t.ns_max / 1000.0)),
-                    y_range: d.interval,
-                }],
+                points: vec![p],
                 joined: false,
                 hollow: false,
-            })
-        })
-        .collect();
+            });
+        }
+        if let Some(p) = e.batched.and_then(|t| point(e, t)) {
+            series.push(Series {
+                name: format!("{name}, all at once"),
+                style: style_of(e.model, e.place),
+                points: vec![p],
+                joined: false,
+                hollow: true,
+            });
+        }
+    }
     if series.is_empty() {
         return Ok(());
     }
@@ -468,8 +508,9 @@ fn figure(md: &mut String, variants: usize, entries: &[Entry], dir: &Path) -> Re
         md,
         "![difference from persistence against time per state]({FIGURE})\n\n\
          Each model's mean error minus persistence's on the same rows (bars: {}) against its time \
-         to predict a state on one thread (bars: the range of {REPEATS} timed runs). Lower is more \
-         accurate, left is faster.\n",
+         to predict a state on one thread (bars: the range of its timed runs): filled, one state \
+         (the simulator: one frame) at a time; hollow, every test state at once. Each simulator \
+         setting is a point of its own. Lower is more accurate, left is faster.\n",
         over_words(over)
     );
     Ok(())
@@ -519,6 +560,35 @@ impl Decisions {
     }
 }
 
+/// The first screen's models as `frontier.csv` rows, unrounded.
+fn frontier_rows(entries: &[Entry]) -> Vec<super::synthesis::FrontierRow> {
+    let us = |t: Option<&Timing>, f: fn(&Timing) -> f64| t.map(|t| f(t) / 1000.0);
+    entries
+        .iter()
+        .map(|e| super::synthesis::FrontierRow {
+            model: e.model.to_string(),
+            variant: e.variant.info.name.clone(),
+            variables: e.variables,
+            error: e.error.mean,
+            error_low: e.error.interval.map(|(low, _)| low),
+            error_high: e.error.interval.map(|(_, high)| high),
+            persistence: e.persistence.map(|p| p.mean),
+            one_at_a_time_us: us(e.single, |t| t.ns_per_state),
+            one_at_a_time_min_us: us(e.single, |t| t.ns_min),
+            one_at_a_time_max_us: us(e.single, |t| t.ns_max),
+            all_at_once_us: us(e.batched, |t| t.ns_per_state),
+            all_at_once_min_us: us(e.batched, |t| t.ns_min),
+            all_at_once_max_us: us(e.batched, |t| t.ns_max),
+        })
+        .collect()
+}
+
+/// "2.64 (2.62–2.71)": a time in µs and its range, without the unit (the
+/// column names it).
+fn micros_cell(t: &Timing) -> String {
+    t.spread().replace(" µs", "")
+}
+
 /// The results table: at most [`TABLE_ROWS`] rows.
 fn table(md: &mut String, variants: usize, entries: &[Entry], decisions: Option<&Decisions>) {
     let decision_column = decisions.map(|d| {
@@ -531,7 +601,8 @@ fn table(md: &mut String, variants: usize, entries: &[Entry], decisions: Option<
         "mean error (levels)",
         "persistence's",
         "− persistence",
-        "µs per state, one thread",
+        "µs per state, one at a time",
+        "µs per state, all at once",
     ];
     columns.extend(decision_column.as_deref());
     let mut t = MdTable::new(&["model", "variables"]).numbers(&columns);
@@ -546,14 +617,8 @@ fn table(md: &mut String, variants: usize, entries: &[Entry], decisions: Option<
             },
             e.against_persistence
                 .map_or("—".into(), |d| d.difference_cell()),
-            e.timing.map_or("—".into(), |t| {
-                format!(
-                    "{} ({}–{})",
-                    sig3(t.ns_per_state / 1000.0),
-                    sig3(t.ns_min / 1000.0),
-                    sig3(t.ns_max / 1000.0)
-                )
-            }),
+            e.single.map_or("—".into(), micros_cell),
+            e.batched.map_or("—".into(), micros_cell),
         ];
         if let Some(d) = decisions {
             cells.push(d.ms[k].map_or("—".into(), sig3));

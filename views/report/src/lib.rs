@@ -23,6 +23,7 @@ pub mod html;
 pub mod metrics;
 mod plan;
 mod replicates;
+pub mod synthesis;
 mod variant;
 
 use std::fmt::Write as _;
@@ -105,6 +106,8 @@ pub struct Replicate {
     pub summary: PathBuf,
     pub comparisons: PathBuf,
     pub horizons: PathBuf,
+    /// The test stage's timings of its models.
+    pub timings: PathBuf,
     /// The plan stage's per-episode table, if the run had one.
     pub planning: Option<PathBuf>,
 }
@@ -138,20 +141,48 @@ pub struct StageTime {
     pub compute_seconds: f64,
 }
 
-/// "3.81 µs (3.62–4.10)": a timing's median and range.
+/// "3.81 µs (3.62–4.10)": a timing's median and range, to the precision
+/// the range supports ([`format::timing`]).
 pub(crate) trait Spread {
     fn spread(&self) -> String;
 }
 
 impl Spread for Timing {
     fn spread(&self) -> String {
-        format!(
-            "{} ({}–{})",
-            format::micros(self.ns_per_state),
-            format::sig3(self.ns_min / 1000.0),
-            format::sig3(self.ns_max / 1000.0)
-        )
+        format::timing(self.ns_per_state, self.ns_min, self.ns_max)
     }
+}
+
+/// Every replicate's runs of each timed path pooled into the first
+/// replicate's rows: each replicate's test stage timed its models in
+/// interleaved rounds of its own, minutes apart, so the pooled runs carry
+/// the spread from one timing session to the next, not only within one.
+/// Run k of every model still belongs to the same round of the same
+/// replicate, so runs pair by position. A path some replicate lacks keeps
+/// the runs the others have.
+fn pool_timings(first: Vec<Timing>, others: &[Vec<Timing>]) -> Vec<Timing> {
+    first
+        .into_iter()
+        .map(|mut t| {
+            for other in others {
+                if let Some(o) = other
+                    .iter()
+                    .find(|o| o.model == t.model && o.path == t.path && o.threads == t.threads)
+                {
+                    t.runs.extend_from_slice(&o.runs);
+                    t.failed = t.failed.max(o.failed);
+                }
+            }
+            if !t.runs.is_empty() {
+                let mut sorted = t.runs.clone();
+                sorted.sort_by(f64::total_cmp);
+                t.ns_per_state = sorted[sorted.len() / 2];
+                t.ns_min = sorted[0];
+                t.ns_max = sorted[sorted.len() - 1];
+            }
+            t
+        })
+        .collect()
 }
 
 /// A variant's artifacts, read.
@@ -215,6 +246,23 @@ impl Loaded<'_> {
         self.timing("aln", "single")
             .or_else(|| self.timing("aln", "threshold-search"))
             .or_else(|| self.timing("aln", "pwl-plain"))
+    }
+
+    /// `model` one state at a time on one thread, where it was so timed:
+    /// the ALN's path of [`Loaded::aln_single`], the robust linear fit's
+    /// plain path, the simulator's frame by frame.
+    fn single(&self, model: &str) -> Option<&Timing> {
+        match model {
+            "aln" => self.aln_single(),
+            "linear" => self.timing(model, "pwl-plain"),
+            _ => self.timing(model, "single"),
+        }
+    }
+
+    /// `model` predicting every test state at once on one thread, where it
+    /// was so timed (the simulator never is).
+    fn all_at_once(&self, model: &str) -> Option<&Timing> {
+        self.timing(model, "batched")
     }
 
     /// The ALN's batches on all threads, when there are more than one.
@@ -478,7 +526,13 @@ fn load(info: &VariantInfo) -> Result<Loaded<'_>> {
     let comparisons = alnlab_summarize::read_comparisons(&info.comparisons)?;
     let horizons = alnlab_summarize::read_horizons(&info.horizons)?;
     let horizons = horizons.into_iter().filter(|h| h.rows == judged).collect();
-    let timings = alnlab_evaluate::timings::read(&info.timings)?;
+    let others = info
+        .replicates
+        .iter()
+        .skip(1)
+        .map(|r| alnlab_evaluate::timings::read(&r.timings))
+        .collect::<Result<Vec<_>>>()?;
+    let timings = pool_timings(alnlab_evaluate::timings::read(&info.timings)?, &others);
     let training = read_training(&info.training)?;
 
     let model = Model::read(&info.model)?;
@@ -861,4 +915,44 @@ fn paper_rows(summary: &[SummaryRow]) -> Vec<(Vec<&'static str>, Option<&Summary
             (f, ours)
         })
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn timed(model: &str, path: &str, runs: &[f64]) -> Timing {
+        Timing {
+            model: model.into(),
+            path: path.into(),
+            ns_per_state: f64::NAN,
+            ns_min: f64::NAN,
+            ns_max: f64::NAN,
+            runs: runs.to_vec(),
+            states: 10,
+            threads: 1,
+            failed: 0,
+            cores: 2,
+            cpu: "cpu".into(),
+        }
+    }
+
+    /// Replicates' runs join the first replicate's, in replicate order, and
+    /// the median and range are of them all.
+    #[test]
+    fn timings_pool_across_replicates() {
+        let first = vec![timed("aln", "batched", &[1.0, 2.0, 3.0])];
+        let others = vec![
+            vec![timed("aln", "batched", &[10.0, 11.0, 12.0])],
+            vec![
+                timed("aln", "single", &[99.0]),
+                timed("aln", "batched", &[0.5]),
+            ],
+        ];
+        let pooled = pool_timings(first, &others);
+        assert_eq!(pooled.len(), 1);
+        let t = &pooled[0];
+        assert_eq!(t.runs, [1.0, 2.0, 3.0, 10.0, 11.0, 12.0, 0.5]);
+        assert_eq!((t.ns_min, t.ns_per_state, t.ns_max), (0.5, 3.0, 12.0));
+    }
 }

@@ -272,6 +272,12 @@ pub(super) fn section(md: &mut String, variants: &[Loaded], dir: &Path) -> Resul
             };
             if !MODELS.contains(&model.as_str()) {
                 figures.push((format!("{model} mean"), means(model)));
+                // The first screen sets the ALN against each simulator
+                // setting.
+                figures.push((
+                    format!("aln - {model}"),
+                    v.replicates.iter().map(|f| f.aln_minus(model)).collect(),
+                ));
             }
             if model != "aln" && model != "persistence" {
                 let persistence = means("persistence");
@@ -287,7 +293,8 @@ pub(super) fn section(md: &mut String, variants: &[Loaded], dir: &Path) -> Resul
             let interval = across(values);
             if k >= shown_in_table {
                 if let Some(i) = interval {
-                    csv_line(&mut csv, &v.info.name, figure, &i, false, values);
+                    let verdict = figure.starts_with("aln - ");
+                    csv_line(&mut csv, &v.info.name, figure, &i, verdict, values);
                 }
                 continue;
             }

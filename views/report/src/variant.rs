@@ -461,7 +461,8 @@ fn hardware(md: &mut String, v: &Loaded) {
                 let cpu = super::circuit::Cpu {
                     aln_batched: v.ns("aln", "batched"),
                     aln_single: v.aln_single().map(|t| t.ns_per_state),
-                    simulator: v.ns("simulator@1/frame", "single"),
+                    simulator: super::findings::simulator_rival(v)
+                        .map(|r| (r.model.to_string(), r.timing.ns_per_state)),
                 };
                 super::circuit::fpga_section(md, routed, measured.depth, &cpu);
             }
