@@ -68,10 +68,11 @@ pub fn read_frontier(path: &Path) -> Result<Vec<FrontierRow>> {
 }
 
 /// Draws `<reports>/synthesis.svg` from every `<reports>/<name>/frontier.csv`
-/// (reports in name order): per report, its ALNs and its simulator settings
-/// (joined, fewest steps first), each by its mean error over persistence's
-/// on the same rows against its µs per state one at a time. Returns the
-/// chart's path and the reports drawn.
+/// (reports in name order): per report, its best ALN and its simulator
+/// settings (joined, fewest steps first; one line for reports on the same
+/// data), each by its mean error over persistence's on the same rows
+/// against its µs per state one at a time. Returns the chart's path and
+/// the reports drawn.
 pub fn render_synthesis(reports: &Path) -> Result<(PathBuf, Vec<String>)> {
     let mut found: Vec<(String, PathBuf)> = std::fs::read_dir(reports)
         .map_err(|e| Error::io(reports, e))?
@@ -90,6 +91,8 @@ pub fn render_synthesis(reports: &Path) -> Result<(PathBuf, Vec<String>)> {
         )));
     }
     let mut series = Vec::new();
+    let mut simulator_lines: Vec<(Vec<String>, Vec<Point>)> = Vec::new();
+    let mut simulator_series: Vec<(String, Style)> = Vec::new();
     for (k, (name, path)) in found.iter().enumerate() {
         let rows = read_frontier(path)?;
         let point = |r: &FrontierRow| -> Option<Point> {
@@ -102,20 +105,21 @@ pub fn render_synthesis(reports: &Path) -> Result<(PathBuf, Vec<String>)> {
             })
         };
         let colour = style_of("aln", k).colour;
-        let alns: Vec<Point> = rows
+        // The report's best ALN: the lowest error over persistence's.
+        let best = rows
             .iter()
             .filter(|r| r.model == "aln")
-            .filter_map(point)
-            .collect();
-        if !alns.is_empty() {
+            .filter_map(|r| Some((r, point(r)?)))
+            .min_by(|a, b| a.1.y.total_cmp(&b.1.y));
+        if let Some((row, p)) = best {
             series.push(Series {
-                name: format!("{name}: ALN"),
+                name: format!("{name}: ALN `{}`", row.variant),
                 style: Style {
                     colour,
                     marker: Marker::Circle,
                     dashed: false,
                 },
-                points: alns,
+                points: vec![p],
                 joined: false,
                 hollow: false,
             });
@@ -128,20 +132,38 @@ pub fn render_synthesis(reports: &Path) -> Result<(PathBuf, Vec<String>)> {
             })
             .collect();
         simulators.sort_by_key(|&(steps, _)| steps);
-        if !simulators.is_empty() {
-            let steps: Vec<String> = simulators.iter().map(|(s, _)| s.to_string()).collect();
-            series.push(Series {
-                name: format!("{name}: simulator@{}/frame", steps.join(",")),
-                style: Style {
-                    colour,
-                    marker: Marker::Diamond,
-                    dashed: true,
-                },
-                points: simulators.into_iter().map(|(_, p)| p).collect(),
-                joined: true,
-                hollow: true,
-            });
+        if simulators.is_empty() {
+            continue;
         }
+        let points: Vec<Point> = simulators.iter().map(|(_, p)| *p).collect();
+        // Reports on the same data (one cached simulation and test stage)
+        // share one simulator line, named after all of them.
+        if let Some(same) = simulator_lines
+            .iter_mut()
+            .find(|(_, drawn): &&mut (Vec<String>, Vec<Point>)| *drawn == points)
+        {
+            same.0.push(name.clone());
+            continue;
+        }
+        simulator_lines.push((vec![name.clone()], points));
+        let steps: Vec<String> = simulators.iter().map(|(s, _)| s.to_string()).collect();
+        simulator_series.push((
+            steps.join(","),
+            Style {
+                colour,
+                marker: Marker::Diamond,
+                dashed: true,
+            },
+        ));
+    }
+    for ((names, points), (steps, style)) in simulator_lines.into_iter().zip(simulator_series) {
+        series.push(Series {
+            name: format!("{}: simulator@{steps}/frame", names.join(", ")),
+            style,
+            points,
+            joined: true,
+            hollow: true,
+        });
     }
     let svg = charts::plot(&Plot {
         title: "every report: error against speed, one state at a time".into(),
