@@ -447,6 +447,25 @@ fn abstract_(
             all.spread()
         );
     }
+    // The other learned models' times beside the ALN's, so that a cheaper
+    // or more accurate learned rival is seen at its own cost.
+    let others: Vec<String> = entries
+        .iter()
+        .filter(|e| e.model != "aln" && e.model != "persistence")
+        .filter(|e| !e.model.starts_with("simulator@"))
+        .filter(|e| e.single.is_some() || e.batched.is_some())
+        .map(|e| {
+            let time = |t: Option<&Timing>| t.map_or("—".into(), |t| t.spread());
+            format!("{} {} / {}", e.model, time(e.single), time(e.batched))
+        })
+        .collect();
+    if !others.is_empty() {
+        let _ = write!(
+            md,
+            " The other learned models, one at a time / all at once: {}.",
+            others.join("; ")
+        );
+    }
     md.push_str("\n\n");
 }
 
