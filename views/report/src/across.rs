@@ -339,7 +339,7 @@ pub(super) fn side_by_side(md: &mut String, variants: &[Loaded], shared: bool) {
     columns.extend(["training (s)", "trees (MiB)"]);
     let mut table = MdTable::new(&["variant"]).numbers(&columns);
     for v in variants {
-        let time = |t: Option<&Timing>| t.map_or("—".into(), |t| t.spread().replace(" µs", ""));
+        let time = |t: Option<&Timing>| t.map_or("—".into(), Spread::spread_in_column);
         let mut row = vec![
             format!("`{}`", v.info.name),
             time(v.all_at_once("aln")),

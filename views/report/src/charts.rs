@@ -128,7 +128,7 @@ pub fn style_of(model: &str, variant: usize) -> Style {
 }
 
 /// k of `simulator@k/frame`.
-fn simulator_steps(model: &str) -> Option<u32> {
+pub(crate) fn simulator_steps(model: &str) -> Option<u32> {
     model
         .strip_prefix("simulator@")?
         .strip_suffix("/frame")?

@@ -5,6 +5,7 @@
 
 use std::fmt::Write as _;
 
+use super::charts::simulator_steps;
 use super::format::{estimate, interval, micros, sig3};
 use super::{Loaded, RunInfo, Spread, Timing, normalized, overall, paper_rows};
 use alnlab_evaluate::timing::REPEATS;
@@ -14,13 +15,7 @@ use alnlab_summarize::paired::{Interval, Verdict};
 /// The simulator baseline at the fewest integration steps per frame that
 /// the variant ran: (model name, steps per frame).
 pub(super) fn coarsest_simulator<'a>(v: &'a Loaded) -> Option<(&'a str, u32)> {
-    v.timings
-        .iter()
-        .filter_map(|t| {
-            let steps = t.model.strip_prefix("simulator@")?.strip_suffix("/frame")?;
-            Some((t.model.as_str(), steps.parse().ok()?))
-        })
-        .min_by_key(|&(_, steps)| steps)
+    simulators(v).first().copied()
 }
 
 /// Every simulator setting the variant measured, fewest steps per frame
@@ -30,10 +25,7 @@ pub(super) fn simulators<'a>(v: &'a Loaded) -> Vec<(&'a str, u32)> {
         .timings
         .iter()
         .filter(|t| t.threads == 1)
-        .filter_map(|t| {
-            let steps = t.model.strip_prefix("simulator@")?.strip_suffix("/frame")?;
-            Some((t.model.as_str(), steps.parse().ok()?))
-        })
+        .filter_map(|t| Some((t.model.as_str(), simulator_steps(&t.model)?)))
         .collect();
     found.sort_by_key(|&(_, steps)| steps);
     found.dedup();

@@ -602,12 +602,6 @@ fn frontier_rows(entries: &[Entry]) -> Vec<super::synthesis::FrontierRow> {
         .collect()
 }
 
-/// "2.64 (2.62–2.71)": a time in µs and its range, without the unit (the
-/// column names it).
-fn micros_cell(t: &Timing) -> String {
-    t.spread().replace(" µs", "")
-}
-
 /// The results table: at most [`TABLE_ROWS`] rows.
 fn table(md: &mut String, variants: usize, entries: &[Entry], decisions: Option<&Decisions>) {
     let decision_column = decisions.map(|d| {
@@ -636,8 +630,8 @@ fn table(md: &mut String, variants: usize, entries: &[Entry], decisions: Option<
             },
             e.against_persistence
                 .map_or("—".into(), |d| d.difference_cell()),
-            e.single.map_or("—".into(), micros_cell),
-            e.batched.map_or("—".into(), micros_cell),
+            e.single.map_or("—".into(), Spread::spread_in_column),
+            e.batched.map_or("—".into(), Spread::spread_in_column),
         ];
         if let Some(d) = decisions {
             cells.push(d.ms[k].map_or("—".into(), sig3));

@@ -145,6 +145,12 @@ pub struct StageTime {
 /// the range supports ([`format::timing`]).
 pub(crate) trait Spread {
     fn spread(&self) -> String;
+
+    /// The same without the unit, for a column that names it: "2.64
+    /// (2.62–2.71)".
+    fn spread_in_column(&self) -> String {
+        self.spread().replace(" µs", "")
+    }
 }
 
 impl Spread for Timing {

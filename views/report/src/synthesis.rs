@@ -126,10 +126,7 @@ pub fn render_synthesis(reports: &Path) -> Result<(PathBuf, Vec<String>)> {
         }
         let mut simulators: Vec<(u32, Point)> = rows
             .iter()
-            .filter_map(|r| {
-                let steps = r.model.strip_prefix("simulator@")?.strip_suffix("/frame")?;
-                Some((steps.parse().ok()?, point(r)?))
-            })
+            .filter_map(|r| Some((charts::simulator_steps(&r.model)?, point(r)?)))
             .collect();
         simulators.sort_by_key(|&(steps, _)| steps);
         if simulators.is_empty() {
