@@ -187,6 +187,11 @@ def replicate_figures(artifacts):
     for model in models - {"aln", "persistence"}:
         figures[f"{model} mean - persistence mean"] = \
             figures[f"{model} mean"] - figures["persistence mean"]
+    # The ALN against each simulator setting: the difference of the two
+    # means over the same rows and variables (the stage pairs only the
+    # headline baselines).
+    for model in models - {"aln", "persistence", "linear", "boosted"}:
+        figures[f"aln - {model}"] = figures["aln mean"] - figures[f"{model} mean"]
     return figures
 
 
