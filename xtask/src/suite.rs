@@ -61,6 +61,11 @@ pub fn run(python: &Path) -> Result<(), Failure> {
         python: python.to_path_buf(),
         work: target_dir().join("xtask"),
     };
+    let marker = format!("{}-{}", std::process::id(), unix_nanos());
+    // SAFETY: the suite has started no thread yet, so nothing reads the
+    // environment while it changes; every process the steps start, and
+    // theirs, inherit the marker.
+    unsafe { std::env::set_var(MARKER, &marker) };
     let mut times = Vec::new();
     let mut failure = None;
     for (name, step) in STEPS {
@@ -73,6 +78,9 @@ pub fn run(python: &Path) -> Result<(), Failure> {
             break;
         }
     }
+    // Whatever a step left behind (a server's child, a stray run) is found
+    // by the marker it inherited, even when the step failed.
+    let left = nothing_left_running(&marker, Duration::from_secs(10));
     println!("\nwall time per step:");
     for (name, time) in &times {
         println!("  {:>7.1} s  {name}", time.as_secs_f64());
@@ -81,6 +89,13 @@ pub fn run(python: &Path) -> Result<(), Failure> {
     println!("  {total:>7.1} s  in all");
     let failed = usize::from(failure.is_some());
     println!("steps: {} passed, {failed} failed", times.len() - failed);
+    match left {
+        Ok(()) => println!("left running: nothing"),
+        Err(message) => {
+            println!("left running: {message}");
+            failure.get_or_insert(message);
+        }
+    }
     failure.map_or(Ok(()), |f| Err(Failure::Step(f)))
 }
 
@@ -428,6 +443,78 @@ impl Drop for MlflowServer {
     }
 }
 
+/// The environment variable every process the suite starts inherits, so
+/// that any still running when it ends can be found whatever its group.
+const MARKER: &str = "ALNLAB_SUITE_RUN";
+
+fn unix_nanos() -> u128 {
+    std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.as_nanos())
+}
+
+/// Waits up to `grace` for every process carrying this suite's marker
+/// (zombies aside) to end; those that outlive it are killed and named in
+/// the error.
+fn nothing_left_running(marker: &str, grace: Duration) -> Result<(), String> {
+    let deadline = Instant::now() + grace;
+    let mut left = marked_processes(marker);
+    while !left.is_empty() && Instant::now() < deadline {
+        std::thread::sleep(Duration::from_millis(200));
+        left = marked_processes(marker);
+    }
+    if left.is_empty() {
+        return Ok(());
+    }
+    for (pid, _) in &left {
+        let _ = Command::new("kill")
+            .args(["-KILL", &pid.to_string()])
+            .status();
+    }
+    let named: Vec<String> = left.iter().map(|(p, c)| format!("{p} ({c})")).collect();
+    Err(format!(
+        "{} process(es) the suite started were still running at its end, now killed: {}",
+        left.len(),
+        named.join(", ")
+    ))
+}
+
+/// Every process but this one whose environment holds `MARKER=marker` and
+/// that has not exited, as (pid, command line).
+fn marked_processes(marker: &str) -> Vec<(u32, String)> {
+    let entry = format!("{MARKER}={marker}");
+    let me = std::process::id();
+    let Ok(entries) = std::fs::read_dir("/proc") else {
+        return Vec::new();
+    };
+    let mut found = Vec::new();
+    for dir in entries.flatten() {
+        let Some(pid) = dir.file_name().to_str().and_then(|n| n.parse::<u32>().ok()) else {
+            continue;
+        };
+        if pid == me {
+            continue;
+        }
+        // Another user's process, or one that just ended: unreadable, skipped.
+        let Ok(environ) = std::fs::read(dir.path().join("environ")) else {
+            continue;
+        };
+        if !environ.split(|b| *b == 0).any(|v| v == entry.as_bytes()) {
+            continue;
+        }
+        let stat = std::fs::read_to_string(dir.path().join("stat")).unwrap_or_default();
+        let zombie = stat
+            .rsplit_once(')')
+            .is_some_and(|(_, after)| after.split_whitespace().next() == Some("Z"));
+        if !zombie {
+            let cmdline = std::fs::read(dir.path().join("cmdline")).unwrap_or_default();
+            let cmdline = String::from_utf8_lossy(&cmdline).replace('\0', " ");
+            found.push((pid, cmdline.trim().to_string()));
+        }
+    }
+    found
+}
+
 /// Sends `signal` to every process of the group `group` (with `kill`, the
 /// command: the suite needs no binding to libc for two signals).
 fn signal_group(group: u32, signal: &str) {
@@ -499,5 +586,29 @@ fn run_in_root(command: &mut Command) -> Result<(), String> {
         Ok(())
     } else {
         Err(format!("{shown} failed ({status})"))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_marked_process_left_running_is_found_killed_and_named() {
+        let marker = format!("test-{}", unix_nanos());
+        let mut child = Command::new("sleep")
+            .arg("60")
+            .env(MARKER, &marker)
+            .spawn()
+            .unwrap();
+        let found = marked_processes(&marker);
+        assert_eq!(found.len(), 1, "{found:?}");
+        assert_eq!(found[0].0, child.id());
+        assert_eq!(found[0].1, "sleep 60");
+        let error = nothing_left_running(&marker, Duration::from_secs(1)).unwrap_err();
+        assert!(error.contains("sleep 60"), "{error}");
+        child.wait().unwrap();
+        assert!(marked_processes(&marker).is_empty());
+        assert!(nothing_left_running(&marker, Duration::ZERO).is_ok());
     }
 }
