@@ -11,6 +11,7 @@
 use std::path::Path;
 
 use alnlab_common::table::Table;
+use alnlab_tables::levels::Levels;
 use arrow_array::{UInt32Array, UInt64Array};
 
 use crate::common::{alnlab, stderr, write_manifest};
@@ -106,8 +107,8 @@ fn the_circuit_equals_the_software_on_every_test_row_and_its_figures_reach_the_r
     // Three parts per learned variable; every test row simulated equal
     // (the stage fails otherwise).
     let figures = Table::read(&artifact(d, "circuit")).unwrap();
-    let levels = Table::read(&artifact(d, "levels")).unwrap();
-    let test_rows = alnlab_codes::split_rows(&levels, "test").unwrap().len() as u64;
+    let levels = Levels::read(&artifact(d, "levels")).unwrap();
+    let test_rows = levels.test_rows().len() as u64;
     let variables = figures.strings("variable").unwrap();
     let parts = figures.strings("part").unwrap();
     assert_eq!(figures.num_rows() % 3, 0);
@@ -249,8 +250,8 @@ fn a_small_forest_placed_and_routed_on_an_ice40_equals_the_software_in_nanosecon
     write_manifest(d, "fpga.toml", FPGA);
     let out = alnlab(d, &["-q", "run", "fpga.toml", "--reports", "reports"]);
     assert!(out.status.success(), "{}", stderr(&out));
-    let levels = Table::read(&artifact_of(d, "fpga", "levels")).unwrap();
-    let test_rows = alnlab_codes::split_rows(&levels, "test").unwrap().len() as u64;
+    let levels = Levels::read(&artifact_of(d, "fpga", "levels")).unwrap();
+    let test_rows = levels.test_rows().len() as u64;
     let gates = alnlab_circuit::measured::read(&artifact_of(d, "fpga", "circuit"))
         .unwrap()
         .unwrap();

@@ -184,7 +184,7 @@ pub const STAGES: &[Stage] = &[
             role: "trajectory",
             from: "simulate",
         }],
-        outputs: &[("pairs", alnlab_stride::PAIRS_FILE)],
+        outputs: &[("pairs", alnlab_tables::pairs::FILE)],
         archived: Archived::Always,
         every_replicate: true,
         params: |s| json(&s.stride),
@@ -225,7 +225,7 @@ pub const STAGES: &[Stage] = &[
         ],
         outputs: &[
             ("codebook", alnlab_quantize::CODEBOOK_FILE),
-            ("levels", alnlab_quantize::LEVELS_FILE),
+            ("levels", alnlab_tables::levels::FILE),
         ],
         archived: Archived::WithLevels,
         every_replicate: true,

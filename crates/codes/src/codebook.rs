@@ -1,6 +1,5 @@
 //! The codebook (`codebook.parquet`): every variable's range, level count and
-//! code, written by the quantize stage and read by every stage after it; and
-//! the two ways into `levels.parquet` ([`split_rows`], [`level_column`]).
+//! code, written by the quantize stage and read by every stage after it.
 //!
 //! The codebook is the one source of each learned variable's codec: a stage
 //! that needs to encode or decode levels builds it with
@@ -11,7 +10,7 @@ use std::sync::Arc;
 
 use alnlab_common::table::{self, Table};
 use alnlab_common::{Error, Provenance, Result};
-use arrow_array::{Array, BooleanArray, Float64Array, StringArray, UInt16Array, UInt64Array};
+use arrow_array::{Array, BooleanArray, Float64Array, StringArray, UInt64Array};
 
 use crate::codes::{Code, Codec};
 use crate::walk::WalkSpec;
@@ -60,78 +59,6 @@ pub fn unit_of(variable: &str) -> &'static str {
         "tau" => "N·m or N",
         _ => "",
     }
-}
-
-/// The rows of `levels.parquet` in the `split` given (`train` or `test`):
-/// those marked so or `both`.
-pub fn split_rows(levels: &Table, split: &str) -> Result<Vec<usize>> {
-    let column = levels.column::<StringArray>("split")?;
-    let mut rows = Vec::new();
-    for r in 0..levels.num_rows() {
-        match column.is_valid(r).then(|| column.value(r)) {
-            Some(s) if s == split || s == "both" => rows.push(r),
-            Some("train" | "test" | "both") => {}
-            other => {
-                return Err(Error::bad_file(
-                    levels.path(),
-                    format!(
-                        "row {r}: `split` is {}, expected train, test or both",
-                        other.map_or("null".to_string(), |s| format!("`{s}`"))
-                    ),
-                ));
-            }
-        }
-    }
-    Ok(rows)
-}
-
-/// The levels of `entries`' variables on one side of `rows` of
-/// `levels.parquet`, `[variable][row]`, each column checked as
-/// [`level_column`] checks it.
-pub fn level_rows(
-    levels: &Table,
-    side: &str,
-    entries: &[&Entry],
-    rows: &[usize],
-) -> Result<Vec<Vec<u16>>> {
-    entries
-        .iter()
-        .map(|e| {
-            let column = level_column(levels, side, e)?;
-            Ok(rows.iter().map(|&r| column[r]).collect())
-        })
-        .collect()
-}
-
-/// The levels of `entry`'s variable in `levels.parquet` on one side of the
-/// pairs (`x`, the current frame, or `y`, the next), checked against the
-/// codebook: no nulls, every level below the entry's level count.
-pub fn level_column<'a>(levels: &'a Table, side: &str, entry: &Entry) -> Result<&'a [u16]> {
-    let name = format!("{side}.{}", entry.variable);
-    let column = levels.column::<UInt16Array>(&name)?;
-    if let Some(r) = (0..column.len()).find(|&r| column.is_null(r)) {
-        return Err(Error::bad_file(
-            levels.path(),
-            format!("row {r}: `{name}` is null, expected a level"),
-        ));
-    }
-    let count = entry.quantizer.levels;
-    if let Some(r) = column
-        .values()
-        .iter()
-        .position(|&l| usize::from(l) >= count)
-    {
-        return Err(Error::bad_file(
-            levels.path(),
-            format!(
-                "row {r}: `{name}` is level {}, but the codebook gives `{}` {count} levels (0…{})",
-                column.value(r),
-                entry.variable,
-                count - 1
-            ),
-        ));
-    }
-    Ok(column.values())
 }
 
 /// Uniform quantization of one variable.

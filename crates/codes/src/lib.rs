@@ -8,8 +8,7 @@
 //! - [`bits`]: level columns → packed bit matrices.
 //! - [`residual`]: a variable's change of level as a target of its own
 //!   (clamped to ±k, on the circle for angles that wrap).
-//! - [`codebook`]: `codebook.parquet` read and written, and the columns of
-//!   `levels.parquet`.
+//! - [`codebook`]: `codebook.parquet` read and written.
 
 pub mod bits;
 pub mod codebook;
@@ -18,8 +17,6 @@ mod near;
 pub mod residual;
 pub mod walk;
 
-pub use codebook::{
-    Codebook, Entry, GROUPS, Quantizer, group_of, level_column, level_rows, split_rows, unit_of,
-};
+pub use codebook::{Codebook, Entry, GROUPS, Quantizer, group_of, unit_of};
 pub use codes::{Code, Codec};
 pub use residual::{DeltaSpec, Residual};

@@ -1,6 +1,7 @@
 //! The tables one stage writes and another stage (or the report) reads:
-//! `stats` (simulate → quantize), `predictions` and `rollout` (test →
-//! summarize).
+//! `stats` (simulate → quantize), `pairs` (stride → quantize, train, test),
+//! `levels` (quantize → train, test, plan, circuit), `predictions` and
+//! `rollout` (test → summarize).
 //! Stages never depend on each other, so such a table's contract cannot
 //! live in its writer's crate: each module here holds one table's file name,
 //! its columns, its one writer and its one reader, and every other crate
@@ -10,6 +11,8 @@
 //! `timings.parquet`, …) stays with that stage.
 
 mod dictionary;
+pub mod levels;
+pub mod pairs;
 pub mod predictions;
 pub mod rollout;
 pub mod stats;

@@ -1,4 +1,4 @@
-//! What the tables' tests share: a provenance, and a written table's rows
+//! What the tables' tests share: a provenance, a codebook entry, and a written table's rows
 //! taken again or a column of it edited, as damage would.
 
 use std::path::Path;
@@ -7,6 +7,26 @@ use std::sync::Arc;
 use alnlab_common::Provenance;
 use alnlab_common::table::{self, Table};
 use arrow_array::{Array, RecordBatch, UInt16Array, UInt32Array};
+
+/// A learned variable `variable` of 8 levels over [0, 1], binary-coded.
+pub(crate) fn entry(variable: &str) -> alnlab_codes::Entry {
+    alnlab_codes::Entry {
+        variable: variable.into(),
+        learned: true,
+        note: String::new(),
+        quantizer: alnlab_codes::Quantizer {
+            min: 0.0,
+            max: 1.0,
+            levels: 8,
+        },
+        code: alnlab_codes::codes::Code::Binary,
+        width: 3,
+        walk_step: 0,
+        walk_span: 0,
+        seed: 0,
+        clamped: 0,
+    }
+}
 
 pub(crate) fn provenance() -> Provenance {
     Provenance {
@@ -58,4 +78,21 @@ pub(crate) fn edit_u16_columns(path: &Path, edit: impl FnOnce(&mut [Option<Vec<u
         .collect();
     let batch = RecordBatch::try_new(table.batch.schema(), columns).unwrap();
     table::write_parquet(path, &batch, &provenance()).unwrap();
+}
+
+/// Three pairs' keys: two of one scene's runs, one of another; one of each
+/// split.
+pub(crate) fn keys() -> Vec<crate::pairs::Key> {
+    use crate::pairs::{Key, Split};
+    let key = |scene: &str, run, step, split| Key {
+        scene: scene.into(),
+        run,
+        step,
+        split,
+    };
+    vec![
+        key("worm", 0, 3, Split::Train),
+        key("worm", 1, 9, Split::Both),
+        key("chain", 0, 0, Split::Test),
+    ]
 }

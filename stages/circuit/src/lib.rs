@@ -40,10 +40,11 @@ use std::path::Path;
 
 use alnlab_aln::ModelKind;
 use alnlab_aln::runtime::Trained;
-use alnlab_codes::{Entry, level_rows, split_rows};
+use alnlab_codes::Entry;
 use alnlab_common::params::{Count, ParamError};
-use alnlab_common::table::Table;
 use alnlab_common::{Error, Progress, Provenance, Result, params};
+use alnlab_tables::levels::Levels;
+use alnlab_tables::pairs::Side;
 use serde::{Deserialize, Serialize};
 
 pub use check::Measurement;
@@ -167,13 +168,13 @@ pub fn measure_test_rows(
     progress: &dyn Progress,
 ) -> Result<(Measurement, usize)> {
     let circuit = circuit_of(trained, model_path)?;
-    let levels = Table::read(levels_path)?;
-    let mut test = split_rows(&levels, "test")?;
+    let levels = Levels::read(levels_path)?;
+    let mut test = levels.test_rows();
     if let Some(n) = rows {
         test.truncate(n);
     }
     let learned: Vec<&Entry> = trained.codebook.learned().collect();
-    let x = level_rows(&levels, "x", &learned, &test)?;
+    let x = levels.select(Side::Current, &learned, &test)?;
     let expected = trained.runtime().levels(&x, None);
     let scratch = tempfile::tempdir().map_err(|e| Error::io(&std::env::temp_dir(), e))?;
     let measurement = check::measure(

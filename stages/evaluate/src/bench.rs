@@ -9,10 +9,10 @@
 use std::path::Path;
 
 use alnlab_aln::ModelKind;
-use alnlab_aln::pwl::predict::{self, Path as Evaluation, Predictor, real_values};
+use alnlab_aln::pwl::predict::{self, Path as Evaluation, Predictor};
 use alnlab_codes::bits::encode_columns;
-use alnlab_common::table::Table;
 use alnlab_common::{Error, Result};
+use alnlab_tables::pairs::{Pairs, Side};
 use rayon::prelude::*;
 use serde::Serialize;
 
@@ -79,8 +79,8 @@ pub fn on_data(
     let simulator_one_step_one_thread_ns = simulator(&data, &test, trajectory_path, repeat)?;
     if data.model.header.model == ModelKind::PiecewiseLinear {
         let learned = data.learned();
-        let x = real_values(&Table::read(pairs_path)?, "x", &learned)?;
-        let train = alnlab_codes::split_rows(&data.levels, "train")?;
+        let x = Pairs::read(pairs_path)?.values(Side::Current, &learned)?;
+        let train = data.levels.train_rows();
         let predictor = Predictor::new(
             &data.model.pieces,
             &data.reads,
@@ -212,7 +212,7 @@ fn simulator(
     let frames = rollout::LoggedFrames::new(&log, &learned);
     let replays = alnlab_physics::replay::SceneReplay::from_log(&log)
         .map_err(|m| Error::bad_file(trajectory_path, m))?;
-    let starts = data.starts(test)?;
+    let starts = data.starts(test);
     let mut failed = Ok(());
     let spread = one_thread().install(|| {
         measure(repeat, test.rows.len(), || {

@@ -31,18 +31,18 @@ pub mod timings;
 use std::path::Path;
 
 use alnlab_aln::model::{Model, Reads};
-use alnlab_aln::pwl::predict::{Predictor, real_values, states};
+use alnlab_aln::pwl::predict::{Predictor, states};
 use alnlab_aln::runtime::{Runtime, Trained};
 use alnlab_aln::{ModelKind, Output};
 use alnlab_codes::codes::Codec;
-use alnlab_codes::{Codebook, Entry, level_rows, split_rows};
+use alnlab_codes::{Codebook, Entry};
 use alnlab_common::params::{self, Count, Fraction, ParamError};
 use alnlab_common::state_log::StateLog;
-use alnlab_common::table::Table;
 use alnlab_common::{Error, Progress, Provenance, Result};
+use alnlab_tables::levels::Levels;
+use alnlab_tables::pairs::{Pairs, Side, Split};
 use alnlab_tables::predictions::{self, Predictions};
 use alnlab_tables::rollout::Rollout;
-use arrow_array::{StringArray, UInt32Array};
 use serde::{Deserialize, Serialize};
 
 /// Version of what this stage writes (part of every cache key; 5: the
@@ -140,8 +140,7 @@ pub(crate) struct Data {
     pub outputs: Vec<Output>,
     /// A piecewise-linear model's outputs (none for a bit model).
     pub reads: Vec<Reads>,
-    pub levels: Table,
-    levels_path: std::path::PathBuf,
+    pub levels: Levels,
 }
 
 impl Data {
@@ -159,8 +158,7 @@ impl Data {
             codecs,
             outputs,
             reads,
-            levels: Table::read(levels_path)?,
-            levels_path: levels_path.to_path_buf(),
+            levels: Levels::read(levels_path)?,
             codebook,
         })
     }
@@ -170,40 +168,37 @@ impl Data {
         self.codebook.learned().collect()
     }
 
-    /// The levels of side `x` or `y` of `rows`, `[variable][row]`.
-    pub fn select(&self, side: &str, rows: &[usize]) -> Result<Vec<Vec<u16>>> {
-        level_rows(&self.levels, side, &self.learned(), rows)
+    /// The learned variables' levels on `side` of `rows`, `[variable][row]`.
+    pub fn select(&self, side: Side, rows: &[usize]) -> Result<Vec<Vec<u16>>> {
+        self.levels.select(side, &self.learned(), rows)
     }
 
     /// The test rows (at least one).
     pub fn test_rows(&self) -> Result<TestRows> {
-        let rows = split_rows(&self.levels, "test")?;
+        let rows = self.levels.test_rows();
         if rows.is_empty() {
-            return Err(Error::bad_file(&self.levels_path, "has no test rows"));
+            return Err(Error::bad_file(self.levels.path(), "has no test rows"));
         }
-        let split = self.levels.column::<StringArray>("split")?;
+        let keys = self.levels.keys();
         Ok(TestRows {
-            held_out: rows.iter().map(|&r| split.value(r) == "test").collect(),
-            x: self.select("x", &rows)?,
-            y: self.select("y", &rows)?,
+            held_out: rows.iter().map(|&r| keys[r].split == Split::Test).collect(),
+            x: self.select(Side::Current, &rows)?,
+            y: self.select(Side::Next, &rows)?,
             rows,
         })
     }
 
     /// Where each test row's frame is in the trajectory log.
-    pub fn starts(&self, test: &TestRows) -> Result<Vec<rollout::Start<'_>>> {
-        let scenes = self.levels.column::<StringArray>("scene")?;
-        let runs = self.levels.column::<UInt32Array>("run")?.values();
-        let steps = self.levels.column::<UInt32Array>("step")?.values();
-        Ok(test
-            .rows
+    pub fn starts(&self, test: &TestRows) -> Vec<rollout::Start<'_>> {
+        let keys = self.levels.keys();
+        test.rows
             .iter()
             .map(|&r| rollout::Start {
-                scene: scenes.value(r),
-                run: runs[r],
-                frame: steps[r],
+                scene: &keys[r].scene,
+                run: keys[r].run,
+                frame: keys[r].step,
             })
-            .collect())
+            .collect()
     }
 }
 
@@ -223,25 +218,25 @@ pub fn run(
 ) -> Result<()> {
     params.validate().map_err(|e| params::invalid("test", e))?;
     let data = Data::read(model_path, codebook_path, levels_path)?;
-    let pairs = Table::read(pairs_path)?;
-    if pairs.num_rows() != data.levels.num_rows() {
+    let pairs = Pairs::read(pairs_path)?;
+    if pairs.keys() != data.levels.keys() {
         return Err(Error::bad_file(
             pairs_path,
             format!(
-                "has {} rows, but the levels {} made from it have {}",
-                pairs.num_rows(),
+                "does not hold the pairs {} was made from ({} rows against {})",
                 levels_path.display(),
-                data.levels.num_rows()
+                pairs.len(),
+                data.levels.len()
             ),
         ));
     }
     let codecs = &data.codecs;
     let learned = data.learned();
     let test = data.test_rows()?;
-    let train_rows = split_rows(&data.levels, "train")?;
+    let train_rows = data.levels.train_rows();
     let (real_x, real_y) = (
-        real_values(&pairs, "x", &learned)?,
-        real_values(&pairs, "y", &learned)?,
+        pairs.values(Side::Current, &learned)?,
+        pairs.values(Side::Next, &learned)?,
     );
     let test_states = states(&real_x, &test.rows);
     let test_columns = pick_rows(&real_x, &test.rows);
@@ -299,7 +294,7 @@ pub fn run(
 
     // The simulator re-stepping each test row's logged frame.
     let log = StateLog::read(trajectory_path)?;
-    let starts = data.starts(&test)?;
+    let starts = data.starts(&test);
     let frames = rollout::LoggedFrames::new(&log, &learned);
     let replays = alnlab_physics::replay::SceneReplay::from_log(&log)
         .map_err(|m| Error::bad_file(trajectory_path, m))?;

@@ -44,16 +44,17 @@ use alnlab_aln::ModelKind;
 use alnlab_aln::linear::Linear;
 use alnlab_aln::pwl::predict::Predictor;
 use alnlab_aln::runtime::Trained;
-use alnlab_codes::{level_rows, split_rows};
 use alnlab_common::hash::mix_seed;
 use alnlab_common::params::{self, Count, Fraction, ParamError};
 use alnlab_common::state_log::{StateFrame, StateLayout, StateLog, StateLogWriter};
-use alnlab_common::table::{self, Table};
+use alnlab_common::table;
 use alnlab_common::{Error, Progress, Provenance, Result};
 use alnlab_physics::controller::ControllerKind;
 use alnlab_physics::dynamics::{Kinematics, State};
 use alnlab_physics::replay::SceneReplay;
 use alnlab_physics::{Prepared, Runner, Scene, foxglove, state_from_generalized};
+use alnlab_tables::levels::Levels;
+use alnlab_tables::pairs::Side;
 use arrow_array::builder::{ListBuilder, StringBuilder};
 use arrow_array::types::Float64Type;
 use arrow_array::{Array, Float64Array, ListArray, StringArray, UInt32Array};
@@ -359,11 +360,11 @@ pub fn run(
             .frames;
         let starts = start_states(p, logged, params, seed, trajectory_path)?;
         let trained = Trained::read(model_path, codebook_path)?;
-        let levels = Table::read(levels_path)?;
+        let levels = Levels::read(levels_path)?;
         let learned: Vec<_> = trained.codebook.learned().collect();
-        let train_rows = split_rows(&levels, "train")?;
-        let x_train = level_rows(&levels, "x", &learned, &train_rows)?;
-        let linear = Linear::fit(&x_train, &level_rows(&levels, "y", &learned, &train_rows)?);
+        let train_rows = levels.train_rows();
+        let x_train = levels.select(Side::Current, &learned, &train_rows)?;
+        let linear = Linear::fit(&x_train, &levels.select(Side::Next, &learned, &train_rows)?);
         let level_counts: Vec<usize> = trained.codecs.iter().map(|c| c.levels()).collect();
         // A piecewise-linear model reads real values; its compiled boxes
         // are cut where the training rows lie (their levels' values: the

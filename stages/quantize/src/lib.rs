@@ -14,12 +14,12 @@ pub mod bench;
 
 use std::collections::BTreeMap;
 use std::path::Path;
-use std::sync::Arc;
 
 use alnlab_common::params::{self, Count, ParamError};
-use alnlab_common::table::{self, Table};
 use alnlab_common::{Error, Progress, Provenance, Result};
-use arrow_array::{Array, StringArray, UInt16Array, UInt32Array};
+use alnlab_tables::levels;
+use alnlab_tables::pairs::{Pairs, Side};
+use arrow_array::Array;
 use serde::{Deserialize, Serialize};
 
 use alnlab_codes::codes::{Code, binary_width};
@@ -30,8 +30,6 @@ use alnlab_codes::{Codebook, Entry, GROUPS, Quantizer, group_of};
 pub const FORMAT_VERSION: u32 = 3;
 /// File name of the codebook.
 pub const CODEBOOK_FILE: &str = "codebook.parquet";
-/// File name of the levels table.
-pub const LEVELS_FILE: &str = "levels.parquet";
 
 /// Where variable ranges come from.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
@@ -182,15 +180,9 @@ pub fn run(
     params
         .validate()
         .map_err(|e| params::invalid("quantize", e))?;
-    let pairs = Table::read(pairs_path)?;
+    let pairs = Pairs::read(pairs_path)?;
     let stats = alnlab_tables::stats::read(stats_path)?;
-    let variables: Vec<String> = pairs
-        .batch
-        .schema()
-        .fields()
-        .iter()
-        .filter_map(|f| f.name().strip_prefix("x.").map(str::to_string))
-        .collect();
+    let variables = pairs.variables();
     for name in params.range.keys() {
         let known = variables.iter().any(|v| {
             v == name || group_of(v) == name || v.split('.').next() == Some(name.as_str())
@@ -207,10 +199,11 @@ pub fn run(
     progress.start("quantize", variables.len() as u64, "variables");
 
     let mut entries = Vec::new();
-    let mut columns: Vec<(String, Arc<dyn Array>)> = Vec::new();
-    for v in &variables {
-        let x = pairs.finite_f64_column(&format!("x.{v}"))?;
-        let y = pairs.finite_f64_column(&format!("y.{v}"))?;
+    // The learned variables' levels, `[variable][row]`, on each side.
+    let (mut x_levels, mut y_levels) = (Vec::new(), Vec::new());
+    for v in variables {
+        let x = pairs.column(Side::Current, v)?;
+        let y = pairs.column(Side::Next, v)?;
         let (lo, hi) = observed
             .get(v.as_str())
             .copied()
@@ -268,50 +261,39 @@ pub fn run(
             .map_err(|e| Error::Invalid(format!("quantize: {v}: {e}")))?;
         entry.width = codec.width();
         if entry.learned {
-            for (prefix, values) in [("x", x), ("y", y)] {
+            for (values, levels) in [(x, &mut x_levels), (y, &mut y_levels)] {
                 let mut clamped = 0u64;
-                let levels: UInt16Array = values
-                    .values()
-                    .iter()
-                    .map(|&value| {
-                        let (level, was_clamped) = entry.quantizer.level(value);
-                        clamped += u64::from(was_clamped);
-                        level
-                    })
-                    .collect::<Vec<_>>()
-                    .into();
+                levels.push(
+                    values
+                        .values()
+                        .iter()
+                        .map(|&value| {
+                            let (level, was_clamped) = entry.quantizer.level(value);
+                            clamped += u64::from(was_clamped);
+                            level
+                        })
+                        .collect(),
+                );
                 entry.clamped += clamped;
-                columns.push((format!("{prefix}.{v}"), Arc::new(levels)));
             }
         }
         entries.push(entry);
         progress.advance(1);
     }
-    // x. columns first, then y., in variable order.
-    columns.sort_by_key(|(name, _)| !name.starts_with("x."));
-    let mut batch_columns: Vec<(&str, Arc<dyn Array>)> = vec![
-        (
-            "scene",
-            Arc::new(pairs.column::<StringArray>("scene")?.clone()),
-        ),
-        ("run", Arc::new(pairs.column::<UInt32Array>("run")?.clone())),
-        (
-            "step",
-            Arc::new(pairs.column::<UInt32Array>("step")?.clone()),
-        ),
-        (
-            "split",
-            Arc::new(pairs.column::<StringArray>("split")?.clone()),
-        ),
-    ];
-    batch_columns.extend(columns.iter().map(|(n, a)| (n.as_str(), a.clone())));
-    let codebook = Codebook { entries };
-    codebook.write(&out_dir.join(CODEBOOK_FILE), provenance)?;
-    table::write_parquet(
-        &out_dir.join(LEVELS_FILE),
-        &table::batch(batch_columns),
+    let learned: Vec<&str> = entries
+        .iter()
+        .filter(|e| e.learned)
+        .map(|e| e.variable.as_str())
+        .collect();
+    levels::write(
+        &out_dir.join(levels::FILE),
+        pairs.keys(),
+        &learned,
+        &x_levels,
+        &y_levels,
         provenance,
-    )
+    )?;
+    Codebook { entries }.write(&out_dir.join(CODEBOOK_FILE), provenance)
 }
 
 /// A variable whose spread is at most this fraction of its group's scale
@@ -353,14 +335,22 @@ mod tests {
     use super::*;
     use alnlab_common::Silent;
     use alnlab_common::params::Positive;
-    use arrow_array::Float64Array;
+    use alnlab_common::table::{self, Table};
+    use alnlab_tables::pairs;
+    use arrow_array::{Float64Array, UInt16Array};
+    use std::sync::Arc;
 
-    /// Simulates a short worm run and strides it; returns the folder.
     /// Simulates `scene` with `seed` and strides it; returns the folder.
     fn simulated(scene: alnlab_simulate::Scene, seed: u64) -> tempfile::TempDir {
+        simulated_scenes(vec![scene], seed)
+    }
+
+    /// Simulates `scenes` together with `seed` and strides them; returns
+    /// the folder.
+    fn simulated_scenes(scenes: Vec<alnlab_simulate::Scene>, seed: u64) -> tempfile::TempDir {
         let dir = tempfile::tempdir().unwrap();
         let sim = alnlab_simulate::Params {
-            scene: vec![scene],
+            scene: scenes,
             ..Default::default()
         };
         let provenance = Provenance::default();
@@ -386,7 +376,7 @@ mod tests {
         run(
             params,
             5,
-            &dir.join(alnlab_stride::PAIRS_FILE),
+            &dir.join(pairs::FILE),
             &dir.join(alnlab_simulate::STATS_FILE),
             &Provenance::default(),
             dir,
@@ -403,8 +393,8 @@ mod tests {
         };
         quantize(&params, dir.path()).unwrap();
         let codebook = Codebook::read(&dir.path().join(CODEBOOK_FILE)).unwrap();
-        let levels = Table::read(&dir.path().join(LEVELS_FILE)).unwrap();
-        let pairs = Table::read(&dir.path().join(alnlab_stride::PAIRS_FILE)).unwrap();
+        let levels = Table::read(&dir.path().join(levels::FILE)).unwrap();
+        let pairs = Table::read(&dir.path().join(pairs::FILE)).unwrap();
         assert_eq!(levels.num_rows(), pairs.num_rows());
         assert!(codebook.learned().count() > 40);
         for entry in codebook.learned() {
@@ -449,7 +439,7 @@ mod tests {
             (-1.0, 1.0),
             "a manual group range wins"
         );
-        let pairs = Table::read(&dir.path().join(alnlab_stride::PAIRS_FILE)).unwrap();
+        let pairs = Table::read(&dir.path().join(pairs::FILE)).unwrap();
         let outside = ["x", "y"]
             .iter()
             .flat_map(|s| {
@@ -460,6 +450,38 @@ mod tests {
             .count() as u64;
         assert!(outside > 0);
         assert_eq!(omega.clamped, outside);
+    }
+
+    #[test]
+    fn a_variable_missing_in_one_scene_is_not_learned() {
+        // A pendulum's first link hangs from a fixed hinge: it has no
+        // linear velocity a worm's free root has.
+        let scene = |name: &str, kind| alnlab_simulate::Scene {
+            name: name.into(),
+            kind,
+            duration: Positive(1.0),
+            ..Default::default()
+        };
+        let dir = simulated_scenes(
+            vec![
+                scene("worm", alnlab_simulate::SceneKind::Worm),
+                scene("pendulum", alnlab_simulate::SceneKind::Pendulum),
+            ],
+            3,
+        );
+        quantize(&Params::default(), dir.path()).unwrap();
+        let codebook = Codebook::read(&dir.path().join(CODEBOOK_FILE)).unwrap();
+        let missing: Vec<&Entry> = codebook
+            .entries
+            .iter()
+            .filter(|e| e.note == "missing in some scene")
+            .collect();
+        assert!(!missing.is_empty(), "{:?}", codebook.entries);
+        assert!(missing.iter().all(|e| !e.learned));
+        let levels = alnlab_tables::levels::Levels::read(&dir.path().join(levels::FILE)).unwrap();
+        let scenes: std::collections::BTreeSet<&str> =
+            levels.keys().iter().map(|k| k.scene.as_str()).collect();
+        assert_eq!(scenes, ["pendulum", "worm"].into());
     }
 
     #[test]
@@ -486,7 +508,7 @@ mod tests {
             "{:?}",
             codebook.entries[0].note
         );
-        let levels = Table::read(&dir.path().join(LEVELS_FILE)).unwrap();
+        let levels = Table::read(&dir.path().join(levels::FILE)).unwrap();
         assert_eq!(
             levels.batch.num_columns(),
             4,
@@ -607,7 +629,7 @@ mod tests {
     #[test]
     fn non_finite_values_name_row_and_column() {
         let dir = data();
-        let pairs_path = dir.path().join(alnlab_stride::PAIRS_FILE);
+        let pairs_path = dir.path().join(pairs::FILE);
         let pairs = Table::read(&pairs_path).unwrap();
         let mut columns: Vec<(String, Arc<dyn Array>)> = Vec::new();
         for (field, column) in pairs

@@ -9,19 +9,17 @@
 //! (f64) for the union of the scenes' variables (null where a scene lacks one).
 
 use std::path::Path;
-use std::sync::Arc;
 
 use alnlab_common::hash::{fnv1a, mix_seed};
 use alnlab_common::params::{self, Count, Fraction, ParamError};
 use alnlab_common::state_log::{StateFrame, StateLog};
-use alnlab_common::{Error, Progress, Provenance, Result, table};
-use arrow_array::{Array, Float64Array, StringArray, UInt32Array};
+use alnlab_common::{Error, Progress, Provenance, Result};
+// A pair's split is its role here: `Split` is the parameter that assigns them.
+use alnlab_tables::pairs::{self, Key, Side, Split as Role};
 use serde::{Deserialize, Serialize};
 
 /// Version of what this stage writes (part of every cache key).
 pub const FORMAT_VERSION: u32 = 3;
-/// File name of the pairs table.
-pub const PAIRS_FILE: &str = "pairs.parquet";
 
 /// How rows are assigned to training and testing.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
@@ -106,24 +104,6 @@ struct Pair<'a> {
     y: &'a StateFrame,
 }
 
-/// Which split a row is in.
-#[derive(Clone, Copy, PartialEq, Debug)]
-enum Role {
-    Train,
-    Test,
-    Both,
-}
-
-impl Role {
-    fn name(self) -> &'static str {
-        match self {
-            Role::Train => "train",
-            Role::Test => "test",
-            Role::Both => "both",
-        }
-    }
-}
-
 /// Reads `trajectory`, writes `out_dir/pairs.parquet`.
 pub fn run(
     params: &Params,
@@ -194,61 +174,25 @@ pub fn run(
                 .collect()
         })
         .collect();
-    // `after` picks the successor frame (`y.` columns) instead of the frame.
-    let column = |k: usize, after: bool| -> Arc<dyn Array> {
-        let values: Float64Array = chosen
-            .iter()
-            .map(|(p, _)| {
-                let frame = if after { p.y } else { p.x };
-                index[p.scene][k].map(|i| frame.variables[i])
-            })
-            .collect();
-        Arc::new(values)
+    let keys: Vec<Key> = chosen
+        .iter()
+        .map(|(p, role)| Key {
+            scene: scene_name(p).to_string(),
+            run: p.x.run,
+            step: p.x.frame,
+            split: *role,
+        })
+        .collect();
+    let value = |side: Side, k: usize, row: usize| {
+        let (p, _) = chosen[row];
+        let frame = if side == Side::Next { p.y } else { p.x };
+        index[p.scene][k].map(|i| frame.variables[i])
     };
-    let x_names: Vec<String> = variables.iter().map(|v| format!("x.{v}")).collect();
-    let y_names: Vec<String> = variables.iter().map(|v| format!("y.{v}")).collect();
-    let mut columns: Vec<(&str, Arc<dyn Array>)> = vec![
-        (
-            "scene",
-            Arc::new(
-                chosen
-                    .iter()
-                    .map(|(p, _)| Some(scene_name(p)))
-                    .collect::<StringArray>(),
-            ),
-        ),
-        (
-            "run",
-            Arc::new(chosen.iter().map(|(p, _)| p.x.run).collect::<UInt32Array>()),
-        ),
-        (
-            "step",
-            Arc::new(
-                chosen
-                    .iter()
-                    .map(|(p, _)| p.x.frame)
-                    .collect::<UInt32Array>(),
-            ),
-        ),
-        (
-            "split",
-            Arc::new(
-                chosen
-                    .iter()
-                    .map(|(_, r)| Some(r.name()))
-                    .collect::<StringArray>(),
-            ),
-        ),
-    ];
-    for (k, name) in x_names.iter().enumerate() {
-        columns.push((name, column(k, false)));
-    }
-    for (k, name) in y_names.iter().enumerate() {
-        columns.push((name, column(k, true)));
-    }
-    table::write_parquet(
-        &out_dir.join(PAIRS_FILE),
-        &table::batch(columns),
+    pairs::write(
+        &out_dir.join(pairs::FILE),
+        &keys,
+        &variables,
+        value,
         provenance,
     )
 }
@@ -337,6 +281,7 @@ mod tests {
     use super::*;
     use alnlab_common::Silent;
     use alnlab_common::table::Table;
+    use arrow_array::{Array, StringArray, UInt32Array};
 
     #[test]
     fn every_row_matches_the_log() {
@@ -360,7 +305,7 @@ mod tests {
 
         let log = StateLog::read(&trajectory).unwrap();
         let frames = &log.scenes[0].frames;
-        let pairs = Table::read(&dir.path().join(PAIRS_FILE)).unwrap();
+        let pairs = Table::read(&dir.path().join(pairs::FILE)).unwrap();
         // 1001 frames per run: frames 4, 13, …, 994 have successors.
         assert_eq!(pairs.num_rows(), 2 * 111);
         let runs = pairs.column::<UInt32Array>("run").unwrap();

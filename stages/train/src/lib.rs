@@ -21,14 +21,15 @@ mod threshold;
 
 use std::path::Path;
 
+use alnlab_codes::Codebook;
 use alnlab_codes::bits::encode;
 use alnlab_codes::codes::{Code, Codec};
 use alnlab_codes::residual::{DeltaSpec, change};
-use alnlab_codes::{Codebook, level_column, split_rows};
 use alnlab_common::hash::sha256_file;
 use alnlab_common::params::{self, Count, Fraction, ParamError};
-use alnlab_common::table::Table;
 use alnlab_common::{Error, Progress, Provenance, Result};
+use alnlab_tables::levels::Levels;
+use alnlab_tables::pairs::{Pairs, Side};
 use serde::{Deserialize, Serialize};
 
 use alnlab_aln::model::{Header, Model};
@@ -202,7 +203,7 @@ pub fn run(
 ) -> Result<()> {
     params.validate().map_err(|e| params::invalid("train", e))?;
     let codebook = Codebook::read(codebook_path)?;
-    let levels = Table::read(levels_path)?;
+    let levels = Levels::read(levels_path)?;
     let learned: Vec<_> = codebook.learned().collect();
     if learned.is_empty() {
         return Err(Error::bad_file(
@@ -211,7 +212,7 @@ pub fn run(
         ));
     }
     let codecs = codebook.learned_codecs(codebook_path)?;
-    let rows = split_rows(&levels, "train")?;
+    let rows = levels.train_rows();
     if rows.is_empty() {
         return Err(Error::bad_file(levels_path, "has no training rows"));
     }
@@ -223,7 +224,7 @@ pub fn run(
                     .into(),
             ));
         }
-        let pairs = Table::read(pairs_path)?;
+        let pairs = Pairs::read(pairs_path)?;
         let predicted = learned
             .iter()
             .filter(|e| !(params.controls == Controls::Given && piecewise::is_control(&e.variable)))
@@ -238,7 +239,6 @@ pub fn run(
             &learned,
             &levels,
             &pairs,
-            pairs_path,
             &rows,
             &tick,
         )?;
@@ -274,11 +274,11 @@ pub fn run(
     }
     let x_columns: Vec<&[u16]> = learned
         .iter()
-        .map(|e| level_column(&levels, "x", e))
+        .map(|e| levels.column(Side::Current, e))
         .collect::<Result<_>>()?;
     let y_columns: Vec<&[u16]> = learned
         .iter()
-        .map(|e| level_column(&levels, "y", e))
+        .map(|e| levels.column(Side::Next, e))
         .collect::<Result<_>>()?;
     let codec_refs: Vec<&Codec> = codecs.iter().collect();
     let x_bits = encode(&codec_refs, &x_columns);

@@ -17,12 +17,13 @@
 //!   are read, never predicted.
 
 use alnlab_aln::linear::least_absolute;
-use alnlab_aln::pwl::predict::{change, real_values};
+use alnlab_aln::pwl::predict::change;
 use alnlab_aln::pwl::{MAX_PIECES, Tree};
+use alnlab_codes::Entry;
 use alnlab_codes::residual::change as level_change;
-use alnlab_codes::{Entry, level_column};
-use alnlab_common::table::Table;
 use alnlab_common::{Error, Result};
+use alnlab_tables::levels::Levels;
+use alnlab_tables::pairs::{Pairs, Side};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
@@ -174,25 +175,25 @@ pub fn train(
     controls_given: bool,
     seed: u64,
     learned: &[&Entry],
-    levels: &Table,
-    pairs: &Table,
-    pairs_path: &std::path::Path,
+    levels: &Levels,
+    pairs: &Pairs,
     rows: &[usize],
     tick: &(dyn Fn() + Sync),
 ) -> Result<Vec<TrainedTree>> {
-    if pairs.num_rows() != levels.num_rows() {
+    if pairs.keys() != levels.keys() {
         return Err(Error::bad_file(
-            pairs_path,
+            pairs.path(),
             format!(
-                "has {} rows, but the levels made from it have {}",
-                pairs.num_rows(),
-                levels.num_rows()
+                "does not hold the pairs {} was made from ({} rows against {})",
+                levels.path().display(),
+                pairs.len(),
+                levels.len()
             ),
         ));
     }
     let (x, y) = (
-        real_values(pairs, "x", learned)?,
-        real_values(pairs, "y", learned)?,
+        pairs.values(Side::Current, learned)?,
+        pairs.values(Side::Next, learned)?,
     );
     let predicted: Vec<usize> = (0..learned.len())
         .filter(|&v| !(controls_given && is_control(&learned[v].variable)))
@@ -201,14 +202,14 @@ pub fn train(
         Some(count) => {
             let x_levels: Vec<&[u16]> = learned
                 .iter()
-                .map(|e| level_column(levels, "x", e))
+                .map(|e| levels.column(Side::Current, e))
                 .collect::<Result<_>>()?;
             // Scored against what the tree learns: the change of level (on
             // the circle for an angle), shifted to be non-negative.
             let changes: Vec<Vec<u16>> = predicted
                 .iter()
                 .map(|&v| {
-                    let y = level_column(levels, "y", learned[v])?;
+                    let y = levels.column(Side::Next, learned[v])?;
                     let period = learned[v].period();
                     let top = i32::from(u16::MAX / 2);
                     Ok(x_levels[v]

@@ -12,8 +12,6 @@
 //! by the test stage). One row at a time, nothing is allocated.
 
 use alnlab_codes::{Entry, Quantizer};
-use alnlab_common::Result;
-use alnlab_common::table::Table;
 
 use super::dtree::{self, DecisionTree};
 use super::lazy::Lazy;
@@ -648,20 +646,6 @@ pub fn change(entry: &Entry, x: f64, y: f64) -> f64 {
         d = (d + pi).rem_euclid(std::f64::consts::TAU) - pi;
     }
     d / spacing
-}
-
-/// The real values `[variable][row]` of the `learned` variables on side
-/// `x` (current) or `y` (next) of `pairs.parquet`.
-pub fn real_values(pairs: &Table, side: &str, learned: &[&Entry]) -> Result<Vec<Vec<f64>>> {
-    learned
-        .iter()
-        .map(|e| {
-            Ok(pairs
-                .f64_column(&format!("{side}.{}", e.variable))?
-                .values()
-                .to_vec())
-        })
-        .collect()
 }
 
 /// Rows `rows` of `columns` (`[variable][row]`) as states, one after
