@@ -11,7 +11,7 @@ use std::sync::Arc;
 use alnlab::records::RunRecord;
 use alnlab_common::Provenance;
 use alnlab_common::table::{Table, batch, write_parquet};
-use arrow_array::{Array, Float64Array, RecordBatch, StringArray, UInt16Array};
+use arrow_array::{Array, Float64Array, RecordBatch, StringArray, UInt16Array, UInt32Array};
 
 use crate::common::{TINY, alnlab, case, check_all, stderr};
 
@@ -616,6 +616,45 @@ fn damaged_and_hostile_files_given_to_stages_are_refused() {
             Some(&out),
         ));
     }
+
+    // Pairs that are not the ones the levels were made from: one pair's
+    // step moved.
+    let pairs = Table::read(&art("pairs")).unwrap();
+    let mut steps = pairs
+        .column::<UInt32Array>("step")
+        .unwrap()
+        .values()
+        .to_vec();
+    steps[3] += 1;
+    replaced(
+        &pairs,
+        "step",
+        Arc::new(UInt32Array::from(steps)),
+        &d.join("pairs-other.parquet"),
+    );
+    let out = fresh_out();
+    cases.push(case(
+        "pairs other than the levels were made from",
+        &[
+            "test",
+            "--manifest",
+            "tiny.toml",
+            "--trajectory",
+            &s(&trajectory),
+            "--model",
+            &s(&model),
+            "--codebook",
+            &good_codebook,
+            "--levels",
+            &good_levels,
+            "--pairs",
+            "pairs-other.parquet",
+            "--out",
+            &s(&out),
+        ],
+        &["pairs-other.parquet", "does not hold the pairs"],
+        Some(&out),
+    ));
 
     // Predictions, to summarize.
     flipped(

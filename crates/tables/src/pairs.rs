@@ -226,22 +226,42 @@ impl Pairs {
         self.table.path()
     }
 
-    /// `variable`'s values on `side`: null where a pair's scene has no
-    /// such variable, finite wherever present, or the file is refused naming
-    /// the row.
+    /// `variable`'s values on `side`: null on every pair of a scene that
+    /// has no such variable, finite on every pair of one that has it; a
+    /// value that breaks this is refused naming its row.
     pub fn column(&self, side: Side, variable: &str) -> Result<&Float64Array> {
         let name = side.column(variable);
         let values = self.table.f64_column(&name)?;
-        match (0..values.len()).find(|&r| values.is_valid(r) && !values.value(r).is_finite()) {
-            Some(r) => Err(Error::bad_file(
-                self.path(),
-                format!(
-                    "row {r}, column `{name}`: {} is not a finite number",
-                    values.value(r)
-                ),
-            )),
-            None => Ok(values),
+        // Per scene, whether its first pair has the variable.
+        let mut has: Vec<(&str, bool)> = Vec::new();
+        for (r, key) in self.keys.iter().enumerate() {
+            let present = values.is_valid(r);
+            if present && !values.value(r).is_finite() {
+                return Err(Error::bad_file(
+                    self.path(),
+                    format!(
+                        "row {r}, column `{name}`: {} is not a finite number",
+                        values.value(r)
+                    ),
+                ));
+            }
+            match has.iter().find(|(scene, _)| *scene == key.scene) {
+                Some(&(_, first)) if first != present => {
+                    return Err(Error::bad_file(
+                        self.path(),
+                        format!(
+                            "row {r}, column `{name}`: {} where other pairs of scene `{}` {}",
+                            if present { "a value" } else { "null" },
+                            key.scene,
+                            if first { "have a value" } else { "are null" }
+                        ),
+                    ));
+                }
+                Some(_) => {}
+                None => has.push((&key.scene, present)),
+            }
         }
+        Ok(values)
     }
 
     /// The values `[variable][row]` of the `learned` variables on `side`:
@@ -334,5 +354,22 @@ mod tests {
         let pairs = Pairs::read(&path).unwrap();
         let message = pairs.column(Side::Current, "a").unwrap_err().to_string();
         assert!(message.contains("row 1, column `x.a`: NaN"), "{message}");
+        // Rows 0 and 1 are both of scene `worm`.
+        write(
+            &path,
+            &keys(),
+            &["a"],
+            |_, _, r| (r != 1).then_some(0.0),
+            &provenance(),
+        )
+        .unwrap();
+        let pairs = Pairs::read(&path).unwrap();
+        let message = pairs.column(Side::Next, "a").unwrap_err().to_string();
+        assert!(
+            message.contains(
+                "row 1, column `y.a`: null where other pairs of scene `worm` have a value"
+            ),
+            "{message}"
+        );
     }
 }
