@@ -196,6 +196,30 @@ fn manifests_that_cannot_run_are_refused_at_check() {
             "[experimen]",
             "experimen",
         ),
+        (
+            "a payload on a link the scene lacks",
+            "duration = 0.5",
+            "duration = 0.5\nplant = { payload = { link = \"9\", mass = 1.0 } }",
+            "plant.payload.link",
+        ),
+        (
+            "a plant without mass",
+            "duration = 0.5",
+            "duration = 0.5\nplant = { mass_scale = 0.0 }",
+            "plant.mass_scale",
+        ),
+        (
+            "Coulomb friction at ball hinges",
+            "duration = 0.5",
+            "duration = 0.5\nplant = { coulomb_friction = 0.2 }",
+            "plant.coulomb_friction",
+        ),
+        (
+            "unknown plant key",
+            "duration = 0.5",
+            "duration = 0.5\nplant = { mass = 2.0 }",
+            "mass",
+        ),
         ("zero leaves", "leaves = 8", "leaves = 0", "leaves"),
         ("zero stride", "n = 1", "n = 0", "n"),
     ];

@@ -3,15 +3,18 @@
 Usage: python tests/robots.py ALNLAB WORK_DIR [--json FILE]
 
 For every robot below — the two vendored under robots/ and further robots
-of PyPI's example-robot-data, read from the installed package — writes a
+of PyPI's example-robot-data, read from the installed package, and the UR5
+as a plant that departs from its description (Pinocchio's model perturbed
+to match) — writes a
 manifest of one 10 s run with a random controller into WORK_DIR, runs
 `ALNLAB simulate` on it, and checks every logged frame with Pinocchio (PyPI
 `pin`), which loads the same URDF on its own:
 
 - joint accelerations: `pinocchio.aba` from the logged state, with each
-  joint's total effort (the control effort `tau.<joint>` plus the passive
-  effort `joint.<joint>.passive` logged beside the state: damping, friction,
-  limit springs) and, for a robot on the floor, the contact forces
+  joint's total effort (the control effort `tau.<joint>`, or the effort its
+  actuator applied, `joint.<joint>.applied`, where a plant logs it, plus the
+  passive effort `joint.<joint>.passive` logged beside the state: damping,
+  friction, limit springs) and, for a robot on the floor, the contact forces
   (`f_E`, `g_E`) as external forces; a free base's accelerations too;
 - link velocities `v.<link>`, `omega.<link>` with `getFrameVelocity`
   (LOCAL);
@@ -70,6 +73,15 @@ def robots():
          {"amplitude": 5.0, "link_velocities": ["slide", "arm"]}),
         ("anymal", data / "anymal_c_simple_description/urdf/anymal.urdf",
          {"base": "free", "amplitude": 5.0, "initial_height": 1.0, "link_velocities": ["LF_SHANK"]}),
+        # A plant that is not its description (issue 43): heavier links, a
+        # payload on the flange (a link merged into the last body), friction
+        # and weak actuators — checked against Pinocchio's model perturbed
+        # the same way.
+        ("ur5-plant", ROOT / "robots/ur5/ur5_robot.urdf",
+         {"link_velocities": ["wrist_3_link"], "amplitude": 30.0,
+          "plant": {"mass_scale": 1.2, "viscous_friction": 0.5, "coulomb_friction": 0.3,
+                    "actuator_gain": 0.9,
+                    "payload": {"link": "tool0", "mass": 2.0, "offset": [0.0, 0.02, 0.05]}}}),
     ]
 
 
@@ -81,14 +93,18 @@ def manifest(name: str, urdf: Path, fields: dict) -> str:
         f'controller = {{ kind = "random", amplitude = [{fields["amplitude"]}] }}',
     ]
     for key, value in fields.items():
-        if key == "amplitude":
-            continue
-        if isinstance(value, dict):
-            value = "{ " + ", ".join(f"{k} = {json.dumps(v)}" for k, v in value.items()) + " }"
-        else:
-            value = json.dumps(value)
-        lines.append(f"{key} = {value}")
+        if key != "amplitude":
+            lines.append(f"{key} = {toml_value(value)}")
     return "\n".join(lines) + "\n"
+
+
+def toml_value(value) -> str:
+    """`value` as TOML: tables inline, strings as JSON writes them."""
+    if isinstance(value, dict):
+        return "{ " + ", ".join(f"{k} = {toml_value(v)}" for k, v in value.items()) + " }"
+    if isinstance(value, list):
+        return "[" + ", ".join(toml_value(v) for v in value) + "]"
+    return json.dumps(value)
 
 
 def read_log(path: Path):
@@ -108,6 +124,21 @@ def read_log(path: Path):
     return records["alnlab.scene"], json.loads(records["alnlab.model"]["json"]), frames, tf
 
 
+def perturb(model, plant: dict) -> None:
+    """Pinocchio's model made the plant: every body's mass and rotational
+    inertia scaled, and the payload's point mass added to the body its link
+    is fixed to, at the offset in that link's frame."""
+    scale = plant.get("mass_scale", 1.0)
+    for i in range(model.njoints):
+        inertia = model.inertias[i]
+        model.inertias[i] = pin.Inertia(inertia.mass * scale, inertia.lever, inertia.inertia * scale)
+    payload = plant.get("payload")
+    if payload:
+        frame = model.frames[model.getFrameId(payload["link"], pin.BODY)]
+        at = frame.placement.act(np.array(payload["offset"], dtype=float))
+        model.inertias[frame.parentJoint] += pin.Inertia(payload["mass"], at, np.zeros((3, 3)))
+
+
 def check(name: str, log: Path) -> dict:
     scene_record, model_record, frames, tf = read_log(log)
     scene = json.loads(scene_record["json"])
@@ -115,6 +146,8 @@ def check(name: str, log: Path) -> dict:
     free = scene["base"] == "free"
     model = pin.buildModelFromXML(urdf, pin.JointModelFreeFlyer()) if free else pin.buildModelFromXML(urdf)
     model.gravity.linear = np.array(scene["gravity"])
+    plant = scene.get("plant") or {}
+    perturb(model, plant)
     data = model.createData()
     links = model_record["links"]
     joints = [l["joint_name"] for l in links[1:]]
@@ -150,7 +183,12 @@ def check(name: str, log: Path) -> dict:
             else:
                 q[joint.idx_q] = angle
             v[joint.idx_v] = rate
-            tau[joint.idx_v] = x.get(f"tau.{j}", 0.0) + x[f"joint.{j}.passive"]
+            # The actuator's effort where the plant logs it (a gain), else
+            # the command.
+            effort = x.get(f"joint.{j}.applied", x.get(f"tau.{j}", 0.0))
+            if plant.get("actuator_gain", 1.0) != 1.0:
+                assert f"joint.{j}.applied" in x, (name, j)
+            tau[joint.idx_v] = effort + x[f"joint.{j}.passive"]
             logged[joint.idx_v] = x[f"qdd.{j}"]
         fext = [pin.Force.Zero() for _ in range(model.njoints)]
         for i, link in enumerate(links):

@@ -46,15 +46,24 @@ pub struct JointLaw {
 }
 
 impl JointLaw {
-    /// The law of `link`'s joint as `spec` states it, with `added_damping`,
-    /// for integration steps of `dt`.
-    pub fn new(link: &Link, spec: &JointSpec, added_damping: f64, dt: f64) -> JointLaw {
+    /// The law of `link`'s joint as `spec` states it, with `added_damping`
+    /// and, from a plant, `added_friction`, for integration steps of `dt`.
+    pub fn new(
+        link: &Link,
+        spec: &JointSpec,
+        added_damping: f64,
+        added_friction: Option<f64>,
+        dt: f64,
+    ) -> JointLaw {
         let inertia = link.axis_inertia();
         let omega = std::f64::consts::TAU / (LIMIT_PERIOD_STEPS * dt);
         let stiffness = inertia * omega * omega;
         JointLaw {
             damping: spec.damping + added_damping,
-            friction: spec.friction,
+            friction: match added_friction {
+                Some(added) => spec.friction + added,
+                None => spec.friction,
+            },
             friction_cap: inertia / (2.0 * dt),
             range: spec.range,
             stiffness,
@@ -110,7 +119,7 @@ mod tests {
             damping: 0.5,
             friction: 0.2,
         };
-        JointLaw::new(&link, &spec, 0.25, 1e-3)
+        JointLaw::new(&link, &spec, 0.25, None, 1e-3)
     }
 
     #[test]

@@ -14,6 +14,7 @@
 //! - [`joints`]: a robot joint's effort limit, damping, friction and soft
 //!   position limits.
 //! - [`scene`]: a manifest scene, its kind's defaults and initial states.
+//! - [`plant`]: how the plant the data come from departs from the scene.
 //! - [`variables`]: the paper's variables a scene has, names and values.
 //! - [`runner`]: one scene's runs, frame by frame.
 //! - [`foxglove`]: a scene's motion as Foxglove messages, to watch a log.
@@ -30,6 +31,7 @@ pub mod foxglove;
 pub mod integrate;
 pub mod joints;
 pub mod model;
+pub mod plant;
 #[cfg(test)]
 mod reference;
 pub mod replay;

@@ -7,7 +7,9 @@
 //! A re-simulation starts from the logged state with the run's controller
 //! replayed to that instant; only the free root's tracked momentum starts
 //! afresh there, so at the logged step it reproduces the next frame to
-//! rounding.
+//! rounding — of a scene logged without a plant. A scene with a plant
+//! (`crate::plant`) is re-simulated as written, its nominal model: the
+//! simulator a user has.
 
 use std::collections::BTreeMap;
 
@@ -86,7 +88,9 @@ impl SceneReplay {
                     .map_err(|e| format!("{SCENE_RECORD} `{key}`: {e}"))
             };
             let replay = SceneReplay {
-                prepared: Prepared::new(&scene),
+                // The simulator a user has is the scene as written: a
+                // plant's departure from it is what no nominal model knows.
+                prepared: Prepared::new(&scene.nominal()),
                 index: number("index")? as usize,
                 seed: number("seed")?,
             };

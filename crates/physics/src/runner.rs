@@ -15,6 +15,7 @@ use crate::dynamics::{Kinematics, Loads, State};
 use crate::integrate::{Evaluation, Forces, Stepper};
 use crate::joints::JointLaw;
 use crate::model::{Model, Root};
+use crate::plant::Plant;
 use crate::scene::{self, Scene};
 use crate::urdf::Robot;
 use crate::variables::VariableSet;
@@ -39,10 +40,7 @@ impl Prepared {
     pub fn new(scene: &Scene) -> Prepared {
         let scene = scene.clone().resolve();
         let robot = scene.robot();
-        let model = match &robot {
-            Some(robot) => robot.model.clone(),
-            None => scene.model(),
-        };
+        let model = scene.plant_model();
         let surfaces = scene.surfaces();
         let controlled = scene.controller().kind != ControllerKind::None;
         let dt = scene.dt.get();
@@ -84,7 +82,8 @@ impl Prepared {
                     &points,
                     controlled,
                 );
-                let added = scene.hinge_damping.expect("resolved");
+                let added = scene.added_damping();
+                let friction = scene.plant.as_ref().map(|p| p.coulomb_friction);
                 let laws = model
                     .links
                     .iter()
@@ -92,7 +91,7 @@ impl Prepared {
                     .enumerate()
                     .map(|(i, (link, spec))| {
                         (i > 0 && link.joint.dof() == 1)
-                            .then(|| JointLaw::new(link, spec, added, dt))
+                            .then(|| JointLaw::new(link, spec, added, friction, dt))
                     })
                     .collect();
                 (
@@ -103,9 +102,10 @@ impl Prepared {
                 )
             }
         };
+        let applied = scene.plant.as_ref().is_some_and(Plant::has_actuators);
         let layout = StateLayout {
             scene: scene.name.clone(),
-            state: state_names(&model, &labels.0, &labels.1),
+            state: state_names(&model, &labels.0, &labels.1, applied),
             variables: variables.names(),
         };
         Prepared {
@@ -130,8 +130,15 @@ impl Prepared {
 /// joint (named by `joints`), its position `joint.<joint>.q` and velocity
 /// `joint.<joint>.qd`; last, each one-DOF joint's passive effort
 /// `joint.<joint>.passive` (damping, friction and limits at that instant,
-/// which replay the dynamics; not part of the state).
-pub fn state_names(model: &Model, links: &[String], joints: &[String]) -> Vec<String> {
+/// which replay the dynamics; not part of the state) and, where the plant's
+/// actuators produce other than the command (`applied`), each one-DOF
+/// joint's applied effort `joint.<joint>.applied`.
+pub fn state_names(
+    model: &Model,
+    links: &[String],
+    joints: &[String],
+    applied: bool,
+) -> Vec<String> {
     let mut names: Vec<String> = ["x", "y", "z"]
         .iter()
         .map(|a| format!("root.p.{a}"))
@@ -151,6 +158,9 @@ pub fn state_names(model: &Model, links: &[String], joints: &[String]) -> Vec<St
         }
     }
     names.extend(one_dof(model).map(|i| format!("joint.{}.passive", joints[i])));
+    if applied {
+        names.extend(one_dof(model).map(|i| format!("joint.{}.applied", joints[i])));
+    }
     names
 }
 
@@ -201,7 +211,7 @@ pub fn generalized_state(model: &Model, state: &State, out: &mut Vec<f64>) {
 }
 
 /// The state a logged generalized state stands for (the inverse of
-/// [`generalized_state`], passive efforts ignored); `None` if `values` has
+/// [`generalized_state`], passive and applied efforts ignored); `None` if `values` has
 /// the wrong length.
 pub fn state_from_generalized(model: &Model, values: &[f64]) -> Option<State> {
     let free = model.root == Root::Free;
@@ -213,7 +223,10 @@ pub fn state_from_generalized(model: &Model, values: &[f64]) -> Option<State> {
             Logged::Axis => 2,
         };
     }
-    if values.len() != expected + one_dof(model).count() {
+    // Passive efforts follow the state, and applied ones where the plant
+    // logs them.
+    let efforts = one_dof(model).count();
+    if values.len() != expected + efforts && values.len() != expected + 2 * efforts {
         return None;
     }
     let mut state = State::rest(model, Vector3::new(values[0], values[1], values[2]));
@@ -258,6 +271,12 @@ pub struct SceneForces<'a> {
     pub laws: &'a [Option<JointLaw>],
     /// Per link, the passive effort of the last evaluation.
     pub passive: Vec<f64>,
+    /// The plant's actuator gain, where it is not 1: the torque applied is
+    /// the command times it (a one-DOF joint's clamped to its limit again).
+    pub actuator_gain: Option<f64>,
+    /// Per link, the effort its one-DOF joint's actuator applied in the last
+    /// evaluation (with an actuator gain only).
+    pub applied: Vec<f64>,
 }
 
 impl<'a> SceneForces<'a> {
@@ -267,17 +286,29 @@ impl<'a> SceneForces<'a> {
             surfaces: &p.surfaces,
             points: &p.points,
             g: vec![Vector3::zeros(); p.model.len()],
-            hinge_damping: p.scene.hinge_damping.expect("resolved"),
+            hinge_damping: p.scene.added_damping(),
             laws: &p.laws,
             passive: vec![0.0; p.model.len()],
+            actuator_gain: p
+                .scene
+                .plant
+                .as_ref()
+                .filter(|plant| plant.has_actuators())
+                .map(|plant| plant.actuator_gain),
+            applied: vec![0.0; p.model.len()],
         }
     }
 }
 
 impl Forces for SceneForces<'_> {
     fn apply(&mut self, model: &Model, state: &State, kin: &Kinematics, loads: &mut Loads) {
+        let gain = self.actuator_gain;
         for ((t, g), w) in loads.tau.iter_mut().zip(&self.g).zip(&state.rates) {
-            *t = -g - w * self.hinge_damping;
+            // Written apart so that without a gain the sum is as it was.
+            *t = match gain {
+                Some(gain) => -(g * gain) - w * self.hinge_damping,
+                None => -g - w * self.hinge_damping,
+            };
         }
         if model.root == Root::Pinned {
             loads.tau[0] = Vector3::zeros();
@@ -286,7 +317,12 @@ impl Forces for SceneForces<'_> {
         for (i, law) in self.laws.iter().enumerate() {
             if let Some(law) = law {
                 self.passive[i] = law.passive(state.q[i], state.qd[i]);
-                loads.effort[i] = self.g[i].x + self.passive[i];
+                let applied = match gain {
+                    Some(gain) => law.clamp(gain * self.g[i].x),
+                    None => self.g[i].x,
+                };
+                self.applied[i] = applied;
+                loads.effort[i] = applied + self.passive[i];
             }
         }
         loads.f_ext.fill(Vector6::zeros());
@@ -459,6 +495,11 @@ impl<'a> Runner<'a> {
         frame
             .state
             .extend(one_dof(&p.model).map(|i| self.forces.passive[i]));
+        if self.forces.actuator_gain.is_some() {
+            frame
+                .state
+                .extend(one_dof(&p.model).map(|i| self.forces.applied[i]));
+        }
         p.variables
             .values(state, &self.eval, &self.forces.g, &mut frame.variables);
     }

@@ -30,6 +30,7 @@ use crate::contact::{ContactParams, Surfaces};
 use crate::controller::{Amplitude, ControllerKind, ControllerParams};
 use crate::dynamics::State;
 use crate::model::{Joint, Model, Root, Shape};
+use crate::plant::Plant;
 use crate::urdf::{self, Base, Robot};
 
 /// What a scene simulates.
@@ -121,6 +122,10 @@ pub struct Scene {
     /// (link frame) are variables, besides every joint's.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub link_velocities: Option<Vec<String>>,
+    /// How the plant the data are logged from departs from this scene (its
+    /// nominal model); none when it is the scene as written.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub plant: Option<Plant>,
     /// `urdf`: the description's text, read from `file`.
     #[serde(skip)]
     pub description: Option<Arc<str>>,
@@ -168,6 +173,7 @@ impl Default for Scene {
             base: None,
             contact_links: None,
             link_velocities: None,
+            plant: None,
             description: None,
         }
     }
@@ -177,9 +183,14 @@ impl Default for Scene {
 pub type SceneError = (String, String);
 
 impl Scene {
-    /// Fills every field left out with the kind's default.
+    /// Fills every field left out with the kind's default; a plant that is
+    /// the scene as written is dropped, so that the scene is the same one
+    /// (its cache keys and artifacts) as without it.
     pub fn resolve(mut self) -> Scene {
         use SceneKind::*;
+        if self.plant.as_ref().is_some_and(Plant::is_nominal) {
+            self.plant = None;
+        }
         let k = self.kind;
         if k == Urdf {
             return self.resolve_robot();
@@ -328,6 +339,106 @@ impl Scene {
         self.links.expect("resolved").get()
     }
 
+    /// The scene as written, without its plant: the nominal model a user
+    /// has, which a simulator baseline and a planner's model run.
+    pub fn nominal(&self) -> Scene {
+        Scene {
+            plant: None,
+            ..self.clone()
+        }
+    }
+
+    /// The viscous damping added at every joint: the scene's
+    /// `hinge_damping`, and the plant's friction beyond it.
+    pub fn added_damping(&self) -> f64 {
+        let damping = self.hinge_damping.expect("resolved");
+        match &self.plant {
+            Some(plant) => damping + plant.viscous_friction,
+            None => damping,
+        }
+    }
+
+    /// The body the plant's payload is fixed to and its link's placement on
+    /// that body (`robot`: a `urdf` scene's); `None` without a payload.
+    fn payload_at(
+        &self,
+        robot: Option<&Robot>,
+    ) -> Result<Option<(usize, nalgebra::Isometry3<f64>)>, SceneError> {
+        let Some(payload) = self.plant.as_ref().and_then(|p| p.payload.as_ref()) else {
+            return Ok(None);
+        };
+        let field = "plant.payload.link".to_string();
+        match robot {
+            Some(robot) => match robot.frame(&payload.link) {
+                Some(frame) => Ok(Some((frame.body, frame.placement))),
+                None => Err((
+                    field,
+                    format!(
+                        "robot `{}` has no link `{}`; its links: {}",
+                        robot.name,
+                        payload.link,
+                        robot
+                            .frames
+                            .iter()
+                            .map(|f| f.name.as_str())
+                            .collect::<Vec<_>>()
+                            .join(", ")
+                    ),
+                )),
+            },
+            None => {
+                let n = self.links_n();
+                match payload.link.parse::<usize>() {
+                    Ok(k) if (1..=n).contains(&k) => {
+                        Ok(Some((k - 1, nalgebra::Isometry3::identity())))
+                    }
+                    _ => Err((
+                        field,
+                        format!(
+                            "expected a link number from 1 (the root) to {n}, found `{}`",
+                            payload.link
+                        ),
+                    )),
+                }
+            }
+        }
+    }
+
+    /// The link tree the plant has: [`Scene::model`] with the plant's masses
+    /// and payload (the same tree without a plant).
+    pub fn plant_model(&self) -> Model {
+        let robot = self.robot();
+        let mut model = match &robot {
+            Some(robot) => robot.model.clone(),
+            None => self.model(),
+        };
+        if let Some(plant) = &self.plant {
+            let at = self.payload_at(robot.as_ref()).expect("validated");
+            plant.perturb(&mut model, at);
+        }
+        model
+    }
+
+    /// The plant's own checks: its values, its payload's link, and no
+    /// Coulomb friction where the joints are ball hinges.
+    fn validate_plant(&self) -> Result<(), SceneError> {
+        let Some(plant) = &self.plant else {
+            return Ok(());
+        };
+        plant
+            .validate()
+            .map_err(|(field, message)| (format!("plant.{field}"), message))?;
+        if self.kind != SceneKind::Urdf && plant.coulomb_friction != 0.0 {
+            return Err((
+                "plant.coulomb_friction".into(),
+                "a ball hinge has no Coulomb friction law; it applies to a robot's one-DOF \
+                 joints"
+                    .into(),
+            ));
+        }
+        self.payload_at(self.robot().as_ref()).map(|_| ())
+    }
+
     /// Checks the scene (after [`Scene::resolve`]); on error, the field and
     /// what is allowed.
     pub fn validate(&self) -> Result<(), SceneError> {
@@ -414,10 +525,11 @@ impl Scene {
         if self.kind == SceneKind::Urdf {
             return self.validate_robot();
         }
+        self.validate_plant()?;
         // Damping is integrated explicitly: b·dt must stay below the smallest
         // rotational inertia of a link, or the hinge's rate overshoots.
-        let damping = self.hinge_damping.expect("resolved");
-        let model = self.model();
+        let damping = self.added_damping();
+        let model = self.plant_model();
         let smallest = model
             .links
             .iter()
@@ -503,9 +615,10 @@ impl Scene {
                 ),
             ));
         }
+        self.validate_plant()?;
         let dt = self.dt.get();
-        let added = self.hinge_damping.expect("resolved");
-        for (i, link) in robot.model.links.iter().enumerate().skip(1) {
+        let added = self.added_damping();
+        for (i, link) in self.plant_model().links.iter().enumerate().skip(1) {
             let spec = &robot.specs[i];
             let damping = spec.damping + added;
             let inertia = link.axis_inertia();

@@ -594,3 +594,103 @@ fn a_fixed_root_does_not_turn() {
     assert_eq!(state.orient[0], UnitQuaternion::identity());
     assert_eq!(state.root_p, Vector3::new(0.0, 0.0, 1.0));
 }
+
+/// A plant's masses (issue 43): a one-link pendulum held level, at rest,
+/// starts to swing at α = τ / J about the hinge. Scaling its mass and
+/// inertia together leaves α; a payload at distance d adds m_p g d to the
+/// gravity torque and m_p d² to J.
+#[test]
+fn a_heavier_pendulum_with_a_payload_swings_as_the_physics_says() {
+    use crate::plant::{Payload, Plant};
+    let scene = |plant: Option<Plant>| {
+        passive(Scene {
+            name: "pendulum".into(),
+            kind: SceneKind::Pendulum,
+            links: Some(Count(1)),
+            plant,
+            ..Scene::default()
+        })
+    };
+    let alpha = |scene: &Scene| {
+        scene.validate().unwrap();
+        let p = Prepared::new(scene);
+        let state = State::rest(&p.model, Vector3::zeros());
+        let mut eval = Evaluation::new(&p.model);
+        let mut forces = runner::SceneForces::new(&p);
+        eval.run(&p.model, &state, &mut forces);
+        eval.deriv.rates[0]
+    };
+    let nominal = scene(None);
+    let link = nominal.model().links[0].clone();
+    assert_eq!((link.c.y, link.c.z), (0.0, 0.0), "the link lies along x");
+    let (m, c, j, g) = (link.mass, link.c.x, link.inertia_hinge()[(1, 1)], 9.81);
+    let level = alpha(&nominal);
+    assert!((level.y.abs() - m * c * g / j).abs() < 1e-12 * level.y.abs());
+    assert!(level.x.abs() < 1e-12 && level.z.abs() < 1e-12);
+
+    let heavier = alpha(&scene(Some(Plant {
+        mass_scale: 2.0,
+        ..Plant::default()
+    })));
+    assert!(
+        (heavier - level).norm() < 1e-12 * level.norm(),
+        "{heavier} {level}"
+    );
+
+    let (mp, d) = (0.7, 2.0 * c);
+    let loaded = alpha(&scene(Some(Plant {
+        mass_scale: 2.0,
+        payload: Some(Payload {
+            link: "1".into(),
+            mass: mp,
+            offset: [d, 0.0, 0.0],
+        }),
+        ..Plant::default()
+    })));
+    let expected = (2.0 * m * c + mp * d) * g / (2.0 * j + mp * d * d);
+    assert!(
+        (loaded.y.abs() - expected).abs() < 1e-12 * expected,
+        "{loaded} {expected}"
+    );
+    assert_eq!(loaded.y.signum(), level.y.signum());
+}
+
+/// A plant whose every value is as written is no plant: the worm logs the
+/// same frames, bit for bit, and the scene serializes as without one.
+#[test]
+fn a_nominal_plant_is_the_scene_as_written() {
+    let plain = Scene {
+        duration: Positive(0.5),
+        ..Scene::default()
+    };
+    let nominal: Scene = Scene {
+        plant: Some(toml::from_str("mass_scale = 1.0\nactuator_gain = 1.0").unwrap()),
+        ..plain.clone()
+    };
+    assert_eq!(
+        serde_json::to_string(&plain.clone().resolve()).unwrap(),
+        serde_json::to_string(&nominal.clone().resolve()).unwrap()
+    );
+    let frames = |scene: &Scene| {
+        let p = Prepared::new(scene);
+        let mut all = Vec::new();
+        runner::simulate_run(&p, 7, 0, 0, |f, _| {
+            all.push(f.clone());
+            Ok(())
+        })
+        .unwrap();
+        all
+    };
+    let (a, b) = (frames(&plain), frames(&nominal));
+    assert!(!a.is_empty());
+    for (x, y) in a.iter().zip(&b) {
+        assert_eq!(
+            x.state.iter().map(|v| v.to_bits()).collect::<Vec<_>>(),
+            y.state.iter().map(|v| v.to_bits()).collect::<Vec<_>>()
+        );
+        assert_eq!(
+            x.variables.iter().map(|v| v.to_bits()).collect::<Vec<_>>(),
+            y.variables.iter().map(|v| v.to_bits()).collect::<Vec<_>>()
+        );
+    }
+}

@@ -273,6 +273,16 @@ fn model_record(p: &Prepared) -> std::collections::BTreeMap<String, String> {
             "links": "model links are the URDF's moving bodies; links fixed to one are merged into it",
         });
     }
+    if let Some(plant) = &scene.plant {
+        json["plant"] = serde_json::json!({
+            "departure": plant,
+            "note": "the links' masses, centres and inertias above are the plant's, which the \
+                     data come from; the scene as written (its description) is the nominal model",
+            "applied": "where the actuators have a gain, joint.<j>.applied is the effort the \
+                        actuator applied and the joint's total effort is applied + passive; \
+                        tau stays the command",
+        });
+    }
     [
         ("scene".to_string(), scene.name.clone()),
         ("json".to_string(), json.to_string()),
