@@ -74,13 +74,15 @@ def robots():
         ("anymal", data / "anymal_c_simple_description/urdf/anymal.urdf",
          {"base": "free", "amplitude": 5.0, "initial_height": 1.0, "link_velocities": ["LF_SHANK"]}),
         # A plant that is not its description (issue 43): heavier links, a
-        # payload on the flange (a link merged into the last body), friction
-        # and weak actuators — checked against Pinocchio's model perturbed
-        # the same way.
+        # payload on the flange (a link merged into the last body), friction,
+        # and weak, slow, late and noisy actuators — checked against
+        # Pinocchio's model perturbed the same way, with the efforts the
+        # actuators applied.
         ("ur5-plant", ROOT / "robots/ur5/ur5_robot.urdf",
          {"link_velocities": ["wrist_3_link"], "amplitude": 30.0,
           "plant": {"mass_scale": 1.2, "viscous_friction": 0.5, "coulomb_friction": 0.3,
-                    "actuator_gain": 0.9,
+                    "actuator_gain": 0.9, "actuator_lag": 0.02, "actuator_delay_frames": 1,
+                    "torque_noise": 0.5,
                     "payload": {"link": "tool0", "mass": 2.0, "offset": [0.0, 0.02, 0.05]}}}),
     ]
 
@@ -186,7 +188,8 @@ def check(name: str, log: Path) -> dict:
             # The actuator's effort where the plant logs it (a gain), else
             # the command.
             effort = x.get(f"joint.{j}.applied", x.get(f"tau.{j}", 0.0))
-            if plant.get("actuator_gain", 1.0) != 1.0:
+            if any(k in plant for k in ("actuator_gain", "actuator_lag", "actuator_delay_frames",
+                                        "torque_noise")):
                 assert f"joint.{j}.applied" in x, (name, j)
             tau[joint.idx_v] = effort + x[f"joint.{j}.passive"]
             logged[joint.idx_v] = x[f"qdd.{j}"]

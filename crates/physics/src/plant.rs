@@ -11,8 +11,11 @@
 //!   (`viscous_friction`), Coulomb at every one-DOF joint
 //!   (`coulomb_friction`), under the joint laws of [`crate::joints`].
 //! - **Actuators**: the torque an actuator produces per unit of command
-//!   (`actuator_gain`); the command stays what is logged as `tau`, and the
-//!   torque applied is logged beside the state (`joint.<j>.applied`).
+//!   (`actuator_gain`), a first-order lag (`actuator_lag`), a delay
+//!   (`actuator_delay_frames`) and Gaussian noise (`torque_noise`, seeded by
+//!   the run) — [`Actuators`]; the command stays what is logged as `tau`, and
+//!   the torque applied is logged beside the state (`joint.<j>.applied`).
+//! - **Contact**: a contact law of its own (`contact`).
 //!
 //! A plant whose every value is nominal is no plant: [`Plant::is_nominal`],
 //! and resolving a scene drops it, so its artifacts are bit for bit those of
@@ -21,6 +24,7 @@
 use nalgebra::{Isometry3, Matrix3, Point3, Vector3};
 use serde::{Deserialize, Serialize};
 
+use crate::contact::ContactParams;
 use crate::model::Model;
 use crate::spatial::parallel_axis;
 
@@ -48,6 +52,23 @@ pub struct Plant {
     /// the effort limit still caps what it produces.
     #[serde(skip_serializing_if = "is_one")]
     pub actuator_gain: f64,
+    /// The actuators' first-order lag: the time constant (s) with which
+    /// what they produce follows the command (0: none).
+    #[serde(skip_serializing_if = "is_zero")]
+    pub actuator_lag: f64,
+    /// Frames before a command reaches the actuators (a bus, a controller
+    /// cycle); until the first arrives they produce nothing.
+    #[serde(skip_serializing_if = "is_zero_frames")]
+    pub actuator_delay_frames: u64,
+    /// The standard deviation of a Gaussian noise on every actuator's
+    /// output (N m or N), drawn afresh each integration step, seeded by the
+    /// run.
+    #[serde(skip_serializing_if = "is_zero")]
+    pub torque_noise: f64,
+    /// The plant's contact law, in the scene's place (the scene's is the
+    /// nominal model's).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub contact: Option<ContactParams>,
 }
 
 /// A point mass fixed to a link.
@@ -72,6 +93,10 @@ fn is_zero(x: &f64) -> bool {
     *x == 0.0
 }
 
+fn is_zero_frames(x: &u64) -> bool {
+    *x == 0
+}
+
 impl Default for Plant {
     fn default() -> Self {
         Plant {
@@ -80,6 +105,10 @@ impl Default for Plant {
             viscous_friction: 0.0,
             coulomb_friction: 0.0,
             actuator_gain: 1.0,
+            actuator_lag: 0.0,
+            actuator_delay_frames: 0,
+            torque_noise: 0.0,
+            contact: None,
         }
     }
 }
@@ -93,6 +122,9 @@ impl Plant {
     /// Whether the actuators produce other than the command.
     pub fn has_actuators(&self) -> bool {
         self.actuator_gain != 1.0
+            || self.actuator_lag != 0.0
+            || self.actuator_delay_frames != 0
+            || self.torque_noise != 0.0
     }
 
     /// Checks the values; on error, the field (within `plant`) and what is
@@ -112,9 +144,30 @@ impl Plant {
         for (field, v) in [
             ("viscous_friction", self.viscous_friction),
             ("coulomb_friction", self.coulomb_friction),
+            ("actuator_lag", self.actuator_lag),
+            ("torque_noise", self.torque_noise),
         ] {
             if !(v.is_finite() && v >= 0.0) {
                 return err(field, "a finite number ≥ 0 (0: as described)", v);
+            }
+        }
+        if self.actuator_delay_frames > 1000 {
+            return Err((
+                "actuator_delay_frames".into(),
+                format!(
+                    "expected at most 1000 frames, found {}",
+                    self.actuator_delay_frames
+                ),
+            ));
+        }
+        if let Some(c) = &self.contact {
+            for (field, v) in [
+                ("contact.damping", c.damping),
+                ("contact.friction", c.friction),
+            ] {
+                if !(v.is_finite() && v >= 0.0) {
+                    return err(field, "a finite number ≥ 0", v);
+                }
             }
         }
         if let Some(p) = &self.payload {
@@ -152,6 +205,84 @@ impl Plant {
             link.c = c;
             link.inertia_com = (inertia + inertia.transpose()) * 0.5;
         }
+    }
+}
+
+/// The plant's actuators in one run: what they produce from the commands
+/// over time — delayed, lagging, scaled and noisy — one update per
+/// integration step, however often a step's torques are asked for.
+pub struct Actuators {
+    gain: f64,
+    /// The lag's weight of the new command in one step, 1 − e^(−dt/τ);
+    /// `None`: no lag.
+    follow: Option<f64>,
+    /// Commands on their way, oldest first; `delay` steps long when full.
+    queue: std::collections::VecDeque<Vec<Vector3<f64>>>,
+    delay: usize,
+    noise: Option<(rand_chacha::ChaCha8Rng, f64)>,
+    /// What each produces now but for the noise (the lag's state).
+    filtered: Vec<Vector3<f64>>,
+    /// What each produces now.
+    output: Vec<Vector3<f64>>,
+    /// The instant of the last update.
+    last: Option<f64>,
+}
+
+impl Actuators {
+    /// The actuators of `plant` for `hinges` hinges, updated every `dt`
+    /// with `steps_per_frame` steps a frame, their noise seeded by `seed`.
+    pub fn new(plant: &Plant, hinges: usize, dt: f64, steps_per_frame: u64, seed: u64) -> Self {
+        use rand::SeedableRng;
+        Actuators {
+            gain: plant.actuator_gain,
+            follow: (plant.actuator_lag > 0.0).then(|| 1.0 - (-dt / plant.actuator_lag).exp()),
+            queue: std::collections::VecDeque::new(),
+            delay: (plant.actuator_delay_frames * steps_per_frame) as usize,
+            noise: (plant.torque_noise > 0.0).then(|| {
+                (
+                    rand_chacha::ChaCha8Rng::seed_from_u64(seed),
+                    plant.torque_noise,
+                )
+            }),
+            filtered: vec![Vector3::zeros(); hinges],
+            output: vec![Vector3::zeros(); hinges],
+            last: None,
+        }
+    }
+
+    /// What the actuators produce at the step starting at `t` under
+    /// `command` (one per hinge): updated once per instant, so asking again
+    /// at the same `t` (observing a frame, then stepping from it) changes
+    /// nothing.
+    pub fn update(&mut self, t: f64, command: &[Vector3<f64>]) -> &[Vector3<f64>] {
+        if self.last == Some(t) {
+            return &self.output;
+        }
+        self.last = Some(t);
+        let arrived = if self.delay == 0 {
+            Some(command.to_vec())
+        } else {
+            self.queue.push_back(command.to_vec());
+            (self.queue.len() > self.delay).then(|| self.queue.pop_front().expect("queued"))
+        };
+        let target = arrived.unwrap_or_else(|| vec![Vector3::zeros(); command.len()]);
+        for (y, u) in self.filtered.iter_mut().zip(&target) {
+            *y = match self.follow {
+                Some(follow) => *y + (u * self.gain - *y) * follow,
+                None => u * self.gain,
+            };
+        }
+        self.output.copy_from_slice(&self.filtered);
+        if let Some((rng, sigma)) = &mut self.noise {
+            use rand_distr::Distribution;
+            for out in &mut self.output {
+                for x in out.iter_mut() {
+                    let z: f64 = rand_distr::StandardNormal.sample(rng);
+                    *x += *sigma * z;
+                }
+            }
+        }
+        &self.output
     }
 }
 
@@ -213,6 +344,43 @@ mod tests {
         // The inertia about the hinge is the sum of the parts'.
         let hinge = l.inertia_hinge();
         assert!((hinge[(2, 2)] - (0.1 + 4.0 * 0.0625 + 1.0)).abs() < 1e-14);
+    }
+
+    #[test]
+    fn actuators_delay_lag_and_scale_the_command_once_per_step() {
+        let plant = Plant {
+            actuator_gain: 0.5,
+            actuator_lag: 0.01,
+            actuator_delay_frames: 1,
+            ..Plant::default()
+        };
+        // 2 steps a frame of 1 ms: the command arrives 2 steps late.
+        let mut a = Actuators::new(&plant, 1, 1e-3, 2, 0);
+        let u = [Vector3::new(4.0, 0.0, 0.0)];
+        assert_eq!(a.update(0.0, &u)[0].x, 0.0);
+        assert_eq!(a.update(0.0, &u)[0].x, 0.0, "the same instant again");
+        assert_eq!(a.update(1e-3, &u)[0].x, 0.0);
+        let follow = 1.0 - (-0.1f64).exp();
+        let first = a.update(2e-3, &u)[0].x;
+        assert!((first - 2.0 * follow).abs() < 1e-15, "{first}");
+        let second = a.update(3e-3, &u)[0].x;
+        assert!((second - (first + (2.0 - first) * follow)).abs() < 1e-15);
+        // Noise: seeded, zero-mean, its spread as stated.
+        let noisy = Plant {
+            torque_noise: 0.3,
+            ..Plant::default()
+        };
+        let draws = |seed| {
+            let mut a = Actuators::new(&noisy, 1, 1e-3, 1, seed);
+            (0..4000)
+                .map(|k| a.update(k as f64, &[Vector3::zeros()])[0].y)
+                .collect::<Vec<_>>()
+        };
+        let x = draws(5);
+        assert_eq!(x, draws(5));
+        let mean = x.iter().sum::<f64>() / x.len() as f64;
+        let sd = (x.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / 3999.0).sqrt();
+        assert!(mean.abs() < 0.02 && (sd - 0.3).abs() < 0.02, "{mean} {sd}");
     }
 
     #[test]

@@ -15,7 +15,7 @@ use crate::dynamics::{Kinematics, Loads, State};
 use crate::integrate::{Evaluation, Forces, Stepper};
 use crate::joints::JointLaw;
 use crate::model::{Model, Root};
-use crate::plant::Plant;
+use crate::plant::{Actuators, Plant};
 use crate::scene::{self, Scene};
 use crate::urdf::Robot;
 use crate::variables::VariableSet;
@@ -271,11 +271,12 @@ pub struct SceneForces<'a> {
     pub laws: &'a [Option<JointLaw>],
     /// Per link, the passive effort of the last evaluation.
     pub passive: Vec<f64>,
-    /// The plant's actuator gain, where it is not 1: the torque applied is
-    /// the command times it (a one-DOF joint's clamped to its limit again).
-    pub actuator_gain: Option<f64>,
+    /// Where the plant's actuators produce other than the command: what
+    /// each link's actuator produces (index 0 unused; a one-DOF joint's
+    /// clamped to its effort limit when applied), set by the runner.
+    pub actuated: Option<Vec<Vector3<f64>>>,
     /// Per link, the effort its one-DOF joint's actuator applied in the last
-    /// evaluation (with an actuator gain only).
+    /// evaluation.
     pub applied: Vec<f64>,
 }
 
@@ -289,12 +290,12 @@ impl<'a> SceneForces<'a> {
             hinge_damping: p.scene.added_damping(),
             laws: &p.laws,
             passive: vec![0.0; p.model.len()],
-            actuator_gain: p
+            actuated: p
                 .scene
                 .plant
                 .as_ref()
-                .filter(|plant| plant.has_actuators())
-                .map(|plant| plant.actuator_gain),
+                .is_some_and(Plant::has_actuators)
+                .then(|| vec![Vector3::zeros(); p.model.len()]),
             applied: vec![0.0; p.model.len()],
         }
     }
@@ -302,13 +303,9 @@ impl<'a> SceneForces<'a> {
 
 impl Forces for SceneForces<'_> {
     fn apply(&mut self, model: &Model, state: &State, kin: &Kinematics, loads: &mut Loads) {
-        let gain = self.actuator_gain;
-        for ((t, g), w) in loads.tau.iter_mut().zip(&self.g).zip(&state.rates) {
-            // Written apart so that without a gain the sum is as it was.
-            *t = match gain {
-                Some(gain) => -(g * gain) - w * self.hinge_damping,
-                None => -g - w * self.hinge_damping,
-            };
+        let drive = self.actuated.as_deref().unwrap_or(&self.g);
+        for ((t, g), w) in loads.tau.iter_mut().zip(drive).zip(&state.rates) {
+            *t = -g - w * self.hinge_damping;
         }
         if model.root == Root::Pinned {
             loads.tau[0] = Vector3::zeros();
@@ -317,8 +314,8 @@ impl Forces for SceneForces<'_> {
         for (i, law) in self.laws.iter().enumerate() {
             if let Some(law) = law {
                 self.passive[i] = law.passive(state.q[i], state.qd[i]);
-                let applied = match gain {
-                    Some(gain) => law.clamp(gain * self.g[i].x),
+                let applied = match &self.actuated {
+                    Some(actuated) => law.clamp(actuated[i].x),
                     None => self.g[i].x,
                 };
                 self.applied[i] = applied;
@@ -393,6 +390,8 @@ pub struct Runner<'a> {
     driven: Option<Vec<Vector3<f64>>>,
     forces: SceneForces<'a>,
     hinge_torques: Vec<Vector3<f64>>,
+    /// The plant's actuators, where they produce other than the command.
+    actuators: Option<Actuators>,
     stepper: Stepper,
     eval: Evaluation,
 }
@@ -411,6 +410,20 @@ impl<'a> Runner<'a> {
             driven: None,
             forces: SceneForces::new(p),
             hinge_torques: vec![Vector3::zeros(); hinges],
+            actuators: p
+                .scene
+                .plant
+                .as_ref()
+                .filter(|plant| plant.has_actuators())
+                .map(|plant| {
+                    Actuators::new(
+                        plant,
+                        hinges,
+                        p.scene.dt.get(),
+                        p.scene.steps_per_frame(),
+                        scene::run_seed(seed ^ 0xAC7, scene_index, run),
+                    )
+                }),
             stepper: Stepper::new(model),
             eval: Evaluation::new(model),
         }
@@ -478,6 +491,10 @@ impl<'a> Runner<'a> {
             }
         }
         self.forces.g[1..].copy_from_slice(&self.hinge_torques);
+        if let (Some(actuators), Some(actuated)) = (&mut self.actuators, &mut self.forces.actuated)
+        {
+            actuated[1..].copy_from_slice(actuators.update(t, &self.hinge_torques));
+        }
     }
 
     /// Forgets what the integrator tracked, to step on from another state of
@@ -495,7 +512,7 @@ impl<'a> Runner<'a> {
         frame
             .state
             .extend(one_dof(&p.model).map(|i| self.forces.passive[i]));
-        if self.forces.actuator_gain.is_some() {
+        if self.forces.actuated.is_some() {
             frame
                 .state
                 .extend(one_dof(&p.model).map(|i| self.forces.applied[i]));

@@ -710,7 +710,12 @@ impl Scene {
         Surfaces {
             floor: self.floor.expect("resolved"),
             arena_radius: (arena > 0.0).then_some(arena),
-            params: self.contact.clone(),
+            // The plant's contact law where it has one of its own.
+            params: self
+                .plant
+                .as_ref()
+                .and_then(|p| p.contact.clone())
+                .unwrap_or_else(|| self.contact.clone()),
             dt: self.dt.get(),
             point_radius: match self.kind {
                 SceneKind::Tumbler => 0.0,
