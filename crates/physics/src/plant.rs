@@ -16,6 +16,8 @@
 //!   the run) — [`Actuators`]; the command stays what is logged as `tau`, and
 //!   the torque applied is logged beside the state (`joint.<j>.applied`).
 //! - **Contact**: a contact law of its own (`contact`).
+//! - **Sensors**: a robot's logged joint positions and velocities are the
+//!   truth plus Gaussian noise (`sensor_noise`), drawn every frame.
 //!
 //! A plant whose every value is nominal is no plant: [`Plant::is_nominal`],
 //! and resolving a scene drops it, so its artifacts are bit for bit those of
@@ -69,6 +71,22 @@ pub struct Plant {
     /// nominal model's).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub contact: Option<ContactParams>,
+    /// A robot's joint sensors: what is logged of each joint's position and
+    /// velocity is the truth plus Gaussian noise, as an encoder and its
+    /// differentiation report it.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub sensor_noise: Option<SensorNoise>,
+}
+
+/// The standard deviations of a robot's joint sensors' noise, drawn afresh
+/// every logged frame, seeded by the run.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct SensorNoise {
+    /// On each joint position (rad or m).
+    pub position: f64,
+    /// On each joint velocity (rad/s or m/s).
+    pub velocity: f64,
 }
 
 /// A point mass fixed to a link.
@@ -109,6 +127,7 @@ impl Default for Plant {
             actuator_delay_frames: 0,
             torque_noise: 0.0,
             contact: None,
+            sensor_noise: None,
         }
     }
 }
@@ -116,7 +135,22 @@ impl Default for Plant {
 impl Plant {
     /// Whether every value is nominal: the plant is the scene as written.
     pub fn is_nominal(&self) -> bool {
-        *self == Plant::default()
+        let quiet = self
+            .sensor_noise
+            .as_ref()
+            .is_none_or(|n| *n == SensorNoise::default());
+        quiet
+            && Plant {
+                sensor_noise: None,
+                ..self.clone()
+            } == Plant::default()
+    }
+
+    /// The sensors' noise, where there is any.
+    pub fn sensors(&self) -> Option<&SensorNoise> {
+        self.sensor_noise
+            .as_ref()
+            .filter(|n| **n != SensorNoise::default())
     }
 
     /// Whether the actuators produce other than the command.
@@ -159,6 +193,16 @@ impl Plant {
                     self.actuator_delay_frames
                 ),
             ));
+        }
+        if let Some(n) = &self.sensor_noise {
+            for (field, v) in [
+                ("sensor_noise.position", n.position),
+                ("sensor_noise.velocity", n.velocity),
+            ] {
+                if !(v.is_finite() && v >= 0.0) {
+                    return err(field, "a finite number ≥ 0 (0: exact)", v);
+                }
+            }
         }
         if let Some(c) = &self.contact {
             for (field, v) in [

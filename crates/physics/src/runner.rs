@@ -357,6 +357,7 @@ pub fn simulate_run(
         state: Vec::with_capacity(p.layout.state.len()),
         variables: Vec::with_capacity(p.layout.variables.len()),
     };
+    let mut sensors = Sensors::new(p, seed, scene_index, run);
     let mut step = 0u64;
     for index in 0..scene.frames_per_run() {
         if index > 0 {
@@ -373,11 +374,68 @@ pub fn simulate_run(
         if let Some(err) = check(p, run, step, &frame) {
             return Err(err);
         }
+        if let Some(sensors) = &mut sensors {
+            sensors.read(&mut frame);
+        }
         frame.time = index as f64 * scene.frame_dt.get();
         frame.frame = index as u32;
         on_frame(&frame, &runner.eval.kin)?;
     }
     Ok(())
+}
+
+/// A plant's joint sensors in one run: the logged joint positions and
+/// velocities (in the state and as variables) made what noisy sensors
+/// report.
+struct Sensors {
+    /// (index in the state, index among the variables if one, its noise).
+    read: Vec<(usize, Option<usize>, f64)>,
+    rng: rand_chacha::ChaCha8Rng,
+}
+
+impl Sensors {
+    /// The sensors of `p`'s plant, if it has noisy ones, seeded by the run.
+    fn new(p: &Prepared, seed: u64, scene_index: usize, run: u32) -> Option<Sensors> {
+        use rand::SeedableRng;
+        let noise = p.scene.plant.as_ref()?.sensors()?;
+        let robot = p.robot.as_ref()?;
+        let at = |names: &[String], name: &str| names.iter().position(|n| n == name);
+        let mut read = Vec::new();
+        for i in one_dof(&p.model) {
+            let joint = &robot.joints[i];
+            for (suffix, variable, sigma) in
+                [("q", "q", noise.position), ("qd", "qd", noise.velocity)]
+            {
+                let state = at(&p.layout.state, &format!("joint.{joint}.{suffix}"))
+                    .expect("every one-DOF joint's q and qd are logged");
+                if sigma > 0.0 {
+                    let variable = at(&p.layout.variables, &format!("{variable}.{joint}"));
+                    read.push((state, variable, sigma));
+                }
+            }
+        }
+        Some(Sensors {
+            read,
+            rng: rand_chacha::ChaCha8Rng::seed_from_u64(scene::run_seed(
+                seed ^ 0x5E45,
+                scene_index,
+                run,
+            )),
+        })
+    }
+
+    /// Adds each sensor's noise to what `frame` logs of its joint.
+    fn read(&mut self, frame: &mut StateFrame) {
+        use rand_distr::Distribution;
+        for &(state, variable, sigma) in &self.read {
+            let z: f64 = rand_distr::StandardNormal.sample(&mut self.rng);
+            let measured = frame.state[state] + sigma * z;
+            frame.state[state] = measured;
+            if let Some(v) = variable {
+                frame.variables[v] = measured;
+            }
+        }
+    }
 }
 
 /// The moving parts of one run of a scene: its controller (seeded by the

@@ -428,6 +428,14 @@ impl Scene {
         plant
             .validate()
             .map_err(|(field, message)| (format!("plant.{field}"), message))?;
+        if self.kind != SceneKind::Urdf && plant.sensors().is_some() {
+            return Err((
+                "plant.sensor_noise".into(),
+                "joint sensors are a robot's: its joint positions and velocities; a ball-hinged \
+                 chain has none"
+                    .into(),
+            ));
+        }
         if self.kind != SceneKind::Urdf && plant.coulomb_friction != 0.0 {
             return Err((
                 "plant.coulomb_friction".into(),

@@ -694,3 +694,65 @@ fn a_nominal_plant_is_the_scene_as_written() {
         );
     }
 }
+
+/// A plant's joint sensors (issue 43): the logged joint positions and
+/// velocities — in the state and as variables alike — are the truth plus
+/// noise of the stated spread, seeded by the run; everything else is the
+/// truth.
+#[test]
+fn noisy_joint_sensors_log_the_truth_plus_their_noise() {
+    use crate::plant::{Plant, SensorNoise};
+    let frames = |plant: Option<Plant>| {
+        let scene = Scene { plant, ..ur5(2.0) }.resolve();
+        scene.validate().unwrap();
+        let p = Prepared::new(&scene);
+        let mut all = Vec::new();
+        runner::simulate_run(&p, 3, 0, 0, |f, _| {
+            all.push(f.clone());
+            Ok(())
+        })
+        .unwrap();
+        (p.layout.clone(), all)
+    };
+    let noisy = Some(Plant {
+        sensor_noise: Some(SensorNoise {
+            position: 0.01,
+            velocity: 0.0,
+        }),
+        ..Plant::default()
+    });
+    let (layout, truth) = frames(None);
+    let (_, read) = frames(noisy.clone());
+    assert_eq!(read, frames(noisy).1, "seeded by the run");
+    let q = layout
+        .state
+        .iter()
+        .position(|n| n == "joint.elbow_joint.q")
+        .unwrap();
+    let qd = layout
+        .state
+        .iter()
+        .position(|n| n == "joint.elbow_joint.qd")
+        .unwrap();
+    let var = layout
+        .variables
+        .iter()
+        .position(|n| n == "q.elbow_joint")
+        .unwrap();
+    let errors: Vec<f64> = truth
+        .iter()
+        .zip(&read)
+        .map(|(t, r)| {
+            assert_eq!(r.state[q], r.variables[var]);
+            assert_eq!(r.state[qd], t.state[qd], "no velocity noise was asked for");
+            r.state[q] - t.state[q]
+        })
+        .collect();
+    let n = errors.len() as f64;
+    let mean = errors.iter().sum::<f64>() / n;
+    let sd = (errors.iter().map(|e| (e - mean).powi(2)).sum::<f64>() / (n - 1.0)).sqrt();
+    assert!(
+        mean.abs() < 0.002 && (sd - 0.01).abs() < 0.0015,
+        "{mean} {sd}"
+    );
+}
