@@ -179,6 +179,16 @@ impl Default for Scene {
     }
 }
 
+/// That `robot` has no link `name`, and the links it has.
+fn no_link(robot: &Robot, name: &str) -> String {
+    let links: Vec<&str> = robot.frames.iter().map(|f| f.name.as_str()).collect();
+    format!(
+        "robot `{}` has no link `{name}`; its links: {}",
+        robot.name,
+        links.join(", ")
+    )
+}
+
 /// A scene error: the field (within the scene) and what is wrong.
 pub type SceneError = (String, String);
 
@@ -371,20 +381,7 @@ impl Scene {
         match robot {
             Some(robot) => match robot.frame(&payload.link) {
                 Some(frame) => Ok(Some((frame.body, frame.placement))),
-                None => Err((
-                    field,
-                    format!(
-                        "robot `{}` has no link `{}`; its links: {}",
-                        robot.name,
-                        payload.link,
-                        robot
-                            .frames
-                            .iter()
-                            .map(|f| f.name.as_str())
-                            .collect::<Vec<_>>()
-                            .join(", ")
-                    ),
-                )),
+                None => Err((field, no_link(robot, &payload.link))),
             },
             None => {
                 let n = self.links_n();
@@ -577,19 +574,7 @@ impl Scene {
         ] {
             for name in names.unwrap_or_default() {
                 let Some(frame) = robot.frame(name) else {
-                    return Err((
-                        field.into(),
-                        format!(
-                            "robot `{}` has no link `{name}`; its links: {}",
-                            robot.name,
-                            robot
-                                .frames
-                                .iter()
-                                .map(|f| f.name.as_str())
-                                .collect::<Vec<_>>()
-                                .join(", ")
-                        ),
-                    ));
+                    return Err((field.into(), no_link(&robot, name)));
                 };
                 if field == "link_velocities" && robot.links[frame.body] != *name {
                     return Err((
