@@ -20,12 +20,14 @@ fn first_screen(report: &str) -> &str {
     report.split("\n## Appendix").next().unwrap()
 }
 
-/// A figure of `replicates.csv`: its mean and 95% interval.
+/// A figure of `replicates.csv`: its mean and 95% interval, and its
+/// verdict when it is a difference.
 #[derive(Clone, Copy, Debug)]
 struct Figure {
     mean: f64,
     low: f64,
     high: f64,
+    verdict: Option<&'static str>,
 }
 
 /// `replicates.csv` by (variant, figure).
@@ -33,12 +35,13 @@ fn figures(dir: &Path) -> BTreeMap<(String, String), Figure> {
     let mut reader = csv::Reader::from_path(dir.join("replicates.csv")).unwrap();
     let headers = reader.headers().unwrap().clone();
     let column = |name: &str| headers.iter().position(|h| h == name).unwrap();
-    let (variant, figure, mean, low, high) = (
+    let (variant, figure, mean, low, high, verdict) = (
         column("variant"),
         column("figure"),
         column("mean"),
         column("ci_low"),
         column("ci_high"),
+        column("verdict"),
     );
     reader
         .records()
@@ -51,6 +54,9 @@ fn figures(dir: &Path) -> BTreeMap<(String, String), Figure> {
                     mean: number(mean),
                     low: number(low),
                     high: number(high),
+                    verdict: ["lower", "higher", "indistinguishable", "tied"]
+                        .into_iter()
+                        .find(|v| *v == &r[verdict]),
                 },
             )
         })
@@ -123,6 +129,7 @@ fn cells_are_read_with_their_precision() {
         mean: 0.68202,
         low: 0.38098,
         high: 0.98306,
+        verdict: None,
     };
     assert!(agrees("0.682 [0.381, 0.983]", figure));
     assert!(!agrees("0.682 [0.381, 0.984]", figure));
@@ -154,7 +161,7 @@ fn every_first_screen_table_agrees_with_its_replicates() {
             column("persistence's"),
             column("− persistence"),
         );
-        assert!(!rows.is_empty() && rows.len() <= 8, "{name}: {rows:?}");
+        assert!(!rows.is_empty() && rows.len() <= 10, "{name}: {rows:?}");
         // Baselines are the best (first) ALN's variant's.
         let variant_of = |label: &str| -> String {
             match label.strip_prefix("ALN `") {
@@ -212,7 +219,81 @@ fn every_first_screen_table_agrees_with_its_replicates() {
             rows[0][gap]
         );
         assert!(checked >= 5, "{name}: {checked} figures checked");
+        if screen.contains("Planning with it") {
+            continue;
+        }
+        check_frontier(&name, abstract_, &header, &rows, &best, &figures);
     }
+}
+
+/// The simulator on the first screen: every setting the best variant
+/// measured has a row, and the abstract sets the ALN's one-at-a-time speed
+/// against the cheapest setting at least as accurate (one the ALN is not
+/// better than, by `replicates.csv`), quoting its paired difference.
+fn check_frontier(
+    name: &str,
+    abstract_: &str,
+    header: &[String],
+    rows: &[Vec<String>],
+    best: &str,
+    figures: &BTreeMap<(String, String), Figure>,
+) {
+    let measured: Vec<String> = figures
+        .keys()
+        .filter(|(v, f)| v == best && f.starts_with("simulator@") && f.ends_with("/frame mean"))
+        .map(|(_, f)| f.trim_end_matches(" mean").to_string())
+        .collect();
+    if measured.is_empty() {
+        return;
+    }
+    let one_at_a_time = header
+        .iter()
+        .position(|h| h == "µs per state, one at a time")
+        .unwrap_or_else(|| panic!("{name}: no one-at-a-time column in {header:?}"));
+    let median = |model: &str| -> f64 {
+        let row = rows
+            .iter()
+            .find(|r| r[0] == model)
+            .unwrap_or_else(|| panic!("{name}: {model} measured, but not in the results table"));
+        numbers(&row[one_at_a_time])[0].0
+    };
+    let as_accurate: Vec<&String> = measured
+        .iter()
+        .filter(|m| {
+            let f = figures[&(best.to_string(), format!("aln - {m}"))];
+            f.verdict != Some("lower")
+        })
+        .collect();
+    let Some(cheapest) = as_accurate
+        .iter()
+        .min_by(|a, b| median(a).total_cmp(&median(b)))
+    else {
+        return;
+    };
+    let claim = format!(
+        "{cheapest}, the cheapest simulator setting at least as accurate as the ALN (the ALN is "
+    );
+    let rest = abstract_
+        .split(&claim)
+        .nth(1)
+        .unwrap_or_else(|| panic!("{name}: the abstract does not name {cheapest}: {abstract_}"));
+    let figure = figures[&(best.to_string(), format!("aln - {cheapest}"))];
+    let word = match figure.verdict {
+        Some("higher") => "worse than",
+        Some("indistinguishable") => "indistinguishable from",
+        Some("tied") => "tied with",
+        other => panic!("{name}: {cheapest} is not as accurate ({other:?})"),
+    };
+    assert!(rest.starts_with(word), "{name}: {word:?} expected: {rest}");
+    let cell = rest[word.len()..]
+        .trim_start_matches(" it, ")
+        .split(" across")
+        .next()
+        .unwrap();
+    assert!(
+        agrees(cell, figure),
+        "{name}: the abstract's {cell:?} is not aln - {cheapest} = {figure:?}"
+    );
 }
 
 #[test]
@@ -220,11 +301,21 @@ fn the_reports_index_quotes_only_first_screen_figures() {
     let index = std::fs::read_to_string(reports_root().join("README.md")).unwrap();
     let normal = |s: &str| s.replace('−', "-");
     let mut lines = 0;
-    for line in index.lines().filter(|l| l.starts_with("| [")) {
+    // The index's table (`| [name](…) | finding |`) and the synthesis
+    // above it (`- [name](…): finding`): each line's figures are its
+    // report's.
+    for line in index
+        .lines()
+        .filter(|l| l.starts_with("| [") || l.starts_with("- ["))
+    {
         let name = line[3..].split(']').next().unwrap();
         let report = std::fs::read_to_string(reports_root().join(name).join("report.md")).unwrap();
         let screen = normal(first_screen(&report));
-        let finding = normal(line.rsplit(" | ").next().unwrap());
+        let finding = if line.starts_with("| [") {
+            normal(line.rsplit(" | ").next().unwrap())
+        } else {
+            normal(line.split_once("): ").unwrap().1)
+        };
         for token in finding
             .split(|c: char| !(c.is_ascii_digit() || c == '.' || c == '-' || c == '+' || c == '×'))
         {
@@ -238,5 +329,59 @@ fn the_reports_index_quotes_only_first_screen_figures() {
         }
         lines += 1;
     }
-    assert!(lines >= 7, "{lines} reports listed");
+    assert!(lines >= 10, "{lines} report lines");
+}
+
+/// Each report's `frontier.csv` — the first screen's models, unrounded,
+/// which the synthesis chart draws — holds the errors of its
+/// `replicates.csv`.
+#[test]
+fn every_frontier_agrees_with_its_replicates() {
+    for dir in committed_reports() {
+        let name = dir.file_name().unwrap().to_string_lossy().to_string();
+        let figures = figures(&dir);
+        let mut reader = csv::Reader::from_path(dir.join("frontier.csv"))
+            .unwrap_or_else(|e| panic!("{name}: frontier.csv: {e}"));
+        let headers = reader.headers().unwrap().clone();
+        let column = |title: &str| headers.iter().position(|h| h == title).unwrap();
+        let (model, variant, error) = (column("model"), column("variant"), column("error"));
+        let mut checked = 0;
+        for record in reader.records() {
+            let record = record.unwrap();
+            let key = (
+                record[variant].to_string(),
+                format!("{} mean", &record[model]),
+            );
+            let expected = figures
+                .get(&key)
+                .unwrap_or_else(|| panic!("{name}: no {key:?} in replicates.csv"));
+            let found: f64 = record[error].parse().unwrap();
+            assert!(
+                (found - expected.mean).abs() <= 1e-12 * expected.mean.abs().max(1.0),
+                "{name}: frontier.csv {key:?} {found} against {}",
+                expected.mean
+            );
+            checked += 1;
+        }
+        assert!(checked >= 3, "{name}: {checked} rows");
+    }
+}
+
+/// The chart at the top of `reports/README.md` is what `alnlab synthesis`
+/// draws from the committed reports' `frontier.csv` files, byte for byte.
+#[test]
+fn the_synthesis_chart_is_drawn_from_the_reports() {
+    let tmp = tempfile::tempdir().unwrap();
+    for dir in committed_reports() {
+        let to = tmp.path().join(dir.file_name().unwrap());
+        std::fs::create_dir_all(&to).unwrap();
+        std::fs::copy(dir.join("frontier.csv"), to.join("frontier.csv")).unwrap();
+    }
+    let out = crate::common::alnlab(tmp.path(), &["synthesis", "."]);
+    assert!(out.status.success(), "{}", crate::common::stderr(&out));
+    assert_eq!(
+        std::fs::read(tmp.path().join("synthesis.svg")).unwrap(),
+        std::fs::read(reports_root().join("synthesis.svg")).unwrap(),
+        "reports/synthesis.svg is not what `alnlab synthesis reports` draws: run it again"
+    );
 }

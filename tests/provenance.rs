@@ -125,3 +125,44 @@ fn an_edited_manifest_is_not_published_into_a_committed_folder() {
         stderr(&out)
     );
 }
+
+/// Every committed report names a commit at which its manifest is the
+/// one it printed: `git show <commit>:<manifest>` hashes to the report's
+/// manifest sha256 (a report rendered from a tree that differed from its
+/// commit would not).
+#[test]
+fn every_committed_report_names_a_commit_that_makes_its_manifest() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    for dir in crate::common::committed_reports() {
+        let name = dir.file_name().unwrap().to_string_lossy().to_string();
+        let report = std::fs::read_to_string(dir.join("report.md")).unwrap();
+        let cell = |key: &str| -> String {
+            report
+                .lines()
+                .find_map(|l| l.strip_prefix(&format!("| {key} | `")))
+                .and_then(|rest| rest.split('`').next())
+                .unwrap_or_else(|| panic!("{name}: no `{key}` in the Reproducibility table"))
+                .to_string()
+        };
+        let (manifest, sha256, commit) = (
+            cell("manifest"),
+            cell("manifest sha256"),
+            cell("git commit"),
+        );
+        let shown = std::process::Command::new("git")
+            .current_dir(root)
+            .args(["show", &format!("{commit}:{manifest}")])
+            .output()
+            .expect("git runs");
+        assert!(
+            shown.status.success(),
+            "{name}: git show {commit}:{manifest}: {}",
+            String::from_utf8_lossy(&shown.stderr)
+        );
+        assert_eq!(
+            alnlab_common::hash::sha256_hex(&shown.stdout),
+            sha256,
+            "{name}: {manifest} at {commit} is not the manifest the report printed"
+        );
+    }
+}

@@ -104,7 +104,12 @@ pub fn render_synthesis(reports: &Path) -> Result<(PathBuf, Vec<String>)> {
                 y_range: None,
             })
         };
-        let colour = style_of("aln", k).colour;
+        // Past the palette's colours, the marker tells reports apart.
+        let Style {
+            colour,
+            marker: aln_marker,
+            ..
+        } = style_of("aln", k);
         // The report's best ALN: the lowest error over persistence's.
         let best = rows
             .iter()
@@ -116,7 +121,7 @@ pub fn render_synthesis(reports: &Path) -> Result<(PathBuf, Vec<String>)> {
                 name: format!("{name}: ALN `{}`", row.variant),
                 style: Style {
                     colour,
-                    marker: Marker::Circle,
+                    marker: aln_marker,
                     dashed: false,
                 },
                 points: vec![p],
