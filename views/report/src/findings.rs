@@ -226,7 +226,9 @@ pub(super) fn definitions(md: &mut String) {
          each variable's change (least absolute deviations, from the real values of the inputs \
          the ALN reads); *boosted* (where present) gradient-boosted trees fitted to the same \
          change; *simulator@k/frame* re-steps the physics from the logged frame with k \
-         integration steps per frame (the logged step is exact by construction).\n\
+         integration steps per frame (the logged step is exact by construction — unless the \
+         data come from a plant that departs from the scene as written: the simulator is the \
+         scene's, the nominal model a user has).\n\
          - **Normalized error** (a secondary metric): each variable's mean error over the \
          standard deviation of its true levels on the same rows, so runs with different ranges, \
          level counts or codes compare.\n\
