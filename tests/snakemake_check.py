@@ -25,8 +25,12 @@ def artifacts(path):
 
 
 def same_table_but(a, b, columns):
+    """Equal tables but for the measured `columns` a table has (a
+    piecewise-linear model's training log, rounds of splits, has no time)."""
     ta, tb = pq.read_table(a), pq.read_table(b)
-    return ta.drop_columns(columns).equals(tb.drop_columns(columns))
+    measured = [c for c in columns if c in ta.column_names]
+    assert ta.column_names == tb.column_names, (a, b)
+    return ta.drop_columns(measured).equals(tb.drop_columns(measured))
 
 
 def error_tables(report):

@@ -41,6 +41,14 @@ pub fn snakemake(export: &Export, dir: &Path) -> Result<()> {
     };
     let manifest = export.manifest;
     let variants: Vec<&str> = manifest.variants.iter().map(|v| v.name.as_str()).collect();
+    // A piecewise-linear model's few trees train in one process: never
+    // sharded (`run --train-shard` refuses it).
+    let unsharded: Vec<&str> = manifest
+        .variants
+        .iter()
+        .filter(|v| v.stages.train.model == alnlab_aln::ModelKind::PiecewiseLinear)
+        .map(|v| v.name.as_str())
+        .collect();
     // A hint, generous: the trees of the paper's forest (8192 leaves, one
     // voter) take 62 MiB while training, and the data less.
     let leaves = manifest
@@ -84,6 +92,8 @@ pub fn snakemake(export: &Export, dir: &Path) -> Result<()> {
          manifest: {manifest_file:?}\n\
          experiment: {experiment:?}\n\
          variants: [{variants}]\n\
+         # Variants whose model trains in one job whatever `shards` says.\n\
+         unsharded: [{unsharded}]\n\
          stages: [{stages}]\n\
          sharded_stage: {sharded:?}\n\
          out: {out:?}\n\
@@ -107,11 +117,8 @@ pub fn snakemake(export: &Export, dir: &Path) -> Result<()> {
         alnlab = absolute(&export.alnlab)?,
         manifest_file = absolute(&manifest.path)?,
         experiment = manifest.experiment.name,
-        variants = variants
-            .iter()
-            .map(|v| format!("{v:?}"))
-            .collect::<Vec<_>>()
-            .join(", "),
+        variants = quoted(&variants),
+        unsharded = quoted(&unsharded),
         out = absolute(&export.out)?,
         reports = absolute(&export.reports)?,
         datasets = absolute(&export.datasets)?,
@@ -121,6 +128,15 @@ pub fn snakemake(export: &Export, dir: &Path) -> Result<()> {
     atomic::write_bytes(&dir.join("Snakefile"), SNAKEFILE.as_bytes())
 }
 
+/// `names` as YAML list items: `"a", "b-2"`.
+fn quoted(names: &[&str]) -> String {
+    names
+        .iter()
+        .map(|v| format!("{v:?}"))
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -128,7 +144,8 @@ mod tests {
     #[test]
     fn the_config_names_every_variant_and_absolute_paths() {
         let text = "[experiment]\nname = \"x\"\nseed = 1\n\n[[simulate.scene]]\nname = \"s\"\n\n\
-                    [[variant]]\nname = \"a\"\n\n[[variant]]\nname = \"b-2\"\n";
+                    [[variant]]\nname = \"a\"\n\n[[variant]]\nname = \"b-2\"\n\
+                    train.model = \"piecewise-linear\"\n";
         let manifest = Manifest::parse(text, Path::new("m.toml")).unwrap();
         let dir = tempfile::tempdir().unwrap();
         let export = Export {
@@ -143,6 +160,7 @@ mod tests {
         let config = std::fs::read_to_string(dir.path().join("config.yaml")).unwrap();
         assert!(config.contains("variants: [\"a\", \"b-2\"]"), "{config}");
         assert!(config.contains("shards: 4"), "{config}");
+        assert!(config.contains("unsharded: [\"b-2\"]"), "{config}");
         let out = std::path::absolute("runs").unwrap();
         assert!(
             config.contains(&format!("out: {:?}", out.display().to_string())),
