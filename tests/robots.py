@@ -18,7 +18,9 @@ manifest of one 10 s run with a random controller into WORK_DIR, runs
   (`f_E`, `g_E`) as external forces; a free base's accelerations too;
 - link velocities `v.<link>`, `omega.<link>` with `getFrameVelocity`
   (LOCAL);
-- every URDF link's frame on /tf with `updateFramePlacements`.
+- every URDF link's frame on /tf with `updateFramePlacements`;
+- a plant's applied efforts, recomputed from the logged commands with its
+  actuators' gain, lag and delay.
 
 Errors are relative: |Δ| / max(1, |reference|) per frame. Fails when an
 acceleration is off by more than 1e-10 or a velocity or pose by more than
@@ -41,6 +43,9 @@ from interop import field_name
 ROOT = Path(__file__).resolve().parent.parent
 ACCELERATION_TOLERANCE = 1e-10
 KINEMATICS_TOLERANCE = 1e-12
+# The actuators' efforts recomputed from the commands: the same operations
+# in the same order, so only exp's last bit may differ.
+APPLIED_TOLERANCE = 1e-12
 
 
 def installed_robots() -> Path:
@@ -75,14 +80,13 @@ def robots():
          {"base": "free", "amplitude": 5.0, "initial_height": 1.0, "link_velocities": ["LF_SHANK"]}),
         # A plant that is not its description (issue 43): heavier links, a
         # payload on the flange (a link merged into the last body), friction,
-        # and weak, slow, late and noisy actuators — checked against
-        # Pinocchio's model perturbed the same way, with the efforts the
-        # actuators applied.
+        # and weak, slow and late actuators — checked against Pinocchio's
+        # model perturbed the same way, with the efforts the actuators
+        # applied, which are recomputed here from the logged commands.
         ("ur5-plant", ROOT / "robots/ur5/ur5_robot.urdf",
          {"link_velocities": ["wrist_3_link"], "amplitude": 30.0,
           "plant": {"mass_scale": 1.2, "viscous_friction": 0.5, "coulomb_friction": 0.3,
                     "actuator_gain": 0.9, "actuator_lag": 0.02, "actuator_delay_frames": 1,
-                    "torque_noise": 0.5,
                     "payload": {"link": "tool0", "mass": 2.0, "offset": [0.0, 0.02, 0.05]}}}),
     ]
 
@@ -141,6 +145,30 @@ def perturb(model, plant: dict) -> None:
         model.inertias[frame.parentJoint] += pin.Inertia(payload["mass"], at, np.zeros((3, 3)))
 
 
+def actuated(frames, joints, scene, plant, effort) -> dict:
+    """Each joint's applied effort at every frame, recomputed from the
+    logged commands `tau.<joint>` as the plant states its actuators: a gain,
+    a first-order lag and a delay in frames, updated every integration step
+    (the command held over a frame's steps), clamped to the effort limit."""
+    dt, frame_dt = scene["dt"], scene["frame_dt"]
+    per_frame = round(frame_dt / dt)
+    delay = plant.get("actuator_delay_frames", 0) * per_frame
+    gain = plant.get("actuator_gain", 1.0)
+    lag = plant.get("actuator_lag", 0.0)
+    follow = 1.0 - math.exp(-dt / lag) if lag > 0 else None
+    expected = {}
+    for j in joints:
+        command = [x[f"tau.{j}"] for _, x in frames]
+        y, out = 0.0, []
+        for s in range((len(frames) - 1) * per_frame + 1):
+            arrived = command[(s - delay) // per_frame] if s >= delay else 0.0
+            y = y + (arrived * gain - y) * follow if follow is not None else arrived * gain
+            if s % per_frame == 0:
+                out.append(min(max(y, -effort[j]), effort[j]))
+        expected[j] = out
+    return expected
+
+
 def check(name: str, log: Path) -> dict:
     scene_record, model_record, frames, tf = read_log(log)
     scene = json.loads(scene_record["json"])
@@ -158,10 +186,15 @@ def check(name: str, log: Path) -> dict:
     ids = {j: model.getJointId(j) for j in joints}
     assert all(i < model.njoints for i in ids.values()), f"{name}: joints Pinocchio does not have"
     assert model.nv == len(joints) + (6 if free else 0), (model.nv, len(joints))
-    worst = {"acceleration": 0.0, "velocity": 0.0, "pose": 0.0}
+    worst = {"acceleration": 0.0, "velocity": 0.0, "pose": 0.0, "applied": 0.0}
+    actuators = ("actuator_gain", "actuator_lag", "actuator_delay_frames", "torque_noise")
+    recomputed = None
+    if any(k in plant for k in actuators[:3]) and "torque_noise" not in plant:
+        limits = {j: float(model.effortLimit[model.joints[ids[j]].idx_v]) for j in joints}
+        recomputed = actuated(frames, joints, scene, plant, limits)
     compared = {"velocity": 0, "pose": 0}
     largest_acceleration = 0.0
-    for log_time, x in frames:
+    for index, (log_time, x) in enumerate(frames):
         q = pin.neutral(model)
         v = np.zeros(model.nv)
         tau = np.zeros(model.nv)
@@ -188,9 +221,11 @@ def check(name: str, log: Path) -> dict:
             # The actuator's effort where the plant logs it (a gain), else
             # the command.
             effort = x.get(f"joint.{j}.applied", x.get(f"tau.{j}", 0.0))
-            if any(k in plant for k in ("actuator_gain", "actuator_lag", "actuator_delay_frames",
-                                        "torque_noise")):
+            if any(k in plant for k in actuators):
                 assert f"joint.{j}.applied" in x, (name, j)
+            if recomputed is not None:
+                want = recomputed[j][index]
+                worst["applied"] = max(worst["applied"], abs(effort - want) / max(1.0, abs(want)))
             tau[joint.idx_v] = effort + x[f"joint.{j}.passive"]
             logged[joint.idx_v] = x[f"qdd.{j}"]
         fext = [pin.Force.Zero() for _ in range(model.njoints)]
@@ -251,10 +286,13 @@ def main(alnlab: str, work: str, json_out=None) -> int:
         results.append(result)
         print(f"{name}: {result['frames']} frames, nv {result['nv']}, |q̈| up to {result['largest_acceleration']:.3g}; "
               f"worst relative error: accelerations {result['worst_acceleration']:.2e}, "
+              f"applied efforts {result['worst_applied']:.2e}, "
               f"link velocities {result['worst_velocity']:.2e} ({result['velocities']} compared), "
               f"poses {result['worst_pose']:.2e} ({result['poses']} frames on /tf)")
         if result["worst_acceleration"] > ACCELERATION_TOLERANCE:
             failed.append(f"{name}: accelerations off by {result['worst_acceleration']:.2e}")
+        if result["worst_applied"] > APPLIED_TOLERANCE:
+            failed.append(f"{name}: applied efforts off by {result['worst_applied']:.2e}")
         if max(result["worst_velocity"], result["worst_pose"]) > KINEMATICS_TOLERANCE:
             failed.append(f"{name}: kinematics off by {max(result['worst_velocity'], result['worst_pose']):.2e}")
     if json_out:

@@ -51,7 +51,8 @@ pub struct Plant {
     #[serde(skip_serializing_if = "is_zero")]
     pub coulomb_friction: f64,
     /// The torque (or force) an actuator produces per unit of command (> 0);
-    /// the effort limit still caps what it produces.
+    /// the effort limit (a ball hinge's: the controller's torque limit) still
+    /// caps what it applies.
     #[serde(skip_serializing_if = "is_one")]
     pub actuator_gain: f64,
     /// The actuators' first-order lag: the time constant (s) with which
@@ -59,7 +60,7 @@ pub struct Plant {
     #[serde(skip_serializing_if = "is_zero")]
     pub actuator_lag: f64,
     /// Frames before a command reaches the actuators (a bus, a controller
-    /// cycle); until the first arrives they produce nothing.
+    /// cycle); until the first arrives they produce nothing but their noise.
     #[serde(skip_serializing_if = "is_zero_frames")]
     pub actuator_delay_frames: u64,
     /// The standard deviation of a Gaussian noise on every actuator's
@@ -292,6 +293,15 @@ impl Actuators {
             output: vec![Vector3::zeros(); hinges],
             last: None,
         }
+    }
+
+    /// Forgets every command on its way and the lag's state, as at a run's
+    /// start (the noise's stream goes on).
+    pub fn reset(&mut self) {
+        self.queue.clear();
+        self.filtered.fill(Vector3::zeros());
+        self.output.fill(Vector3::zeros());
+        self.last = None;
     }
 
     /// What the actuators produce at the step starting at `t` under

@@ -278,6 +278,8 @@ pub struct SceneForces<'a> {
     /// Per link, the effort its one-DOF joint's actuator applied in the last
     /// evaluation.
     pub applied: Vec<f64>,
+    /// The controller's torque limit, which caps a ball hinge's actuator too.
+    pub torque_limit: f64,
 }
 
 impl<'a> SceneForces<'a> {
@@ -297,15 +299,27 @@ impl<'a> SceneForces<'a> {
                 .is_some_and(Plant::has_actuators)
                 .then(|| vec![Vector3::zeros(); p.model.len()]),
             applied: vec![0.0; p.model.len()],
+            torque_limit: p.scene.controller().torque_limit.get(),
         }
     }
 }
 
 impl Forces for SceneForces<'_> {
     fn apply(&mut self, model: &Model, state: &State, kin: &Kinematics, loads: &mut Loads) {
-        let drive = self.actuated.as_deref().unwrap_or(&self.g);
-        for ((t, g), w) in loads.tau.iter_mut().zip(drive).zip(&state.rates) {
-            *t = -g - w * self.hinge_damping;
+        match &self.actuated {
+            // What the actuators produce, capped by the torque limit as the
+            // command is (a one-DOF joint's by its effort limit, below).
+            Some(actuated) => {
+                let limit = self.torque_limit;
+                for ((t, a), w) in loads.tau.iter_mut().zip(actuated).zip(&state.rates) {
+                    *t = -a.map(|x| x.clamp(-limit, limit)) - w * self.hinge_damping;
+                }
+            }
+            None => {
+                for ((t, g), w) in loads.tau.iter_mut().zip(&self.g).zip(&state.rates) {
+                    *t = -g - w * self.hinge_damping;
+                }
+            }
         }
         if model.root == Root::Pinned {
             loads.tau[0] = Vector3::zeros();
@@ -555,10 +569,13 @@ impl<'a> Runner<'a> {
         }
     }
 
-    /// Forgets what the integrator tracked, to step on from another state of
-    /// the same run.
+    /// Forgets what the integrator (and a plant's actuators) tracked, to
+    /// step on from another state of the same run.
     pub fn restart(&mut self) {
         self.stepper.restart();
+        if let Some(actuators) = &mut self.actuators {
+            actuators.reset();
+        }
     }
 
     /// The frame of `state` at time `t`: its generalized state and variables.

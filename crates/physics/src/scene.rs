@@ -447,6 +447,11 @@ impl Scene {
     /// Checks the scene (after [`Scene::resolve`]); on error, the field and
     /// what is allowed.
     pub fn validate(&self) -> Result<(), SceneError> {
+        if self.plant.is_some() {
+            // The scene as written is a simulator that runs too (the
+            // baselines' and planners'): it must pass on its own.
+            self.nominal().validate()?;
+        }
         let err = |field: &str, message: String| Err((field.to_string(), message));
         let n = self.links_n();
         if n > 64 {
@@ -542,11 +547,16 @@ impl Scene {
             .fold(f64::INFINITY, f64::min);
         let limit = smallest / self.dt.get();
         if damping > limit {
+            // The scene as written passed: what fails is the plant's.
+            let (field, whose) = match self.plant {
+                Some(_) => ("plant", "the plant's damping with its friction"),
+                None => ("hinge_damping", "the damping"),
+            };
             return err(
-                "hinge_damping",
+                field,
                 format!(
-                    "expected at most {limit:.3} N m s/rad with dt = {} (the links' smallest \
-                     inertia is {smallest:.2e} kg m²), found {damping}; lower it or dt",
+                    "{whose}: expected at most {limit:.3} N m s/rad with dt = {} (the links' \
+                     smallest inertia is {smallest:.2e} kg m²), found {damping}; lower it or dt",
                     self.dt.get()
                 ),
             );
@@ -616,10 +626,14 @@ impl Scene {
             let damping = spec.damping + added;
             let inertia = link.axis_inertia();
             if damping * dt > inertia {
+                let (field, whose) = match self.plant {
+                    Some(_) => ("plant", "the plant's joint"),
+                    None => ("dt", "joint"),
+                };
                 return Err((
-                    "dt".into(),
+                    field.into(),
                     format!(
-                        "joint `{}`: damping {damping} with dt = {dt} is more than explicit \
+                        "{whose} `{}`: damping {damping} with dt = {dt} is more than explicit \
                          integration resolves on its link's own inertia about the axis \
                          ({inertia:.3e}); expected dt ≤ {:.2e}",
                         robot.joints[i],

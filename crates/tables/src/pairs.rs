@@ -232,34 +232,32 @@ impl Pairs {
     pub fn column(&self, side: Side, variable: &str) -> Result<&Float64Array> {
         let name = side.column(variable);
         let values = self.table.f64_column(&name)?;
-        // Per scene, whether its first pair has the variable.
-        let mut has: Vec<(&str, bool)> = Vec::new();
-        for (r, key) in self.keys.iter().enumerate() {
-            let present = values.is_valid(r);
-            if present && !values.value(r).is_finite() {
-                return Err(Error::bad_file(
-                    self.path(),
-                    format!(
-                        "row {r}, column `{name}`: {} is not a finite number",
-                        values.value(r)
-                    ),
-                ));
-            }
-            match has.iter().find(|(scene, _)| *scene == key.scene) {
-                Some(&(_, first)) if first != present => {
-                    return Err(Error::bad_file(
-                        self.path(),
-                        format!(
-                            "row {r}, column `{name}`: {} where other pairs of scene `{}` {}",
-                            if present { "a value" } else { "null" },
-                            key.scene,
-                            if first { "have a value" } else { "are null" }
-                        ),
-                    ));
-                }
-                Some(_) => {}
-                None => has.push((&key.scene, present)),
-            }
+        if let Some(r) =
+            (0..values.len()).find(|&r| values.is_valid(r) && !values.value(r).is_finite())
+        {
+            return Err(Error::bad_file(
+                self.path(),
+                format!(
+                    "row {r}, column `{name}`: {} is not a finite number",
+                    values.value(r)
+                ),
+            ));
+        }
+        // The scenes with a value: a null in one of them is damage.
+        let with_values: std::collections::BTreeSet<&str> = (0..values.len())
+            .filter(|&r| values.is_valid(r))
+            .map(|r| self.keys[r].scene.as_str())
+            .collect();
+        if let Some(r) = (0..values.len())
+            .find(|&r| values.is_null(r) && with_values.contains(self.keys[r].scene.as_str()))
+        {
+            return Err(Error::bad_file(
+                self.path(),
+                format!(
+                    "row {r}, column `{name}`: null where other pairs of scene `{}` have a value",
+                    self.keys[r].scene
+                ),
+            ));
         }
         Ok(values)
     }
@@ -371,5 +369,17 @@ mod tests {
             ),
             "{message}"
         );
+        // The scene's first pair damaged: it is the one named.
+        write(
+            &path,
+            &keys(),
+            &["a"],
+            |_, _, r| (r != 0).then_some(0.0),
+            &provenance(),
+        )
+        .unwrap();
+        let pairs = Pairs::read(&path).unwrap();
+        let message = pairs.column(Side::Next, "a").unwrap_err().to_string();
+        assert!(message.contains("row 0, column `y.a`: null"), "{message}");
     }
 }

@@ -203,6 +203,17 @@ impl Params {
                 ),
             ));
         }
+        if scene.plant.is_some() {
+            return Err((
+                "scene".to_string(),
+                format!(
+                    "scene `{}` has a plant that departs from it; planning executes episodes in \
+                     the scene as written, so it would not be the plant the models learned \
+                     from — plan a scene without one",
+                    scene.name
+                ),
+            ));
+        }
         Ok(Prepared::new(scene).variables.names())
     }
 }

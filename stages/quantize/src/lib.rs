@@ -240,7 +240,18 @@ pub fn run(
             seed: walk.map_or(0, |w| w.seed),
             clamped: 0,
         };
-        if x.null_count() > 0 {
+        if x.null_count() > 0 || y.null_count() > 0 {
+            // A scene without the variable has neither side of it.
+            if let Some(r) = (0..x.len()).find(|&r| x.is_null(r) != y.is_null(r)) {
+                return Err(Error::bad_file(
+                    pairs_path,
+                    format!(
+                        "row {r}: `{v}` is null on one side of the pair only (x.{v} {}, y.{v} {})",
+                        if x.is_null(r) { "null" } else { "present" },
+                        if y.is_null(r) { "null" } else { "present" }
+                    ),
+                ));
+            }
             entry.learned = false;
             entry.note = "missing in some scene".into();
         } else if lo == hi {
@@ -626,10 +637,9 @@ mod tests {
         assert_eq!(e.exit_code(), 2);
     }
 
-    #[test]
-    fn non_finite_values_name_row_and_column() {
-        let dir = data();
-        let pairs_path = dir.path().join(pairs::FILE);
+    /// Rewrites the pairs in `dir` with column `name`'s values edited.
+    fn edit_pairs(dir: &Path, name: &str, edit: impl Fn(&mut Vec<Option<f64>>)) {
+        let pairs_path = dir.join(pairs::FILE);
         let pairs = Table::read(&pairs_path).unwrap();
         let mut columns: Vec<(String, Arc<dyn Array>)> = Vec::new();
         for (field, column) in pairs
@@ -640,10 +650,9 @@ mod tests {
             .zip(pairs.batch.columns())
         {
             let mut column = column.clone();
-            if field.name() == "y.v.2.z" {
-                let mut values: Vec<Option<f64>> =
-                    pairs.f64_column("y.v.2.z").unwrap().iter().collect();
-                values[7] = Some(f64::NAN);
+            if field.name() == name {
+                let mut values: Vec<Option<f64>> = pairs.f64_column(name).unwrap().iter().collect();
+                edit(&mut values);
                 column = Arc::new(Float64Array::from(values));
             }
             columns.push((field.name().clone(), column));
@@ -655,6 +664,24 @@ mod tests {
                 .collect(),
         );
         table::write_parquet(&pairs_path, &batch, &Provenance::default()).unwrap();
+    }
+
+    #[test]
+    fn a_variable_on_one_side_of_its_pairs_only_is_damage() {
+        let dir = data();
+        edit_pairs(dir.path(), "y.v.2.z", |values| values.fill(None));
+        let e = quantize(&Params::default(), dir.path()).unwrap_err();
+        assert!(
+            e.to_string()
+                .contains("row 0: `v.2.z` is null on one side of the pair only (x.v.2.z present, y.v.2.z null)"),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn non_finite_values_name_row_and_column() {
+        let dir = data();
+        edit_pairs(dir.path(), "y.v.2.z", |values| values[7] = Some(f64::NAN));
         let e = quantize(&Params::default(), dir.path()).unwrap_err();
         assert!(
             e.to_string()
