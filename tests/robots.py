@@ -152,6 +152,12 @@ def actuated(frames, joints, scene, plant, effort) -> dict:
     (the command held over a frame's steps), clamped to the effort limit."""
     dt, frame_dt = scene["dt"], scene["frame_dt"]
     per_frame = round(frame_dt / dt)
+    # The command held over a frame's steps: a controller that redraws on
+    # frame boundaries only (a held random draw, a whole number of frames).
+    controller = scene["controller"]
+    assert controller["kind"] in ("random", "constant"), controller
+    frames_per_hold = controller["hold"] / frame_dt
+    assert abs(frames_per_hold - round(frames_per_hold)) < 1e-9, controller
     delay = plant.get("actuator_delay_frames", 0) * per_frame
     gain = plant.get("actuator_gain", 1.0)
     lag = plant.get("actuator_lag", 0.0)

@@ -3,7 +3,8 @@
 //!
 //! Every rule calls the `alnlab` binary on the same output folder `alnlab
 //! run` uses, one stage at a time (`run --until STAGE`), training in N
-//! shards (`run --train-shard K/N`) that the train rule merges; the last
+//! shards (`run --train-shard K/N`) that the train rule merges (a
+//! piecewise-linear variant's few trees in one job: `unsharded`); the last
 //! rule is `alnlab run` itself, which finds every artifact cached and writes
 //! the run record and report. So a workflow run and `alnlab run` share the
 //! cache and the run record. Rules mark their completion with empty files

@@ -570,7 +570,10 @@ impl<'a> Runner<'a> {
     }
 
     /// Forgets what the integrator (and a plant's actuators) tracked, to
-    /// step on from another state of the same run.
+    /// step on from another state of the same run. A plant's actuators start
+    /// again at rest, their delay empty, so stepping on from a mid-run state
+    /// of a plant does not reproduce its run (replay and planning run the
+    /// nominal scene, which has none).
     pub fn restart(&mut self) {
         self.stepper.restart();
         if let Some(actuators) = &mut self.actuators {

@@ -549,7 +549,10 @@ impl Scene {
         if damping > limit {
             // The scene as written passed: what fails is the plant's.
             let (field, whose) = match self.plant {
-                Some(_) => ("plant", "the plant's damping with its friction"),
+                Some(_) => (
+                    "plant",
+                    "the damping with the plant (its friction and masses)",
+                ),
                 None => ("hinge_damping", "the damping"),
             };
             return err(
