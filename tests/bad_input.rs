@@ -387,6 +387,7 @@ fn damaged_and_hostile_files_given_to_stages_are_refused() {
     )
     .unwrap();
     let good_pairs = s(&art("pairs"));
+    let good_nominal = s(&art("nominal"));
     let good_stats = s(&art("stats"));
     for (name, pairs, stats, mention) in [
         (
@@ -633,6 +634,8 @@ fn damaged_and_hostile_files_given_to_stages_are_refused() {
                 &good_levels,
                 "--pairs",
                 &good_pairs,
+                "--nominal",
+                &good_nominal,
                 "--out",
                 &s(&out),
             ],
@@ -673,6 +676,8 @@ fn damaged_and_hostile_files_given_to_stages_are_refused() {
             &good_levels,
             "--pairs",
             "pairs-other.parquet",
+            "--nominal",
+            &good_nominal,
             "--out",
             &s(&out),
         ],

@@ -45,7 +45,7 @@ fn every_flipped_byte_is_refused_or_remade() {
     let artifacts = &record.variants[0].artifacts;
     let path = |role: &str| d.join(&artifacts[role].path);
     let kinds: Vec<String> = artifacts.keys().cloned().collect();
-    assert_eq!(kinds.len(), 18, "{kinds:?}");
+    assert_eq!(kinds.len(), 19, "{kinds:?}");
 
     // Through the cache: every kind.
     let mut trials = 0;
@@ -66,13 +66,19 @@ fn every_flipped_byte_is_refused_or_remade() {
             trials += 1;
         }
     }
-    assert_eq!(trials, 18 * POSITIONS);
+    assert_eq!(trials, 19 * POSITIONS);
 
     // To a stage alone: every kind a stage reads.
     let s = |p: &Path| p.to_string_lossy().into_owned();
     // (the damaged input, the stage reading it, its other inputs intact)
-    let readers: [Reader; 9] = [
+    let readers: [Reader; 12] = [
         ("trajectory", "stride", vec![]),
+        ("trajectory", "nominal", vec![("pairs", s(&path("pairs")))]),
+        (
+            "pairs",
+            "nominal",
+            vec![("trajectory", s(&path("trajectory")))],
+        ),
         ("pairs", "quantize", vec![("stats", s(&path("stats")))]),
         ("stats", "quantize", vec![("pairs", s(&path("pairs")))]),
         (
@@ -96,12 +102,25 @@ fn every_flipped_byte_is_refused_or_remade() {
                 ("codebook", s(&path("codebook"))),
                 ("levels", s(&path("levels"))),
                 ("pairs", s(&path("pairs"))),
+                ("nominal", s(&path("nominal"))),
             ],
         ),
         (
             "trajectory",
             "test",
             vec![
+                ("model", s(&path("model"))),
+                ("codebook", s(&path("codebook"))),
+                ("levels", s(&path("levels"))),
+                ("pairs", s(&path("pairs"))),
+                ("nominal", s(&path("nominal"))),
+            ],
+        ),
+        (
+            "nominal",
+            "test",
+            vec![
+                ("trajectory", s(&path("trajectory"))),
                 ("model", s(&path("model"))),
                 ("codebook", s(&path("codebook"))),
                 ("levels", s(&path("levels"))),

@@ -129,6 +129,7 @@ fn a_run_from_an_archived_dataset_gives_the_same_bytes() {
         stages,
         [
             "dataset",
+            "nominal",
             "quantize",
             "train",
             "test",
@@ -142,7 +143,7 @@ fn a_run_from_an_archived_dataset_gives_the_same_bytes() {
     let report = std::fs::read_to_string(dir.path().join("runs/e2e/report/report.md")).unwrap();
     assert!(report.contains(&format!("| dataset | box@1 (sha256 `{}`) |", named.sha256)));
 
-    // With levels the run starts at train — and a [quantize] table is refused.
+    // With levels quantize does not run — and a [quantize] table is refused.
     std::fs::remove_dir_all(dir.path().join("runs")).unwrap();
     write_manifest(dir.path(), "l.toml", &from_dataset("box-levels@1", false));
     let levels = run_ok(dir.path(), &["l.toml"]);
@@ -154,14 +155,22 @@ fn a_run_from_an_archived_dataset_gives_the_same_bytes() {
         .collect();
     assert_eq!(
         stages,
-        ["dataset", "train", "test", "summarize", "plan", "circuit"]
+        [
+            "dataset",
+            "nominal",
+            "train",
+            "test",
+            "summarize",
+            "plan",
+            "circuit"
+        ]
     );
     write_manifest(dir.path(), "lq.toml", &from_dataset("box-levels@1", true));
     let out = alnlab(dir.path(), &["run", "lq.toml"]);
     assert_eq!(out.status.code(), Some(2));
     assert!(
         stderr(&out).contains("holds quantized levels")
-            && stderr(&out).contains("so the run starts at train; remove `quantize`"),
+            && stderr(&out).contains("so the quantize stage does not run; remove `quantize`"),
         "{}",
         stderr(&out)
     );

@@ -105,8 +105,6 @@ pub fn run(manifest: &Manifest, options: &RunOptions) -> Result<RunRecord> {
                 .find_pinned(&data.dataset)
                 .map_err(|e| e.context(&format!("{}: [data] dataset", manifest.path.display())))?;
             archive.require_whole(&entry)?;
-            // The first stage a dataset with levels does not stand for.
-            let start = STAGES.iter().find(|s| !s.archived.holds(true));
             for variant in &variants {
                 let set = STAGES
                     .iter()
@@ -114,12 +112,12 @@ pub fn run(manifest: &Manifest, options: &RunOptions) -> Result<RunRecord> {
                     .find(|s| variant.tables.contains(s.name));
                 if let Some(stage) = set.filter(|_| entry.has_levels()) {
                     return Err(Error::Invalid(format!(
-                        "{}: variant `{}`: dataset {} holds quantized levels, so the run starts at \
-                         {}; remove `{}` (or archive the dataset without levels)",
+                        "{}: variant `{}`: dataset {} holds quantized levels, so the {} stage \
+                         does not run; remove `{}` (or archive the dataset without levels)",
                         manifest.path.display(),
                         variant.name,
                         entry.label(),
-                        start.map_or("", |s| s.name),
+                        stage.name,
                         stage.name
                     )));
                 }

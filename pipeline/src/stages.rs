@@ -210,6 +210,43 @@ pub const STAGES: &[Stage] = &[
         },
     },
     Stage {
+        name: "nominal",
+        about: "Run the nominal stage alone: what the simulator of the scene as written predicts \
+                for every pair",
+        format_version: alnlab_nominal::FORMAT_VERSION,
+        inputs: &[
+            Input {
+                role: "trajectory",
+                from: "simulate",
+            },
+            Input {
+                role: "pairs",
+                from: "stride",
+            },
+        ],
+        outputs: &[("nominal", alnlab_nominal::NOMINAL_FILE)],
+        archived: Archived::Never,
+        every_replicate: true,
+        params: |_| serde_json::Value::Null,
+        validate: |_, _| Ok(()),
+        run: |c| {
+            alnlab_nominal::run(
+                c.input("trajectory"),
+                c.input("pairs"),
+                c.provenance,
+                c.out_dir,
+                c.progress,
+            )
+        },
+        merge_shards: None,
+        hints: Hints {
+            threads: 1,
+            mem_mb: 1024,
+            runtime: 10,
+            holds_forest: false,
+        },
+    },
+    Stage {
         name: "quantize",
         about: "Run the quantize stage alone: ranges, levels and codes per variable",
         format_version: alnlab_quantize::FORMAT_VERSION,
@@ -324,6 +361,10 @@ pub const STAGES: &[Stage] = &[
                 role: "pairs",
                 from: "stride",
             },
+            Input {
+                role: "nominal",
+                from: "nominal",
+            },
         ],
         outputs: &[
             ("predictions", alnlab_evaluate::PREDICTIONS_FILE),
@@ -342,6 +383,7 @@ pub const STAGES: &[Stage] = &[
                 c.input("codebook"),
                 c.input("levels"),
                 c.input("pairs"),
+                c.input("nominal"),
                 c.provenance,
                 c.out_dir,
                 c.progress,

@@ -10,6 +10,9 @@
 //!   true level, the predicted level and the absolute error in levels, and
 //!   whether the row was held out of training (with the paper's split, test
 //!   rows include training rows);
+//!   With `hybrids`, also `linear+nominal` and (with `peer`)
+//!   `boosted+nominal`: the nominal simulator plus a learned correction
+//!   ([`hybrid`]);
 //! - `timings.parquet`: ns per predicted state for each model, evaluation
 //!   path and thread count — every model on one thread, the ALN's batches
 //!   also on all threads — as the median of 5 runs interleaved across the
@@ -20,6 +23,7 @@
 //!   variable, horizon and start row.
 
 pub mod bench;
+mod hybrid;
 mod peer;
 mod piecewise;
 mod predict;
@@ -48,8 +52,9 @@ use serde::{Deserialize, Serialize};
 /// Version of what this stage writes (part of every cache key; 5: the
 /// robust linear baseline of the change, piecewise-linear models; 6: an
 /// angle that wraps scored on the circle, its period in the predictions; 7:
-/// the robust linear fit timed one state at a time too).
-pub const FORMAT_VERSION: u32 = 7;
+/// the robust linear fit timed one state at a time too; 8: hybrids, the
+/// nominal predictions an input).
+pub const FORMAT_VERSION: u32 = 8;
 
 /// File name of the predictions table ([`alnlab_tables::predictions`]).
 pub const PREDICTIONS_FILE: &str = alnlab_tables::predictions::FILE;
@@ -78,6 +83,12 @@ pub struct Params {
     /// the same rows and target (`boosted`, [`peer`]; a minute or so of
     /// fitting on the paper's data).
     pub peer: bool,
+    /// The hybrids beside them ([`hybrid`]): the nominal simulator — the
+    /// nominal stage's prediction, the scene as written without its plant
+    /// — plus a learned correction of what the plant did beyond it, by the
+    /// robust linear fit (`linear+nominal`) and, with `peer`, by boosted
+    /// trees (`boosted+nominal`).
+    pub hybrids: bool,
 }
 
 /// The learned peer's model name.
@@ -91,6 +102,7 @@ impl Default for Params {
             rollout_starts: Count(200),
             resimulate_steps: vec![Count(10), Count(5), Count(2), Count(1)],
             peer: false,
+            hybrids: false,
         }
     }
 }
@@ -212,6 +224,7 @@ pub fn run(
     codebook_path: &Path,
     levels_path: &Path,
     pairs_path: &Path,
+    nominal_path: &Path,
     provenance: &Provenance,
     out_dir: &Path,
     progress: &dyn Progress,
@@ -279,17 +292,60 @@ pub fn run(
     let persistence = pick(&test.x, &scored);
     progress.advance(1);
     let linear_reads = linear_inputs(&data, &learned, &scored)?;
-    let linear_trees =
-        piecewise::robust_linear(&learned, &linear_reads, &real_x, &real_y, &train_rows);
+    let linear_trees = piecewise::robust_linear(
+        &learned,
+        &linear_reads,
+        &real_x,
+        &real_x,
+        &real_y,
+        &train_rows,
+    );
     let linear = Predictor::new(&linear_trees, &linear_reads, &learned, &train_states);
     let (linear_levels, linear_paths) =
         piecewise::paths("linear", &linear, &test_columns, &test_states, &pool);
     let peer = params
         .peer
-        .then(|| peer::Peer::fit(&learned, &scored, &real_x, &real_y, &train_rows));
+        .then(|| peer::Peer::fit(&learned, &scored, &real_x, &real_x, &real_y, &train_rows));
     let peer_levels = peer
         .as_ref()
-        .map(|p| p.levels(&learned, &real_x, &test.rows));
+        .map(|p| p.levels(&learned, &real_x, &real_x, &test.rows));
+    // The hybrids: the nominal simulator's prediction, corrected (read and
+    // checked either way: an input given is an input verified).
+    let nominal = hybrid::base(nominal_path, &pairs, &learned)?;
+    let hybrids = params.hybrids.then(|| {
+        hybrid::Hybrids::fit(
+            &learned,
+            &linear_reads,
+            &scored,
+            &real_x,
+            nominal,
+            &real_y,
+            &train_rows,
+            params.peer,
+        )
+    });
+    let hybrid_linear = hybrids
+        .as_ref()
+        .map(|h| Predictor::new(&h.linear, &h.reads, &h.inputs, &states(&h.x, &train_rows)));
+    let hybrid_columns = hybrids.as_ref().map(|h| {
+        (
+            pick_rows(&h.x, &test.rows),
+            pick_rows(&h.nominal, &test.rows),
+        )
+    });
+    let hybrid_linear_levels =
+        hybrid_linear
+            .as_ref()
+            .zip(hybrid_columns.as_ref())
+            .map(|(predictor, (columns, base))| {
+                let columns: Vec<&[f64]> = columns.iter().map(Vec::as_slice).collect();
+                let base: Vec<&[f64]> = base.iter().map(Vec::as_slice).collect();
+                predictor.levels_from(&columns, &base, &mut predictor.scratch())
+            });
+    let hybrid_peer_levels = hybrids.as_ref().and_then(|h| {
+        let peer = h.peer.as_ref()?;
+        Some(peer.levels(&learned, &h.x, &h.nominal, &test.rows))
+    });
     progress.advance(1);
 
     // The simulator re-stepping each test row's logged frame.
@@ -324,7 +380,7 @@ pub fn run(
                 states: rows.len(),
                 failed: 0,
                 run: Box::new(move || {
-                    std::hint::black_box(pool.install(|| peer.levels(learned, x, rows)));
+                    std::hint::black_box(pool.install(|| peer.levels(learned, x, x, rows)));
                 }),
             });
         }
@@ -333,6 +389,45 @@ pub fn run(
                 .iter()
                 .map(|r| resimulate::path(r, &frames, &replays, &learned, &starts, &test.y)),
         );
+        let width = learned.len();
+        if let Some(predictor) = &hybrid_linear {
+            let mut scratch = predictor.scratch();
+            let outputs = predictor.variables().count();
+            timed.push(hybrid::path(
+                hybrid::LINEAR,
+                &frames,
+                &replays,
+                &starts,
+                &test_states,
+                width,
+                move |inputs, nominal, next| {
+                    let plain = alnlab_aln::pwl::predict::Path::Plain;
+                    let next = &mut next[..outputs];
+                    predictor.next_values_from(inputs, nominal, plain, &mut scratch, next);
+                },
+            ));
+        }
+        if let Some(peer) = hybrids.as_ref().and_then(|h| h.peer.as_ref()) {
+            let learned = &learned;
+            timed.push(hybrid::path(
+                hybrid::PEER,
+                &frames,
+                &replays,
+                &starts,
+                &test_states,
+                width,
+                move |inputs, nominal, next| {
+                    // One state as the crate's one-row table.
+                    let column = |values: &[f64]| -> Vec<Vec<f64>> {
+                        values.iter().map(|&v| vec![v]).collect()
+                    };
+                    let values = peer.next_values(learned, &column(inputs), &column(nominal), &[0]);
+                    for (n, v) in next.iter_mut().zip(values) {
+                        *n = v[0];
+                    }
+                },
+            ));
+        }
         timing::in_rounds(timed, timing::REPEATS)
     };
 
@@ -393,7 +488,7 @@ pub fn run(
     ];
     if let Some(peer) = &peer {
         let every: Vec<usize> = (0..start_rows.len()).collect();
-        let mut step = |state: &[Vec<f64>]| peer.next_values(&learned, state, &every);
+        let mut step = |state: &[Vec<f64>]| peer.next_values(&learned, state, state, &every);
         rolled.push((PEER.to_string(), roll_real(&scored, &mut step)));
     }
     for (steps, r) in params.resimulate_steps.iter().zip(&resimulated) {
@@ -420,6 +515,12 @@ pub fn run(
     ];
     if let Some(levels) = &peer_levels {
         models.push((PEER, levels));
+    }
+    if let Some(levels) = &hybrid_linear_levels {
+        models.push((hybrid::LINEAR, levels));
+    }
+    if let Some(levels) = &hybrid_peer_levels {
+        models.push((hybrid::PEER, levels));
     }
     models.extend(
         resimulated

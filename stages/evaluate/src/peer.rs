@@ -48,11 +48,14 @@ fn samples(x: &[Vec<f64>], rows: &[usize], labels: Option<&[f64]>) -> DataVec {
 
 impl Peer {
     /// Fits one model per variable of `variables` on the training `rows`
-    /// of the current and next real values `x`, `y` (`[variable][row]`).
+    /// of the current and next real values `x`, `y` (`[variable][row]`):
+    /// the change from `base` (`x` itself, or another model's prediction
+    /// for a hybrid) to `y`.
     pub fn fit(
         learned: &[&Entry],
         variables: &[usize],
         x: &[Vec<f64>],
+        base: &[Vec<f64>],
         y: &[Vec<f64>],
         rows: &[usize],
     ) -> Peer {
@@ -61,7 +64,7 @@ impl Peer {
             .map(|&v| {
                 let target: Vec<f64> = rows
                     .iter()
-                    .map(|&r| change(learned[v], x[v][r], y[v][r]))
+                    .map(|&r| change(learned[v], base[v][r], y[v][r]))
                     .collect();
                 let mut data = samples(x, rows, Some(&target));
                 let mut config = Config::new();
@@ -82,8 +85,15 @@ impl Peer {
         }
     }
 
-    /// The next real values `[output][row]` of the states `rows` of `x`.
-    pub fn next_values(&self, learned: &[&Entry], x: &[Vec<f64>], rows: &[usize]) -> Vec<Vec<f64>> {
+    /// The next real values `[output][row]` of the states `rows` of `x`,
+    /// each advanced from its value in `base` (as fitted).
+    pub fn next_values(
+        &self,
+        learned: &[&Entry],
+        x: &[Vec<f64>],
+        base: &[Vec<f64>],
+        rows: &[usize],
+    ) -> Vec<Vec<f64>> {
         let data = samples(x, rows, None);
         self.models
             .iter()
@@ -93,15 +103,22 @@ impl Peer {
                     .predict(&data)
                     .iter()
                     .zip(rows)
-                    .map(|(&d, &r)| advance(learned[v], x[v][r], f64::from(d)))
+                    .map(|(&d, &r)| advance(learned[v], base[v][r], f64::from(d)))
                     .collect()
             })
             .collect()
     }
 
-    /// The next levels `[output][row]` of the states `rows` of `x`.
-    pub fn levels(&self, learned: &[&Entry], x: &[Vec<f64>], rows: &[usize]) -> Vec<Vec<u16>> {
-        self.next_values(learned, x, rows)
+    /// The next levels `[output][row]` of the states `rows` of `x`, each
+    /// advanced from its value in `base`.
+    pub fn levels(
+        &self,
+        learned: &[&Entry],
+        x: &[Vec<f64>],
+        base: &[Vec<f64>],
+        rows: &[usize],
+    ) -> Vec<Vec<u16>> {
+        self.next_values(learned, x, base, rows)
             .iter()
             .zip(&self.variables)
             .map(|(values, &v)| {

@@ -82,13 +82,15 @@ pub fn paths<'s, 'm: 's>(
 }
 
 /// The robust linear baseline of the variables `reads` names: per output
-/// one piece, the least-absolute-deviations fit of its change from its
-/// inputs' real values `x[variable][row]` to their next values `y` on
-/// `rows`.
+/// one piece, the least-absolute-deviations fit, from its inputs' real
+/// values `x[variable][row]`, of its change from `base` (the current values
+/// `x` themselves, or another model's prediction for a hybrid) to the next
+/// values `y`, on `rows`.
 pub fn robust_linear(
     learned: &[&Entry],
     reads: &[Reads],
     x: &[Vec<f64>],
+    base: &[Vec<f64>],
     y: &[Vec<f64>],
     rows: &[usize],
 ) -> Vec<Tree> {
@@ -102,7 +104,7 @@ pub fn robust_linear(
             let v = r.variable;
             let target: Vec<f64> = rows
                 .iter()
-                .map(|&row| predict::change(learned[v], x[v][row], y[v][row]))
+                .map(|&row| predict::change(learned[v], base[v][row], y[v][row]))
                 .collect();
             let (bias, weights) = least_absolute(&inputs, &target, r.inputs.len());
             Tree::affine(bias, &weights)

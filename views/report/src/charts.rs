@@ -66,6 +66,10 @@ const SIMULATOR: [RGBColor; 5] = [
 /// The learned peer (gradient-boosted trees): dark teal, dashed like a
 /// baseline.
 const BOOSTED: RGBColor = RGBColor(0x00, 0x66, 0x66);
+/// The hybrids (the nominal simulator plus a learned correction): the
+/// learned kind's hue, darker and warmer, dashed.
+const LINEAR_NOMINAL: RGBColor = RGBColor(0x88, 0x44, 0x88);
+const BOOSTED_NOMINAL: RGBColor = RGBColor(0x22, 0x33, 0x99);
 /// The planning reference the random controller.
 const RANDOM_TORQUES: RGBColor = RGBColor(0xDD, 0x44, 0x00);
 /// A reference line across a plot ([`Plot::rules`]): lighter than any
@@ -107,6 +111,8 @@ pub fn style_of(model: &str, variant: usize) -> Style {
         "random torques" => dashed(RANDOM_TORQUES, Marker::Cross),
         "linear" => dashed(LINEAR, Marker::Triangle),
         "boosted" => dashed(BOOSTED, Marker::Circle),
+        "linear+nominal" => dashed(LINEAR_NOMINAL, Marker::Triangle),
+        "boosted+nominal" => dashed(BOOSTED_NOMINAL, Marker::Circle),
         _ => match simulator_steps(model) {
             Some(steps) => {
                 let (k, marker) = match steps {

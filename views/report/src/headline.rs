@@ -183,8 +183,11 @@ fn entries<'a>(variants: &'a [Loaded<'a>]) -> Vec<Entry<'a>> {
     let simulators = super::findings::simulators(best.0)
         .into_iter()
         .map(|(name, _)| name);
-    let baselines: Vec<Entry> = ["persistence", "linear", "boosted"]
+    let learned = ["persistence", "linear", "boosted"];
+    let hybrids = ["linear+nominal", "boosted+nominal"];
+    let baselines: Vec<Entry> = learned
         .into_iter()
+        .chain(hybrids)
         .chain(simulators)
         .filter_map(|m| entry(best.0, best.1, m))
         .collect();

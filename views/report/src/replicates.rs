@@ -16,9 +16,16 @@ use super::{Loaded, Replicate, aln_against, overall, split_rows};
 use alnlab_summarize::Rows;
 use alnlab_summarize::paired::Interval;
 
-/// The models whose errors the headline gives (the learned peer where the
-/// test stage fitted one).
-pub(super) const MODELS: [&str; 4] = ["aln", "persistence", "linear", "boosted"];
+/// The models whose errors the headline gives (the learned peer and the
+/// hybrids where the test stage fitted them).
+pub(super) const MODELS: [&str; 6] = [
+    "aln",
+    "persistence",
+    "linear",
+    "boosted",
+    "linear+nominal",
+    "boosted+nominal",
+];
 
 /// One replicate's headline figures, on its held-out rows (all test rows
 /// when none is held out).

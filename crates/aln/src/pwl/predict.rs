@@ -259,9 +259,23 @@ impl<'m> Predictor<'m> {
         scratch: &mut Scratch<'m>,
         next: &mut [f64],
     ) {
+        self.next_values_from(state, state, path, scratch, next);
+    }
+
+    /// [`Predictor::next_values`] with each output advanced from its value
+    /// in `base` (`width()` values) instead of `state`: a correction
+    /// learned on top of another model's prediction `base` (a hybrid).
+    pub fn next_values_from(
+        &self,
+        state: &[f64],
+        base: &[f64],
+        path: Path,
+        scratch: &mut Scratch<'m>,
+        next: &mut [f64],
+    ) {
         for (o, value) in next.iter_mut().enumerate() {
             let change = self.change(o, state, path, scratch);
-            *value = self.outputs[o].advance(state, change);
+            *value = self.outputs[o].advance(base, change);
         }
     }
 
@@ -346,12 +360,25 @@ impl<'m> Predictor<'m> {
     /// [`Tree::piece_value`]'s order, then the MIN/MAX nodes from the
     /// leaves up — the plain evaluation's numbers.
     pub fn levels(&self, columns: &[&[f64]], scratch: &mut Scratch<'m>) -> Vec<Vec<u16>> {
+        self.levels_from(columns, columns, scratch)
+    }
+
+    /// [`Predictor::levels`] with each output advanced from its values in
+    /// `base` (`[variable][row]`, as `columns`) instead of `columns`: a
+    /// correction learned on top of another model's prediction `base` (a
+    /// hybrid).
+    pub fn levels_from(
+        &self,
+        columns: &[&[f64]],
+        base: &[&[f64]],
+        scratch: &mut Scratch<'m>,
+    ) -> Vec<Vec<u16>> {
         let rows = columns.first().map_or(0, |c| c.len());
         let wide = self.vectors;
         (0..self.outputs.len())
             .map(|o| {
                 let out = &self.outputs[o];
-                let current = columns[out.variable];
+                let current = base[out.variable];
                 let mut levels = Vec::with_capacity(rows);
                 for start in (0..rows).step_by(BLOCK) {
                     let block = BLOCK.min(rows - start);
@@ -722,5 +749,29 @@ mod tests {
         assert!((next[0] + 3.1).abs() < 1e-9, "{}", next[0]);
         let plain = entry("a.1.x", -4.0, 4.0);
         assert!((change(&plain, 3.1, -3.1) + 6.2 / 0.08).abs() < 1e-9);
+    }
+
+    #[test]
+    fn a_hybrid_advances_from_its_base_on_both_paths() {
+        // A constant change of 2 spacings (0.08 each) from a base 1.0 above
+        // the state: the state decides nothing but the change.
+        let a = entry("a.1.x", -4.0, 4.0);
+        let tree = [Tree::affine(2.0, &[0.0])];
+        let reads = [Reads {
+            variable: 0,
+            inputs: vec![0],
+        }];
+        let states = [-1.0, 0.0, 0.5];
+        let base: Vec<f64> = states.iter().map(|x| x + 1.0).collect();
+        let predictor = Predictor::new(&tree, &reads, &[&a], &states);
+        let mut scratch = predictor.scratch();
+        let batch = predictor.levels_from(&[&states], &[&base], &mut scratch);
+        let mut next = [0.0];
+        for (r, (&x, &b)) in states.iter().zip(&base).enumerate() {
+            predictor.next_values_from(&[x], &[b], Path::Plain, &mut scratch, &mut next);
+            assert!((next[0] - (b + 0.16)).abs() < 1e-12, "row {r}: {}", next[0]);
+            assert_eq!(batch[0][r], a.quantizer.level(next[0]).0, "row {r}");
+        }
+        assert_ne!(batch, predictor.levels(&[&states], &mut scratch));
     }
 }
