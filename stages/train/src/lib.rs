@@ -39,8 +39,9 @@ use alnlab_aln::{ModelKind, Output, Target};
 use alnlab_codes::bits::Columns;
 
 /// Version of what this stage writes (part of every cache key; 6: model
-/// format 5, piecewise-linear models).
-pub const FORMAT_VERSION: u32 = 6;
+/// format 5, piecewise-linear models; 7: a piecewise-linear tree's planes
+/// fitted through QR, which moves their last bits).
+pub const FORMAT_VERSION: u32 = 7;
 /// File name of the model.
 pub const MODEL_FILE: &str = "model.aln";
 /// File name of the training log table.
