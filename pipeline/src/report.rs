@@ -71,6 +71,12 @@ pub fn render(record: &RunRecord, dir: &Path) -> Result<PathBuf> {
                 codebook: artifact("codebook")?,
                 planning: v.artifacts.get("planning").map(|a| PathBuf::from(&a.path)),
                 plan_setup: plan_setup(&v.parameters),
+                // A plant of nominal values resolves to none, so a key of
+                // a scene's plant table means one that departs.
+                plant: v
+                    .parameters
+                    .keys()
+                    .any(|k| k.starts_with("simulate.scene.") && k.contains(".plant.")),
                 circuit: v.artifacts.get("circuit").map(|a| PathBuf::from(&a.path)),
                 fpga: v.artifacts.get("fpga").map(|a| PathBuf::from(&a.path)),
                 replicates,

@@ -112,7 +112,7 @@ pub fn style_of(model: &str, variant: usize) -> Style {
         "linear" => dashed(LINEAR, Marker::Triangle),
         "boosted" => dashed(BOOSTED, Marker::Circle),
         "linear+nominal" => dashed(LINEAR_NOMINAL, Marker::Triangle),
-        "boosted+nominal" => dashed(BOOSTED_NOMINAL, Marker::Circle),
+        "boosted+nominal" => dashed(BOOSTED_NOMINAL, Marker::Square),
         _ => match simulator_steps(model) {
             Some(steps) => {
                 let (k, marker) = match steps {

@@ -283,12 +283,33 @@ pub(super) fn first_screen(
         "Errors: mean over a model's variables of its mean error in levels on the {held_out} \
          held-out test rows (of {test}{also}); {intervals}; a difference is paired — the same \
          rows and variables, {paired}.{baselines} Models: persistence predicts no change; \
-         linear is a robust linear fit of the change; simulator@k/frame re-steps each frame \
-         from its logged state with k integration steps (exact at the scene's own step \
-         count). Times, one thread: one state (the simulator: one frame) at a time, and every \
+         linear is a robust linear fit of the change{others}; simulator@k/frame re-steps each \
+         frame from its logged state with k integration steps (exact at the scene's own step \
+         count{nominal}). Times, one thread: one state (the simulator: one frame) at a time, and every \
          test state at once; median and range of {runs}; a baseline several variants share is \
          timed by the first, and that timing is quoted throughout.{decisions} Levels, baselines and intervals \
          are defined under Definitions, at the end.\n",
+        others = {
+            let shown = |model: &str| entries.iter().any(|e| e.model == model);
+            let mut words = String::new();
+            if shown("boosted") {
+                words.push_str("; boosted, gradient-boosted trees fitted to the same change");
+            }
+            if shown("linear+nominal") || shown("boosted+nominal") {
+                words.push_str(
+                    "; a +nominal model is a hybrid: the nominal simulator's prediction (the \
+                     scene as written, at its own step) plus that fit of what the data did \
+                     beyond it",
+                );
+            }
+            words
+        },
+        nominal = if best.variant.info.plant {
+            "; here the data come from a plant, and the simulator is the scene as written — the \
+             nominal model a user has — which knows nothing of how the plant departs from it"
+        } else {
+            ""
+        },
         also = if test > held_out {
             format!("; the other {} were also trained on", test - held_out)
         } else {

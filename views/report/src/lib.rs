@@ -90,6 +90,9 @@ pub struct VariantInfo {
     pub planning: Option<PathBuf>,
     /// What the plan stage was asked, when it planned.
     pub plan_setup: Option<PlanSetup>,
+    /// Whether the data come from a plant that departs from its scene:
+    /// the simulator baselines are then its nominal model.
+    pub plant: bool,
     /// The circuit stage's figures, if the run had them.
     pub circuit: Option<PathBuf>,
     /// The circuit stage's place-and-route figures, if the run had them.
