@@ -68,8 +68,8 @@ pub fn read_frontier(path: &Path) -> Result<Vec<FrontierRow>> {
 }
 
 /// Draws `<reports>/synthesis.svg` from every `<reports>/<name>/frontier.csv`
-/// (reports in name order): per report, its best ALN and its simulator
-/// settings (joined, fewest steps first; one line for reports on the same
+/// (reports in name order): per report, its best ALN, its best hybrid
+/// (`…+nominal`) where it has one, and its simulator settings (joined, fewest steps first; one line for reports on the same
 /// data), each by its mean error over persistence's on the same rows
 /// against its µs per state one at a time. Returns the chart's path and
 /// the reports drawn.
@@ -122,6 +122,26 @@ pub fn render_synthesis(reports: &Path) -> Result<(PathBuf, Vec<String>)> {
                 style: Style {
                     colour,
                     marker: aln_marker,
+                    dashed: false,
+                },
+                points: vec![p],
+                joined: false,
+                hollow: false,
+            });
+        }
+        // The report's best hybrid (the nominal simulator corrected), where
+        // it has one: the model to beat on a plant.
+        let hybrid = rows
+            .iter()
+            .filter(|r| r.model.ends_with("+nominal"))
+            .filter_map(|r| Some((r, point(r)?)))
+            .min_by(|a, b| a.1.y.total_cmp(&b.1.y));
+        if let Some((row, p)) = hybrid {
+            series.push(Series {
+                name: format!("{name}: {} (hybrid)", row.model),
+                style: Style {
+                    colour,
+                    marker: Marker::Triangle,
                     dashed: false,
                 },
                 points: vec![p],
