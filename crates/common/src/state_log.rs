@@ -44,8 +44,9 @@ pub struct StateLayout {
     pub variables: Vec<String>,
 }
 
-/// One logged frame of one run.
-#[derive(Clone, Debug, PartialEq)]
+/// One logged frame of one run (the default: an empty frame at time 0, to
+/// be written into).
+#[derive(Clone, Debug, Default, PartialEq)]
 pub struct StateFrame {
     /// Simulated time since the start of the run, in seconds.
     pub time: f64,

@@ -504,13 +504,7 @@ fn a_robot_joint_effort_is_clamped_to_its_limit() {
     let p = Prepared::new(&scene);
     let mut runner = Runner::new(&p, 1, 0, 0);
     let state = scene.initial_state(&p.model, &mut crate::scene::run_rng(1, 0, 0));
-    let mut frame = alnlab_common::state_log::StateFrame {
-        time: 0.0,
-        run: 0,
-        frame: 0,
-        state: Vec::new(),
-        variables: Vec::new(),
-    };
+    let mut frame = alnlab_common::state_log::StateFrame::default();
     runner.observe(&state, 0.0, &mut frame);
     let efforts: Vec<f64> = runner.hinge_torques().iter().map(|t| t.x).collect();
     // Shoulder and elbow allow 150 N m, the wrists 28.

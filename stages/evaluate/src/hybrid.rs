@@ -141,13 +141,7 @@ pub fn path<'a>(
         .iter()
         .map(|(name, r)| (name.as_str(), r.replayer()))
         .collect();
-    let mut next = StateFrame {
-        time: 0.0,
-        run: 0,
-        frame: 0,
-        state: Vec::new(),
-        variables: Vec::new(),
-    };
+    let mut next = StateFrame::default();
     let (mut inputs, mut corrected) = (vec![0.0; 2 * width], vec![0.0; width]);
     // In time order within each run, as the simulator baselines step them,
     // so each run's controller mostly moves forward.

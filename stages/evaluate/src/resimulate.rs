@@ -130,13 +130,7 @@ fn simulate(
         .map(|(name, r)| (name.as_str(), r.replayer()))
         .collect();
     let mut levels = vec![vec![vec![0u16; rows.len()]; learned.len()]; horizon];
-    let mut next = StateFrame {
-        time: 0.0,
-        run: 0,
-        frame: 0,
-        state: Vec::new(),
-        variables: Vec::new(),
-    };
+    let mut next = StateFrame::default();
     let mut failed = 0;
     for k in order {
         let row = &rows[k];

@@ -73,13 +73,7 @@ pub fn run(
         .map(|(name, r)| (name.as_str(), r.replayer()))
         .collect();
     let mut next_values = vec![vec![None; keys.len()]; variables.len()];
-    let mut next = StateFrame {
-        time: 0.0,
-        run: 0,
-        frame: 0,
-        state: Vec::new(),
-        variables: Vec::new(),
-    };
+    let mut next = StateFrame::default();
     progress.start("nominal", keys.len() as u64, "pairs");
     for (done, r) in order.into_iter().enumerate() {
         let key = &keys[r];

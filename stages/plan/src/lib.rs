@@ -264,13 +264,7 @@ impl View {
             scene,
             runs: 0,
             log_time_ns: 0,
-            frame: StateFrame {
-                time: 0.0,
-                run: 0,
-                frame: 0,
-                state: Vec::new(),
-                variables: Vec::new(),
-            },
+            frame: StateFrame::default(),
         })
     }
 

@@ -110,44 +110,39 @@ pub fn render_synthesis(reports: &Path) -> Result<(PathBuf, Vec<String>)> {
             marker: aln_marker,
             ..
         } = style_of("aln", k);
-        // The report's best ALN: the lowest error over persistence's.
-        let best = rows
-            .iter()
-            .filter(|r| r.model == "aln")
-            .filter_map(|r| Some((r, point(r)?)))
-            .min_by(|a, b| a.1.y.total_cmp(&b.1.y));
-        if let Some((row, p)) = best {
-            series.push(Series {
-                name: format!("{name}: ALN `{}`", row.variant),
-                style: Style {
-                    colour,
-                    marker: aln_marker,
-                    dashed: false,
-                },
-                points: vec![p],
-                joined: false,
-                hollow: false,
-            });
+        // The lowest error over persistence's among the rows `keep` picks.
+        let best = |keep: &dyn Fn(&FrontierRow) -> bool| {
+            rows.iter()
+                .filter(|r| keep(r))
+                .filter_map(|r| Some((r, point(r)?)))
+                .min_by(|a, b| a.1.y.total_cmp(&b.1.y))
+        };
+        let single = |name: String, marker, point| Series {
+            name,
+            style: Style {
+                colour,
+                marker,
+                dashed: false,
+            },
+            points: vec![point],
+            joined: false,
+            hollow: false,
+        };
+        // The report's best ALN, and its best hybrid (the nominal simulator
+        // corrected) where it has one: the model to beat on a plant.
+        if let Some((row, p)) = best(&|r| r.model == "aln") {
+            series.push(single(
+                format!("{name}: ALN `{}`", row.variant),
+                aln_marker,
+                p,
+            ));
         }
-        // The report's best hybrid (the nominal simulator corrected), where
-        // it has one: the model to beat on a plant.
-        let hybrid = rows
-            .iter()
-            .filter(|r| r.model.ends_with("+nominal"))
-            .filter_map(|r| Some((r, point(r)?)))
-            .min_by(|a, b| a.1.y.total_cmp(&b.1.y));
-        if let Some((row, p)) = hybrid {
-            series.push(Series {
-                name: format!("{name}: {} (hybrid)", row.model),
-                style: Style {
-                    colour,
-                    marker: Marker::Triangle,
-                    dashed: false,
-                },
-                points: vec![p],
-                joined: false,
-                hollow: false,
-            });
+        if let Some((row, p)) = best(&|r| r.model.ends_with("+nominal")) {
+            series.push(single(
+                format!("{name}: {} (hybrid)", row.model),
+                Marker::Triangle,
+                p,
+            ));
         }
         let mut simulators: Vec<(u32, Point)> = rows
             .iter()
