@@ -616,7 +616,15 @@ mod tests {
             .env(MARKER, &marker)
             .spawn()
             .unwrap();
-        let found = marked_processes(&marker);
+        // A child spawned through vfork is running before its new
+        // environment is in place (a window a loaded machine widens): wait
+        // a few seconds at most for it to show.
+        let deadline = Instant::now() + Duration::from_secs(5);
+        let mut found = marked_processes(&marker);
+        while found.is_empty() && Instant::now() < deadline {
+            std::thread::sleep(Duration::from_millis(10));
+            found = marked_processes(&marker);
+        }
         assert_eq!(found.len(), 1, "{found:?}");
         assert_eq!(found[0].0, child.id());
         assert_eq!(found[0].1, "sleep 60");
