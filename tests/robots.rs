@@ -240,3 +240,116 @@ fn the_vendored_arm_runs_through_every_stage() {
     assert!(report.contains("`q.elbow_joint`") || report.contains("q.elbow_joint"));
     assert!(Path::new(&dir.path().join("reports/e2e/report.html")).exists());
 }
+
+/// The ALN trained as the correction of an arm's nominal simulator (`base
+/// = "nominal"`): its trees read the nominal predictions, it is more
+/// accurate than that simulator, it is timed with the simulator's step, and
+/// its closed loop — the nominal simulator stepping the state the hybrid
+/// predicted, rebuilt from the joints' positions and velocities — starts
+/// where its one-step prediction is.
+#[test]
+fn an_aln_hybrid_corrects_an_arms_nominal_simulator_one_step_and_closed_loop() {
+    let dir = tempfile::tempdir().unwrap();
+    let robots = dir.path().join("robots");
+    std::fs::create_dir(&robots).unwrap();
+    std::fs::write(robots.join("ur5.urdf"), UR5).unwrap();
+    let text = manifest(
+        "robots/ur5.urdf",
+        "controller = { kind = \"random\", amplitude = [40.0, 60.0, 30.0, 8.0, 8.0, 2.0], \
+         hold = 0.25 }\nhinge_damping = 2.0\nduration = 6.0\nruns = 2\n\n\
+         [simulate.scene.plant]\nmass_scale = 1.2\n\
+         payload = { link = \"tool0\", mass = 2.0, offset = [0.0, 0.0, 0.05] }\n\
+         viscous_friction = 1.0\n\n[stride]\nn = 2\n\n[quantize]\nlevels = 100\n\n\
+         [train]\nmodel = \"piecewise-linear\"\ncontrols = \"given\"\ninformative_inputs = 4\n\
+         base = \"nominal\"\npwl.max_pieces = 4\n\n[test]\nresimulate_steps = [10]\n\
+         rollout_starts = 5\nhorizon = 3\nhybrids = true\n",
+    )
+    .replace("runs = 1\nduration = 1.0\n", "");
+    std::fs::write(dir.path().join("arm.toml"), &text).unwrap();
+    let out = alnlab(dir.path(), &["-q", "run", "arm.toml"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let record: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(dir.path().join("runs/e2e/run.json")).unwrap())
+            .unwrap();
+    let artifact = |role: &str| {
+        dir.path().join(
+            record["variants"][0]["artifacts"][role]["path"]
+                .as_str()
+                .unwrap(),
+        )
+    };
+    let model = alnlab_aln::model::Model::read(&artifact("model")).unwrap();
+    assert_eq!(model.header.base, alnlab_aln::model::Base::Nominal);
+    assert!(
+        model
+            .header
+            .reads
+            .iter()
+            .all(|reads| reads.iter().any(|r| r.starts_with("nominal("))),
+        "every tree reads its variable's nominal prediction: {:?}",
+        model.header.reads
+    );
+    let predictions =
+        alnlab_tables::predictions::Predictions::read(&artifact("predictions")).unwrap();
+    let model_index = |name: &str| {
+        let models = predictions.models();
+        models
+            .iter()
+            .position(|m| m == name)
+            .unwrap_or_else(|| panic!("{name} in {models:?}"))
+    };
+    let held_out_mean = |name: &str| {
+        let m = model_index(name);
+        let held_out = predictions.held_out();
+        let (mut sum, mut count) = (0.0, 0.0);
+        for v in 0..predictions.variables().len() {
+            for (e, &h) in predictions.errors(m, v).zip(held_out) {
+                if h {
+                    sum += f64::from(e);
+                    count += 1.0;
+                }
+            }
+        }
+        sum / count
+    };
+    let (aln, nominal) = (held_out_mean("aln"), held_out_mean("simulator@10/frame"));
+    assert!(
+        aln < 0.5 * nominal,
+        "the ALN hybrid errs {aln} levels, the nominal simulator {nominal}"
+    );
+    let timings = alnlab_common::table::Table::read(&artifact("timings")).unwrap();
+    let (models, paths) = (
+        timings.strings("model").unwrap(),
+        timings.strings("path").unwrap(),
+    );
+    let timed: Vec<(&str, &str)> = models
+        .iter()
+        .zip(&paths)
+        .filter(|(m, _)| *m == "aln")
+        .map(|(m, p)| (m.as_str(), p.as_str()))
+        .collect();
+    assert_eq!(timed, [("aln", "single")], "with the nominal step only");
+    let rollout = alnlab_tables::rollout::Rollout::read(&artifact("rollout")).unwrap();
+    assert_eq!(rollout.variables(), predictions.variables());
+    for name in ["aln", "linear+nominal"] {
+        let r = rollout
+            .models()
+            .iter()
+            .position(|m| m == name)
+            .unwrap_or_else(|| panic!("{name}'s closed loop in {:?}", rollout.models()));
+        let m = model_index(name);
+        for v in 0..rollout.variables().len() {
+            let one_step: Vec<u16> = predictions.errors(m, v).collect();
+            for (s, &row) in rollout.starts().iter().enumerate() {
+                let k = predictions.rows().iter().position(|&t| t == row).unwrap();
+                assert_eq!(
+                    rollout.errors(r, v, 1)[s],
+                    one_step[k],
+                    "{name}, {}, start row {row}: the closed loop's first step is its \
+                     one-step prediction",
+                    rollout.variables()[v]
+                );
+            }
+        }
+    }
+}

@@ -104,6 +104,7 @@ pub fn shards(manifest_path: &Path, variant: &str, shards: u32) -> Result<ShardB
         codebook,
         levels,
         &inputs["pairs"],
+        &inputs["nominal"],
         &provenance,
         &whole,
         &alnlab_common::progress::Silent,

@@ -304,6 +304,10 @@ pub const STAGES: &[Stage] = &[
                 role: "pairs",
                 from: "stride",
             },
+            Input {
+                role: "nominal",
+                from: "nominal",
+            },
         ],
         outputs: &[
             ("model", alnlab_train::MODEL_FILE),
@@ -321,6 +325,7 @@ pub const STAGES: &[Stage] = &[
                 c.input("codebook"),
                 c.input("levels"),
                 c.input("pairs"),
+                c.input("nominal"),
                 c.provenance,
                 c.out_dir,
                 c.progress,

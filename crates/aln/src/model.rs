@@ -61,6 +61,38 @@ impl ModelKind {
     }
 }
 
+/// What a piecewise-linear model's change is measured from: the current
+/// state (a model of the dynamics), or the nominal simulator's prediction
+/// of the next state (a hybrid: the nominal model plus a learned
+/// correction, issue 43).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Base {
+    /// Each output advances from its variable's current value, reading the
+    /// current state.
+    #[default]
+    Current,
+    /// Each output advances from the nominal simulator's prediction of its
+    /// variable, reading the current state and that prediction: the inputs
+    /// are the learned variables, then the same again as predicted
+    /// ([`nominal_input`]).
+    Nominal,
+}
+
+impl Base {
+    /// Whether this is the default, [`Base::Current`] (left out of files,
+    /// which then read as before).
+    pub fn is_current(&self) -> bool {
+        *self == Base::Current
+    }
+}
+
+/// The name under which a hybrid's tree reads the nominal simulator's
+/// prediction of `variable`.
+pub fn nominal_input(variable: &str) -> String {
+    format!("nominal({variable})")
+}
+
 /// The file's magic bytes.
 pub const MAGIC: &[u8; 16] = b"ALNLAB-MODEL\0\0\0\0";
 /// The model file format version (4: the file ends with its CRC-32; 5:
@@ -103,6 +135,10 @@ pub struct Header {
     /// the trees [`Shard::owns`]. Absent from whole models.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub shard: Option<Shard>,
+    /// What a piecewise-linear model's changes advance from (absent: the
+    /// current state).
+    #[serde(default, skip_serializing_if = "Base::is_current")]
+    pub base: Base,
 }
 
 impl Header {
@@ -154,22 +190,35 @@ impl Header {
 
     /// For a piecewise-linear model evaluated with `learned` (the
     /// codebook's learned entries, in order): per output, its variable's
-    /// index among them and the indices of the variables its tree reads.
-    /// On a mismatch, what differs.
+    /// index among them and the indices of the inputs its tree reads — the
+    /// learned variables, then for a hybrid ([`Base::Nominal`]) their
+    /// nominal predictions at `learned.len()` on. On a mismatch, what
+    /// differs.
     pub fn piecewise_for(&self, learned: &[&Entry]) -> std::result::Result<Vec<Reads>, String> {
-        let index = |name: &str| {
-            learned
-                .iter()
-                .position(|e| e.variable == name)
-                .ok_or_else(|| {
-                    format!("reads or predicts `{name}`, which the codebook does not learn")
-                })
+        let width = learned.len();
+        let variable = |name: &str| learned.iter().position(|e| e.variable == name);
+        let unknown =
+            |name: &str| format!("reads or predicts `{name}`, which the codebook does not learn");
+        let input = |name: &str| {
+            let nominal = (self.base == Base::Nominal)
+                .then(|| (0..width).find(|&v| nominal_input(&learned[v].variable) == name))
+                .flatten();
+            variable(name)
+                .or(nominal.map(|v| width + v))
+                .ok_or_else(|| unknown(name))
         };
-        if self.inputs != learned.len() {
+        let inputs = match self.base {
+            Base::Current => width,
+            Base::Nominal => 2 * width,
+        };
+        if self.inputs != inputs {
             return Err(format!(
-                "reads {} variables, but the codebook learns {}",
+                "reads {} inputs, but the codebook learns {width} variables{}",
                 self.inputs,
-                learned.len()
+                match self.base {
+                    Base::Current => "",
+                    Base::Nominal => ", which with their nominal predictions make twice as many",
+                }
             ));
         }
         if self.reads.len() != self.outputs.len() {
@@ -184,8 +233,8 @@ impl Header {
             .zip(&self.reads)
             .map(|((name, _), reads)| {
                 Ok(Reads {
-                    variable: index(name)?,
-                    inputs: reads.iter().map(|r| index(r)).collect::<Result<_, _>>()?,
+                    variable: variable(name).ok_or_else(|| unknown(name))?,
+                    inputs: reads.iter().map(|r| input(r)).collect::<Result<_, _>>()?,
                 })
             })
             .collect()
@@ -600,6 +649,7 @@ mod tests {
                 vote: 1,
                 counter_bound: 3,
                 shard: None,
+                base: Base::Current,
             },
             trees,
             pieces: Vec::new(),
@@ -780,6 +830,59 @@ mod tests {
         short.truncate(short.len() - 20);
         let error = Model::from_bytes(&path, &short).unwrap_err().to_string();
         assert!(error.contains("model.aln"), "{error}");
+    }
+
+    /// A hybrid's trees read the learned variables and their nominal
+    /// predictions, after them; its header says so, and a model of the
+    /// dynamics never reads a nominal prediction.
+    #[test]
+    fn a_hybrids_trees_read_nominal_predictions_after_the_state() {
+        let entry = |variable: &str| Entry {
+            variable: variable.into(),
+            learned: true,
+            note: String::new(),
+            quantizer: alnlab_codes::Quantizer {
+                min: 0.0,
+                max: 1.0,
+                levels: 8,
+            },
+            code: alnlab_codes::Code::Gray,
+            width: 3,
+            walk_step: 0,
+            walk_span: 0,
+            seed: 0,
+            clamped: 0,
+        };
+        let (a, b) = (entry("a"), entry("b"));
+        let mut header = model().header;
+        header.model = ModelKind::PiecewiseLinear;
+        header.target = Target::Change;
+        header.base = Base::Nominal;
+        header.inputs = 4;
+        header.outputs = vec![("b".into(), 1)];
+        header.reads = vec![vec!["a".into(), nominal_input("a"), nominal_input("b")]];
+        let reads = header.piecewise_for(&[&a, &b]).unwrap();
+        assert_eq!(
+            reads,
+            [Reads {
+                variable: 1,
+                inputs: vec![0, 2, 3]
+            }]
+        );
+        let json = serde_json::to_string(&header).unwrap();
+        assert!(json.contains(r#""base":"nominal""#), "{json}");
+        header.inputs = 2;
+        let narrow = header.piecewise_for(&[&a, &b]).unwrap_err();
+        assert!(
+            narrow.contains("reads 2 inputs") && narrow.contains("twice as many"),
+            "{narrow}"
+        );
+        header.base = Base::Current;
+        let unknown = header.piecewise_for(&[&a, &b]).unwrap_err();
+        assert!(unknown.contains("`nominal(a)`"), "{unknown}");
+        // A model of the dynamics leaves `base` out of its header.
+        let json = serde_json::to_string(&header).unwrap();
+        assert!(!json.contains("base"), "{json}");
     }
 
     #[test]

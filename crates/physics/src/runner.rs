@@ -164,6 +164,43 @@ pub fn state_names(
     names
 }
 
+/// How to rebuild a logged generalized state (named by [`state_names`])
+/// from the scene's `variables`: for each coordinate that changes, its
+/// index in the state and the index of the variable that is it — a
+/// one-DOF joint's position `joint.<j>.q` is the variable `q.<j>`, its
+/// velocity `joint.<j>.qd` is `qd.<j>`. A fixed root's position never
+/// changes, and the efforts after the state are not part of it, so they
+/// are left as they are. An error names the first coordinate no variable
+/// is (a ball hinge's or free root's orientation and rates, a free root's
+/// motion): such a state cannot be rebuilt from the variables.
+pub fn state_from_variables(
+    state: &[String],
+    variables: &[String],
+) -> std::result::Result<Vec<(usize, usize)>, String> {
+    let free_root = state.iter().any(|n| n.starts_with("root.v."));
+    let mut filled = Vec::new();
+    for (i, name) in state.iter().enumerate() {
+        if name.starts_with("root.p.") && !free_root
+            || name.ends_with(".passive") && name.starts_with("joint.")
+            || name.ends_with(".applied") && name.starts_with("joint.")
+        {
+            continue;
+        }
+        let variable = name
+            .strip_prefix("joint.")
+            .and_then(|rest| {
+                let (joint, part) = rest.rsplit_once('.')?;
+                matches!(part, "q" | "qd").then(|| format!("{part}.{joint}"))
+            })
+            .and_then(|v| variables.iter().position(|n| *n == v));
+        match variable {
+            Some(v) => filled.push((i, v)),
+            None => return Err(format!("the state's `{name}` is no logged variable")),
+        }
+    }
+    Ok(filled)
+}
+
 /// What the logged state holds of a link.
 #[derive(Clone, Copy)]
 enum Logged {

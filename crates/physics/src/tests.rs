@@ -491,6 +491,35 @@ fn a_robot_logs_named_variables_and_its_state_reads_back() {
     assert!(state_from_generalized(&p.model, &[0.0; 20]).is_none());
 }
 
+/// A robot's state rebuilt from its logged variables is its logged state;
+/// the worm's, free and turning in ball hinges, cannot be rebuilt so.
+#[test]
+fn a_robot_state_rebuilds_from_its_variables() {
+    let p = Prepared::new(&ur5(0.2));
+    let filled = runner::state_from_variables(&p.layout.state, &p.layout.variables).unwrap();
+    assert_eq!(filled.len(), 12, "q and qd of six joints");
+    let mut logged = Vec::new();
+    simulate_run(&p, 5, 0, 0, |frame, _| {
+        logged.push(frame.clone());
+        Ok(())
+    })
+    .unwrap();
+    let mut rebuilt = logged[3].clone();
+    for &(s, _) in &filled {
+        rebuilt.state[s] = f64::NAN;
+    }
+    for &(s, v) in &filled {
+        rebuilt.state[s] = rebuilt.variables[v];
+    }
+    assert_eq!(rebuilt.state, logged[3].state);
+    let worm = Prepared::new(&Scene::default().resolve());
+    let refused = runner::state_from_variables(&worm.layout.state, &worm.layout.variables);
+    assert_eq!(
+        refused,
+        Err("the state's `root.p.x` is no logged variable".into())
+    );
+}
+
 /// A robot's effort limit clamps what the controller (or a planner) asks.
 #[test]
 fn a_robot_joint_effort_is_clamped_to_its_limit() {

@@ -182,6 +182,7 @@ mod tests {
             vote,
             counter_bound: 7,
             shard: None,
+            base: alnlab_aln::model::Base::Current,
         };
         Model {
             header,

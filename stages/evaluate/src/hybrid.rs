@@ -12,10 +12,16 @@
 //! the learned model's (the same form, a superset of its inputs), so it is
 //! the strongest fair form of the idea, not a handicapped one.
 //!
+//! A piecewise-linear ALN trained as the correction (`[train] base =
+//! "nominal"`) is the ALN hybrid; its fits nest the `linear+nominal` one,
+//! which then reads what the ALN's trees read.
+//!
 //! A hybrid is timed as a user would run one: each state's frame stepped by
 //! the nominal simulator, then corrected, one state at a time. Its closed
-//! loop is not run: the nominal simulator steps the whole generalized
-//! state, which the learned variables a model predicts are not.
+//! loop ([`roll`]) steps the nominal simulator from the state the hybrid
+//! predicted, which needs every coordinate of the scene's generalized state
+//! among the predicted variables ([`Restep`]): a robot's joint positions
+//! and velocities are, the worm's links' orientations are not.
 
 use std::collections::{BTreeMap, HashMap};
 use std::path::Path;
@@ -80,12 +86,14 @@ pub struct Hybrids<'e> {
 impl<'e> Hybrids<'e> {
     /// Fits the corrections on the training `rows`: the learned variables'
     /// current and next real values `x`, `y` and nominal predictions
-    /// `nominal` (`[variable][row]`); `linear_reads`, the linear baseline's
-    /// reads; the boosted trees (for the `scored` variables) with `peer`.
+    /// `nominal` (`[variable][row]`); `reads`, what the robust linear
+    /// correction reads ([`with_own_nominal`] of the linear baseline's, or
+    /// an ALN hybrid's); the boosted trees (for the `scored` variables)
+    /// with `peer`.
     #[allow(clippy::too_many_arguments)]
     pub fn fit(
         learned: &[&'e Entry],
-        linear_reads: &[Reads],
+        reads: Vec<Reads>,
         scored: &[usize],
         x: &[Vec<f64>],
         nominal: Vec<Vec<f64>>,
@@ -93,21 +101,8 @@ impl<'e> Hybrids<'e> {
         rows: &[usize],
         peer: bool,
     ) -> Hybrids<'e> {
-        let width = learned.len();
-        let inputs: Vec<&Entry> = learned.iter().chain(learned).copied().collect();
-        let x: Vec<Vec<f64>> = x.iter().chain(&nominal).cloned().collect();
-        let reads: Vec<Reads> = linear_reads
-            .iter()
-            .map(|r| Reads {
-                variable: r.variable,
-                inputs: r
-                    .inputs
-                    .iter()
-                    .copied()
-                    .chain([width + r.variable])
-                    .collect(),
-            })
-            .collect();
+        let inputs = inputs(learned);
+        let x = columns(x, &nominal);
         let linear = piecewise::robust_linear(&inputs, &reads, &x, &nominal, y, rows);
         let peer = peer.then(|| Peer::fit(learned, scored, &x, &nominal, y, rows));
         Hybrids {
@@ -119,6 +114,36 @@ impl<'e> Hybrids<'e> {
             peer,
         }
     }
+}
+
+/// A hybrid's input entries: the learned variables, then the same again
+/// for their nominal predictions.
+pub fn inputs<'e>(learned: &[&'e Entry]) -> Vec<&'e Entry> {
+    learned.iter().chain(learned).copied().collect()
+}
+
+/// A hybrid's input columns `[input][row]`: the current values `x`, then
+/// the nominal predictions.
+pub fn columns(x: &[Vec<f64>], nominal: &[Vec<f64>]) -> Vec<Vec<f64>> {
+    x.iter().chain(nominal).cloned().collect()
+}
+
+/// The linear baseline's reads (among `width` learned variables) with each
+/// output's own nominal prediction added: what `linear+nominal` reads
+/// beside a model of the dynamics.
+pub fn with_own_nominal(linear: &[Reads], width: usize) -> Vec<Reads> {
+    linear
+        .iter()
+        .map(|r| Reads {
+            variable: r.variable,
+            inputs: r
+                .inputs
+                .iter()
+                .copied()
+                .chain([width + r.variable])
+                .collect(),
+        })
+        .collect()
 }
 
 /// The path to time of a hybrid under `model`'s name: each test row's frame
@@ -177,4 +202,170 @@ pub fn path<'a>(
             }
         }),
     }
+}
+
+/// A hybrid's correction: from its inputs (the state, then its nominal
+/// prediction) and the nominal prediction alone, the predicted variables'
+/// next values.
+pub type Correct<'a> = dyn FnMut(&[f64], &[f64], &mut [f64]) + 'a;
+
+/// The nominal simulator stepping a state a model predicted: the logged
+/// frame the state stands in for, its generalized state rebuilt from the
+/// predicted variables, re-simulated one frame at the scene's own step.
+pub struct Restep<'a> {
+    frames: &'a LoggedFrames<'a>,
+    replays: &'a BTreeMap<String, SceneReplay>,
+    replayers: HashMap<&'a str, Replayer<'a>>,
+    /// Per scene: each changing coordinate of its generalized state, and
+    /// the learned variable that is it.
+    fills: HashMap<&'a str, Vec<(usize, usize)>>,
+    from: StateFrame,
+    next: StateFrame,
+}
+
+impl<'a> Restep<'a> {
+    /// The nominal simulator of every scene of `replays`, whose states are
+    /// rebuilt from the `predicted` learned variables (indices among
+    /// `learned`); an error says which scene's state cannot be, and why.
+    pub fn new(
+        frames: &'a LoggedFrames<'a>,
+        replays: &'a BTreeMap<String, SceneReplay>,
+        learned: &[&Entry],
+        predicted: &[usize],
+    ) -> std::result::Result<Restep<'a>, String> {
+        let mut fills = HashMap::new();
+        for (name, replay) in replays {
+            let layout = &replay.prepared.layout;
+            let refused = |why: String| format!("scene `{name}`: {why}");
+            let filled =
+                alnlab_physics::runner::state_from_variables(&layout.state, &layout.variables)
+                    .map_err(refused)?;
+            let fill = filled
+                .into_iter()
+                .map(|(state, variable)| {
+                    let name = &layout.variables[variable];
+                    predicted
+                        .iter()
+                        .copied()
+                        .find(|&v| learned[v].variable == *name)
+                        .map(|v| (state, v))
+                        .ok_or_else(|| refused(format!("the model does not predict `{name}`")))
+                })
+                .collect::<std::result::Result<_, _>>()?;
+            fills.insert(name.as_str(), fill);
+        }
+        Ok(Restep {
+            frames,
+            replays,
+            replayers: replays
+                .iter()
+                .map(|(name, r)| (name.as_str(), r.replayer()))
+                .collect(),
+            fills,
+            from: StateFrame::default(),
+            next: StateFrame::default(),
+        })
+    }
+
+    /// The nominal simulator's prediction `nominal` (every learned
+    /// variable) one frame after the state `values` (the learned
+    /// variables), which stands in for the frame `h` frames after `row`.
+    /// An error if that frame is not logged, or [`Error::Diverged`] if the
+    /// simulation blew up.
+    pub fn step(&mut self, row: &Start, h: u32, values: &[f64], nominal: &mut [f64]) -> Result<()> {
+        let missing = || {
+            Error::Invalid(format!(
+                "scene `{}`, run {}: frame {} is not in the trajectory log",
+                row.scene,
+                row.run,
+                row.frame + h
+            ))
+        };
+        let logged = self.frames.get(row, h).ok_or_else(missing)?;
+        let (Some(replayer), Some(fill)) =
+            (self.replayers.get_mut(row.scene), self.fills.get(row.scene))
+        else {
+            return Err(missing());
+        };
+        self.from.clone_from(logged);
+        for &(state, v) in fill {
+            self.from.state[state] = values[v];
+        }
+        let steps = self.replays[row.scene].prepared.scene.steps_per_frame();
+        replayer.next_frame(&self.from, steps, &mut self.next)?;
+        for (v, value) in nominal.iter_mut().enumerate() {
+            *value = self
+                .frames
+                .value(row.scene, &self.next, v)
+                .unwrap_or(f64::NAN);
+        }
+        Ok(())
+    }
+}
+
+/// A hybrid's closed loop from the real states `start` (`[variable][s]`,
+/// the learned variables) of `starts`: each step the nominal simulator
+/// steps the current state ([`Restep::step`]), then `correct(inputs,
+/// nominal, next)` — as in [`path`] — gives the `variables`' next values,
+/// which replace theirs; the other variables (the controls, when given)
+/// take their logged values. Returns the `variables`' levels after each of
+/// `horizon` steps, `[h][output][s]`; a start whose simulation blew up
+/// scores from then on the level farthest from the truth `truth`
+/// (`[h][variable][s]`), as a simulator's blow-up does.
+#[allow(clippy::too_many_arguments)]
+pub fn roll(
+    restep: &mut Restep,
+    learned: &[&Entry],
+    variables: &[usize],
+    starts: &[Start],
+    start: &[Vec<f64>],
+    truth: &[Vec<Vec<u16>>],
+    horizon: usize,
+    mut correct: impl FnMut(&[f64], &[f64], &mut [f64]),
+) -> Result<Vec<Vec<Vec<u16>>>> {
+    let width = learned.len();
+    let mut levels = vec![vec![vec![0u16; starts.len()]; variables.len()]; horizon];
+    let (mut inputs, mut next) = (vec![0.0; 2 * width], vec![0.0; variables.len()]);
+    // In time order within each run, so each run's controller mostly moves
+    // forward.
+    let mut order: Vec<usize> = (0..starts.len()).collect();
+    order.sort_by_key(|&k| (starts[k].scene, starts[k].run, starts[k].frame));
+    for s in order {
+        let row = &starts[s];
+        for (slot, column) in inputs[..width].iter_mut().zip(start) {
+            *slot = column[s];
+        }
+        let mut blown = false;
+        for (h, at_h) in levels.iter_mut().enumerate() {
+            if !blown {
+                let (current, nominal) = inputs.split_at_mut(width);
+                match restep.step(row, h as u32, current, nominal) {
+                    Ok(()) => {}
+                    Err(Error::Diverged(_)) => blown = true,
+                    Err(e) => return Err(e),
+                }
+            }
+            if !blown {
+                correct(&inputs, &inputs[width..], &mut next);
+                for (&v, &value) in variables.iter().zip(&next) {
+                    inputs[v] = value;
+                }
+                let logged = restep.frames.get(row, h as u32 + 1);
+                for v in (0..width).filter(|v| !variables.contains(v)) {
+                    inputs[v] = logged
+                        .and_then(|f| restep.frames.value(row.scene, f, v))
+                        .unwrap_or(f64::NAN);
+                }
+            }
+            for (o, &v) in variables.iter().enumerate() {
+                let levels = learned[v].quantizer.levels;
+                at_h[o][s] = if blown {
+                    crate::resimulate::farthest(truth[h][v][s], levels)
+                } else {
+                    learned[v].quantizer.level(inputs[v]).0
+                };
+            }
+        }
+    }
+    Ok(levels)
 }

@@ -12,7 +12,8 @@
 //!   rows include training rows);
 //!   With `hybrids`, also `linear+nominal` and (with `peer`)
 //!   `boosted+nominal`: the nominal simulator plus a learned correction
-//!   ([`hybrid`]);
+//!   ([`hybrid`]); a piecewise-linear model trained as that correction
+//!   (`[train] base = "nominal"`) is itself a hybrid, and `aln` names it;
 //! - `timings.parquet`: ns per predicted state for each model, evaluation
 //!   path and thread count — every model on one thread, the ALN's batches
 //!   also on all threads — as the median of 5 runs interleaved across the
@@ -34,7 +35,7 @@ pub mod timings;
 
 use std::path::Path;
 
-use alnlab_aln::model::{Model, Reads};
+use alnlab_aln::model::{Base, Model, Reads};
 use alnlab_aln::pwl::predict::{Predictor, states};
 use alnlab_aln::runtime::{Runtime, Trained};
 use alnlab_aln::{ModelKind, Output};
@@ -53,8 +54,9 @@ use serde::{Deserialize, Serialize};
 /// robust linear baseline of the change, piecewise-linear models; 6: an
 /// angle that wraps scored on the circle, its period in the predictions; 7:
 /// the robust linear fit timed one state at a time too; 8: hybrids, the
-/// nominal predictions an input).
-pub const FORMAT_VERSION: u32 = 8;
+/// nominal predictions an input; 9: the ALN as a hybrid, hybrids' closed
+/// loops).
+pub const FORMAT_VERSION: u32 = 9;
 
 /// File name of the predictions table ([`alnlab_tables::predictions`]).
 pub const PREDICTIONS_FILE: &str = alnlab_tables::predictions::FILE;
@@ -256,6 +258,27 @@ pub fn run(
     let test_columns: Vec<&[f64]> = test_columns.iter().map(Vec::as_slice).collect();
     let train_states = states(&real_x, &train_rows);
     let piecewise = data.model.header.model == ModelKind::PiecewiseLinear;
+    let width = learned.len();
+    // The nominal simulator's predictions (read and checked either way: an
+    // input given is an input verified).
+    let nominal = hybrid::base(nominal_path, &pairs, &learned)?;
+    // An ALN hybrid reads the state, then its nominal prediction, and
+    // advances from that prediction.
+    let aln_hybrid = piecewise && data.model.header.base == Base::Nominal;
+    let aln_entries = match aln_hybrid {
+        true => hybrid::inputs(&learned),
+        false => learned.clone(),
+    };
+    let aln_x = aln_hybrid.then(|| hybrid::columns(&real_x, &nominal));
+    let aln_x = aln_x.as_deref().unwrap_or(&real_x);
+    let aln_test_states = states(aln_x, &test.rows);
+    let aln_test_columns = pick_rows(aln_x, &test.rows);
+    let aln_test_columns: Vec<&[f64]> = aln_test_columns.iter().map(Vec::as_slice).collect();
+    let nominal_test = (
+        pick_rows(&nominal, &test.rows),
+        states(&nominal, &test.rows),
+    );
+    let nominal_test_columns: Vec<&[f64]> = nominal_test.0.iter().map(Vec::as_slice).collect();
     // Every model is scored on the variables the model predicts.
     let scored: Vec<usize> = if piecewise {
         data.reads.iter().map(|r| r.variable).collect()
@@ -276,13 +299,23 @@ pub fn run(
         Aln::Piecewise(Predictor::new(
             &data.model.pieces,
             &data.reads,
-            &learned,
-            &train_states,
+            &aln_entries,
+            &states(aln_x, &train_rows),
         ))
     } else {
         Aln::Bits(Runtime::new(&data.model, codecs, &data.outputs))
     };
     let (aln, aln_paths) = match &aln_model {
+        // Timed below with the nominal simulator's step, as the hybrids are.
+        Aln::Piecewise(predictor) if aln_hybrid => (
+            piecewise::checked_levels(
+                "aln",
+                predictor,
+                (&aln_test_columns, &aln_test_states),
+                (&nominal_test_columns, &nominal_test.1),
+            ),
+            Vec::new(),
+        ),
         Aln::Piecewise(predictor) => {
             piecewise::paths("aln", predictor, &test_columns, &test_states, &pool)
         }
@@ -309,16 +342,20 @@ pub fn run(
     let peer_levels = peer
         .as_ref()
         .map(|p| p.levels(&learned, &real_x, &real_x, &test.rows));
-    // The hybrids: the nominal simulator's prediction, corrected (read and
-    // checked either way: an input given is an input verified).
-    let nominal = hybrid::base(nominal_path, &pairs, &learned)?;
+    // The hybrids: the nominal simulator's prediction, corrected. Beside an
+    // ALN hybrid the linear correction reads what the ALN's trees read, so
+    // that it is the ALN's one-piece form, as `linear` is beside a model of
+    // the dynamics.
     let hybrids = params.hybrids.then(|| {
         hybrid::Hybrids::fit(
             &learned,
-            &linear_reads,
+            match aln_hybrid {
+                true => data.reads.clone(),
+                false => hybrid::with_own_nominal(&linear_reads, width),
+            },
             &scored,
             &real_x,
-            nominal,
+            nominal.clone(),
             &real_y,
             &train_rows,
             params.peer,
@@ -364,6 +401,23 @@ pub fn run(
         .collect::<Result<_>>()?;
     let timings = {
         let mut timed = aln_paths;
+        if let (Aln::Piecewise(predictor), true) = (&aln_model, aln_hybrid) {
+            let mut scratch = predictor.scratch();
+            let outputs = predictor.variables().count();
+            timed.push(hybrid::path(
+                "aln",
+                &frames,
+                &replays,
+                &starts,
+                &test_states,
+                width,
+                move |inputs, nominal, next| {
+                    let plain = alnlab_aln::pwl::predict::Path::Plain;
+                    let next = &mut next[..outputs];
+                    predictor.next_values_from(inputs, nominal, plain, &mut scratch, next);
+                },
+            ));
+        }
         // The robust linear fit all at once and one state at a time (its
         // plain path, the quickest), as a practitioner would run it.
         timed.extend(
@@ -389,7 +443,6 @@ pub fn run(
                 .iter()
                 .map(|r| resimulate::path(r, &frames, &replays, &learned, &starts, &test.y)),
         );
-        let width = learned.len();
         if let Some(predictor) = &hybrid_linear {
             let mut scratch = predictor.scratch();
             let outputs = predictor.variables().count();
@@ -469,14 +522,38 @@ pub fn run(
     let each = |levels: Vec<Vec<Vec<u16>>>| -> Vec<Vec<Vec<u16>>> {
         levels.iter().map(|h| pick(h, &scored)).collect()
     };
-    let aln_rolled = match &aln_model {
-        Aln::Piecewise(predictor) => roll_real(&scored, &mut piecewise::step_of(predictor)),
-        Aln::Bits(runtime) => each(rollout::roll(from.clone(), horizon, |x| {
-            runtime.levels(x, windows.as_deref())
-        })),
+    // A hybrid's closed loop steps the nominal simulator from the state it
+    // predicted, where every scene's state is made of predicted variables
+    // (a robot's; not the worm's, whose hybrids have no closed loop).
+    let mut restep = hybrid::Restep::new(&frames, &replays, &learned, &scored).ok();
+    let mut roll_hybrid = |correct: &mut hybrid::Correct| {
+        let Some(restep) = restep.as_mut() else {
+            return Ok(None);
+        };
+        let (rows, states, truth) = (&start_rows, &start_states, &truth.levels);
+        hybrid::roll(
+            restep, &learned, &scored, rows, states, truth, horizon, correct,
+        )
+        .map(Some)
     };
-    let mut rolled = vec![
-        ("aln".to_string(), aln_rolled),
+    let plain = alnlab_aln::pwl::predict::Path::Plain;
+    let aln_rolled = match &aln_model {
+        Aln::Piecewise(predictor) if aln_hybrid => {
+            let mut scratch = predictor.scratch();
+            roll_hybrid(&mut |inputs, nominal, next| {
+                predictor.next_values_from(inputs, nominal, plain, &mut scratch, next)
+            })?
+        }
+        Aln::Piecewise(predictor) => Some(roll_real(&scored, &mut piecewise::step_of(predictor))),
+        Aln::Bits(runtime) => Some(each(rollout::roll(from.clone(), horizon, |x| {
+            runtime.levels(x, windows.as_deref())
+        }))),
+    };
+    let mut rolled: Vec<(String, Vec<Vec<Vec<u16>>>)> = aln_rolled
+        .map(|levels| ("aln".to_string(), levels))
+        .into_iter()
+        .collect();
+    rolled.extend([
         (
             "persistence".to_string(),
             each(rollout::roll(from, horizon, |x| x.to_vec())),
@@ -485,11 +562,29 @@ pub fn run(
             "linear".to_string(),
             roll_real(&scored, &mut piecewise::step_of(&linear)),
         ),
-    ];
+    ]);
     if let Some(peer) = &peer {
         let every: Vec<usize> = (0..start_rows.len()).collect();
         let mut step = |state: &[Vec<f64>]| peer.next_values(&learned, state, state, &every);
         rolled.push((PEER.to_string(), roll_real(&scored, &mut step)));
+    }
+    if let Some(predictor) = &hybrid_linear {
+        let mut scratch = predictor.scratch();
+        let levels = roll_hybrid(&mut |inputs, nominal, next| {
+            predictor.next_values_from(inputs, nominal, plain, &mut scratch, next)
+        })?;
+        rolled.extend(levels.map(|levels| (hybrid::LINEAR.to_string(), levels)));
+    }
+    if let Some(peer) = hybrids.as_ref().and_then(|h| h.peer.as_ref()) {
+        let levels = roll_hybrid(&mut |inputs, nominal, next| {
+            let column =
+                |values: &[f64]| -> Vec<Vec<f64>> { values.iter().map(|&v| vec![v]).collect() };
+            let values = peer.next_values(&learned, &column(inputs), &column(nominal), &[0]);
+            for (n, v) in next.iter_mut().zip(values) {
+                *n = v[0];
+            }
+        })?;
+        rolled.extend(levels.map(|levels| (hybrid::PEER.to_string(), levels)));
     }
     for (steps, r) in params.resimulate_steps.iter().zip(&resimulated) {
         let levels = resimulate::rollout(
@@ -589,12 +684,22 @@ fn pick<T: Clone>(all: &[Vec<T>], scored: &[usize]) -> Vec<Vec<T>> {
 }
 
 /// What the robust linear baseline of each scored variable reads: what
-/// the model's tree for it reads (a piecewise-linear model), or the
+/// the model's tree for it reads of the state (a piecewise-linear model),
+/// or the
 /// variables a bit model's trees for it read when it reads a few, or
 /// every learned variable — the variable itself always among them.
 fn linear_inputs(data: &Data, learned: &[&Entry], scored: &[usize]) -> Result<Vec<Reads>> {
     if !data.reads.is_empty() {
-        return Ok(data.reads.clone());
+        // An ALN hybrid's nominal predictions are not the linear fit's.
+        let state = |&i: &usize| i < learned.len();
+        return Ok(data
+            .reads
+            .iter()
+            .map(|r| Reads {
+                variable: r.variable,
+                inputs: r.inputs.iter().copied().filter(state).collect(),
+            })
+            .collect());
     }
     let index = |name: &String| learned.iter().position(|e| e.variable == *name);
     scored

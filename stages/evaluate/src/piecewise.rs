@@ -21,8 +21,43 @@ use crate::rollout::{LoggedFrames, Start};
 use crate::timing::Path;
 
 /// The levels `[output][row]` of the test states — `columns`
-/// (`[variable][row]`) and the same as `states`, rows of the predictor's
-/// width — checked equal on every evaluation path, and the paths to time
+/// (`[input][row]`) and the same as `states`, rows of the predictor's
+/// width — each output advanced from its variable's value in `base`
+/// (`[variable][row]` and rows of values, as `columns` and `states` for a
+/// model of the dynamics, the nominal predictions for a hybrid), checked
+/// equal on every evaluation path: tree by tree over blocks of rows, and
+/// one row at a time by each evaluation.
+pub fn checked_levels(
+    model: &str,
+    predictor: &Predictor,
+    (columns, states): (&[&[f64]], &[f64]),
+    (base_columns, base_states): (&[&[f64]], &[f64]),
+) -> Vec<Vec<u16>> {
+    let levels = predictor.levels_from(columns, base_columns, &mut predictor.scratch());
+    let rows = levels.first().map_or(0, Vec::len);
+    let base_width = base_states.len().checked_div(rows).unwrap_or(0);
+    for evaluation in Evaluation::ALL {
+        let mut scratch = predictor.scratch();
+        let mut next = vec![0u16; levels.len()];
+        let rows = states
+            .chunks_exact(predictor.width())
+            .zip(base_states.chunks_exact(base_width.max(1)));
+        for (r, (state, base)) in rows.enumerate() {
+            predictor.next_levels_from(state, base, evaluation, &mut scratch, &mut next);
+            for (o, &level) in next.iter().enumerate() {
+                assert_eq!(
+                    level,
+                    levels[o][r],
+                    "{model}: the {} path disagrees with the compiled batch on test row {r}",
+                    evaluation.name()
+                );
+            }
+        }
+    }
+    levels
+}
+
+/// [`checked_levels`] of a model of the dynamics, and the paths to time
 /// under `model`'s name: tree by tree over blocks of rows (`batched`) and
 /// one row at a time by each evaluation.
 pub fn paths<'s, 'm: 's>(
@@ -47,15 +82,7 @@ pub fn paths<'s, 'm: 's>(
         levels
     };
     let batched = move || predictor.levels(columns, &mut predictor.scratch());
-    let levels = batched();
-    for evaluation in Evaluation::ALL {
-        assert_eq!(
-            one_row(evaluation),
-            levels,
-            "{model}: the {} path disagrees with the compiled batch",
-            evaluation.name()
-        );
-    }
+    let levels = checked_levels(model, predictor, (columns, states), (columns, states));
     let path = |path, run: Box<dyn FnMut() + 's>| Path {
         model: model.into(),
         path,

@@ -129,6 +129,7 @@ mod tests {
             vote: 3,
             counter_bound: 3,
             shard: None,
+            base: alnlab_aln::model::Base::Current,
         };
         let trees = trained.into_iter().map(|t| (t.id, t.tree)).collect();
         let pieces = Vec::new();

@@ -169,7 +169,7 @@ fn simulate(
 }
 
 /// The level farthest from `truth` among `levels` levels.
-fn farthest(truth: u16, levels: usize) -> u16 {
+pub fn farthest(truth: u16, levels: usize) -> u16 {
     let top = (levels - 1) as u16;
     if truth >= top - truth { 0 } else { top }
 }

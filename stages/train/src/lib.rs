@@ -32,7 +32,7 @@ use alnlab_tables::levels::Levels;
 use alnlab_tables::pairs::{Pairs, Side};
 use serde::{Deserialize, Serialize};
 
-use alnlab_aln::model::{Header, Model};
+use alnlab_aln::model::{Base, Header, Model, nominal_input};
 use alnlab_aln::shard::Shard;
 use alnlab_aln::tree::TreeSpec;
 use alnlab_aln::{ModelKind, Output, Target};
@@ -86,6 +86,12 @@ pub struct Params {
     pub controls: Controls,
     /// How a piecewise-linear model's trees are trained.
     pub pwl: piecewise::PwlParams,
+    /// What a piecewise-linear model's changes advance from: the
+    /// `current` state, or the `nominal` simulator's prediction (a hybrid,
+    /// [`piecewise`]). Left out of the model's header when `current`, so
+    /// a model trained without it is the same file.
+    #[serde(skip_serializing_if = "Base::is_current")]
+    pub base: Base,
 }
 
 /// Whether the controls are predicted (the `controls` key).
@@ -127,6 +133,7 @@ impl Default for Params {
             informative_inputs: None,
             controls: Controls::Learned,
             pwl: piecewise::PwlParams::default(),
+            base: Base::Current,
         }
     }
 }
@@ -159,6 +166,16 @@ impl Params {
                 format!(
                     "`given` needs model = \"piecewise-linear\"; a {} predicts every learned \
                      variable",
+                    self.model.name()
+                ),
+            ));
+        }
+        if self.base == Base::Nominal && self.model != ModelKind::PiecewiseLinear {
+            return Err((
+                "base".into(),
+                format!(
+                    "`nominal` needs model = \"piecewise-linear\"; a {} learns levels, not a \
+                     correction of real values",
                     self.model.name()
                 ),
             ));
@@ -198,6 +215,7 @@ pub fn run(
     codebook_path: &Path,
     levels_path: &Path,
     pairs_path: &Path,
+    nominal_path: &Path,
     provenance: &Provenance,
     out_dir: &Path,
     progress: &dyn Progress,
@@ -226,6 +244,10 @@ pub fn run(
             ));
         }
         let pairs = Pairs::read(pairs_path)?;
+        let nominal = match params.base {
+            Base::Current => None,
+            Base::Nominal => Some(Pairs::read(nominal_path)?),
+        };
         let predicted = learned
             .iter()
             .filter(|e| !(params.controls == Controls::Given && piecewise::is_control(&e.variable)))
@@ -240,32 +262,34 @@ pub fn run(
             &learned,
             &levels,
             &pairs,
+            nominal.as_ref(),
             &rows,
             &tick,
         )?;
+        let width = learned.len();
+        let input_name = |u: usize| match u.checked_sub(width) {
+            None => learned[u].variable.clone(),
+            Some(v) => nominal_input(&learned[v].variable),
+        };
         let model = Model {
             header: Header {
                 codebook_sha256: sha256_file(codebook_path)?,
                 params: serde_json::to_value(params).expect("parameters serialize"),
                 model: params.model,
                 target: Target::Change,
-                inputs: learned.len(),
+                inputs: if nominal.is_some() { 2 * width } else { width },
                 outputs: trained
                     .iter()
                     .map(|t| (learned[t.variable].variable.clone(), t.tree.pieces()))
                     .collect(),
                 reads: trained
                     .iter()
-                    .map(|t| {
-                        t.reads
-                            .iter()
-                            .map(|&u| learned[u].variable.clone())
-                            .collect()
-                    })
+                    .map(|t| t.reads.iter().map(|&u| input_name(u)).collect())
                     .collect(),
                 vote: 1,
                 counter_bound: 0,
                 shard: None,
+                base: params.base,
             },
             trees: Vec::new(),
             pieces: trained.iter().map(|t| t.tree.clone()).collect(),
@@ -425,6 +449,7 @@ pub fn run(
             vote,
             counter_bound: spec.counter_bound,
             shard: shard.is_part().then_some(shard),
+            base: Base::Current,
         },
         trees: trained.iter().map(|t| (t.id, t.tree.clone())).collect(),
         pieces: Vec::new(),

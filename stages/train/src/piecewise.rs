@@ -15,6 +15,13 @@
 //!   coefficients, so the model reads the real values as logged.
 //! - **Controls given** (`controls = "given"`): the controller's torques g
 //!   are read, never predicted.
+//! - **A hybrid** (`base = "nominal"`, issue 43): the trees also read the
+//!   nominal simulator's prediction of every variable (the nominal stage's
+//!   `nominal.parquet`: the scene as written, stepped one frame), chosen
+//!   among the informative inputs as the state's values are, and always
+//!   their own; each learns the change from its variable's nominal
+//!   prediction to the logged next value — what the plant did beyond its
+//!   nominal model.
 
 use alnlab_aln::linear::least_absolute;
 use alnlab_aln::pwl::predict::change;
@@ -156,8 +163,9 @@ pub fn is_control(variable: &str) -> bool {
     matches!(alnlab_codes::codebook::group_of(variable), "g" | "tau")
 }
 
-/// One trained output: its variable, the variables its tree reads
-/// (indices among the learned ones) and the tree, with its rounds.
+/// One trained output: its variable, the inputs its tree reads (indices
+/// among the learned variables, then, for a hybrid, their nominal
+/// predictions) and the tree, with its rounds.
 pub struct TrainedTree {
     pub variable: usize,
     pub reads: Vec<usize>,
@@ -167,7 +175,8 @@ pub struct TrainedTree {
 
 /// Trains one tree per predicted variable on the training `rows`.
 /// `levels` gives the level columns the informative inputs are chosen on;
-/// `pairs` the real values.
+/// `pairs` the real values; `nominal`, for a hybrid, the nominal
+/// simulator's predictions of the same rows.
 #[allow(clippy::too_many_arguments)]
 pub fn train(
     params: &PwlParams,
@@ -177,6 +186,7 @@ pub fn train(
     learned: &[&Entry],
     levels: &Levels,
     pairs: &Pairs,
+    nominal: Option<&Pairs>,
     rows: &[usize],
     tick: &(dyn Fn() + Sync),
 ) -> Result<Vec<TrainedTree>> {
@@ -191,28 +201,56 @@ pub fn train(
             ),
         ));
     }
-    let (x, y) = (
+    let (mut x, y) = (
         pairs.values(Side::Current, learned)?,
         pairs.values(Side::Next, learned)?,
     );
+    let width = learned.len();
+    // A hybrid's inputs are the state, then the nominal simulator's
+    // prediction of it, from which its changes are measured.
+    if let Some(nominal) = nominal {
+        if nominal.keys() != pairs.keys() {
+            return Err(Error::bad_file(
+                nominal.path(),
+                format!(
+                    "does not hold the nominal predictions of {} ({} rows against {})",
+                    pairs.path().display(),
+                    nominal.len(),
+                    pairs.len()
+                ),
+            ));
+        }
+        x.extend(nominal.values(Side::Next, learned)?);
+    }
+    let base_of = |v: usize| if nominal.is_some() { width + v } else { v };
     let predicted: Vec<usize> = (0..learned.len())
         .filter(|&v| !(controls_given && is_control(&learned[v].variable)))
         .collect();
     let reads: Vec<Vec<usize>> = match informative {
         Some(count) => {
-            let x_levels: Vec<&[u16]> = learned
+            let mut x_levels: Vec<std::borrow::Cow<[u16]>> = learned
                 .iter()
-                .map(|e| levels.column(Side::Current, e))
+                .map(|e| {
+                    levels
+                        .column(Side::Current, e)
+                        .map(std::borrow::Cow::Borrowed)
+                })
                 .collect::<Result<_>>()?;
+            // A nominal prediction is chosen on its level, as a state is.
+            for (v, column) in x[width..].iter().enumerate() {
+                let q = &learned[v].quantizer;
+                x_levels.push(column.iter().map(|&value| q.level(value).0).collect());
+            }
             // Scored against what the tree learns: the change of level (on
-            // the circle for an angle), shifted to be non-negative.
+            // the circle for an angle) from its base, shifted to be
+            // non-negative.
             let changes: Vec<Vec<u16>> = predicted
                 .iter()
                 .map(|&v| {
                     let y = levels.column(Side::Next, learned[v])?;
                     let period = learned[v].period();
                     let top = i32::from(u16::MAX / 2);
-                    Ok(x_levels[v]
+                    Ok(x_levels[base_of(v)]
                         .iter()
                         .zip(y)
                         .map(|(&x, &y)| (level_change(x, y, period).clamp(-top, top) + top) as u16)
@@ -220,13 +258,16 @@ pub fn train(
                 })
                 .collect::<Result<_>>()?;
             let targets: Vec<&[u16]> = changes.iter().map(Vec::as_slice).collect();
+            let x_levels: Vec<&[u16]> = x_levels.iter().map(|c| c.as_ref()).collect();
             let chosen = select::informative(&x_levels, &targets, rows, count);
             chosen
                 .into_iter()
                 .zip(&predicted)
                 .map(|(mut inputs, &v)| {
-                    if !inputs.contains(&v) {
-                        inputs.push(v);
+                    for own in [v, base_of(v)] {
+                        if !inputs.contains(&own) {
+                            inputs.push(own);
+                        }
                     }
                     if controls_given && params.read_controls {
                         let controls =
@@ -242,7 +283,7 @@ pub fn train(
                 })
                 .collect()
         }
-        None => vec![(0..learned.len()).collect(); predicted.len()],
+        None => vec![(0..x.len()).collect(); predicted.len()],
     };
     // Standardization on the training rows.
     let scale: Vec<(f64, f64)> = x
@@ -275,7 +316,7 @@ pub fn train(
                 .collect();
             let target: Vec<f64> = rows
                 .iter()
-                .map(|&r| change(learned[v], x[v][r], y[v][r]))
+                .map(|&r| change(learned[v], x[base_of(v)][r], y[v][r]))
                 .collect();
             let samples = Samples {
                 x: &standard,

@@ -221,7 +221,9 @@ pub(super) fn definitions(md: &mut String) {
          - **ALN**: the adaptive logic network under test — a *bit-forest* (the 1991 form: \
          AND/OR trees over input bits, one per output bit, decoded to a level) or a \
          *piecewise-linear* ALN (MIN/MAX trees over affine pieces of the real inputs, predicting \
-         the change).\n\
+         the change) — an *ALN hybrid* where its variant's model says so: the nominal \
+         simulator's prediction plus the ALN's correction, trees that also read that prediction \
+         and learn the change from it.\n\
          - **Baselines**: *persistence* predicts no change; *linear* is the robust linear fit of \
          each variable's change (least absolute deviations, from the real values of the inputs \
          the ALN reads); *boosted* (where present) gradient-boosted trees fitted to the same \
@@ -364,10 +366,10 @@ fn variant_findings(md: &mut String, v: &Loaded) {
         let _ = write!(
             md,
             " {}",
-            if single.is_some() {
-                "one at a time"
-            } else {
-                "all at once"
+            match (single.is_some(), v.hybrid) {
+                (true, true) => "one at a time (the nominal simulator's step, then the correction)",
+                (true, false) => "one at a time",
+                (false, _) => "all at once",
             }
         );
         if let (Some(_), Some(all)) = (single, batched) {

@@ -302,6 +302,12 @@ pub(super) fn first_screen(
                      beyond it",
                 );
             }
+            if entries.iter().any(|e| e.model == "aln" && e.variant.hybrid) {
+                words.push_str(
+                    "; an ALN hybrid is the nominal simulator's prediction plus an ALN trained \
+                     as its correction, timed with the simulator's step",
+                );
+            }
             words
         },
         nominal = if best.variant.info.plant {

@@ -29,7 +29,7 @@ mod variant;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
-use alnlab_aln::model::{Header, Model};
+use alnlab_aln::model::{Base, Header, Model};
 use alnlab_aln::{ModelKind, Target};
 use alnlab_codes::{Codebook, unit_of};
 use alnlab_common::{Result, atomic};
@@ -228,6 +228,9 @@ struct Loaded<'a> {
     not_learned: Vec<(String, String)>,
     /// What the model is and learns, in words.
     description: String,
+    /// Whether the model is a hybrid: the nominal simulator's prediction,
+    /// corrected (its time includes the simulator's step).
+    hybrid: bool,
     /// The replicates' headline figures, when there are several.
     replicates: Vec<replicates::Figures>,
     /// Every replicate's plans, in replicate order (empty when the variant
@@ -646,6 +649,7 @@ fn load(info: &VariantInfo) -> Result<Loaded<'_>> {
         planning,
         replicates,
         description,
+        hybrid: model.header.base == Base::Nominal,
         not_learned,
         info,
         summary,
@@ -722,7 +726,8 @@ fn describe(header: &Header, trees: usize, leaves: usize) -> String {
 }
 
 /// What a piecewise-linear model is, in a sentence: its trees, their
-/// pieces and MIN/MAX nodes, what they learn and read.
+/// pieces and MIN/MAX nodes, what they learn and read — for a hybrid, the
+/// correction of the nominal simulator's prediction.
 fn describe_piecewise(model: &Model) -> String {
     let pieces: Vec<usize> = model.pieces.iter().map(|t| t.pieces()).collect();
     let (mins, maxes) = model
@@ -731,15 +736,32 @@ fn describe_piecewise(model: &Model) -> String {
         .map(|t| t.operators())
         .fold((0, 0), |(a, b), (m, x)| (a + m, b + x));
     let most = model.header.reads.iter().map(Vec::len).max().unwrap_or(0);
+    let (what, from, variables) = match model.header.base {
+        Base::Current => (
+            "its variable's change of real value",
+            "the current state's real values",
+            model.header.inputs,
+        ),
+        Base::Nominal => (
+            "the change from the nominal simulator's prediction of its variable (the scene as \
+             written, stepped one frame) to the next real value",
+            "the current state's real values and the nominal simulator's predictions",
+            model.header.inputs / 2,
+        ),
+    };
     format!(
-        "a piecewise-linear ALN: {} MIN/MAX trees over {} affine pieces in all (from {} to {} \
-         a tree; {mins} MIN and {maxes} MAX nodes); each learns its variable's change of real \
-         value in level spacings from at most {most} of the current state's real values{}",
+        "a piecewise-linear ALN{}: {} MIN/MAX trees over {} affine pieces in all (from {} to {} \
+         a tree; {mins} MIN and {maxes} MAX nodes); each learns {what} in level spacings from \
+         at most {most} of {from}{}",
+        match model.header.base {
+            Base::Current => "",
+            Base::Nominal => " hybrid",
+        },
         pieces.len(),
         pieces.iter().sum::<usize>(),
         pieces.iter().min().unwrap_or(&0),
         pieces.iter().max().unwrap_or(&0),
-        if model.header.outputs.len() < model.header.inputs {
+        if model.header.outputs.len() < variables {
             "; the controller's torques are given, not predicted"
         } else {
             ""

@@ -287,27 +287,50 @@ impl<'m> Predictor<'m> {
         scratch: &mut Scratch<'m>,
         levels: &mut [u16],
     ) {
+        self.next_levels_from(state, state, path, scratch, levels);
+    }
+
+    /// [`Predictor::next_levels`] with each output advanced from its value
+    /// in `base`, as [`Predictor::next_values_from`].
+    pub fn next_levels_from(
+        &self,
+        state: &[f64],
+        base: &[f64],
+        path: Path,
+        scratch: &mut Scratch<'m>,
+        levels: &mut [u16],
+    ) {
         if path == Path::Plain {
-            return self.plain_levels(state, scratch, levels);
+            return self.plain_levels(state, base, scratch, levels);
         }
         for (o, level) in levels.iter_mut().enumerate() {
             let change = self.change(o, state, path, scratch);
             let out = &self.outputs[o];
-            *level = out.quantizer.level(out.advance(state, change)).0;
+            *level = out.quantizer.level(out.advance(base, change)).0;
         }
     }
 
     /// [`Predictor::next_levels`] by the plain path, the whole state
     /// compiled for the widest vectors the CPU has.
-    fn plain_levels(&self, state: &[f64], scratch: &mut Scratch<'m>, levels: &mut [u16]) {
+    fn plain_levels(
+        &self,
+        state: &[f64],
+        base: &[f64],
+        scratch: &mut Scratch<'m>,
+        levels: &mut [u16],
+    ) {
         #[cfg(target_arch = "x86_64")]
         match self.vectors {
             // SAFETY: `wide_vectors` found the CPU's features.
-            Vectors::Avx512 => return unsafe { self.plain_levels_avx512(state, scratch, levels) },
-            Vectors::Avx2 => return unsafe { self.plain_levels_avx2(state, scratch, levels) },
+            Vectors::Avx512 => {
+                return unsafe { self.plain_levels_avx512(state, base, scratch, levels) };
+            }
+            Vectors::Avx2 => {
+                return unsafe { self.plain_levels_avx2(state, base, scratch, levels) };
+            }
             Vectors::Sse => {}
         }
-        self.plain_levels_portable(state, scratch, levels);
+        self.plain_levels_portable(state, base, scratch, levels);
     }
 
     #[cfg(target_arch = "x86_64")]
@@ -315,10 +338,11 @@ impl<'m> Predictor<'m> {
     unsafe fn plain_levels_avx512(
         &self,
         state: &[f64],
+        base: &[f64],
         scratch: &mut Scratch<'m>,
         levels: &mut [u16],
     ) {
-        self.plain_levels_portable(state, scratch, levels);
+        self.plain_levels_portable(state, base, scratch, levels);
     }
 
     #[cfg(target_arch = "x86_64")]
@@ -326,10 +350,11 @@ impl<'m> Predictor<'m> {
     unsafe fn plain_levels_avx2(
         &self,
         state: &[f64],
+        base: &[f64],
         scratch: &mut Scratch<'m>,
         levels: &mut [u16],
     ) {
-        self.plain_levels_portable(state, scratch, levels);
+        self.plain_levels_portable(state, base, scratch, levels);
     }
 
     /// Every tree's change first, then every variable advanced and
@@ -337,7 +362,13 @@ impl<'m> Predictor<'m> {
     /// one another and overlap instead of each waiting at the end of its
     /// tree's chain of selects.
     #[inline(always)]
-    fn plain_levels_portable(&self, state: &[f64], scratch: &mut Scratch<'m>, levels: &mut [u16]) {
+    fn plain_levels_portable(
+        &self,
+        state: &[f64],
+        base: &[f64],
+        scratch: &mut Scratch<'m>,
+        levels: &mut [u16],
+    ) {
         for (out, change) in self.outputs.iter().zip(&mut scratch.changes) {
             let row = &mut scratch.row[..out.inputs.len()];
             for (slot, &i) in row.iter_mut().zip(&out.inputs) {
@@ -349,7 +380,7 @@ impl<'m> Predictor<'m> {
             *change = out.program.run(slots, padded);
         }
         for ((out, &change), level) in self.outputs.iter().zip(&scratch.changes).zip(levels) {
-            *level = out.quantizer.level(out.advance(state, change)).0;
+            *level = out.quantizer.level(out.advance(base, change)).0;
         }
     }
 
