@@ -130,6 +130,12 @@ fn plan_tasks_that_cannot_run_are_refused_at_check() {
             &["plan.models", "oracle", "aln"],
         ),
         (
+            "a plant's simulator for a scene without one",
+            "horizon = 3",
+            "horizon = 3\nplant_steps = [10]",
+            &["plan.plant_steps", "has no plant"],
+        ),
+        (
             "an unknown planner",
             "horizon = 3",
             "horizon = 3\nplanners = [\"gradient\"]",

@@ -7,6 +7,8 @@
 
 use std::path::Path;
 
+use arrow_array::Array;
+
 use crate::common::{alnlab, case, check_all, stderr};
 
 const UR5: &str = include_str!("../robots/ur5/ur5_robot.urdf");
@@ -166,12 +168,12 @@ fn malformed_robot_descriptions_are_refused_naming_file_and_element() {
             vec!["simulate.scene.0.links", "takes this from its description"],
         ),
         (
-            "a robot to plan",
+            "a robot task naming a joint it lacks",
             manifest(
                 "ur5.urdf",
-                "\n[[plan.task]]\nkind = \"hold-angles\"\nname = \"t\"\ntargets = { \"q.elbow_joint\" = 1.0 }\n",
+                "\n[[plan.task]]\nkind = \"hold-angles\"\nname = \"t\"\ntargets = { \"q.knee_joint\" = 1.0 }\n",
             ),
-            vec!["plan.scene", "a robot"],
+            vec!["plan.task.0", "no variable `q.knee_joint`"],
         ),
     ];
     for (k, (name, text, mentions)) in misuse.iter().enumerate() {
@@ -350,6 +352,110 @@ fn an_aln_hybrid_corrects_an_arms_nominal_simulator_one_step_and_closed_loop() {
                     rollout.variables()[v]
                 );
             }
+        }
+    }
+}
+
+/// Planning an arm that is a plant: episodes execute in the plant (its own
+/// simulator predicts each frame exactly, the nominal one does not), the
+/// planner's torques stay within the controller's amplitude and the
+/// joints' effort limits, the ALN hybrid plans, and a joint target beyond
+/// the joint's limits is refused by `alnlab check` with its key.
+#[test]
+fn an_arm_plant_is_planned_in_the_plant_within_its_limits() {
+    let dir = tempfile::tempdir().unwrap();
+    let robots = dir.path().join("robots");
+    std::fs::create_dir(&robots).unwrap();
+    std::fs::write(robots.join("ur5.urdf"), UR5).unwrap();
+    let text = manifest(
+        "robots/ur5.urdf",
+        "controller = { kind = \"random\", amplitude = [40.0, 60.0, 30.0, 8.0, 8.0, 2.0], \
+         hold = 0.25 }\nhinge_damping = 2.0\nduration = 3.0\nruns = 2\n\n\
+         [simulate.scene.plant]\nmass_scale = 1.2\n\
+         payload = { link = \"tool0\", mass = 2.0, offset = [0.0, 0.0, 0.05] }\n\n\
+         [quantize]\nlevels = 64\n\n\
+         [train]\nmodel = \"piecewise-linear\"\ncontrols = \"given\"\ninformative_inputs = 3\n\
+         base = \"nominal\"\npwl.max_pieces = 2\npwl.read_controls = true\n\n\
+         [test]\nresimulate_steps = [10]\nrollout_starts = 2\nhorizon = 2\n\n\
+         [plan]\nmodels = [\"aln\"]\nplanners = [\"cem\"]\nbudgets = [8]\nhorizon = 3\n\
+         episodes = 2\nframes = 5\nsimulator_steps = [10]\nplant_steps = [10]\n\n\
+         [[plan.task]]\nkind = \"hold-angles\"\nname = \"raise\"\n\
+         targets = { \"q.shoulder_lift_joint\" = -1.2, \"q.elbow_joint\" = 0.8 }\n",
+    )
+    .replace("runs = 1\nduration = 1.0\n", "");
+    std::fs::write(dir.path().join("arm.toml"), &text).unwrap();
+    let reach = text.replace("\"q.elbow_joint\" = 0.8", "\"q.elbow_joint\" = 4.0");
+    std::fs::write(dir.path().join("reach.toml"), reach).unwrap();
+    check_all(
+        dir.path(),
+        &[case(
+            "a joint target out of reach",
+            &["check", "reach.toml"],
+            &[
+                "plan.task.0.targets",
+                "q.elbow_joint",
+                "out of the joint's reach",
+                "reach.toml",
+            ],
+            None,
+        )
+        .exits(2)],
+    );
+    let out = alnlab(dir.path(), &["-q", "run", "arm.toml"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let record: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(dir.path().join("runs/e2e/run.json")).unwrap())
+            .unwrap();
+    let artifact = |role: &str| {
+        dir.path().join(
+            record["variants"][0]["artifacts"][role]["path"]
+                .as_str()
+                .unwrap(),
+        )
+    };
+    let planning = alnlab_common::table::Table::read(&artifact("planning")).unwrap();
+    let models = planning.strings("model").unwrap();
+    let rms = planning.f64_column("prediction_rms").unwrap();
+    let rms_of = |model: &str| -> Vec<f64> {
+        (0..planning.num_rows())
+            .filter(|&r| models[r] == model)
+            .map(|r| rms.value(r))
+            .collect()
+    };
+    for model in ["zero", "random", "aln", "simulator@10", "plant@10"] {
+        assert!(models.iter().any(|m| m == model), "{model} in {models:?}");
+    }
+    assert!(
+        rms_of("plant@10").iter().all(|&e| e < 1e-9),
+        "the plant's own simulator predicts the plant: {:?}",
+        rms_of("plant@10")
+    );
+    assert!(
+        rms_of("simulator@10").iter().all(|&e| e > 1e-6),
+        "the nominal simulator does not: {:?}",
+        rms_of("simulator@10")
+    );
+    assert!(rms_of("aln").iter().all(|e| e.is_finite()));
+    // Every planned torque within the controller's amplitude and the
+    // UR5's effort limits (150, 150, 150, 28, 28, 28 N m).
+    let plan = alnlab_common::table::Table::read(&artifact("plan")).unwrap();
+    let lists = plan.column::<arrow_array::ListArray>("torques").unwrap();
+    let torques: Vec<Vec<f64>> = (0..lists.len())
+        .map(|i| {
+            let values = lists.value(i);
+            let values = values
+                .as_any()
+                .downcast_ref::<arrow_array::Float64Array>()
+                .unwrap();
+            values.values().to_vec()
+        })
+        .collect();
+    assert!(!torques.is_empty());
+    let bound = [40.0, 60.0, 30.0, 8.0, 8.0, 2.0];
+    for row in &torques {
+        assert_eq!(row.len(), 6, "one effort per joint: {row:?}");
+        for (t, b) in row.iter().zip(bound) {
+            assert!(t.abs() <= b + 1e-12, "{row:?}");
         }
     }
 }

@@ -40,7 +40,10 @@ pub fn scene_record(scene: &Scene, index: usize, seed: u64) -> BTreeMap<String, 
 
 /// A logged scene, rebuilt.
 pub struct SceneReplay {
+    /// The scene as written — the nominal model a user has.
     pub prepared: Prepared,
+    /// The scene as simulated, where it differs: with its plant.
+    pub plant: Option<Prepared>,
     index: usize,
     seed: u64,
 }
@@ -91,6 +94,7 @@ impl SceneReplay {
                 // The simulator a user has is the scene as written: a
                 // plant's departure from it is what no nominal model knows.
                 prepared: Prepared::new(&scene.nominal()),
+                plant: scene.plant.is_some().then(|| Prepared::new(&scene)),
                 index: number("index")? as usize,
                 seed: number("seed")?,
             };
@@ -105,6 +109,12 @@ impl SceneReplay {
             }
         }
         Ok(scenes)
+    }
+
+    /// The scene as its data were simulated: the plant where it has one,
+    /// else the scene as written.
+    pub fn simulated(&self) -> &Prepared {
+        self.plant.as_ref().unwrap_or(&self.prepared)
     }
 
     /// A re-simulator of this scene's frames.

@@ -1,7 +1,8 @@
 //! One episode of model-predictive control in the true simulator: from a
-//! start state, every frame a policy chooses the hinge torques, the scene's
-//! own simulator (its integrator at its own step) executes them for one
-//! frame, and the task's cost of the frame reached is added up.
+//! start state, every frame a policy chooses the controls ([`Controls`]),
+//! the scene's own simulator — its plant, where it has one — executes them
+//! for one frame at its own step, and the task's cost of the frame reached
+//! is added up.
 //!
 //! Policies: zero torques and the scene's random controller (references),
 //! or a planner with a forward model and a budget (sequences per decision).
@@ -14,6 +15,7 @@ use alnlab_physics::dynamics::{Kinematics, State};
 use alnlab_physics::{Prepared, Runner};
 use nalgebra::Vector3;
 
+use crate::controls::Controls;
 use crate::forward::Model;
 use crate::planner::Planner;
 use crate::task::Cost;
@@ -38,7 +40,8 @@ pub enum Policy<'m> {
 pub struct Step {
     /// The frame reached (1 = one frame after the start).
     pub frame: u32,
-    /// The torques executed on the way to it (hinge by hinge, x y z).
+    /// The controls executed on the way to it (as clamped; in the order of
+    /// [`Controls::names`]).
     pub torques: Vec<f64>,
     /// The task's cost of the frame reached.
     pub cost: f64,
@@ -58,11 +61,14 @@ pub struct Step {
     pub expected: Vec<f64>,
 }
 
-/// Runs `frames` frames from `start`; hands each [`Step`], the frame
-/// reached and its link poses to `on_step`; returns the summed cost. `seed` seeds the random
-/// reference's torques.
+/// Runs `frames` frames of scene `p` (with its plant, if any) from `start`
+/// under `controls`; hands each [`Step`], the frame reached and its link
+/// poses to `on_step`; returns the summed cost. `seed` seeds the random
+/// reference's torques (and a plant's actuator noise).
+#[allow(clippy::too_many_arguments)]
 pub fn run(
     p: &Prepared,
+    controls: &Controls,
     start: &State,
     frames: u32,
     cost: &Cost,
@@ -83,12 +89,12 @@ pub fn run(
     runner.observe(&state, 0.0, &mut frame);
     let steps = p.scene.steps_per_frame();
     let dt = p.scene.dt.get();
-    let mut action = vec![0.0; 3 * hinges];
+    let mut action = vec![0.0; controls.dims()];
     let mut torques = vec![Vector3::zeros(); hinges];
     let mut total = 0.0;
     let mut step = Step {
         frame: 0,
-        torques: vec![0.0; 3 * hinges],
+        torques: vec![0.0; controls.dims()],
         cost: 0.0,
         predicted: f64::NAN,
         spread: f64::NAN,
@@ -100,7 +106,8 @@ pub fn run(
         match policy {
             Policy::Zero => {
                 action.fill(0.0);
-                drive(&mut runner, &action, &mut torques);
+                controls.set(&action, &mut torques);
+                runner.drive(Some(&torques));
             }
             Policy::Random => runner.drive(None),
             Policy::Plan {
@@ -114,7 +121,8 @@ pub fn run(
                 step.spread = planner.cost_spread();
                 step.seconds = clock.elapsed().as_secs_f64();
                 model.predict(&action, &mut step.expected);
-                drive(&mut runner, &action, &mut torques);
+                controls.set(&action, &mut torques);
+                runner.drive(Some(&torques));
             }
         }
         let first = u64::from(f) * steps;
@@ -126,9 +134,7 @@ pub fn run(
         })?;
         // What was executed: the planner's torques as clamped, or the
         // controller's.
-        for (out, g) in step.torques.chunks_mut(3).zip(runner.hinge_torques()) {
-            out.copy_from_slice(g.as_slice());
-        }
+        controls.read(runner.hinge_torques(), &mut step.torques);
         let t = (first + steps) as f64 * dt;
         runner.observe(&state, t, &mut frame);
         step.frame = f + 1;
@@ -142,14 +148,6 @@ pub fn run(
     Ok(total)
 }
 
-/// Drives `runner` with `action` (hinge by hinge, x y z).
-fn drive(runner: &mut Runner, action: &[f64], torques: &mut [Vector3<f64>]) {
-    for (g, t) in torques.iter_mut().zip(action.chunks(3)) {
-        *g = Vector3::new(t[0], t[1], t[2]);
-    }
-    runner.drive(Some(torques));
-}
-
 #[cfg(test)]
 mod tests {
     use std::collections::BTreeMap;
@@ -161,7 +159,7 @@ mod tests {
 
     use super::*;
     use crate::forward::Simulator;
-    use crate::planner::{Bounds, CemSettings, PlannerKind};
+    use crate::planner::{CemSettings, PlannerKind};
     use crate::task::Task;
 
     fn worm() -> Prepared {
@@ -185,30 +183,38 @@ mod tests {
             targets: BTreeMap::from([("pitch.2".into(), 0.6), ("pitch.3".into(), -0.6)]),
         };
         let cost = task.over(&p.layout.variables).unwrap();
+        let controls = Controls::of(&p).unwrap();
         let mut rng = ChaCha8Rng::seed_from_u64(5);
         let start = p.scene.initial_state(&p.model, &mut rng);
         let frames = 60;
         let episode = |policy: &mut Policy| {
             let mut steps = Vec::new();
-            let total = run(&p, &start, frames, &cost, policy, 9, |s, _, _| {
-                steps.push(s.clone());
-                Ok(())
-            })
+            let total = run(
+                &p,
+                &controls,
+                &start,
+                frames,
+                &cost,
+                policy,
+                9,
+                |s, _, _| {
+                    steps.push(s.clone());
+                    Ok(())
+                },
+            )
             .unwrap();
             (total, steps)
         };
         let (zero, _) = episode(&mut Policy::Zero);
         let (random, random_steps) = episode(&mut Policy::Random);
-        let bounds = Bounds {
-            low: vec![-1.0, -10.0, -10.0, -1.0, -10.0, -10.0],
-            high: vec![1.0, 10.0, 10.0, 1.0, 10.0, 10.0],
-        };
+        let bounds = controls.bounds().clone();
+        assert_eq!(bounds.high, [1.0, 10.0, 10.0, 1.0, 10.0, 10.0]);
         let cem = CemSettings {
             iterations: 3,
             elite: 0.1,
         };
         let mut planner = Planner::new(PlannerKind::Cem, cem, 10, bounds, 60, 1);
-        let mut model = Simulator::new(&p, p.scene.steps_per_frame(), cost.clone());
+        let mut model = Simulator::new(&p, &controls, p.scene.steps_per_frame(), cost.clone());
         let (planned, steps) = episode(&mut Policy::Plan {
             planner: &mut planner,
             model: &mut model,

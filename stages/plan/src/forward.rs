@@ -3,9 +3,11 @@
 //! predicts, for candidate torque sequences, the task's cost summed over
 //! the frames ([`crate::planner::Forward`]).
 //!
-//! - [`Simulator`]: the simulator itself at k integration steps per frame
-//!   (k = the scene's own steps per frame is the true model; smaller k is
-//!   cheaper and wronger). A candidate that blows up costs +∞.
+//! - [`Simulator`]: a simulator at k integration steps per frame — the
+//!   scene as written (the nominal model; without a plant, k = the scene's
+//!   own steps per frame is the true model; smaller k is cheaper and
+//!   wronger), or a plant's own (the reference no user has). A candidate
+//!   that blows up costs +∞.
 //! - [`Learned`]: a model of levels — the trained ALN ([`Runtime`]) or the
 //!   linear baseline ([`LinearStep`]) — fed the planner's torques as the
 //!   hinge torque variables' levels and its own predictions after that.
@@ -13,6 +15,8 @@
 //!   planner's torques as they are — so that its predictions move with
 //!   every torque, not only with a torque's level — and its own predicted
 //!   values after that; the cost read from those values directly.
+//! - [`Hybrid`]: the simulator of the scene as written corrected by a
+//!   piecewise-linear ALN trained as its correction, on a robot.
 
 use alnlab_aln::linear::Linear;
 use alnlab_aln::pwl::predict::{Path, Predictor, Scratch};
@@ -23,6 +27,7 @@ use alnlab_physics::dynamics::State;
 use alnlab_physics::{Prepared, Runner};
 use nalgebra::Vector3;
 
+use crate::controls::Controls;
 use crate::planner::Forward;
 use crate::task::Cost;
 
@@ -41,9 +46,10 @@ pub trait Model: Forward {
     fn predict(&mut self, action: &[f64], out: &mut [f64]);
 }
 
-/// The simulator at `steps` integration steps per frame.
+/// A simulator at `steps` integration steps per frame.
 pub struct Simulator<'a> {
     p: &'a Prepared,
+    controls: Controls,
     runner: Runner<'a>,
     steps: u64,
     cost: Cost,
@@ -54,12 +60,13 @@ pub struct Simulator<'a> {
 }
 
 impl<'a> Simulator<'a> {
-    /// The simulator of scene `p` at `steps` steps per frame, costing with
-    /// `cost` (over the scene's variables).
-    pub fn new(p: &'a Prepared, steps: u64, cost: Cost) -> Simulator<'a> {
+    /// The simulator of scene `p` at `steps` steps per frame, set by
+    /// `controls`, costing with `cost` (over the scene's variables).
+    pub fn new(p: &'a Prepared, controls: &Controls, steps: u64, cost: Cost) -> Simulator<'a> {
         let hinges = p.model.len() - 1;
         let rest = State::rest(&p.model, Vector3::zeros());
         Simulator {
+            controls: controls.clone(),
             runner: Runner::new(p, 0, 0, 0),
             steps: steps.max(1),
             cost,
@@ -82,9 +89,7 @@ impl Simulator<'_> {
     /// Steps `self.state` one frame under `action`'s torques and observes
     /// the frame reached; false if it blew up.
     fn frame(&mut self, action: &[f64]) -> bool {
-        for (g, t) in self.torques.iter_mut().zip(action.chunks(3)) {
-            *g = Vector3::new(t[0], t[1], t[2]);
-        }
+        self.controls.set(action, &mut self.torques);
         self.runner.drive(Some(&self.torques));
         let dt = self.p.scene.frame_dt.get() / self.steps as f64;
         if self
@@ -120,7 +125,7 @@ impl Model for Simulator<'_> {
 
 impl Forward for Simulator<'_> {
     fn costs(&mut self, actions: &[f64], horizon: usize, costs: &mut [f64]) {
-        let d = 3 * self.torques.len();
+        let d = self.controls.dims();
         for (sequence, cost) in actions.chunks(horizon * d).zip(costs.iter_mut()) {
             copy_state(&mut self.state, &self.start);
             self.runner.restart();
@@ -172,8 +177,8 @@ impl LevelStep for LinearStep<'_> {
 }
 
 /// A forward model in levels: the true state quantized by the codebook,
-/// each frame's torques set as the hinge torque variables' levels (`g.N.x`
-/// … of hinge N − 1), the next levels predicted for every candidate at once
+/// each frame's controls set as their variables' levels, the next levels
+/// predicted for every candidate at once
 /// (the ALN bit-sliced), fed back, and the task's variables read back at
 /// their levels' values to cost.
 pub struct Learned<'a, S: LevelStep> {
@@ -191,16 +196,17 @@ pub struct Learned<'a, S: LevelStep> {
 }
 
 impl<'a, S: LevelStep> Learned<'a, S> {
-    /// `step` over the `learned` codebook entries, in scene `p`, costing
-    /// with `cost`. An error names a task variable or a hinge torque the
-    /// codebook does not learn.
+    /// `step` over the `learned` codebook entries, in scene `p` set by
+    /// `controls`, costing with `cost`. An error names a task variable the
+    /// codebook does not learn, or says it learns no control.
     pub fn new(
         step: S,
         learned: Vec<&'a Entry>,
         p: &Prepared,
+        controls: &Controls,
         cost: Cost,
     ) -> Result<Learned<'a, S>, String> {
-        let (in_scene, torques, costed) = wiring(&learned, p, &cost)?;
+        let (in_scene, torques, costed) = wiring(&learned, p, controls, &cost)?;
         let names = &p.layout.variables;
         Ok(Learned {
             step,
@@ -265,13 +271,18 @@ impl<S: LevelStep> Forward for Learned<'_, S> {
     }
 }
 
-/// The learned variables' indices in the scene, the (torque component,
-/// learned variable) pairs that take the planner's torques, and the
+/// The learned variables' indices in the scene, the (control component,
+/// learned variable) pairs that take the planner's controls, and the
 /// (learned variable, scene variable) pairs the cost reads; an error names
 /// what the model lacks.
 type Wiring = (Vec<usize>, Vec<(usize, usize)>, Vec<(usize, usize)>);
 
-fn wiring(learned: &[&Entry], p: &Prepared, cost: &Cost) -> Result<Wiring, String> {
+fn wiring(
+    learned: &[&Entry],
+    p: &Prepared,
+    controls: &Controls,
+    cost: &Cost,
+) -> Result<Wiring, String> {
     let names = &p.layout.variables;
     let in_scene = learned
         .iter()
@@ -283,18 +294,18 @@ fn wiring(learned: &[&Entry], p: &Prepared, cost: &Cost) -> Result<Wiring, Strin
         })
         .collect::<Result<Vec<_>, String>>()?;
     let find = |name: &str| learned.iter().position(|e| e.variable == name);
-    let hinges = p.model.len() - 1;
-    let torques = (0..3 * hinges)
-        .filter_map(|k| {
-            let name = format!("g.{}.{}", k / 3 + 2, ["x", "y", "z"][k % 3]);
-            find(&name).map(|v| (k, v))
-        })
+    let torques = controls
+        .names()
+        .iter()
+        .enumerate()
+        .filter_map(|(k, name)| find(name).map(|v| (k, v)))
         .collect::<Vec<_>>();
     if torques.is_empty() {
         return Err(format!(
-            "the model learns no hinge torque (g.N.x|y|z) of scene `{}`: it cannot be told \
-             the planner's torques",
-            p.scene.name
+            "the model learns none of scene `{}`'s controls ({}): it cannot be told the \
+             planner's torques",
+            p.scene.name,
+            controls.names().join(", ")
         ));
     }
     let costed = cost
@@ -334,16 +345,17 @@ pub struct Piecewise<'a> {
 }
 
 impl<'a> Piecewise<'a> {
-    /// `predictor` over the `learned` codebook entries, in scene `p`,
-    /// costing with `cost`. An error names a task variable or a hinge
-    /// torque the model does not read.
+    /// `predictor` over the `learned` codebook entries, in scene `p` set
+    /// by `controls`, costing with `cost`. An error names a task variable
+    /// the model does not predict, or says it reads no control.
     pub fn new(
         predictor: &'a Predictor<'a>,
         learned: &[&Entry],
         p: &Prepared,
+        controls: &Controls,
         cost: Cost,
     ) -> Result<Piecewise<'a>, String> {
-        let (in_scene, torques, costed) = wiring(learned, p, &cost)?;
+        let (in_scene, torques, costed) = wiring(learned, p, controls, &cost)?;
         let predicted: Vec<usize> = predictor.variables().collect();
         if let Some(&(_, s)) = costed
             .iter()
@@ -416,6 +428,182 @@ impl Forward for Piecewise<'_> {
     }
 }
 
+/// A hybrid as a forward model: each frame the simulator of the scene as
+/// written steps the state at its own step, and a piecewise-linear ALN
+/// trained as its correction (`[train] base = "nominal"`) turns that
+/// nominal prediction into the next values of the predicted variables,
+/// from which the next frame's state is rebuilt — a robot's joint
+/// positions and velocities are predicted variables, so its state is made
+/// of them. Costed at the corrected values.
+pub struct Hybrid<'a> {
+    nominal: Simulator<'a>,
+    predictor: &'a Predictor<'a>,
+    scratch: Scratch<'a>,
+    /// Per learned variable, its index among the scene's variables.
+    in_scene: Vec<usize>,
+    torques: Vec<(usize, usize)>,
+    costed: Vec<(usize, usize)>,
+    /// The predicted variables' indices among the learned ones.
+    predicted: Vec<usize>,
+    /// Per one-DOF joint: its link, and the learned variables that are its
+    /// position and velocity.
+    joints: Vec<(usize, usize, usize)>,
+    cost: Cost,
+    start: Vec<f64>,
+    /// The learned variables now, then their nominal predictions.
+    inputs: Vec<f64>,
+    next: Vec<f64>,
+    values: Vec<f64>,
+}
+
+impl<'a> Hybrid<'a> {
+    /// The hybrid of `nominal` (the scene as written, at its own step,
+    /// set by `controls`) and `predictor` (over the `learned` entries and
+    /// their nominal predictions), costing with `cost`. An error says what
+    /// the scene or model lacks for it.
+    pub fn new(
+        nominal: &'a Prepared,
+        predictor: &'a Predictor<'a>,
+        learned: &[&Entry],
+        controls: &Controls,
+        cost: Cost,
+    ) -> Result<Hybrid<'a>, String> {
+        let (in_scene, torques, costed) = wiring(learned, nominal, controls, &cost)?;
+        let predicted: Vec<usize> = predictor.variables().collect();
+        let Some(robot) = &nominal.robot else {
+            return Err(format!(
+                "scene `{}` is not a robot: a hybrid re-steps its nominal simulator from the \
+                 state it predicted, which only a robot's joint positions and velocities make",
+                nominal.scene.name
+            ));
+        };
+        let find = |name: String| {
+            predicted
+                .iter()
+                .copied()
+                .find(|&v| learned[v].variable == name)
+                .ok_or_else(|| format!("the model does not predict `{name}`"))
+        };
+        let joints = (1..nominal.model.len())
+            .filter(|&i| nominal.model.links[i].joint.dof() == 1)
+            .map(|i| {
+                let joint = &robot.joints[i];
+                Ok((i, find(format!("q.{joint}"))?, find(format!("qd.{joint}"))?))
+            })
+            .collect::<Result<_, String>>()?;
+        if let Some(&(_, s)) = costed
+            .iter()
+            .find(|(v, _)| !predicted.contains(v) && !torques.iter().any(|(_, t)| t == v))
+        {
+            return Err(format!(
+                "the model does not predict `{}`, which the task reads",
+                nominal.layout.variables[s]
+            ));
+        }
+        let width = learned.len();
+        Ok(Hybrid {
+            nominal: Simulator::new(
+                nominal,
+                controls,
+                nominal.scene.steps_per_frame(),
+                cost.clone(),
+            ),
+            scratch: predictor.scratch(),
+            next: vec![0.0; predicted.len()],
+            predicted,
+            predictor,
+            joints,
+            start: vec![0.0; width],
+            inputs: vec![0.0; 2 * width],
+            values: vec![0.0; nominal.layout.variables.len()],
+            in_scene,
+            torques,
+            costed,
+            cost,
+        })
+    }
+
+    /// One frame under the controls `frame`: the simulator of the scene as
+    /// written steps its state — the decision's at the first frame, then
+    /// the state rebuilt from the hybrid's own predicted joint positions
+    /// and velocities — and the correction advances the learned values in
+    /// `self.inputs` from that nominal prediction. False if the simulator
+    /// blew up.
+    fn step(&mut self, frame: &[f64], first: bool) -> bool {
+        let width = self.start.len();
+        let sim = &mut self.nominal;
+        if first {
+            copy_state(&mut sim.state, &sim.start);
+        } else {
+            for &(link, q, qd) in &self.joints {
+                sim.state.q[link] = self.inputs[q];
+                sim.state.qd[link] = self.inputs[qd];
+            }
+        }
+        for &(k, v) in &self.torques {
+            self.inputs[v] = frame[k];
+        }
+        sim.runner.restart();
+        if !sim.frame(frame) {
+            return false;
+        }
+        for (k, &s) in self.in_scene.iter().enumerate() {
+            self.inputs[width + k] = sim.frame.variables[s];
+        }
+        self.predictor.next_values_from(
+            &self.inputs,
+            &self.inputs[width..],
+            Path::Plain,
+            &mut self.scratch,
+            &mut self.next,
+        );
+        for (&v, &x) in self.predicted.iter().zip(&self.next) {
+            self.inputs[v] = x;
+        }
+        true
+    }
+}
+
+impl Model for Hybrid<'_> {
+    fn start(&mut self, state: &State, variables: &[f64]) {
+        for (value, &s) in self.start.iter_mut().zip(&self.in_scene) {
+            *value = variables[s];
+        }
+        copy_state(&mut self.nominal.start, state);
+    }
+
+    fn predict(&mut self, action: &[f64], out: &mut [f64]) {
+        let width = self.start.len();
+        self.inputs[..width].copy_from_slice(&self.start);
+        let reached = self.step(action, true);
+        for (o, &(v, _)) in out.iter_mut().zip(&self.costed) {
+            *o = if reached { self.inputs[v] } else { f64::NAN };
+        }
+    }
+}
+
+impl Forward for Hybrid<'_> {
+    fn costs(&mut self, actions: &[f64], horizon: usize, costs: &mut [f64]) {
+        let width = self.start.len();
+        let len = actions.len() / costs.len().max(1);
+        let d = len / horizon.max(1);
+        for (sequence, cost) in actions.chunks(len.max(1)).zip(costs.iter_mut()) {
+            self.inputs[..width].copy_from_slice(&self.start);
+            *cost = 0.0;
+            for (h, frame) in sequence.chunks(d.max(1)).take(horizon).enumerate() {
+                if !self.step(frame, h == 0) {
+                    *cost = f64::INFINITY;
+                    break;
+                }
+                for &(v, s) in &self.costed {
+                    self.values[s] = self.inputs[v];
+                }
+                *cost += self.cost.of(&self.values);
+            }
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use std::collections::BTreeMap;
@@ -477,7 +665,9 @@ mod tests {
             targets: BTreeMap::from([("pitch.2".into(), 0.5)]),
         };
         let cost = task.over(&p.layout.variables).unwrap();
-        let mut model = Learned::new(Nudge, entries.iter().collect(), &p, cost.clone()).unwrap();
+        let controls = Controls::of(&p).unwrap();
+        let mut model =
+            Learned::new(Nudge, entries.iter().collect(), &p, &controls, cost.clone()).unwrap();
         let mut variables = vec![0.0; p.layout.variables.len()];
         let pitch = p
             .layout
@@ -506,7 +696,7 @@ mod tests {
             targets: BTreeMap::from([("roll.3".into(), 0.0)]),
         };
         let cost = other.over(&p.layout.variables).unwrap();
-        let e = Learned::new(Nudge, entries.iter().collect(), &p, cost)
+        let e = Learned::new(Nudge, entries.iter().collect(), &p, &controls, cost)
             .err()
             .unwrap();
         assert!(e.contains("does not learn `roll.3`"), "{e}");

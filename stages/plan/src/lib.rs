@@ -3,12 +3,14 @@
 //! torques etc. can be changed until the predicted solution is
 //! satisfactory"): model-predictive control of a scene in the true
 //! simulator. Every frame a planner ([`planner`]: random shooting or the
-//! cross-entropy method) searches torque sequences over a horizon with a
-//! forward model ([`forward`]: the trained ALN, the linear baseline, or the
-//! simulator at k steps per frame), the scene's own simulator executes the
-//! first frame's torques, and the task's cost ([`task`]) of the frame
-//! reached is added up ([`episode`]). Zero torques and the scene's random
-//! controller are the references.
+//! cross-entropy method) searches sequences of the scene's controls
+//! ([`controls`]) over a horizon with a forward model ([`forward`]: the
+//! trained ALN — a hybrid, if it was trained as the nominal simulator's
+//! correction — the linear baseline, the scene as written at k steps per
+//! frame, or a plant's own simulator), the scene's own simulator — its
+//! plant, where it has one — executes the first frame's controls, and the
+//! task's cost ([`task`]) of the frame reached is added up ([`episode`]).
+//! Zero torques and the scene's random controller are the references.
 //!
 //! For every task, model, planner and budget (sequences per decision), the
 //! same episodes — the same start states, taken from the trajectory log —
@@ -30,6 +32,7 @@
 //!   Foxglove), one run each, an `alnlab.plan.episode` metadata record per
 //!   run saying which.
 
+pub mod controls;
 pub mod episode;
 pub mod forward;
 pub mod planner;
@@ -42,14 +45,15 @@ use std::sync::Arc;
 
 use alnlab_aln::ModelKind;
 use alnlab_aln::linear::Linear;
+use alnlab_aln::model::Base;
 use alnlab_aln::pwl::predict::Predictor;
 use alnlab_aln::runtime::Trained;
+use alnlab_codes::Entry;
 use alnlab_common::hash::mix_seed;
 use alnlab_common::params::{self, Count, Fraction, ParamError};
 use alnlab_common::state_log::{StateFrame, StateLayout, StateLog, StateLogWriter};
 use alnlab_common::table;
 use alnlab_common::{Error, Progress, Provenance, Result};
-use alnlab_physics::controller::ControllerKind;
 use alnlab_physics::dynamics::{Kinematics, State};
 use alnlab_physics::replay::SceneReplay;
 use alnlab_physics::{Prepared, Runner, Scene, foxglove, state_from_generalized};
@@ -62,8 +66,9 @@ use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
+use crate::controls::Controls;
 use crate::episode::Policy;
-use crate::forward::{Learned, LinearStep, Model, Piecewise, Simulator};
+use crate::forward::{Hybrid, Learned, LinearStep, Model, Piecewise, Simulator};
 use crate::planner::{Bounds, CemSettings, Planner, PlannerKind};
 use crate::task::{Cost, Task};
 
@@ -103,9 +108,14 @@ pub struct Params {
     pub planners: Vec<PlannerKind>,
     /// The learned forward models.
     pub models: Vec<LearnedKind>,
-    /// The simulator as forward model at these integration steps per frame
-    /// (the scene's own is the true model).
+    /// The simulator as forward model at these integration steps per frame:
+    /// the scene as written (without a plant, the scene's own step count
+    /// is the true model; with one, the nominal model a user has).
     pub simulator_steps: Vec<Count>,
+    /// A plant's own simulator as forward model at these steps per frame
+    /// (`plant@k`): the reference no user has, the plant's actuators
+    /// started at rest at each decision. Only for a scene with a plant.
+    pub plant_steps: Vec<Count>,
     /// Frames a plan looks ahead.
     pub horizon: Count,
     /// Candidate sequences per decision, each budget in turn (a decision
@@ -131,6 +141,7 @@ impl Default for Params {
             planners: vec![PlannerKind::RandomShooting, PlannerKind::Cem],
             models: vec![LearnedKind::Aln, LearnedKind::Linear],
             simulator_steps: vec![Count(10), Count(2)],
+            plant_steps: Vec::new(),
             horizon: Count(10),
             budgets: vec![Count(8), Count(32), Count(128)],
             episodes: Count(3),
@@ -148,15 +159,18 @@ impl Params {
     /// the scene to control is one of them and has every variable a task
     /// names.
     pub fn validate(&self, scenes: Option<&[Scene]>) -> std::result::Result<(), ParamError> {
-        let variables = match scenes {
-            Some(scenes) if !self.task.is_empty() => Some(self.variables_of(scenes)?),
+        let prepared = match scenes {
+            Some(scenes) if !self.task.is_empty() => Some(self.prepared(scenes)?),
             _ => None,
         };
         for (i, task) in self.task.iter().enumerate() {
             task.validate()
                 .map_err(|(field, m)| (format!("task.{i}.{field}"), m))?;
-            if let Some(names) = &variables {
-                task.over(names).map_err(|m| (format!("task.{i}"), m))?;
+            if let Some(p) = &prepared {
+                task.over(&p.variables.names())
+                    .map_err(|m| (format!("task.{i}"), m))?;
+                task.within(p)
+                    .map_err(|(field, m)| (format!("task.{i}.{field}"), m))?;
             }
             if self.task[..i].iter().any(|t| t.name() == task.name()) {
                 return Err((
@@ -176,8 +190,10 @@ impl Params {
 }
 
 impl Params {
-    /// The variable names of the scene to control, among `scenes`.
-    fn variables_of(&self, scenes: &[Scene]) -> std::result::Result<Vec<String>, ParamError> {
+    /// The scene to control, among `scenes`, as its data are simulated
+    /// (with its plant); an error if it is not there, or if `plant_steps`
+    /// asks for a plant it does not have.
+    fn prepared(&self, scenes: &[Scene]) -> std::result::Result<Prepared, ParamError> {
         let scene = match &self.scene {
             None => scenes.first(),
             Some(name) => scenes.iter().find(|s| &s.name == name),
@@ -193,28 +209,17 @@ impl Params {
                 ),
             )
         })?;
-        if scene.kind == alnlab_physics::SceneKind::Urdf {
+        if scene.plant.is_none() && !self.plant_steps.is_empty() {
             return Err((
-                "scene".to_string(),
+                "plant_steps".to_string(),
                 format!(
-                    "scene `{}` is a robot (kind = \"urdf\"); planning drives ball hinges \
-                     only, so plan a worm, chain or pendulum scene",
+                    "scene `{}` has no plant: its own simulator is simulator_steps' (give the \
+                     scene a [simulate.scene.plant], or leave plant_steps out)",
                     scene.name
                 ),
             ));
         }
-        if scene.plant.is_some() {
-            return Err((
-                "scene".to_string(),
-                format!(
-                    "scene `{}` has a plant that departs from it; planning executes episodes in \
-                     the scene as written, so it would not be the plant the models learned \
-                     from — plan a scene without one",
-                    scene.name
-                ),
-            ));
-        }
-        Ok(Prepared::new(scene).variables.names())
+        Ok(Prepared::new(scene))
     }
 }
 
@@ -350,8 +355,11 @@ pub fn run(
                 replays.keys().cloned().collect::<Vec<_>>().join(", ")
             ))
         })?;
-        let p = &replay.prepared;
-        let bounds = bounds_of(p)?;
+        // Episodes execute in the plant (where the scene has one); the
+        // simulators a user has run the scene as written.
+        let (p, nominal) = (replay.simulated(), &replay.prepared);
+        let controls = Controls::of(p).map_err(|m| Error::Invalid(format!("[plan]: {m}")))?;
+        let bounds = controls.bounds().clone();
         let mut out = Outputs {
             frames: FrameRows::default(),
             episodes: Vec::new(),
@@ -374,19 +382,26 @@ pub fn run(
         // A piecewise-linear model reads real values; its compiled boxes
         // are cut where the training rows lie (their levels' values: the
         // cuts decide speed, never a prediction).
+        // A hybrid's trees read the nominal predictions too, after the
+        // state: the state's values stand in for them in the cuts.
+        let hybrid = trained.model.header.base == Base::Nominal;
+        let inputs: Vec<&Entry> = match hybrid {
+            true => learned.iter().chain(&learned).copied().collect(),
+            false => learned.clone(),
+        };
         let piecewise = (trained.model.header.model == ModelKind::PiecewiseLinear).then(|| {
             let points: Vec<f64> = (0..train_rows.len())
                 .flat_map(|r| {
-                    learned
+                    inputs
                         .iter()
-                        .zip(&x_train)
+                        .zip(x_train.iter().cycle())
                         .map(move |(e, column)| e.quantizer.value(usize::from(column[r])))
                 })
                 .collect();
-            Predictor::new(&trained.model.pieces, &trained.reads, &learned, &points)
+            Predictor::new(&trained.model.pieces, &trained.reads, &inputs, &points)
         });
 
-        let models = params.models.len() + params.simulator_steps.len();
+        let models = params.models.len() + params.simulator_steps.len() + params.plant_steps.len();
         let per_task = 2 + params.planners.len() * models * params.budgets.len();
         progress.start(
             "plan",
@@ -400,6 +415,7 @@ pub fn run(
             .expect("a thread pool of one thread");
         let context = Context {
             p,
+            controls: &controls,
             starts: &starts,
             params,
             seed,
@@ -425,15 +441,32 @@ pub fn run(
                         LearnedKind::Aln => (
                             "aln",
                             match &piecewise {
+                                Some(predictor) if hybrid => Box::new(
+                                    Hybrid::new(
+                                        nominal,
+                                        predictor,
+                                        &learned,
+                                        &controls,
+                                        cost.clone(),
+                                    )
+                                    .map_err(|m| Error::Invalid(format!("[plan] aln: {m}")))?,
+                                ),
                                 Some(predictor) => Box::new(
-                                    Piecewise::new(predictor, &learned, p, cost.clone())
-                                        .map_err(|m| Error::Invalid(format!("[plan] aln: {m}")))?,
+                                    Piecewise::new(
+                                        predictor,
+                                        &learned,
+                                        nominal,
+                                        &controls,
+                                        cost.clone(),
+                                    )
+                                    .map_err(|m| Error::Invalid(format!("[plan] aln: {m}")))?,
                                 ),
                                 None => Box::new(
                                     Learned::new(
                                         trained.runtime(),
                                         learned.clone(),
-                                        p,
+                                        nominal,
+                                        &controls,
                                         cost.clone(),
                                     )
                                     .map_err(|m| Error::Invalid(format!("[plan] aln: {m}")))?,
@@ -449,7 +482,8 @@ pub fn run(
                                         levels: &level_counts,
                                     },
                                     learned.clone(),
-                                    p,
+                                    nominal,
+                                    &controls,
                                     cost.clone(),
                                 )
                                 .map_err(|m| Error::Invalid(format!("[plan] linear: {m}")))?,
@@ -460,7 +494,14 @@ pub fn run(
                 }
                 for steps in &params.simulator_steps {
                     let name = format!("simulator@{}", steps.get());
-                    let model = Box::new(Simulator::new(p, steps.get() as u64, cost.clone()));
+                    let steps = steps.get() as u64;
+                    let model = Box::new(Simulator::new(nominal, &controls, steps, cost.clone()));
+                    task_run.planned(&name, model, &bounds, &mut out)?;
+                }
+                for steps in &params.plant_steps {
+                    let name = format!("plant@{}", steps.get());
+                    let steps = steps.get() as u64;
+                    let model = Box::new(Simulator::new(p, &controls, steps, cost.clone()));
                     task_run.planned(&name, model, &bounds, &mut out)?;
                 }
             }
@@ -475,7 +516,9 @@ pub fn run(
 
 /// What every episode of a run shares.
 struct Context<'a> {
+    /// The scene episodes execute in: with its plant, if any.
     p: &'a Prepared,
+    controls: &'a Controls,
     starts: &'a [State],
     params: &'a Params,
     seed: u64,
@@ -569,6 +612,7 @@ impl TaskRun<'_> {
         let Outputs { frames, view, .. } = out;
         let total = episode::run(
             c.p,
+            c.controls,
             &c.starts[e],
             c.params.frames.get() as u32,
             self.cost,
@@ -626,33 +670,6 @@ impl TaskRun<'_> {
         c.progress.advance(1);
         Ok(())
     }
-}
-
-/// The box the planner searches: each hinge's torque within the scene's
-/// controller amplitude (the range its training data saw), clamped to the
-/// torque limit.
-fn bounds_of(p: &Prepared) -> Result<Bounds> {
-    let controller = p.scene.controller();
-    if controller.kind == ControllerKind::None {
-        return Err(Error::Invalid(format!(
-            "[plan]: scene `{}` has no controller, so no torques to plan (give it one, e.g. \
-             controller = {{ kind = \"random\" }})",
-            p.scene.name
-        )));
-    }
-    let limit = controller.torque_limit.get();
-    let hinges = p.model.len() - 1;
-    let high: Vec<f64> = (0..3 * hinges)
-        .map(|k| {
-            let a = &controller.amplitude;
-            let amplitude = a[if a.len() == 1 { 0 } else { k / 3 }].component(k % 3);
-            amplitude.abs().min(limit)
-        })
-        .collect();
-    Ok(Bounds {
-        low: high.iter().map(|h| -h).collect(),
-        high,
-    })
 }
 
 /// The episodes' start states: logged frames drawn (seeded) from the runs

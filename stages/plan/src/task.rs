@@ -1,9 +1,11 @@
 //! Tasks, declared in the manifest in the learned variables, and their cost
 //! per frame (summed over an episode):
 //!
-//! - `hold-angles`: reach and hold target hinge angles — for each
-//!   `roll.N`/`pitch.N` named in `targets` (rad), the squared angle to its
-//!   target, the difference taken on the circle (within ±π);
+//! - `hold-angles`: reach and hold target angles — for each hinge angle
+//!   `roll.N`/`pitch.N` or robot joint position `q.<joint>` named in
+//!   `targets` (rad), the squared angle to its target, the difference taken
+//!   on the circle (within ±π); a joint's target within its limits. Against
+//!   gravity, holding a pose is reaching it;
 //! - `spin`: spin about an axis at a target rate — the squared difference
 //!   of an angular velocity component and `rate` (rad/s); components are in
 //!   the link's own frame, so `omega.3.x` is the third link's spin about its
@@ -12,17 +14,19 @@
 use std::collections::BTreeMap;
 use std::f64::consts::{PI, TAU};
 
+use alnlab_physics::Prepared;
 use serde::{Deserialize, Serialize};
 
 /// One `[[plan.task]]` table.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, tag = "kind", rename_all = "kebab-case")]
 pub enum Task {
-    /// Reach and hold hinge angles.
+    /// Reach and hold hinge or joint angles.
     HoldAngles {
         /// The task's name in tables and the report.
         name: String,
-        /// Target angle (rad) per `roll.N` or `pitch.N` variable.
+        /// Target angle (rad) per `roll.N`, `pitch.N` or `q.<joint>`
+        /// variable.
         targets: BTreeMap<String, f64>,
     },
     /// Spin at a rate.
@@ -83,10 +87,16 @@ impl Task {
                     return Err(("targets", "expected at least one target angle".into()));
                 }
                 for (variable, target) in targets {
-                    if !(variable.starts_with("roll.") || variable.starts_with("pitch.")) {
+                    let angle = ["roll.", "pitch.", "q."]
+                        .iter()
+                        .any(|prefix| variable.starts_with(prefix));
+                    if !angle {
                         return Err((
                             "targets",
-                            format!("`{variable}` is not a hinge angle (roll.N or pitch.N)"),
+                            format!(
+                                "`{variable}` is not a hinge angle (roll.N or pitch.N) or a \
+                                 joint's position (q.<joint>)"
+                            ),
                         ));
                     }
                     if !target.is_finite() {
@@ -104,6 +114,33 @@ impl Task {
                 if !rate.is_finite() {
                     return Err(("rate", "expected a finite rate".into()));
                 }
+            }
+        }
+        Ok(())
+    }
+
+    /// Checks the task against scene `p`: a joint's target within the
+    /// joint's limits, where the robot description gives them. On error,
+    /// the field and the message.
+    pub fn within(&self, p: &Prepared) -> Result<(), (&'static str, String)> {
+        let (Task::HoldAngles { targets, .. }, Some(robot)) = (self, &p.robot) else {
+            return Ok(());
+        };
+        for (variable, &target) in targets {
+            let Some(joint) = variable.strip_prefix("q.") else {
+                continue;
+            };
+            let range = (1..p.model.len())
+                .find(|&i| robot.joints[i] == joint)
+                .and_then(|i| p.laws[i].as_ref()?.range);
+            if let Some((low, high)) = range.filter(|(l, h)| !(*l..=*h).contains(&target)) {
+                return Err((
+                    "targets",
+                    format!(
+                        "`{variable}` = {target} rad is out of the joint's reach: its limits \
+                         are {low} to {high} rad"
+                    ),
+                ));
             }
         }
         Ok(())

@@ -308,9 +308,12 @@ pub(super) fn section(
     let _ = writeln!(
         md,
         "### Planning with the predictor (§1)\n\nModel-predictive control in the simulator: \
-         every frame a planner searches torque sequences with a forward model, the simulator \
-         executes the first frame's torques, and the task's cost of the frame reached adds up \
-         over the episode. Every policy ran the same episodes (the same start states), so each \
+         every frame a planner searches torque sequences with a forward model, the scene's own \
+         simulator — the plant, where the data come from one — executes the first frame's \
+         torques, and the task's cost of the frame reached adds up over the episode. \
+         simulator@k is the scene as written at k steps a frame (of a plant, the nominal model \
+         a user has); plant@k, where present, the plant's own simulator, a reference no user \
+         has. Every policy ran the same episodes (the same start states), so each \
          is compared with zero torques episode by episode. {} Cost: mean over episodes [95% \
          interval]; time: median ms per decision on one thread.\n",
         if replicates > 1 {
