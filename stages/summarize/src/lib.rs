@@ -17,6 +17,7 @@
 
 pub mod bench;
 pub mod paired;
+pub mod signed_rank;
 pub mod stats;
 
 use std::collections::BTreeSet;

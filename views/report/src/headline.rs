@@ -233,7 +233,7 @@ pub(super) fn first_screen(
         });
     // The true model planning by the same rule, for scale.
     let true_model = variants.iter().find_map(|v| {
-        let model = super::plan::true_model(v.planning.first()?)?;
+        let model = super::plan::true_model(v.planning.first()?, v.info.plant)?;
         let phrases = super::plan::within_real_time(&v.planning, model, v.info.plan_setup.as_ref());
         (!phrases.is_empty()).then(|| (model.to_string(), phrases))
     });
@@ -328,6 +328,7 @@ pub(super) fn first_screen(
             ""
         },
     );
+    super::plan::at_real_time(md, variants);
     for v in variants {
         if let (Some(routed), Some(circuit)) = (&v.fpga, &v.circuit) {
             let _ = writeln!(
@@ -439,7 +440,12 @@ fn abstract_(
             Some((model, phrases)) => {
                 let _ = write!(
                     md,
-                    "; by the same rule with {model}/frame, the true model, as forward model: {}.\n\n",
+                    "; by the same rule with {}, the true model, as forward model: {}.\n\n",
+                    if model.starts_with("plant@") {
+                        format!("{model}, the plant's own simulator (no user has it)")
+                    } else {
+                        format!("{model}/frame")
+                    },
                     phrases.join("; ")
                 );
             }

@@ -270,12 +270,15 @@ pub(super) fn within_real_time(
     phrases
 }
 
-/// The true model among `rows`' forward models: the simulator at the most
-/// steps a frame.
-pub(super) fn true_model(rows: &[Episode]) -> Option<&str> {
+/// The true model among `rows`' forward models: a plant's own simulator
+/// at the most steps a frame where the data come from a `plant`, else the
+/// simulator at the most steps a frame (the scene as written, which then
+/// is the plant).
+pub(super) fn true_model(rows: &[Episode], plant: bool) -> Option<&str> {
+    let prefix = if plant { "plant@" } else { "simulator@" };
     rows.iter()
         .filter_map(|e| {
-            let steps: u32 = e.model.strip_prefix("simulator@")?.parse().ok()?;
+            let steps: u32 = e.model.strip_prefix(prefix)?.parse().ok()?;
             Some((steps, e.model.as_str()))
         })
         .max_by_key(|(steps, _)| *steps)
@@ -572,6 +575,233 @@ fn at_equal_time(
     table.write(md);
 }
 
+/// One forward model's plans within real time: its planner at the largest
+/// budget whose median decision fits a frame in replicate 1 (the rule of
+/// the equal-time table), and its episode costs in every replicate.
+struct Contender {
+    label: String,
+    model: String,
+    ms: f64,
+    /// `[replicate][episode]`.
+    costs: Vec<Vec<f64>>,
+}
+
+impl Contender {
+    /// The mean over replicates of the mean episode cost.
+    fn mean(&self) -> f64 {
+        let means: Vec<f64> = self.costs.iter().map(|c| mean(c)).collect();
+        mean(&means)
+    }
+}
+
+fn mean(x: &[f64]) -> f64 {
+    x.iter().sum::<f64>() / x.len().max(1) as f64
+}
+
+/// The first screen's planning answer (issue 43): for each task, every
+/// forward model — each variant's ALN, and the first planning variant's
+/// linear fit and simulators, the scene as written (`simulator@k`) and,
+/// where the data come from a plant, the plant's own (`plant@k`, the
+/// reference no user has) — within real time, paired on the same episodes
+/// against the nominal simulator that plans best within real time: the
+/// mean difference across replicates with its 95% interval (over the
+/// episodes of the one replicate when there is one) and the Wilcoxon
+/// signed-rank p-value over every paired episode. A variant whose episodes
+/// are not the first's (its zero torques cost otherwise) is left out, said
+/// so.
+pub(super) fn at_real_time(md: &mut String, variants: &[super::Loaded]) {
+    let planned: Vec<Planned> = variants
+        .iter()
+        .map(|v| Planned {
+            name: &v.info.name,
+            planning: &v.planning,
+        })
+        .collect();
+    at_real_time_of(md, &planned);
+}
+
+/// A variant's name and its replicates' planning episodes.
+struct Planned<'a> {
+    name: &'a str,
+    planning: &'a [Vec<Episode>],
+}
+
+/// [`at_real_time`] of the variants' planning.
+fn at_real_time_of(md: &mut String, variants: &[Planned]) {
+    let planned: Vec<&Planned> = variants
+        .iter()
+        .filter(|v| v.planning.first().is_some_and(|r| !r.is_empty()))
+        .collect();
+    let Some(first) = planned.first() else {
+        return;
+    };
+    let several = planned.len() > 1;
+    let replicates = first.planning.len();
+    for task in tasks(&first.planning[0]) {
+        let limit = real_time(&first.planning[0], task);
+        let zero_costs = |v: &Planned| -> Option<Vec<Vec<f64>>> {
+            v.planning
+                .iter()
+                .map(|rows| {
+                    let policies = policies(rows, task);
+                    Some(policies.iter().find(|p| p.model == "zero")?.costs())
+                })
+                .collect()
+        };
+        let reference = zero_costs(first);
+        let mut contenders: Vec<Contender> = Vec::new();
+        let mut left_out: Vec<&str> = Vec::new();
+        for v in &planned {
+            if v.planning.len() != replicates || zero_costs(v) != reference {
+                left_out.push(v.name);
+                continue;
+            }
+            let policies_1 = policies(&v.planning[0], task);
+            let mut methods: Vec<(&str, &str)> = Vec::new();
+            for p in &policies_1 {
+                let method = (p.model, p.planner);
+                let kept = p.model == "aln" || std::ptr::eq(*v, *first);
+                if p.planned() && kept && !methods.contains(&method) {
+                    methods.push(method);
+                }
+            }
+            for (model, planner) in methods {
+                let Some(chosen) = within(&policies_1, model, planner, limit) else {
+                    continue;
+                };
+                let costs: Option<Vec<Vec<f64>>> = v
+                    .planning
+                    .iter()
+                    .map(|rows| {
+                        let policies = policies(rows, task);
+                        let p = policies.iter().find(|p| {
+                            p.model == model && p.planner == planner && p.budget == chosen.budget
+                        })?;
+                        Some(p.costs())
+                    })
+                    .collect();
+                let Some(costs) = costs else {
+                    continue;
+                };
+                let name = match (model, several) {
+                    ("aln", true) => format!("ALN (`{}`)", v.name),
+                    ("aln", false) => "ALN".to_string(),
+                    _ => model.to_string(),
+                };
+                contenders.push(Contender {
+                    label: format!("{name}, {planner} ({} sequences)", chosen.budget),
+                    model: model.to_string(),
+                    ms: chosen.ms(),
+                    costs,
+                });
+            }
+        }
+        let nominal = contenders
+            .iter()
+            .filter(|c| c.model.starts_with("simulator@"))
+            .min_by(|a, b| a.mean().total_cmp(&b.mean()));
+        let Some(nominal) = nominal else {
+            continue;
+        };
+        let mut table = MdTable::new(&["forward model, planner (budget)"])
+            .numbers(&["ms / decision", "cost"])
+            .column(&format!("− {}", nominal.label), Align::Left)
+            .column("signed-rank p (episodes)", Align::Left);
+        let mut order: Vec<&Contender> = contenders.iter().collect();
+        order.sort_by(|a, b| a.mean().total_cmp(&b.mean()));
+        let over = if replicates > 1 {
+            format!("across {replicates} replicates")
+        } else {
+            "over the episodes of one replicate".to_string()
+        };
+        let mut aln_words = Vec::new();
+        for c in &order {
+            let means: Vec<f64> = c.costs.iter().map(|r| mean(r)).collect();
+            let cost = match Interval::of(&means) {
+                Some(i) if replicates > 1 => estimate(i.mean, i.low, i.high),
+                _ => sig3(c.mean()),
+            };
+            let pooled: Vec<f64> = c
+                .costs
+                .iter()
+                .zip(&nominal.costs)
+                .flat_map(|(a, b)| a.iter().zip(b).map(|(a, b)| a - b))
+                .collect();
+            let (difference, p) = if std::ptr::eq(*c, nominal) {
+                ("—".to_string(), "—".to_string())
+            } else {
+                let per: Vec<f64> = if replicates > 1 {
+                    c.costs
+                        .iter()
+                        .zip(&nominal.costs)
+                        .map(|(a, b)| mean(a) - mean(b))
+                        .collect()
+                } else {
+                    pooled.clone()
+                };
+                let difference = Interval::of(&per).map_or("—".into(), |d| {
+                    format!(
+                        "{}: {}",
+                        d.verdict().as_str(),
+                        interval(d.mean, d.low, d.high)
+                    )
+                });
+                let p = alnlab_summarize::signed_rank::test(&pooled)
+                    .map_or("— (every episode tied)".into(), |t| {
+                        format!("{} ({})", sig3(t.p), pooled.len())
+                    });
+                if c.model == "aln" {
+                    aln_words.push(format!("{}: {difference}, p = {p}", c.label));
+                }
+                (difference, p)
+            };
+            let label = if c.model.starts_with("plant@") {
+                format!("{} — reference", c.label)
+            } else {
+                c.label.clone()
+            };
+            table.row(vec![label, sig3(c.ms), cost, difference, p]);
+        }
+        let best = order[0];
+        let _ = writeln!(
+            md,
+            "**Planning `{task}` within real time** ({} ms a decision): {} plans best of the \
+             forward models a user could have{}. {}Every model and planner at its largest budget \
+             whose median decision fits a frame in replicate 1, on the same episodes; cost: the \
+             task's summed cost, mean {over}; differences from the nominal simulator that plans \
+             best, paired, {over}, with the Wilcoxon signed-rank p-value over every paired \
+             episode.{}\n",
+            sig3(limit),
+            order
+                .iter()
+                .find(|c| !c.model.starts_with("plant@"))
+                .map_or(best.label.clone(), |c| c.label.clone()),
+            if best.model.starts_with("plant@") {
+                format!(
+                    " (the plant's own simulator, which no user has, plans better: {})",
+                    best.label
+                )
+            } else {
+                String::new()
+            },
+            if aln_words.is_empty() {
+                "No ALN plans within real time. ".to_string()
+            } else {
+                format!("Against the nominal simulator: {}. ", aln_words.join("; "))
+            },
+            if left_out.is_empty() {
+                String::new()
+            } else {
+                format!(
+                    " Left out, its episodes not the same: {}.",
+                    left_out.join(", ")
+                )
+            }
+        );
+        table.write(md);
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -627,6 +857,82 @@ mod tests {
         // The run's only replicate: the verdict its interval allows.
         let one = rendered(1);
         assert!(one.contains("lower: "), "{one}");
+    }
+
+    /// Two variants of two replicates: each ALN set against the nominal
+    /// simulator that plans best within real time, with the mean
+    /// difference across replicates and the signed-rank p-value over the
+    /// eight paired episodes; the plant's simulator a reference; a variant
+    /// on other episodes left out.
+    #[test]
+    fn planning_within_real_time_pairs_every_forward_model_with_the_nominal_simulator() {
+        let replicate = |aln: f64| {
+            [
+                episodes("zero", "", 50.0, 0.0),
+                episodes("random", "", 80.0, 0.0),
+                episodes("aln", "cem", aln, 1.0),
+                episodes("simulator@10", "cem", 20.0, 5.0),
+                episodes("simulator@1", "cem", 30.0, 1.0),
+                episodes("simulator@10", "cem", 5.0, 50.0)
+                    .into_iter()
+                    .map(|e| Episode { budget: 512, ..e })
+                    .collect(),
+                episodes("plant@10", "cem", 12.0, 5.0),
+            ]
+            .concat()
+        };
+        let learned = [replicate(10.0), replicate(12.0), replicate(11.0)];
+        let hybrid = [replicate(25.0), replicate(26.0), replicate(27.0)];
+        let mut other = [replicate(10.0), replicate(10.0), replicate(10.0)];
+        for e in other.iter_mut().flatten().filter(|e| e.model == "zero") {
+            e.cost += 1.0;
+        }
+        let mut md = String::new();
+        at_real_time_of(
+            &mut md,
+            &[
+                Planned {
+                    name: "learned",
+                    planning: &learned,
+                },
+                Planned {
+                    name: "hybrid",
+                    planning: &hybrid,
+                },
+                Planned {
+                    name: "other",
+                    planning: &other,
+                },
+            ],
+        );
+        assert!(
+            md.contains("ALN (`learned`), cem (64 sequences) plans best"),
+            "{md}"
+        );
+        // The 512-sequence simulator takes 50 ms: beyond a frame.
+        assert!(md.contains("− simulator@10, cem (64 sequences)"), "{md}");
+        // learned: −10, −8 and −9 across the replicates, every episode
+        // lower; 12 paired episodes, ties among them.
+        assert!(
+            md.contains("ALN (`learned`), cem (64 sequences): lower: -9.0 ["),
+            "{md}"
+        );
+        let pooled: Vec<f64> = [-10.0, -8.0, -9.0].iter().flat_map(|&d| [d; 4]).collect();
+        let p = alnlab_summarize::signed_rank::test(&pooled).unwrap().p;
+        assert!(md.contains(&format!("p = {} (12)", sig3(p))), "{md}");
+        assert_eq!(md.matches("| simulator@10, cem").count(), 1, "{md}");
+        assert!(
+            md.contains("ALN (`hybrid`), cem (64 sequences): higher:"),
+            "{md}"
+        );
+        assert!(
+            md.contains("plant@10, cem (64 sequences) — reference"),
+            "{md}"
+        );
+        assert!(
+            md.contains("Left out, its episodes not the same: other."),
+            "{md}"
+        );
     }
 
     #[test]
