@@ -136,6 +136,18 @@ fn plan_tasks_that_cannot_run_are_refused_at_check() {
             &["plan.plant_steps", "has no plant"],
         ),
         (
+            "too many rounds",
+            "horizon = 3",
+            "horizon = 3\nrounds = 21",
+            &["plan.rounds", "at most 20"],
+        ),
+        (
+            "rounds without the ALN",
+            "horizon = 3",
+            "horizon = 3\nrounds = 1\nmodels = [\"linear\"]",
+            &["plan.rounds", "the ALN among `models`"],
+        ),
+        (
             "an unknown planner",
             "horizon = 3",
             "horizon = 3\nplanners = [\"gradient\"]",

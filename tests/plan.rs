@@ -227,3 +227,106 @@ fn the_plan_stage_plans_every_task_model_planner_and_budget_reproducibly() {
     assert_eq!(planning_columns, table_without(&planning_again, &measured));
     assert_eq!(view_bytes, std::fs::read(&view_again).unwrap());
 }
+
+/// Rounds of the planner's own data (`[plan] rounds`): each round the
+/// frames the ALN's planners executed join the training pairs, levels and
+/// nominal predictions, the model is trained again and the learned models
+/// plan the same episodes; every round recorded, the same bytes on one
+/// thread, and a second run re-runs nothing.
+#[test]
+fn rounds_of_the_planners_own_data_join_the_training_rows_deterministically() {
+    let dir = tempfile::tempdir().unwrap();
+    let manifest = PLANNED.replace("budgets = [4, 8]", "budgets = [4]\nrounds = 2");
+    write_manifest(dir.path(), "planned.toml", &manifest);
+    let run = |extra: &[&str], threads: &str| -> serde_json::Value {
+        let mut args = vec!["-q", "run", "planned.toml"];
+        args.extend_from_slice(extra);
+        let out = std::process::Command::new(env!("CARGO_BIN_EXE_alnlab"))
+            .current_dir(dir.path())
+            .env("RAYON_NUM_THREADS", threads)
+            .args(&args)
+            .output()
+            .unwrap();
+        assert!(out.status.success(), "{}", stderr(&out));
+        let out_dir = match extra {
+            ["--out", out] => dir.path().join(out),
+            _ => dir.path().join("runs"),
+        };
+        serde_json::from_slice(&std::fs::read(out_dir.join("planned/run.json")).unwrap()).unwrap()
+    };
+    let record = run(&[], "2");
+    let variant = &record["variants"][0];
+    let path = |role: &str| {
+        dir.path().join(
+            variant["artifacts"][role]["path"]
+                .as_str()
+                .unwrap_or_else(|| panic!("{role} recorded")),
+        )
+    };
+    let rows = |role: &str| Table::read(&path(role)).unwrap().num_rows();
+    // 2 tasks × 2 planners × 1 budget × 2 episodes of the ALN, 6 frames each.
+    let planned = 2 * 2 * 2 * 6;
+    assert_eq!(rows("transitions"), planned);
+    assert_eq!(rows("transitions-nominal"), planned);
+    assert_eq!(rows("pairs@1"), rows("pairs") + planned);
+    assert_eq!(rows("pairs@2"), rows("pairs@1") + rows("transitions@1"));
+    assert_eq!(rows("levels@2"), rows("pairs@2"));
+    assert_eq!(rows("nominal@2"), rows("pairs@2"));
+    let splits = Table::read(&path("pairs@1"))
+        .unwrap()
+        .strings("split")
+        .unwrap();
+    assert!(splits[rows("pairs")..].iter().all(|s| s == "train"));
+    let stages: Vec<&str> = variant["stages"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|s| s["stage"].as_str().unwrap())
+        .collect();
+    for stage in [
+        "aggregate@1",
+        "train@1",
+        "plan@1",
+        "aggregate@2",
+        "train@2",
+        "plan@2",
+    ] {
+        assert!(stages.contains(&stage), "{stage} in {stages:?}");
+    }
+    // Only the learned models plan again.
+    let models = Table::read(&path("planning@2"))
+        .unwrap()
+        .strings("model")
+        .unwrap();
+    assert!(models.iter().any(|m| m == "aln") && models.iter().any(|m| m == "linear"));
+    assert!(!models.iter().any(|m| m.starts_with("simulator@")));
+    // A second run re-runs nothing; on one thread, the same bytes.
+    let again = run(&[], "2");
+    assert!(
+        again["variants"][0]["stages"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .all(|s| s["cached"] == true),
+        "{}",
+        again["variants"][0]["stages"]
+    );
+    let one = run(&["--out", "one-thread"], "1");
+    for role in [
+        "pairs@2",
+        "levels@2",
+        "nominal@2",
+        "model@2",
+        "transitions@2",
+    ] {
+        let other = dir.path().join(
+            one["variants"][0]["artifacts"][role]["path"]
+                .as_str()
+                .unwrap(),
+        );
+        assert!(
+            std::fs::read(path(role)).unwrap() == std::fs::read(other).unwrap(),
+            "{role} differs on one thread"
+        );
+    }
+}

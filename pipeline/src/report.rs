@@ -45,6 +45,10 @@ pub fn render(record: &RunRecord, dir: &Path) -> Result<PathBuf> {
                         horizons: artifact(r, "horizons")?,
                         timings: artifact(r, "timings")?,
                         planning: r.artifacts.get("planning").map(|a| PathBuf::from(&a.path)),
+                        rounds: (1..)
+                            .map_while(|k| r.artifacts.get(&format!("planning@{k}")))
+                            .map(|a| PathBuf::from(&a.path))
+                            .collect(),
                     })
                 })
                 .collect::<Result<_>>()?;

@@ -170,6 +170,7 @@ pub fn run(manifest: &Manifest, options: &RunOptions) -> Result<RunRecord> {
                     parameters: manifest.parameters(variant),
                     metrics: None,
                 },
+                round: 0,
             };
             graph.run_variant(variant)?;
             records.push(graph.record);
@@ -225,6 +226,8 @@ struct Graph<'a> {
     overall: &'a Overall,
     place: String,
     record: VariantRecord,
+    /// The round of the planner's own data being made (0: the first plan).
+    round: usize,
 }
 
 impl Graph<'_> {
@@ -267,6 +270,81 @@ impl Graph<'_> {
                 break;
             }
         }
+        let rounds = variant.stages.plan.rounds;
+        if rounds > 0 && made.contains_key("plan") {
+            self.rounds(variant, &made, rounds)?;
+        }
+        Ok(())
+    }
+
+    /// The planner's own data, round by round (`[plan] rounds`; DAgger for
+    /// models): the frames the ALN's planners executed join the training
+    /// pairs (the aggregate stage), the model is trained again, and the
+    /// learned models plan the same episodes with it — the simulators,
+    /// whose plans no data change, are not planned again. Each round's
+    /// artifacts are recorded as `<role>@<round>`, its stages as
+    /// `<stage>@<round>`.
+    fn rounds(
+        &mut self,
+        variant: &Variant,
+        made: &BTreeMap<&str, Artifact>,
+        rounds: usize,
+    ) -> Result<()> {
+        let (train, plan) = (
+            stages::find("train").expect("a train stage"),
+            stages::find("plan").expect("a plan stage"),
+        );
+        let mut learned_only = variant.clone();
+        learned_only.stages.plan.simulator_steps.clear();
+        learned_only.stages.plan.plant_steps.clear();
+        let seed = self.seed;
+        let (quantize, simulate) = (&made["quantize"], &made["simulate"]);
+        let (mut pairs, mut nominal, mut levels, mut planned) = (
+            made["stride"].clone(),
+            made["nominal"].clone(),
+            quantize.clone(),
+            made["plan"].clone(),
+        );
+        for round in 1..=rounds {
+            self.round = round;
+            let aggregate = self.stage(
+                &stages::AGGREGATE,
+                &stage_params(seed, (stages::AGGREGATE.params)(&variant.stages)),
+                &[
+                    ("pairs", &pairs),
+                    ("nominal", &nominal),
+                    ("codebook", quantize),
+                    ("levels", &levels),
+                    ("transitions", &planned),
+                    ("transitions-nominal", &planned),
+                ],
+                variant,
+            )?;
+            let model = self.stage(
+                train,
+                &stage_params(seed, (train.params)(&variant.stages)),
+                &[
+                    ("codebook", quantize),
+                    ("levels", &aggregate),
+                    ("pairs", &aggregate),
+                    ("nominal", &aggregate),
+                ],
+                variant,
+            )?;
+            planned = self.stage(
+                plan,
+                &stage_params(seed, (plan.params)(&learned_only.stages)),
+                &[
+                    ("trajectory", simulate),
+                    ("model", &model),
+                    ("codebook", quantize),
+                    ("levels", &aggregate),
+                ],
+                &learned_only,
+            )?;
+            (pairs, nominal, levels) = (aggregate.clone(), aggregate.clone(), aggregate);
+        }
+        self.round = 0;
         Ok(())
     }
 
@@ -390,9 +468,13 @@ impl Graph<'_> {
                 artifact
             }
         };
+        let round = |name: &str| match self.round {
+            0 => name.to_string(),
+            r => format!("{name}@{r}"),
+        };
         for (role, _) in outputs {
             self.record.artifacts.insert(
-                role.to_string(),
+                round(role),
                 ArtifactRef {
                     path: artifact.path(role).display().to_string(),
                     sha256: artifact.sha256(role).to_string(),
@@ -401,7 +483,7 @@ impl Graph<'_> {
             );
         }
         self.record.stages.push(StageRecord {
-            stage: name.into(),
+            stage: round(name),
             cache_key: key,
             cached,
             wall_seconds: clock.elapsed().as_secs_f64(),

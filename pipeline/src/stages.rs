@@ -474,10 +474,23 @@ pub const STAGES: &[Stage] = &[
             ("plan", alnlab_plan::PLAN_FILE),
             ("planning", alnlab_plan::PLANNING_FILE),
             ("episodes", alnlab_plan::EPISODES_FILE),
+            ("transitions", alnlab_plan::transitions::FILE),
+            (
+                "transitions-nominal",
+                alnlab_plan::transitions::NOMINAL_FILE,
+            ),
         ],
         archived: Archived::Never,
         every_replicate: true,
-        params: |s| json(&s.plan),
+        // Rounds of the planner's own data are the pipeline's: round 0's
+        // plans are the same whatever comes after.
+        params: |s| {
+            let mut params = json(&s.plan);
+            if let Some(table) = params.as_object_mut() {
+                table.remove("rounds");
+            }
+            params
+        },
         validate: |s, simulated| s.plan.validate(simulated.then_some(&s.simulate.scene[..])),
         run: |c| {
             alnlab_plan::run(
@@ -584,6 +597,73 @@ pub fn names() -> Vec<&'static str> {
 
 /// The parameters a stage's cache key and provenance are made of: the
 /// experiment seed and the stage's resolved table.
+/// The aggregate stage of the planner's own data (`[plan] rounds`): not in
+/// [`STAGES`], since it runs once a round after the plan stage, and the
+/// train and plan stages after it again, each on the last round's data.
+pub const AGGREGATE: Stage = Stage {
+    name: "aggregate",
+    about: "Run the aggregate stage alone: the frames a round of planning executed join the \
+            training pairs, their nominal predictions and levels",
+    format_version: alnlab_aggregate::FORMAT_VERSION,
+    inputs: &[
+        Input {
+            role: "pairs",
+            from: "stride",
+        },
+        Input {
+            role: "nominal",
+            from: "nominal",
+        },
+        Input {
+            role: "codebook",
+            from: "quantize",
+        },
+        Input {
+            role: "levels",
+            from: "quantize",
+        },
+        Input {
+            role: "transitions",
+            from: "plan",
+        },
+        Input {
+            role: "transitions-nominal",
+            from: "plan",
+        },
+    ],
+    outputs: &[
+        ("pairs", alnlab_aggregate::PAIRS_FILE),
+        ("nominal", alnlab_aggregate::NOMINAL_FILE),
+        ("levels", alnlab_aggregate::LEVELS_FILE),
+    ],
+    archived: Archived::Never,
+    every_replicate: true,
+    params: |_| serde_json::Value::Null,
+    validate: |_, _| Ok(()),
+    run: |c| {
+        alnlab_aggregate::run(
+            &alnlab_aggregate::Inputs {
+                pairs: c.input("pairs"),
+                nominal: c.input("nominal"),
+                codebook: c.input("codebook"),
+                levels: c.input("levels"),
+                transitions: c.input("transitions"),
+                transitions_nominal: c.input("transitions-nominal"),
+            },
+            c.provenance,
+            c.out_dir,
+            c.progress,
+        )
+    },
+    merge_shards: None,
+    hints: Hints {
+        threads: 1,
+        mem_mb: 1024,
+        runtime: 10,
+        holds_forest: false,
+    },
+};
+
 pub fn stage_params(seed: u64, params: serde_json::Value) -> serde_json::Value {
     serde_json::json!({ "seed": seed, "params": params })
 }

@@ -27,6 +27,9 @@
 //!   thing that differs between equal runs) and real time (the simulated
 //!   time a decision stands for: one frame), and the model's one-step
 //!   error on the task's variables over the episode;
+//! - `transitions.parquet` and `transitions-nominal.parquet`: every frame
+//!   the ALN's planners executed, as training pairs, and the scene as
+//!   written's prediction of each ([`transitions`]) — a next round's data;
 //! - `episodes.mcap`: the first `view_episodes` episodes of every policy as
 //!   a trajectory log (`/state`, and `/tf` and `/scene` to watch them in
 //!   Foxglove), one run each, an `alnlab.plan.episode` metadata record per
@@ -38,6 +41,7 @@ pub mod forward;
 pub mod planner;
 pub mod planning;
 pub mod task;
+pub mod transitions;
 
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -71,10 +75,12 @@ use crate::episode::Policy;
 use crate::forward::{Hybrid, Learned, LinearStep, Model, Piecewise, Simulator};
 use crate::planner::{Bounds, CemSettings, Planner, PlannerKind};
 use crate::task::{Cost, Task};
+use crate::transitions::Transitions;
 
 /// Version of what this stage writes (part of every cache key; 4: the
-/// spread of predicted costs).
-pub const FORMAT_VERSION: u32 = 4;
+/// spread of predicted costs; 5: robots, plants and hybrids, the ALN's
+/// planned frames as pairs).
+pub const FORMAT_VERSION: u32 = 5;
 /// File name of the per-frame table.
 pub const PLAN_FILE: &str = "plan.parquet";
 /// File name of the per-episode table.
@@ -131,7 +137,15 @@ pub struct Params {
     pub cem_elite: Fraction,
     /// Episodes per policy written to `episodes.mcap` (the first ones).
     pub view_episodes: usize,
+    /// Rounds of the planner's own data (DAgger for models): after each,
+    /// the frames the ALN's planners executed join the training rows, the
+    /// learned models are trained again and plan the same episodes (the
+    /// pipeline runs them; 0: none).
+    pub rounds: usize,
 }
+
+/// The most rounds of the planner's own data a manifest may ask for.
+pub const MOST_ROUNDS: usize = 20;
 
 impl Default for Params {
     fn default() -> Self {
@@ -149,6 +163,7 @@ impl Default for Params {
             cem_iterations: Count(3),
             cem_elite: Fraction(0.1),
             view_episodes: 1,
+            rounds: 0,
         }
     }
 }
@@ -184,6 +199,20 @@ impl Params {
         }
         if !self.task.is_empty() && self.budgets.is_empty() {
             return Err(("budgets".into(), "expected at least one budget".into()));
+        }
+        if self.rounds > MOST_ROUNDS {
+            return Err((
+                "rounds".into(),
+                format!("expected at most {MOST_ROUNDS}, found {}", self.rounds),
+            ));
+        }
+        if self.rounds > 0 && (self.task.is_empty() || !self.models.contains(&LearnedKind::Aln)) {
+            return Err((
+                "rounds".into(),
+                "rounds of the planner's own data need a task and the ALN among `models`: \
+                 the ALN's planned frames are the data"
+                    .into(),
+            ));
         }
         Ok(())
     }
@@ -242,10 +271,12 @@ struct FrameRows {
 }
 
 /// Everything the stage writes, filled episode by episode.
-struct Outputs {
+struct Outputs<'a> {
     frames: FrameRows,
     episodes: Vec<planning::Episode>,
     view: View,
+    /// The ALN's planned frames, for a next round's training.
+    transitions: Option<Transitions<'a>>,
 }
 
 /// The executed episodes as a trajectory log to watch.
@@ -331,12 +362,14 @@ pub fn run(
         .validate(None)
         .map_err(|e| params::invalid("plan", e))?;
     let view_path = out_dir.join(EPISODES_FILE);
-    let out = if params.task.is_empty() {
-        Outputs {
+    if params.task.is_empty() {
+        let out = Outputs {
             frames: FrameRows::default(),
             episodes: Vec::new(),
             view: View::create(&view_path, &[])?,
-        }
+            transitions: None,
+        };
+        out.write(out_dir, provenance)
     } else {
         let log = StateLog::read(trajectory_path)?;
         let replays =
@@ -364,6 +397,7 @@ pub fn run(
             frames: FrameRows::default(),
             episodes: Vec::new(),
             view: View::create(&view_path, std::slice::from_ref(&p.layout))?,
+            transitions: Some(Transitions::new(nominal, &controls)),
         };
         let logged = &log
             .scenes
@@ -507,11 +541,21 @@ pub fn run(
             }
             Ok(())
         })?;
-        out
-    };
-    write_frames(&out_dir.join(PLAN_FILE), &out.frames, provenance)?;
-    planning::write(&out_dir.join(PLANNING_FILE), &out.episodes, provenance)?;
-    out.view.log.finish(provenance)
+        out.write(out_dir, provenance)
+    }
+}
+
+impl Outputs<'_> {
+    /// Writes every output into `out_dir`.
+    fn write(self, out_dir: &Path, provenance: &Provenance) -> Result<()> {
+        match &self.transitions {
+            Some(t) => t.write(out_dir, provenance)?,
+            None => transitions::write_none(out_dir, provenance)?,
+        }
+        write_frames(&out_dir.join(PLAN_FILE), &self.frames, provenance)?;
+        planning::write(&out_dir.join(PLANNING_FILE), &self.episodes, provenance)?;
+        self.view.log.finish(provenance)
+    }
 }
 
 /// What every episode of a run shares.
@@ -609,6 +653,16 @@ impl TaskRun<'_> {
             ]);
             out.view.start_run(c.p, record, &c.starts[e])?;
         }
+        // The ALN's planned frames are the next round's training pairs.
+        let mut recorded = match &mut out.transitions {
+            Some(t) if model == "aln" && !planner.is_empty() => {
+                t.start_episode();
+                let mut start = StateFrame::default();
+                Runner::new(c.p, 0, 0, 0).observe(&c.starts[e], 0.0, &mut start);
+                Some((t, start))
+            }
+            _ => None,
+        };
         let Outputs { frames, view, .. } = out;
         let total = episode::run(
             c.p,
@@ -633,6 +687,10 @@ impl TaskRun<'_> {
                 frames.reached.push(step.reached.clone());
                 frames.expected.push(step.expected.clone());
                 squared_error += self.cost.distance(&step.expected, &step.reached).powi(2);
+                if let Some((transitions, before)) = &mut recorded {
+                    transitions.record(step.frame - 1, before, frame, &step.torques)?;
+                    before.clone_from(frame);
+                }
                 times.push(step.seconds * 1e3);
                 if viewed {
                     view.frame.clone_from(frame);

@@ -113,6 +113,9 @@ pub struct Replicate {
     pub timings: PathBuf,
     /// The plan stage's per-episode table, if the run had one.
     pub planning: Option<PathBuf>,
+    /// Its tables of each round of the planner's own data, in order
+    /// (`[plan] rounds`).
+    pub rounds: Vec<PathBuf>,
 }
 
 /// One planning task, as the plan stage defines it.
@@ -637,14 +640,34 @@ fn load(info: &VariantInfo) -> Result<Loaded<'_>> {
     } else {
         Vec::new()
     };
-    let planning = match &info.planning {
-        Some(first) => std::iter::once(Some(first))
-            .chain(info.replicates.iter().skip(1).map(|r| r.planning.as_ref()))
-            .flatten()
-            .map(|path| alnlab_plan::planning::read(path))
-            .collect::<Result<_>>()?,
-        None => Vec::new(),
-    };
+    let planning =
+        match &info.planning {
+            Some(first) => std::iter::once(Some(first))
+                .chain(info.replicates.iter().skip(1).map(|r| r.planning.as_ref()))
+                .flatten()
+                .zip(
+                    info.replicates
+                        .iter()
+                        .map(|r| r.rounds.as_slice())
+                        .chain(std::iter::repeat(&[][..])),
+                )
+                .map(|(path, rounds)| {
+                    let mut episodes = alnlab_plan::planning::read(path)?;
+                    // Each round's plans as models of their own: `aln (round 1)`.
+                    for (r, path) in rounds.iter().enumerate() {
+                        let round = alnlab_plan::planning::read(path)?;
+                        episodes.extend(round.into_iter().filter(|e| !e.planner.is_empty()).map(
+                            |e| Episode {
+                                model: format!("{} (round {})", e.model, r + 1),
+                                ..e
+                            },
+                        ));
+                    }
+                    Ok(episodes)
+                })
+                .collect::<Result<_>>()?,
+            None => Vec::new(),
+        };
     Ok(Loaded {
         planning,
         replicates,

@@ -584,6 +584,9 @@ struct Contender {
     ms: f64,
     /// `[replicate][episode]`.
     costs: Vec<Vec<f64>>,
+    /// Its one-step error on the task's variables in the frames it
+    /// planned, mean over episodes and replicates.
+    one_step: f64,
 }
 
 impl Contender {
@@ -660,7 +663,7 @@ fn at_real_time_of(md: &mut String, variants: &[Planned]) {
             let mut methods: Vec<(&str, &str)> = Vec::new();
             for p in &policies_1 {
                 let method = (p.model, p.planner);
-                let kept = p.model == "aln" || std::ptr::eq(*v, *first);
+                let kept = p.model.starts_with("aln") || std::ptr::eq(*v, *first);
                 if p.planned() && kept && !methods.contains(&method) {
                     methods.push(method);
                 }
@@ -683,16 +686,30 @@ fn at_real_time_of(md: &mut String, variants: &[Planned]) {
                 let Some(costs) = costs else {
                     continue;
                 };
-                let name = match (model, several) {
-                    ("aln", true) => format!("ALN (`{}`)", v.name),
-                    ("aln", false) => "ALN".to_string(),
+                let name = match (model.strip_prefix("aln"), several) {
+                    (Some(round), true) => format!("ALN{round} (`{}`)", v.name),
+                    (Some(round), false) => format!("ALN{round}"),
                     _ => model.to_string(),
                 };
+                let one_step: Vec<f64> = v
+                    .planning
+                    .iter()
+                    .flat_map(|rows| {
+                        rows.iter().filter(|e| {
+                            e.task == task
+                                && e.model == model
+                                && e.planner == planner
+                                && e.budget == chosen.budget
+                        })
+                    })
+                    .map(|e| e.prediction_rms)
+                    .collect();
                 contenders.push(Contender {
                     label: format!("{name}, {planner} ({} sequences)", chosen.budget),
                     model: model.to_string(),
                     ms: chosen.ms(),
                     costs,
+                    one_step: mean(&one_step),
                 });
             }
         }
@@ -706,7 +723,8 @@ fn at_real_time_of(md: &mut String, variants: &[Planned]) {
         let mut table = MdTable::new(&["forward model, planner (budget)"])
             .numbers(&["ms / decision", "cost"])
             .column(&format!("− {}", nominal.label), Align::Left)
-            .column("signed-rank p (episodes)", Align::Left);
+            .column("signed-rank p (episodes)", Align::Left)
+            .numbers(&["one-step error"]);
         let mut order: Vec<&Contender> = contenders.iter().collect();
         order.sort_by(|a, b| a.mean().total_cmp(&b.mean()));
         let over = if replicates > 1 {
@@ -750,7 +768,7 @@ fn at_real_time_of(md: &mut String, variants: &[Planned]) {
                     .map_or("— (every episode tied)".into(), |t| {
                         format!("{} ({})", sig3(t.p), pooled.len())
                     });
-                if c.model == "aln" {
+                if c.model.starts_with("aln") {
                     aln_words.push(format!("{}: {difference}, p = {p}", c.label));
                 }
                 (difference, p)
@@ -760,7 +778,14 @@ fn at_real_time_of(md: &mut String, variants: &[Planned]) {
             } else {
                 c.label.clone()
             };
-            table.row(vec![label, sig3(c.ms), cost, difference, p]);
+            table.row(vec![
+                label,
+                sig3(c.ms),
+                cost,
+                difference,
+                p,
+                sig3(c.one_step),
+            ]);
         }
         let best = order[0];
         let _ = writeln!(
@@ -770,7 +795,9 @@ fn at_real_time_of(md: &mut String, variants: &[Planned]) {
              whose median decision fits a frame in replicate 1, on the same episodes; cost: the \
              task's summed cost, mean {over}; differences from the nominal simulator that plans \
              best, paired, {over}, with the Wilcoxon signed-rank p-value over every paired \
-             episode.{}\n",
+             episode; one-step error: the model's prediction of the task's variables one frame \
+             ahead against what the plant then did, RMS over each episode's frames, mean over \
+             episodes — on the states its own planner visited.{}{}\n",
             sig3(limit),
             order
                 .iter()
@@ -788,6 +815,13 @@ fn at_real_time_of(md: &mut String, variants: &[Planned]) {
                 "No ALN plans within real time. ".to_string()
             } else {
                 format!("Against the nominal simulator: {}. ", aln_words.join("; "))
+            },
+            if contenders.iter().any(|c| c.model.contains("(round ")) {
+                " A model \"(round r)\" was trained again after r rounds of the ALN's planned \
+                 frames joined the training rows (DAgger for models), and planned the same \
+                 episodes."
+            } else {
+                ""
             },
             if left_out.is_empty() {
                 String::new()
