@@ -3,7 +3,8 @@
 # with 4 training shards per variant runs under `snakemake --cores 2`; on the
 # way, a shard with nowhere to write fails the workflow with the shard named, and
 # the re-run resumes without redoing the finished shards. The result must
-# equal `alnlab run`'s on the same manifest.
+# equal `alnlab run`'s on the same manifest; so must a small experiment's
+# with rounds of the planner's own data.
 #
 # Usage: tests/snakemake.sh ALNLAB SNAKEMAKE PYTHON WORK_DIR
 set -euo pipefail
@@ -49,3 +50,17 @@ smk >"$work/resumed.log" 2>&1 || { cat "$work/resumed.log"; exit 1; }
 
 "$python" tests/snakemake_check.py "$work/direct/quickstart/run.json" "$work/runs/quickstart/run.json" \
   "$work/direct-reports/quickstart/report.md" "$work/reports/quickstart/report.md"
+
+# Rounds of the planner's own data run in the workflow too, to the same
+# artifacts.
+rounds=tests/data/planned-rounds.toml
+"$alnlab" -q run "$rounds" --out "$work/direct" --reports "$work/direct-reports" >/dev/null
+"$alnlab" export snakemake "$rounds" -o "$work/wf-rounds" \
+  --out "$work/runs" --reports "$work/reports" --alnlab "$alnlab" >/dev/null
+"$snakemake" --snakefile "$work/wf-rounds/Snakefile" --directory "$work/wf-rounds" --cores 2 \
+  >"$work/rounds.log" 2>&1 || { cat "$work/rounds.log"; exit 1; }
+grep -q "planning@2" "$work/runs/planned-rounds/run.json" || {
+  echo "snakemake: the workflow's run record lacks round 2"; exit 1; }
+"$python" tests/snakemake_check.py "$work/direct/planned-rounds/run.json" \
+  "$work/runs/planned-rounds/run.json" "$work/direct-reports/planned-rounds/report.md" \
+  "$work/reports/planned-rounds/report.md"

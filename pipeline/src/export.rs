@@ -70,6 +70,16 @@ pub fn snakemake(export: &Export, dir: &Path) -> Result<()> {
             ..train.hints
         },
     ));
+    // The rounds of the planner's own data: training and planning again.
+    let plan = stages::find("plan").expect("a plan stage");
+    hints.push((
+        "rounds",
+        Hints {
+            runtime: plan.hints.runtime + train.hints.runtime,
+            mem_mb: plan.hints.mem_mb.max(train.hints.mem_mb),
+            ..train.hints
+        },
+    ));
     hints.push((
         "run_record",
         Hints {
@@ -169,5 +179,7 @@ mod tests {
         );
         let snakefile = std::fs::read_to_string(dir.path().join("Snakefile")).unwrap();
         assert!(snakefile.contains("rule train_shard:"));
+        assert!(snakefile.contains("rule rounds:") && snakefile.contains("--until rounds"));
+        assert!(config.contains("rounds: "), "{config}");
     }
 }

@@ -271,7 +271,8 @@ impl Graph<'_> {
             }
         }
         let rounds = variant.stages.plan.rounds;
-        if rounds > 0 && made.contains_key("plan") {
+        let through = matches!(self.options.until.as_deref(), None | Some(stages::ROUNDS));
+        if rounds > 0 && through && made.contains_key("plan") {
             self.rounds(variant, &made, rounds)?;
         }
         Ok(())

@@ -595,8 +595,17 @@ pub fn names() -> Vec<&'static str> {
     STAGES.iter().map(|s| s.name).collect()
 }
 
-/// The parameters a stage's cache key and provenance are made of: the
-/// experiment seed and the stage's resolved table.
+/// What `run --until` may name: a stage, or [`ROUNDS`].
+pub fn until_names() -> Vec<&'static str> {
+    let mut names = names();
+    names.push(ROUNDS);
+    names
+}
+
+/// `run --until rounds`: every stage and every round of the planner's own
+/// data (`[plan] rounds`), without the run record.
+pub const ROUNDS: &str = "rounds";
+
 /// The aggregate stage of the planner's own data (`[plan] rounds`): not in
 /// [`STAGES`], since it runs once a round after the plan stage, and the
 /// train and plan stages after it again, each on the last round's data.
@@ -664,6 +673,8 @@ pub const AGGREGATE: Stage = Stage {
     },
 };
 
+/// The parameters a stage's cache key and provenance are made of: the
+/// experiment seed and the stage's resolved table.
 pub fn stage_params(seed: u64, params: serde_json::Value) -> serde_json::Value {
     serde_json::json!({ "seed": seed, "params": params })
 }

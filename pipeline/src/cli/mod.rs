@@ -84,9 +84,10 @@ Training in two shards, then a run that merges them instead of training:
         /// The dataset archive a manifest's `[data] dataset` refers to.
         #[arg(long, default_value = "datasets")]
         datasets: PathBuf,
-        /// Stop after this stage; writes no run record and no report (for
-        /// workflow engines running one stage at a time).
-        #[arg(long, value_parser = clap::builder::PossibleValuesParser::new(stages::names()))]
+        /// Stop after this stage (or, `rounds`, after the rounds of the
+        /// planner's own data that follow every stage); writes no run record
+        /// and no report (for workflow engines running one stage at a time).
+        #[arg(long, value_parser = clap::builder::PossibleValuesParser::new(stages::until_names()))]
         until: Option<String>,
         /// Train only shard K of N of the variant's forest (after bringing it
         /// up to quantize), into <OUT>/shards/; a later run through train
