@@ -731,6 +731,7 @@ fn cut_down(text: &str) -> String {
         cap(table, "rollout_starts", 10);
         cap(table, "episodes", 2);
         cap(table, "frames", 5);
+        cap(table, "rounds", 1);
         // Synthesizing 57 walk decoders takes minutes: the committed
         // manifests' circuits are measured by CI's quickstart run and by
         // tests/circuit.rs, not here.

@@ -10,8 +10,8 @@
 //!
 //! Each planned episode becomes a run of its scene numbered after every
 //! run already there, so no key repeats; the planned frames' variables that
-//! the pairs lack are dropped, and a learned variable the planned scene
-//! lacks is an error (its level would be unknown).
+//! the pairs lack are dropped, and a variable the scene's logged frames
+//! have and its planned ones lack is an error.
 
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -98,6 +98,24 @@ pub fn run(
         .collect();
     let keys: Vec<Key> = pairs.keys().iter().cloned().chain(appended).collect();
     let variables: Vec<&str> = pairs.variables().iter().map(String::as_str).collect();
+    // A planned scene's frames hold every variable its logged frames do.
+    for v in variables
+        .iter()
+        .filter(|v| !planned.variables().iter().any(|n| n == *v))
+    {
+        let x = pairs.column(Side::Current, v)?;
+        let logged = pairs
+            .keys()
+            .iter()
+            .enumerate()
+            .find(|(r, k)| x.is_valid(*r) && planned.keys().iter().any(|p| p.scene == k.scene));
+        if let Some((_, k)) = logged {
+            return Err(Error::bad_file(
+                inputs.transitions,
+                format!("has no `{v}`, which scene `{}` logs", k.scene),
+            ));
+        }
+    }
     let before = pairs.len();
     for (old, new, file) in [
         (&pairs, &planned, PAIRS_FILE),
@@ -182,4 +200,125 @@ fn columns<'t>(
                 .transpose()
         })
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use alnlab_codes::codebook::{Entry, Quantizer};
+    use alnlab_codes::{Code, Codebook};
+    use alnlab_common::Silent;
+    use alnlab_tables::pairs::Split;
+
+    use super::*;
+
+    fn key(run: u32, step: u32, split: Split) -> Key {
+        Key {
+            scene: "arm".into(),
+            run,
+            step,
+            split,
+        }
+    }
+
+    /// Writes pairs of `variables` with x = `x + r`, y = `y + r` on row r.
+    fn pairs_of(path: &Path, keys: &[Key], variables: &[&str], x: f64, y: f64) {
+        let value = |side, _, r: usize| {
+            Some(match side {
+                Side::Current => x + r as f64,
+                Side::Next => y + r as f64,
+            })
+        };
+        pairs::write(path, keys, variables, value, &Provenance::default()).unwrap();
+    }
+
+    /// A planned round's frames join the pairs as training rows of a new
+    /// run, their levels by the first codebook; a planned scene without a
+    /// learned variable is refused, naming it.
+    #[test]
+    fn planned_frames_join_as_training_pairs_of_new_runs() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = |name: &str| dir.path().join(name);
+        let old = [key(0, 0, Split::Train), key(3, 1, Split::Test)];
+        pairs_of(&path("pairs.parquet"), &old, &["q", "v"], 0.0, 1.0);
+        pairs_of(&path("nominal.parquet"), &old, &["q", "v"], 0.0, 1.5);
+        let planned = [key(0, 0, Split::Train), key(1, 4, Split::Train)];
+        pairs_of(&path("t.parquet"), &planned, &["q", "v", "w"], 2.0, 3.0);
+        pairs_of(&path("tn.parquet"), &planned, &["q", "v", "w"], 2.0, 3.5);
+        let entry = Entry {
+            variable: "q".into(),
+            learned: true,
+            note: String::new(),
+            quantizer: Quantizer {
+                min: 0.0,
+                max: 10.0,
+                levels: 11,
+            },
+            code: Code::Gray,
+            width: 4,
+            walk_step: 0,
+            walk_span: 0,
+            seed: 0,
+            clamped: 0,
+        };
+        let codebook = Codebook {
+            entries: vec![entry],
+        };
+        codebook
+            .write(&path("codebook.parquet"), &Provenance::default())
+            .unwrap();
+        levels::write(
+            &path("levels.parquet"),
+            &old,
+            &["q"],
+            &[vec![0, 1]],
+            &[vec![1, 2]],
+            &Provenance::default(),
+        )
+        .unwrap();
+        let out = dir.path().join("out");
+        std::fs::create_dir(&out).unwrap();
+        let (t, tn) = (path("t.parquet"), path("tn.parquet"));
+        let (p, n, c, l) = (
+            path("pairs.parquet"),
+            path("nominal.parquet"),
+            path("codebook.parquet"),
+            path("levels.parquet"),
+        );
+        let inputs = Inputs {
+            pairs: &p,
+            nominal: &n,
+            codebook: &c,
+            levels: &l,
+            transitions: &t,
+            transitions_nominal: &tn,
+        };
+        run(&inputs, &Provenance::default(), &out, &Silent).unwrap();
+        let joined = Pairs::read(&out.join(PAIRS_FILE)).unwrap();
+        // After run 3, the scene's last: runs 4 and 5.
+        let runs: Vec<u32> = joined.keys().iter().map(|k| k.run).collect();
+        assert_eq!(runs, [0, 3, 4, 5]);
+        assert!(joined.keys()[2..].iter().all(|k| k.split == Split::Train));
+        let q = joined.column(Side::Next, "q").unwrap();
+        assert_eq!(q.values().to_vec(), [1.0, 2.0, 3.0, 4.0]);
+        // `w`, which the logged pairs lack, is dropped.
+        assert_eq!(joined.variables(), ["q", "v"]);
+        let nominal = Pairs::read(&out.join(NOMINAL_FILE)).unwrap();
+        assert_eq!(nominal.keys(), joined.keys());
+        let predicted = nominal.column(Side::Next, "q").unwrap();
+        assert_eq!(predicted.values().to_vec(), [1.5, 2.5, 3.5, 4.5]);
+        let levels = levels::Levels::read(&out.join(LEVELS_FILE)).unwrap();
+        let entry = &codebook.entries[0];
+        assert_eq!(levels.column(Side::Current, entry).unwrap(), [0, 1, 2, 3]);
+        assert_eq!(levels.column(Side::Next, entry).unwrap(), [1, 2, 3, 4]);
+        assert_eq!(levels.train_rows(), [0, 2, 3]);
+
+        // Planned frames that lack a variable the scene logs.
+        pairs_of(&t, &planned, &["q"], 2.0, 3.0);
+        pairs_of(&tn, &planned, &["q"], 2.0, 3.5);
+        let e = run(&inputs, &Provenance::default(), &out, &Silent).unwrap_err();
+        assert!(
+            e.to_string().contains("has no `v`, which scene `arm` logs"),
+            "{e}"
+        );
+    }
 }
