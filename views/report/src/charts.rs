@@ -72,6 +72,17 @@ const LINEAR_NOMINAL: RGBColor = RGBColor(0x88, 0x44, 0x88);
 const BOOSTED_NOMINAL: RGBColor = RGBColor(0x22, 0x33, 0x99);
 /// The planning reference the random controller.
 const RANDOM_TORQUES: RGBColor = RGBColor(0xDD, 0x44, 0x00);
+/// A plant's own simulator (`plant@k`), the reference no user has: a dark
+/// green apart from the simulators' browns.
+const PLANT: RGBColor = RGBColor(0x11, 0x55, 0x33);
+/// A model trained again after rounds of its planner's own data: its
+/// first form's colour, one marker per round.
+const ROUND_MARKERS: [Marker; 4] = [
+    Marker::Plus,
+    Marker::Diamond,
+    Marker::Triangle,
+    Marker::Cross,
+];
 /// A reference line across a plot ([`Plot::rules`]): lighter than any
 /// series.
 const RULE: RGBColor = RGBColor(0xAA, 0xAA, 0xAA);
@@ -105,6 +116,20 @@ pub fn style_of(model: &str, variant: usize) -> Style {
         marker,
         dashed: true,
     };
+    // `aln (round 2)`: the first form's colour, the round's marker.
+    if let Some((first, round)) = model
+        .strip_suffix(')')
+        .and_then(|m| m.split_once(" (round "))
+    {
+        let round: usize = round.parse().unwrap_or(1);
+        return Style {
+            marker: ROUND_MARKERS[(round.max(1) - 1) % ROUND_MARKERS.len()],
+            ..style_of(first, variant)
+        };
+    }
+    if model.starts_with("plant@") {
+        return dashed(PLANT, Marker::Circle);
+    }
     match model {
         // Doing nothing looks the same whether it predicts or controls.
         "persistence" | "zero torques" => dashed(PERSISTENCE, Marker::Square),

@@ -13,7 +13,7 @@ use alnlab_common::{Result, atomic};
 use alnlab_plan::planning::Episode;
 
 use super::PlanSetup;
-use super::format::{Align, MdTable, estimate, interval, sig3};
+use super::format::{Align, MdTable, estimate, interval, sig3, signed};
 use crate::charts::{self, Axis, Marker, Plot, Point, Rule, Series, style_of};
 use alnlab_summarize::paired::Interval;
 
@@ -723,7 +723,7 @@ fn at_real_time_of(md: &mut String, variants: &[Planned]) {
         let mut table = MdTable::new(&["forward model, planner (budget)"])
             .numbers(&["ms / decision", "cost"])
             .column(&format!("− {}", nominal.label), Align::Left)
-            .column("signed-rank p (episodes)", Align::Left)
+            .column("signed-rank p, median difference (episodes)", Align::Left)
             .numbers(&["one-step error"]);
         let mut order: Vec<&Contender> = contenders.iter().collect();
         order.sort_by(|a, b| a.mean().total_cmp(&b.mean()));
@@ -764,9 +764,14 @@ fn at_real_time_of(md: &mut String, variants: &[Planned]) {
                         interval(d.mean, d.low, d.high)
                     )
                 });
+                // The signed-rank test is of the median: say which way.
+                let mut sorted = pooled.clone();
+                sorted.sort_by(f64::total_cmp);
+                let n = sorted.len();
+                let median = (sorted[(n - 1) / 2] + sorted[n / 2]) / 2.0;
                 let p = alnlab_summarize::signed_rank::test(&pooled)
                     .map_or("— (every episode tied)".into(), |t| {
-                        format!("{} ({})", sig3(t.p), pooled.len())
+                        format!("{}, median {} ({n})", sig3(t.p), signed(median))
                     });
                 if c.model.starts_with("aln") {
                     aln_words.push(format!("{}: {difference}, p = {p}", c.label));
@@ -795,7 +800,9 @@ fn at_real_time_of(md: &mut String, variants: &[Planned]) {
              whose median decision fits a frame in replicate 1, on the same episodes; cost: the \
              task's summed cost, mean {over}; differences from the nominal simulator that plans \
              best, paired, {over}, with the Wilcoxon signed-rank p-value over every paired \
-             episode; one-step error: the model's prediction of the task's variables one frame \
+             episode (a replicate's episodes share its model, so they are not independent: the \
+             interval across replicates is the verdict) and the median paired difference; \
+             one-step error: the model's prediction of the task's variables one frame \
              ahead against what the plant then did, RMS over each episode's frames, mean over \
              episodes — on the states its own planner visited.{}{}\n",
             sig3(limit),
@@ -945,15 +952,21 @@ mod tests {
         );
         // The 512-sequence simulator takes 50 ms: beyond a frame.
         assert!(md.contains("− simulator@10, cem (64 sequences)"), "{md}");
-        // learned: −10, −8 and −9 across the replicates, every episode
-        // lower; 12 paired episodes, ties among them.
+        // learned: −10, −8 and −9 across the replicates.
         assert!(
             md.contains("ALN (`learned`), cem (64 sequences): lower: -9.0 ["),
             "{md}"
         );
-        let pooled: Vec<f64> = [-10.0, -8.0, -9.0].iter().flat_map(|&d| [d; 4]).collect();
+        // The pooled episode differences, as the table computes them.
+        let pooled: Vec<f64> = [10.0, 12.0, 11.0]
+            .iter()
+            .flat_map(|&aln| (0..4).map(move |k| (aln + k as f64 * 1.1) - (20.0 + k as f64 * 1.1)))
+            .collect();
         let p = alnlab_summarize::signed_rank::test(&pooled).unwrap().p;
-        assert!(md.contains(&format!("p = {} (12)", sig3(p))), "{md}");
+        assert!(
+            md.contains(&format!("p = {}, median -9 (12)", sig3(p))),
+            "{md}"
+        );
         assert_eq!(md.matches("| simulator@10, cem").count(), 1, "{md}");
         assert!(
             md.contains("ALN (`hybrid`), cem (64 sequences): higher:"),
