@@ -606,7 +606,7 @@ fn mean(x: &[f64]) -> f64 {
 /// linear fit and simulators, the scene as written (`simulator@k`) and,
 /// where the data come from a plant, the plant's own (`plant@k`, the
 /// reference no user has) — within real time, paired on the same episodes
-/// against the nominal simulator that plans best within real time: the
+/// against the nominal simulator of the lowest mean cost within real time: the
 /// mean difference across replicates with its 95% interval (over the
 /// episodes of the one replicate when there is one) and the Wilcoxon
 /// signed-rank p-value over every paired episode. A variant whose episodes
@@ -795,11 +795,11 @@ fn at_real_time_of(md: &mut String, variants: &[Planned]) {
         let best = order[0];
         let _ = writeln!(
             md,
-            "**Planning `{task}` within real time** ({} ms a decision): {} plans best of the \
-             forward models a user could have{}. {}Every model and planner at its largest budget \
+            "**Planning `{task}` within real time** ({} ms a decision): {} has the lowest mean \
+             cost of the forward models a user could have{}. {}Every model and planner at its largest budget \
              whose median decision fits a frame in replicate 1, on the same episodes; cost: the \
-             task's summed cost, mean {over}; differences from the nominal simulator that plans \
-             best, paired, {over}, with the Wilcoxon signed-rank p-value over every paired \
+             task's summed cost, mean {over}; differences from the nominal simulator of the lowest \
+             mean cost, paired, {over}, with the Wilcoxon signed-rank p-value over every paired \
              episode (a replicate's episodes share its model, so they are not independent: the \
              interval across replicates is the verdict) and the median paired difference; \
              one-step error: the model's prediction of the task's variables one frame \
@@ -812,7 +812,7 @@ fn at_real_time_of(md: &mut String, variants: &[Planned]) {
                 .map_or(best.label.clone(), |c| c.label.clone()),
             if best.model.starts_with("plant@") {
                 format!(
-                    " (the plant's own simulator, which no user has, plans better: {})",
+                    " (the plant's own simulator, which no user has, has a lower mean still: {})",
                     best.label
                 )
             } else {
@@ -947,7 +947,7 @@ mod tests {
             ],
         );
         assert!(
-            md.contains("ALN (`learned`), cem (64 sequences) plans best"),
+            md.contains("ALN (`learned`), cem (64 sequences) has the lowest mean cost"),
             "{md}"
         );
         // The 512-sequence simulator takes 50 ms: beyond a frame.
