@@ -80,8 +80,8 @@ const PLANT: RGBColor = RGBColor(0x11, 0x55, 0x33);
 const ROUND_MARKERS: [Marker; 4] = [
     Marker::Plus,
     Marker::Diamond,
-    Marker::Triangle,
     Marker::Cross,
+    Marker::Square,
 ];
 /// A reference line across a plot ([`Plot::rules`]): lighter than any
 /// series.
