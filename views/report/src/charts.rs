@@ -77,12 +77,7 @@ const RANDOM_TORQUES: RGBColor = RGBColor(0xDD, 0x44, 0x00);
 const PLANT: RGBColor = RGBColor(0x11, 0x55, 0x33);
 /// A model trained again after rounds of its planner's own data: its
 /// first form's colour, one marker per round.
-const ROUND_MARKERS: [Marker; 4] = [
-    Marker::Plus,
-    Marker::Diamond,
-    Marker::Cross,
-    Marker::Square,
-];
+const ROUND_MARKERS: [Marker; 4] = [Marker::Plus, Marker::Diamond, Marker::Cross, Marker::Square];
 /// A reference line across a plot ([`Plot::rules`]): lighter than any
 /// series.
 const RULE: RGBColor = RGBColor(0xAA, 0xAA, 0xAA);

@@ -15,7 +15,7 @@ use alnlab_plan::planning::Episode;
 use super::PlanSetup;
 use super::format::{Align, MdTable, estimate, interval, sig3, signed};
 use crate::charts::{self, Axis, Marker, Plot, Point, Rule, Series, style_of};
-use alnlab_summarize::paired::Interval;
+use alnlab_summarize::paired::{Interval, Verdict};
 
 /// One policy's episodes of one task, in episode order.
 struct Policy<'a> {
@@ -733,6 +733,9 @@ fn at_real_time_of(md: &mut String, variants: &[Planned]) {
             "over the episodes of one replicate".to_string()
         };
         let mut aln_words = Vec::new();
+        // The ALNs whose plans cost less than the nominal simulator's, the
+        // interval below zero: the question's answer.
+        let mut aln_lower: Vec<&str> = Vec::new();
         for c in &order {
             let means: Vec<f64> = c.costs.iter().map(|r| mean(r)).collect();
             let cost = match Interval::of(&means) {
@@ -775,6 +778,10 @@ fn at_real_time_of(md: &mut String, variants: &[Planned]) {
                     });
                 if c.model.starts_with("aln") {
                     aln_words.push(format!("{}: {difference}, p = {p}", c.label));
+                    let lower = Interval::of(&per).is_some_and(|d| d.verdict() == Verdict::Lower);
+                    if lower {
+                        aln_lower.push(&c.label);
+                    }
                 }
                 (difference, p)
             };
@@ -795,8 +802,8 @@ fn at_real_time_of(md: &mut String, variants: &[Planned]) {
         let best = order[0];
         let _ = writeln!(
             md,
-            "**Planning `{task}` within real time** ({} ms a decision): {} has the lowest mean \
-             cost of the forward models a user could have{}. {}Every model and planner at its largest budget \
+            "**Planning `{task}` within real time** ({} ms a decision): {} {} has the lowest \
+             mean cost of the forward models a user could have{}. {}Every model and planner at its largest budget \
              whose median decision fits a frame in replicate 1, on the same episodes; cost: the \
              task's summed cost, mean {over}; differences from the nominal simulator of the lowest \
              mean cost, paired, {over}, with the Wilcoxon signed-rank p-value over every paired \
@@ -806,6 +813,21 @@ fn at_real_time_of(md: &mut String, variants: &[Planned]) {
              ahead against what the plant then did, RMS over each episode's frames, mean over \
              episodes — on the states its own planner visited.{}{}\n",
             sig3(limit),
+            match (aln_lower.as_slice(), aln_words.is_empty()) {
+                (_, true) => "No ALN planned.".to_string(),
+                ([], false) => format!(
+                    "no ALN plans to a lower cost than {}, the nominal simulator of the lowest \
+                     mean cost ({over}).",
+                    nominal.label
+                ),
+                (lower, false) => format!(
+                    "{} {} to a lower cost than {}, the nominal simulator of the lowest mean cost \
+                     ({over}).",
+                    lower.join(" and "),
+                    if lower.len() > 1 { "plan" } else { "plans" },
+                    nominal.label
+                ),
+            },
             order
                 .iter()
                 .find(|c| !c.model.starts_with("plant@"))
@@ -948,6 +970,14 @@ mod tests {
         );
         assert!(
             md.contains("ALN (`learned`), cem (64 sequences) has the lowest mean cost"),
+            "{md}"
+        );
+        assert!(
+            md.contains(
+                "(10 ms a decision): ALN (`learned`), cem (64 sequences) plans to a lower cost \
+                 than simulator@10, cem (64 sequences), the nominal simulator of the lowest mean \
+                 cost (across 3 replicates)."
+            ),
             "{md}"
         );
         // The 512-sequence simulator takes 50 ms: beyond a frame.
