@@ -424,23 +424,29 @@ fn abstract_(
         .filter(|e| !e.model.starts_with("simulator@"))
         .min_by(|a, b| a.error.mean.total_cmp(&b.error.mean));
     let against = |other: &Entry| -> String {
+        // Another variant's baseline pairs replicate by replicate: the
+        // same simulation, split and rows.
         let values: Option<Vec<f64>> = (best.variant.replicates.len() > 1)
             .then(|| {
                 best.variant
                     .replicates
                     .iter()
-                    .map(|f| f.aln_minus(other.model))
+                    .zip(&other.variant.replicates)
+                    .map(|(f, g)| match other.elsewhere {
+                        true => Some(f.mean_of("aln")? - g.mean_of(other.model)?),
+                        false => f.aln_minus(other.model),
+                    })
                     .collect()
             })
             .flatten();
+        let name = other.label(variants.len());
         match values.and_then(|v| Estimate::across_seeds(&v)) {
             Some(d) => format!(
-                "{} {} ({})",
+                "{} {name} ({})",
                 d.verdict.unwrap_or("against"),
-                other.model,
                 d.difference_cell()
             ),
-            None => format!("{}, at {}", other.model, other.error.cell()),
+            None => format!("{name}, at {}", other.error.cell()),
         }
     };
     if let Some(rival) = rival {
