@@ -19,6 +19,27 @@ fn edited(from: &str, to: &str) -> String {
     UR5.replacen(from, to, 1)
 }
 
+/// A folder holding the vendored UR5 as `robots/ur5.urdf`.
+fn with_ur5() -> tempfile::TempDir {
+    let dir = tempfile::tempdir().unwrap();
+    let robots = dir.path().join("robots");
+    std::fs::create_dir(&robots).unwrap();
+    std::fs::write(robots.join("ur5.urdf"), UR5).unwrap();
+    dir
+}
+
+/// The path of `role`'s artifact in the first variant of the run record
+/// of the experiment `e2e` run in `dir`.
+fn artifact(dir: &Path, role: &str) -> std::path::PathBuf {
+    let record: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(dir.join("runs/e2e/run.json")).unwrap()).unwrap();
+    dir.join(
+        record["variants"][0]["artifacts"][role]["path"]
+            .as_str()
+            .unwrap_or_else(|| panic!("{role} recorded")),
+    )
+}
+
 fn manifest(urdf: &str, extra: &str) -> String {
     format!(
         "[experiment]\nname = \"e2e\"\nseed = 5\n\n[[simulate.scene]]\nname = \"arm\"\n\
@@ -189,10 +210,7 @@ fn malformed_robot_descriptions_are_refused_naming_file_and_element() {
 /// next, so that simulator errs 0 levels.
 #[test]
 fn the_vendored_arm_runs_through_every_stage() {
-    let dir = tempfile::tempdir().unwrap();
-    let robots = dir.path().join("robots");
-    std::fs::create_dir(&robots).unwrap();
-    std::fs::write(robots.join("ur5.urdf"), UR5).unwrap();
+    let dir = with_ur5();
     let text = manifest(
         "robots/ur5.urdf",
         "controller = { kind = \"random\", amplitude = [20.0, 20.0, 10.0, 2.0, 2.0, 0.5] }\n\
@@ -207,16 +225,7 @@ fn the_vendored_arm_runs_through_every_stage() {
         &["-q", "run", "arm.toml", "--reports", "reports"],
     );
     assert!(out.status.success(), "{}", stderr(&out));
-    let record: serde_json::Value =
-        serde_json::from_slice(&std::fs::read(dir.path().join("runs/e2e/run.json")).unwrap())
-            .unwrap();
-    let artifact = |role: &str| {
-        dir.path().join(
-            record["variants"][0]["artifacts"][role]["path"]
-                .as_str()
-                .unwrap(),
-        )
-    };
+    let artifact = |role: &str| artifact(dir.path(), role);
     let codebook = alnlab_common::table::Table::read(&artifact("codebook")).unwrap();
     let names = codebook.strings("variable").unwrap();
     for name in [
@@ -251,10 +260,7 @@ fn the_vendored_arm_runs_through_every_stage() {
 /// where its one-step prediction is.
 #[test]
 fn an_aln_hybrid_corrects_an_arms_nominal_simulator_one_step_and_closed_loop() {
-    let dir = tempfile::tempdir().unwrap();
-    let robots = dir.path().join("robots");
-    std::fs::create_dir(&robots).unwrap();
-    std::fs::write(robots.join("ur5.urdf"), UR5).unwrap();
+    let dir = with_ur5();
     let text = manifest(
         "robots/ur5.urdf",
         "controller = { kind = \"random\", amplitude = [40.0, 60.0, 30.0, 8.0, 8.0, 2.0], \
@@ -270,16 +276,7 @@ fn an_aln_hybrid_corrects_an_arms_nominal_simulator_one_step_and_closed_loop() {
     std::fs::write(dir.path().join("arm.toml"), &text).unwrap();
     let out = alnlab(dir.path(), &["-q", "run", "arm.toml"]);
     assert!(out.status.success(), "{}", stderr(&out));
-    let record: serde_json::Value =
-        serde_json::from_slice(&std::fs::read(dir.path().join("runs/e2e/run.json")).unwrap())
-            .unwrap();
-    let artifact = |role: &str| {
-        dir.path().join(
-            record["variants"][0]["artifacts"][role]["path"]
-                .as_str()
-                .unwrap(),
-        )
-    };
+    let artifact = |role: &str| artifact(dir.path(), role);
     let model = alnlab_aln::model::Model::read(&artifact("model")).unwrap();
     assert_eq!(model.header.base, alnlab_aln::model::Base::Nominal);
     assert!(
@@ -363,10 +360,7 @@ fn an_aln_hybrid_corrects_an_arms_nominal_simulator_one_step_and_closed_loop() {
 /// the joint's limits is refused by `alnlab check` with its key.
 #[test]
 fn an_arm_plant_is_planned_in_the_plant_within_its_limits() {
-    let dir = tempfile::tempdir().unwrap();
-    let robots = dir.path().join("robots");
-    std::fs::create_dir(&robots).unwrap();
-    std::fs::write(robots.join("ur5.urdf"), UR5).unwrap();
+    let dir = with_ur5();
     let text = manifest(
         "robots/ur5.urdf",
         "controller = { kind = \"random\", amplitude = [40.0, 60.0, 30.0, 8.0, 8.0, 2.0], \
@@ -375,7 +369,8 @@ fn an_arm_plant_is_planned_in_the_plant_within_its_limits() {
          payload = { link = \"tool0\", mass = 2.0, offset = [0.0, 0.0, 0.05] }\n\n\
          [quantize]\nlevels = 64\n\n\
          [train]\nmodel = \"piecewise-linear\"\ncontrols = \"given\"\ninformative_inputs = 3\n\
-         base = \"nominal\"\npwl.max_pieces = 2\npwl.read_controls = true\n\n\
+         base = \"nominal\"\npwl.max_pieces = 2\npwl.read_controls = true\n\
+         pwl.never_read = [\"qdd\"]\n\n\
          [test]\nresimulate_steps = [10]\nrollout_starts = 2\nhorizon = 2\n\n\
          [plan]\nmodels = [\"aln\"]\nplanners = [\"cem\"]\nbudgets = [8]\nhorizon = 3\n\
          episodes = 2\nframes = 5\nsimulator_steps = [10]\nplant_steps = [10]\n\n\
@@ -403,16 +398,15 @@ fn an_arm_plant_is_planned_in_the_plant_within_its_limits() {
     );
     let out = alnlab(dir.path(), &["-q", "run", "arm.toml"]);
     assert!(out.status.success(), "{}", stderr(&out));
-    let record: serde_json::Value =
-        serde_json::from_slice(&std::fs::read(dir.path().join("runs/e2e/run.json")).unwrap())
-            .unwrap();
-    let artifact = |role: &str| {
-        dir.path().join(
-            record["variants"][0]["artifacts"][role]["path"]
-                .as_str()
-                .unwrap(),
-        )
-    };
+    let artifact = |role: &str| artifact(dir.path(), role);
+    // No tree reads a current acceleration but its own.
+    let model = alnlab_aln::model::Model::read(&artifact("model")).unwrap();
+    for ((output, _), reads) in model.header.outputs.iter().zip(&model.header.reads) {
+        assert!(
+            reads.iter().all(|r| !r.starts_with("qdd.") || r == output),
+            "{output} reads {reads:?}"
+        );
+    }
     let planning = alnlab_common::table::Table::read(&artifact("planning")).unwrap();
     let models = planning.strings("model").unwrap();
     let rms = planning.f64_column("prediction_rms").unwrap();

@@ -611,7 +611,7 @@ pub const ROUNDS: &str = "rounds";
 /// train and plan stages after it again, each on the last round's data.
 pub const AGGREGATE: Stage = Stage {
     name: "aggregate",
-    about: "Run the aggregate stage alone: the frames a round of planning executed join the \
+    about: "The aggregate stage (run by `[plan] rounds`): the frames a round of planning executed join the \
             training pairs, their nominal predictions and levels",
     format_version: alnlab_aggregate::FORMAT_VERSION,
     inputs: &[

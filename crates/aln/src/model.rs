@@ -115,7 +115,8 @@ pub struct Header {
     pub target: Target,
     /// Input bits per sample (for the threshold model, before the
     /// candidate's bits; for a piecewise-linear model, the input variables:
-    /// the codebook's learned ones).
+    /// the codebook's learned ones, then for a hybrid their nominal
+    /// predictions).
     pub inputs: usize,
     /// The learned output variables, in tree order, with the widths of
     /// their targets' codes (for the threshold model, the width of the

@@ -34,6 +34,7 @@ use alnlab_tables::pairs::{Pairs, Side};
 
 use alnlab_aln::model::Reads;
 use alnlab_aln::pwl::Tree;
+use alnlab_aln::pwl::predict::Predictor;
 
 use crate::peer::Peer;
 use crate::piecewise;
@@ -75,7 +76,8 @@ pub struct Hybrids<'e> {
     /// The nominal predictions `[variable][row]` each hybrid advances from.
     pub nominal: Vec<Vec<f64>>,
     /// The robust linear correction's reads (indices among `inputs`): the
-    /// linear baseline's, and the variable's own nominal prediction.
+    /// linear baseline's and the variable's own nominal prediction, or an
+    /// ALN hybrid's.
     pub reads: Vec<Reads>,
     /// The robust linear correction: one piece per output.
     pub linear: Vec<Tree>,
@@ -208,6 +210,34 @@ pub fn path<'a>(
 /// prediction) and the nominal prediction alone, the predicted variables'
 /// next values.
 pub type Correct<'a> = dyn FnMut(&[f64], &[f64], &mut [f64]) + 'a;
+
+/// A piecewise-linear correction (the ALN hybrid's, `linear+nominal`'s) as
+/// [`path`]'s and [`roll`]'s `correct`: each output advanced from its
+/// nominal prediction, by the plain evaluation.
+pub fn correction<'p>(predictor: &'p Predictor<'p>) -> impl FnMut(&[f64], &[f64], &mut [f64]) + 'p {
+    let mut scratch = predictor.scratch();
+    let outputs = predictor.variables().count();
+    move |inputs, nominal, next| {
+        let plain = alnlab_aln::pwl::predict::Path::Plain;
+        predictor.next_values_from(inputs, nominal, plain, &mut scratch, &mut next[..outputs]);
+    }
+}
+
+/// The boosted trees' correction as [`path`]'s and [`roll`]'s `correct`,
+/// one state as the crate's one-row table.
+pub fn peer_correction<'p>(
+    peer: &'p Peer,
+    learned: &'p [&'p Entry],
+) -> impl FnMut(&[f64], &[f64], &mut [f64]) + 'p {
+    move |inputs, nominal, next| {
+        let column =
+            |values: &[f64]| -> Vec<Vec<f64>> { values.iter().map(|&v| vec![v]).collect() };
+        let values = peer.next_values(learned, &column(inputs), &column(nominal), &[0]);
+        for (n, v) in next.iter_mut().zip(values) {
+            *n = v[0];
+        }
+    }
+}
 
 /// The nominal simulator stepping a state a model predicted: the logged
 /// frame the state stands in for, its generalized state rebuilt from the

@@ -402,8 +402,7 @@ pub fn run(
     let timings = {
         let mut timed = aln_paths;
         if let (Aln::Piecewise(predictor), true) = (&aln_model, aln_hybrid) {
-            let mut scratch = predictor.scratch();
-            let outputs = predictor.variables().count();
+            let correct = hybrid::correction(predictor);
             timed.push(hybrid::path(
                 "aln",
                 &frames,
@@ -411,11 +410,7 @@ pub fn run(
                 &starts,
                 &test_states,
                 width,
-                move |inputs, nominal, next| {
-                    let plain = alnlab_aln::pwl::predict::Path::Plain;
-                    let next = &mut next[..outputs];
-                    predictor.next_values_from(inputs, nominal, plain, &mut scratch, next);
-                },
+                correct,
             ));
         }
         // The robust linear fit all at once and one state at a time (its
@@ -444,8 +439,7 @@ pub fn run(
                 .map(|r| resimulate::path(r, &frames, &replays, &learned, &starts, &test.y)),
         );
         if let Some(predictor) = &hybrid_linear {
-            let mut scratch = predictor.scratch();
-            let outputs = predictor.variables().count();
+            let correct = hybrid::correction(predictor);
             timed.push(hybrid::path(
                 hybrid::LINEAR,
                 &frames,
@@ -453,15 +447,11 @@ pub fn run(
                 &starts,
                 &test_states,
                 width,
-                move |inputs, nominal, next| {
-                    let plain = alnlab_aln::pwl::predict::Path::Plain;
-                    let next = &mut next[..outputs];
-                    predictor.next_values_from(inputs, nominal, plain, &mut scratch, next);
-                },
+                correct,
             ));
         }
         if let Some(peer) = hybrids.as_ref().and_then(|h| h.peer.as_ref()) {
-            let learned = &learned;
+            let correct = hybrid::peer_correction(peer, &learned);
             timed.push(hybrid::path(
                 hybrid::PEER,
                 &frames,
@@ -469,16 +459,7 @@ pub fn run(
                 &starts,
                 &test_states,
                 width,
-                move |inputs, nominal, next| {
-                    // One state as the crate's one-row table.
-                    let column = |values: &[f64]| -> Vec<Vec<f64>> {
-                        values.iter().map(|&v| vec![v]).collect()
-                    };
-                    let values = peer.next_values(learned, &column(inputs), &column(nominal), &[0]);
-                    for (n, v) in next.iter_mut().zip(values) {
-                        *n = v[0];
-                    }
-                },
+                correct,
             ));
         }
         timing::in_rounds(timed, timing::REPEATS)
@@ -536,14 +517,8 @@ pub fn run(
         )
         .map(Some)
     };
-    let plain = alnlab_aln::pwl::predict::Path::Plain;
     let aln_rolled = match &aln_model {
-        Aln::Piecewise(predictor) if aln_hybrid => {
-            let mut scratch = predictor.scratch();
-            roll_hybrid(&mut |inputs, nominal, next| {
-                predictor.next_values_from(inputs, nominal, plain, &mut scratch, next)
-            })?
-        }
+        Aln::Piecewise(predictor) if aln_hybrid => roll_hybrid(&mut hybrid::correction(predictor))?,
         Aln::Piecewise(predictor) => Some(roll_real(&scored, &mut piecewise::step_of(predictor))),
         Aln::Bits(runtime) => Some(each(rollout::roll(from.clone(), horizon, |x| {
             runtime.levels(x, windows.as_deref())
@@ -569,21 +544,11 @@ pub fn run(
         rolled.push((PEER.to_string(), roll_real(&scored, &mut step)));
     }
     if let Some(predictor) = &hybrid_linear {
-        let mut scratch = predictor.scratch();
-        let levels = roll_hybrid(&mut |inputs, nominal, next| {
-            predictor.next_values_from(inputs, nominal, plain, &mut scratch, next)
-        })?;
+        let levels = roll_hybrid(&mut hybrid::correction(predictor))?;
         rolled.extend(levels.map(|levels| (hybrid::LINEAR.to_string(), levels)));
     }
     if let Some(peer) = hybrids.as_ref().and_then(|h| h.peer.as_ref()) {
-        let levels = roll_hybrid(&mut |inputs, nominal, next| {
-            let column =
-                |values: &[f64]| -> Vec<Vec<f64>> { values.iter().map(|&v| vec![v]).collect() };
-            let values = peer.next_values(&learned, &column(inputs), &column(nominal), &[0]);
-            for (n, v) in next.iter_mut().zip(values) {
-                *n = v[0];
-            }
-        })?;
+        let levels = roll_hybrid(&mut hybrid::peer_correction(peer, &learned))?;
         rolled.extend(levels.map(|levels| (hybrid::PEER.to_string(), levels)));
     }
     for (steps, r) in params.resimulate_steps.iter().zip(&resimulated) {

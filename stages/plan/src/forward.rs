@@ -9,8 +9,8 @@
 //!   wronger), or a plant's own (the reference no user has). A candidate
 //!   that blows up costs +∞.
 //! - [`Learned`]: a model of levels — the trained ALN ([`Runtime`]) or the
-//!   linear baseline ([`LinearStep`]) — fed the planner's torques as the
-//!   hinge torque variables' levels and its own predictions after that.
+//!   linear baseline ([`LinearStep`]) — fed the planner's controls as their
+//!   variables' levels and its own predictions after that.
 //! - [`Piecewise`]: a piecewise-linear ALN, which reads real values: fed the
 //!   planner's torques as they are — so that its predictions move with
 //!   every torque, not only with a torque's level — and its own predicted
@@ -324,7 +324,7 @@ fn wiring(
 }
 
 /// A piecewise-linear ALN as a forward model, in real values: the true
-/// state's learned variables, each frame's torques set as the hinge torque
+/// state's learned variables, each frame's controls set as their
 /// variables' values, the predicted variables advanced (every piece, one
 /// candidate at a time, nothing allocated), and the task's variables costed
 /// at the predicted values.
@@ -470,12 +470,22 @@ impl<'a> Hybrid<'a> {
     ) -> Result<Hybrid<'a>, String> {
         let (in_scene, torques, costed) = wiring(learned, nominal, controls, &cost)?;
         let predicted: Vec<usize> = predictor.variables().collect();
-        let Some(robot) = &nominal.robot else {
-            return Err(format!(
-                "scene `{}` is not a robot: a hybrid re-steps its nominal simulator from the \
-                 state it predicted, which only a robot's joint positions and velocities make",
+        // The state the simulator re-steps must be made of predicted
+        // variables: a fixed-root robot's joint positions and velocities.
+        let refused = |why: String| {
+            format!(
+                "scene `{}`: a hybrid re-steps its nominal simulator from the state it \
+                 predicted, and {why}",
                 nominal.scene.name
-            ));
+            )
+        };
+        alnlab_physics::runner::state_from_variables(
+            &nominal.layout.state,
+            &nominal.layout.variables,
+        )
+        .map_err(|why| refused(why.replace("the state's", "its state's")))?;
+        let Some(robot) = &nominal.robot else {
+            return Err(refused("it is not a robot".into()));
         };
         let find = |name: String| {
             predicted

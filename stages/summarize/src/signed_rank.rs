@@ -2,12 +2,15 @@
 //! their median is zero, without assuming they are normal — the companion
 //! of the mean's t-interval for heavy-tailed costs. Computed as
 //! `scipy.stats.wilcoxon` computes it by default (zeros dropped, no
-//! continuity correction): the exact null distribution of R+ when no two
-//! |differences| tie and none is zero, else the normal approximation with
-//! the tie-corrected variance (scipy permutes instead when there are 13 or
-//! fewer such differences).
+//! continuity correction): the exact null distribution of R+ for at most 50
+//! differences of which no two |differences| tie and none is zero, else the
+//! normal approximation with the tie-corrected variance (scipy permutes
+//! instead when there are 13 or fewer differences with ties or zeros).
 
 use statrs::distribution::{ContinuousCDF, Normal};
+
+/// The most differences whose p-value is exact (scipy's `auto` rule).
+const EXACT_MOST: usize = 50;
 
 /// A signed-rank test's outcome.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -55,7 +58,7 @@ pub fn test(differences: &[f64]) -> Option<SignedRank> {
         start = end;
     }
     let zeros = n < differences.len();
-    let exact = ties == 0.0 && !zeros;
+    let exact = ties == 0.0 && !zeros && differences.len() <= EXACT_MOST;
     let count = n as f64;
     let p = if exact {
         // R+ is an integer; its null distribution by adding one rank at a
@@ -100,6 +103,10 @@ mod tests {
     /// (scipy 1.17, defaults), computed independently.
     #[test]
     fn the_test_is_scipys() {
+        // ±1 … ±60, every third negative.
+        let sixty: Vec<f64> = (0..60)
+            .map(|i| f64::from(i + 1) * if i % 3 == 0 { -1.0 } else { 1.0 })
+            .collect();
         let cases: &[(&[f64], f64, f64, bool)] = &[
             // Exact: no ties, no zeros.
             (
@@ -114,6 +121,8 @@ mod tests {
                 SCIPY[1].1,
                 true,
             ),
+            // More than 50, none tied: the normal approximation.
+            (&sixty, SCIPY[3].0, SCIPY[3].1, false),
             // Ties and a zero: the normal approximation (n > 13).
             (
                 &[
@@ -142,9 +151,10 @@ mod tests {
     }
 
     /// scipy's (statistic, p) for the cases above.
-    const SCIPY: [(f64, f64); 3] = [
+    const SCIPY: [(f64, f64); 4] = [
         (8.0, 0.048828125),
         (0.0, 0.03125),
         (16.5, 0.013356177488691993),
+        (590.0, 0.016733071607703435),
     ];
 }

@@ -15,6 +15,10 @@
 //!   coefficients, so the model reads the real values as logged.
 //! - **Controls given** (`controls = "given"`): the controller's torques g
 //!   are read, never predicted.
+//! - **What a planner can give** (`never_read`): the state's variables of
+//!   the groups named are read by no tree but their own — a frame's
+//!   accelerations are those under the torque it applies, which a planner
+//!   cannot supply for a candidate torque.
 //! - **A hybrid** (`base = "nominal"`, issue 43): the trees also read the
 //!   nominal simulator's prediction of every variable (the nominal stage's
 //!   `nominal.parquet`: the scene as written, stepped one frame), chosen
@@ -27,6 +31,7 @@ use alnlab_aln::linear::least_absolute;
 use alnlab_aln::pwl::predict::change;
 use alnlab_aln::pwl::{MAX_PIECES, Tree};
 use alnlab_codes::Entry;
+use alnlab_codes::codebook::group_of;
 use alnlab_codes::residual::change as level_change;
 use alnlab_common::{Error, Result};
 use alnlab_tables::levels::Levels;
@@ -67,6 +72,12 @@ pub struct PwlParams {
     /// informative inputs, so that a planner's torques move every
     /// prediction (a forward model's need, not the one-step error's).
     pub read_controls: bool,
+    /// Groups of variables (`qdd`, `v`, … as the codebook groups them) the
+    /// trees never read of the current state, each tree but its own
+    /// variable: a frame's accelerations are those under the torque it
+    /// applies, which a planner cannot give for a candidate torque.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub never_read: Vec<String>,
 }
 
 /// `split`'s values.
@@ -98,6 +109,7 @@ impl Default for PwlParams {
             confidence: 0.75,
             tolerance: None,
             read_controls: false,
+            never_read: Vec::new(),
         }
     }
 }
@@ -125,6 +137,12 @@ impl PwlParams {
                     "expected a level between 0 and 1, found {}",
                     self.confidence
                 ),
+            );
+        }
+        if let Some(empty) = self.never_read.iter().position(|g| g.is_empty()) {
+            return bad(
+                "never_read",
+                format!("entry {empty} is empty: expected a group of variables, e.g. \"qdd\""),
             );
         }
         for (key, value) in [("huber", self.huber), ("tolerance", self.tolerance)] {
@@ -226,6 +244,17 @@ pub fn train(
     let predicted: Vec<usize> = (0..learned.len())
         .filter(|&v| !(controls_given && is_control(&learned[v].variable)))
         .collect();
+    // The inputs any tree may read: every one but the state's variables of
+    // the groups `never_read` names (each tree still reads its own).
+    let readable: Vec<usize> = (0..x.len())
+        .filter(|&u| {
+            u >= width
+                || !params
+                    .never_read
+                    .iter()
+                    .any(|g| group_of(&learned[u].variable) == g)
+        })
+        .collect();
     let reads: Vec<Vec<usize>> = match informative {
         Some(count) => {
             let mut x_levels: Vec<std::borrow::Cow<[u16]>> = learned
@@ -258,12 +287,14 @@ pub fn train(
                 })
                 .collect::<Result<_>>()?;
             let targets: Vec<&[u16]> = changes.iter().map(Vec::as_slice).collect();
-            let x_levels: Vec<&[u16]> = x_levels.iter().map(|c| c.as_ref()).collect();
-            let chosen = select::informative(&x_levels, &targets, rows, count);
+            // Chosen among the inputs a tree may read.
+            let pool: Vec<&[u16]> = readable.iter().map(|&u| x_levels[u].as_ref()).collect();
+            let chosen = select::informative(&pool, &targets, rows, count);
             chosen
                 .into_iter()
                 .zip(&predicted)
-                .map(|(mut inputs, &v)| {
+                .map(|(inputs, &v)| {
+                    let mut inputs: Vec<usize> = inputs.into_iter().map(|i| readable[i]).collect();
                     for own in [v, base_of(v)] {
                         if !inputs.contains(&own) {
                             inputs.push(own);
@@ -283,7 +314,19 @@ pub fn train(
                 })
                 .collect()
         }
-        None => vec![(0..x.len()).collect(); predicted.len()],
+        None => predicted
+            .iter()
+            .map(|&v| {
+                let mut inputs = readable.clone();
+                for own in [v, base_of(v)] {
+                    if !inputs.contains(&own) {
+                        inputs.push(own);
+                    }
+                }
+                inputs.sort_unstable();
+                inputs
+            })
+            .collect(),
     };
     // Standardization on the training rows.
     let scale: Vec<(f64, f64)> = x

@@ -122,7 +122,8 @@ impl Program {
 /// A piecewise-linear model made ready to predict.
 pub struct Predictor<'m> {
     outputs: Vec<Output<'m>>,
-    /// Inputs per state: the codebook's learned variables.
+    /// Inputs per state: the codebook's learned variables (and, for a
+    /// hybrid, their nominal predictions after them).
     width: usize,
     /// The most inputs any tree reads (the size of the row buffer).
     most_inputs: usize,
@@ -150,10 +151,11 @@ const BLOCK: usize = 32;
 
 impl<'m> Predictor<'m> {
     /// Prepares `trees` (a model's, whose outputs read and predict
-    /// `reads`, indices among `learned`, the codebook's learned entries),
-    /// compiling each over the box of `points`: states, `learned.len()`
-    /// real values a row (the training rows; where the cuts fall decides
-    /// speed, never a value).
+    /// `reads`, indices among `learned`: the entries of its inputs — the
+    /// codebook's learned ones, then for a hybrid the same again for their
+    /// nominal predictions), compiling each over the box of `points`:
+    /// states, `learned.len()` real values a row (the training rows; where
+    /// the cuts fall decides speed, never a value).
     pub fn new(
         trees: &'m [Tree],
         reads: &[Reads],
@@ -263,7 +265,7 @@ impl<'m> Predictor<'m> {
     }
 
     /// [`Predictor::next_values`] with each output advanced from its value
-    /// in `base` (`width()` values) instead of `state`: a correction
+    /// in `base` (a value per learned variable) instead of `state`: a correction
     /// learned on top of another model's prediction `base` (a hybrid).
     pub fn next_values_from(
         &self,
