@@ -596,6 +596,8 @@ fn damaged_and_hostile_files_given_to_stages_are_refused() {
                 codebook,
                 "--pairs",
                 &good_pairs,
+                "--nominal",
+                &good_nominal,
                 "--out",
                 &s(&out),
             ],

@@ -45,7 +45,7 @@ fn every_flipped_byte_is_refused_or_remade() {
     let artifacts = &record.variants[0].artifacts;
     let path = |role: &str| d.join(&artifacts[role].path);
     let kinds: Vec<String> = artifacts.keys().cloned().collect();
-    assert_eq!(kinds.len(), 19, "{kinds:?}");
+    assert_eq!(kinds.len(), 21, "{kinds:?}");
 
     // Through the cache: every kind.
     let mut trials = 0;
@@ -66,7 +66,7 @@ fn every_flipped_byte_is_refused_or_remade() {
             trials += 1;
         }
     }
-    assert_eq!(trials, 19 * POSITIONS);
+    assert_eq!(trials, 21 * POSITIONS);
 
     // To a stage alone: every kind a stage reads.
     let s = |p: &Path| p.to_string_lossy().into_owned();
@@ -87,12 +87,17 @@ fn every_flipped_byte_is_refused_or_remade() {
             vec![
                 ("codebook", s(&path("codebook"))),
                 ("pairs", s(&path("pairs"))),
+                ("nominal", s(&path("nominal"))),
             ],
         ),
         (
             "codebook",
             "train",
-            vec![("levels", s(&path("levels"))), ("pairs", s(&path("pairs")))],
+            vec![
+                ("levels", s(&path("levels"))),
+                ("pairs", s(&path("pairs"))),
+                ("nominal", s(&path("nominal"))),
+            ],
         ),
         (
             "model",

@@ -713,7 +713,7 @@ fn piecewise_linear_models_refuse_what_they_cannot_do() {
         )
         .exits(2),
     );
-    let (levels, pairs) = (artifact("levels"), artifact("pairs"));
+    let (levels, pairs, nominal) = (artifact("levels"), artifact("pairs"), artifact("nominal"));
     cases.push(
         case(
             "a piecewise-linear model trained in shards",
@@ -727,6 +727,8 @@ fn piecewise_linear_models_refuse_what_they_cannot_do() {
                 &levels,
                 "--pairs",
                 &pairs,
+                "--nominal",
+                &nominal,
                 "--shard",
                 "1/2",
                 "--out",

@@ -89,7 +89,7 @@ fn shards_trained_apart_merge_into_the_model_of_one_process() {
     // The stage alone: train --shard and merge-models.
     let quantize = &whole.variants[0].artifacts;
     let (codebook, levels) = (&quantize["codebook"].path, &quantize["levels"].path);
-    let pairs = &quantize["pairs"].path;
+    let (pairs, nominal) = (&quantize["pairs"].path, &quantize["nominal"].path);
     for k in 1..=2 {
         let out = format!("s{k}");
         let shard = format!("{k}/2");
@@ -106,6 +106,8 @@ fn shards_trained_apart_merge_into_the_model_of_one_process() {
                 levels,
                 "--pairs",
                 pairs,
+                "--nominal",
+                nominal,
                 "--shard",
                 &shard,
                 "--out",
