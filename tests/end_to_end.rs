@@ -136,7 +136,9 @@ fn cache_reuses_and_reruns_only_what_changed() {
         "summary",
         "timings",
         "training",
-        "trajectory"
+        "trajectory",
+        "transitions",
+        "transitions-nominal"
     ]));
 
     let second = run_ok(dir.path(), &["m.toml"]);
