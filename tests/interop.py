@@ -357,7 +357,7 @@ def main(run_json: str, report_dir: str) -> int:
                 # The plan stage plans nothing without [[plan.task]].
                 # The circuit stage measures nothing without `synthesize`,
                 # and places nothing without `fpga`.
-                assert table.num_rows > 0 or role in ("plan", "planning", "circuit", "fpga"), f"{path}: no rows"
+                assert table.num_rows > 0 or role in ("plan", "planning", "transitions", "transitions-nominal", "circuit", "fpga"), f"{path}: no rows"
                 assert meta[b"alnlab.stage"], f"{path}: no provenance"
                 assert json.loads(meta[b"alnlab.params"])["seed"] == variant.get("seed", record["seed"]), path
                 checked += 1
