@@ -139,6 +139,8 @@ pub fn shards(manifest_path: &Path, variant: &str, shards: u32) -> Result<ShardB
                 .arg(levels)
                 .arg("--pairs")
                 .arg(&inputs["pairs"])
+                .arg("--nominal")
+                .arg(&inputs["nominal"])
                 .arg("--out")
                 .arg(out)
                 .stdout(std::process::Stdio::null())
