@@ -356,8 +356,10 @@ fn an_aln_hybrid_corrects_an_arms_nominal_simulator_one_step_and_closed_loop() {
 /// Planning an arm that is a plant: episodes execute in the plant (its own
 /// simulator predicts each frame exactly, the nominal one does not), the
 /// planner's torques stay within the controller's amplitude and the
-/// joints' effort limits, the ALN hybrid plans, and a joint target beyond
-/// the joint's limits is refused by `alnlab check` with its key.
+/// joints' effort limits, the ALN hybrid plans a joint target and a point
+/// for the tool, and a joint target beyond the joint's limits, a frame the
+/// robot lacks or a point beyond the tool's reach is refused by `alnlab
+/// check` with its key.
 #[test]
 fn an_arm_plant_is_planned_in_the_plant_within_its_limits() {
     let dir = with_ur5();
@@ -375,26 +377,48 @@ fn an_arm_plant_is_planned_in_the_plant_within_its_limits() {
          [plan]\nmodels = [\"aln\"]\nplanners = [\"cem\"]\nbudgets = [8]\nhorizon = 3\n\
          episodes = 2\nframes = 5\nsimulator_steps = [10]\nplant_steps = [10]\n\n\
          [[plan.task]]\nkind = \"hold-angles\"\nname = \"raise\"\n\
-         targets = { \"q.shoulder_lift_joint\" = -1.2, \"q.elbow_joint\" = 0.8 }\n",
+         targets = { \"q.shoulder_lift_joint\" = -1.2, \"q.elbow_joint\" = 0.8 }\n\n\
+         [[plan.task]]\nkind = \"reach-point\"\nname = \"point\"\nframe = \"tool0\"\n\
+         target = [0.3, 0.2, 0.6]\n",
     )
     .replace("runs = 1\nduration = 1.0\n", "");
     std::fs::write(dir.path().join("arm.toml"), &text).unwrap();
     let reach = text.replace("\"q.elbow_joint\" = 0.8", "\"q.elbow_joint\" = 4.0");
     std::fs::write(dir.path().join("reach.toml"), reach).unwrap();
+    let frame = text.replace("frame = \"tool0\"", "frame = \"gripper\"");
+    std::fs::write(dir.path().join("frame.toml"), frame).unwrap();
+    let far = text.replace("[0.3, 0.2, 0.6]", "[0.3, 0.2, 2.6]");
+    std::fs::write(dir.path().join("far.toml"), far).unwrap();
     check_all(
         dir.path(),
-        &[case(
-            "a joint target out of reach",
-            &["check", "reach.toml"],
-            &[
-                "plan.task.0.targets",
-                "q.elbow_joint",
-                "out of the joint's reach",
-                "reach.toml",
-            ],
-            None,
-        )
-        .exits(2)],
+        &[
+            case(
+                "a joint target out of reach",
+                &["check", "reach.toml"],
+                &[
+                    "plan.task.0.targets",
+                    "q.elbow_joint",
+                    "out of the joint's reach",
+                    "reach.toml",
+                ],
+                None,
+            )
+            .exits(2),
+            case(
+                "a frame the robot lacks",
+                &["check", "frame.toml"],
+                &["plan.task.1.frame", "no frame `gripper`", "frame.toml"],
+                None,
+            )
+            .exits(2),
+            case(
+                "a point out of the frame's reach",
+                &["check", "far.toml"],
+                &["plan.task.1.target", "out of `tool0`'s reach", "far.toml"],
+                None,
+            )
+            .exits(2),
+        ],
     );
     let out = alnlab(dir.path(), &["-q", "run", "arm.toml"]);
     assert!(out.status.success(), "{}", stderr(&out));
@@ -430,6 +454,15 @@ fn an_arm_plant_is_planned_in_the_plant_within_its_limits() {
         rms_of("simulator@10")
     );
     assert!(rms_of("aln").iter().all(|e| e.is_finite()));
+    let tasks = planning.strings("task").unwrap();
+    let cost = planning.f64_column("cost").unwrap();
+    assert!(
+        (0..planning.num_rows())
+            .filter(|&r| tasks[r] == "point")
+            .all(|r| cost.value(r).is_finite() && cost.value(r) > 0.0),
+        "the point task is planned and costs its squared distances (m²)"
+    );
+    assert!(tasks.iter().any(|t| t == "point"), "{tasks:?}");
     // Every planned torque within the controller's amplitude and the
     // UR5's effort limits (150, 150, 150, 28, 28, 28 N m).
     let plan = alnlab_common::table::Table::read(&artifact("plan")).unwrap();

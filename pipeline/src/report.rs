@@ -137,6 +137,20 @@ fn plan_setup(parameters: &BTreeMap<String, String>) -> Option<PlanSetup> {
                 variable: get(&key("variable"))?.clone(),
                 rate: get(&key("rate"))?.parse().ok()?,
             },
+            "reach-point" => {
+                // An array is recorded as its TOML text, `[0.3, 0.0, 0.5]`.
+                let text = get(&key("target"))?;
+                let point: Vec<f64> = text
+                    .trim_matches(['[', ']'])
+                    .split(',')
+                    .map(|x| x.trim().parse().ok())
+                    .collect::<Option<_>>()?;
+                Task::ReachPoint {
+                    name,
+                    frame: get(&key("frame"))?.clone(),
+                    target: point.try_into().ok()?,
+                }
+            }
             _ => return None,
         };
         tasks.push(PlanTask {

@@ -196,16 +196,110 @@ impl Kinematics {
     }
 }
 
+/// A point fixed on one body of a model whose root is welded to the world,
+/// placed from the one-DOF joint positions on the path from the root to the
+/// body: the forward kinematics of one point, allocation-free, for a task's
+/// cost evaluated at every predicted frame.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ChainPoint {
+    /// The root's orientation and hinge position (inertial frame).
+    root: (Matrix3<f64>, Vector3<f64>),
+    /// The path's links, root's child first, and each one's joint and offset
+    /// from its parent's hinge.
+    path: Vec<(usize, Joint, Vector3<f64>)>,
+    /// The point, in the body's frame.
+    point: Vector3<f64>,
+}
+
+impl ChainPoint {
+    /// The point `point` (frame of link `body`) of `model`, whose root is
+    /// welded at `root_p` turned by `root_rot`. An error when a ball hinge
+    /// lies on the path (its orientation is not one number).
+    pub fn new(
+        model: &Model,
+        root_rot: Matrix3<f64>,
+        root_p: Vector3<f64>,
+        body: usize,
+        point: Vector3<f64>,
+    ) -> Result<ChainPoint, String> {
+        let mut path = Vec::new();
+        let mut i = body;
+        while let Some(parent) = model.links[i].parent {
+            let link = &model.links[i];
+            if link.joint == Joint::Ball {
+                return Err(format!("link {} hangs from a ball hinge", i + 1));
+            }
+            path.push((i, link.joint, link.l));
+            i = parent;
+        }
+        path.reverse();
+        Ok(ChainPoint {
+            root: (root_rot, root_p),
+            path,
+            point,
+        })
+    }
+
+    /// The links whose joint positions place the point, root's child first:
+    /// the order [`ChainPoint::position`] reads them in.
+    pub fn links(&self) -> impl Iterator<Item = usize> + '_ {
+        self.path.iter().map(|p| p.0)
+    }
+
+    /// The point's position (inertial frame) when the `k`th link of
+    /// [`ChainPoint::links`] has joint position `q(k)`.
+    pub fn position(&self, q: impl Fn(usize) -> f64) -> Vector3<f64> {
+        let (mut rot, mut pos) = self.root;
+        for (k, (_, joint, l)) in self.path.iter().enumerate() {
+            let (rel, r) = one_dof_placement(joint, l, q(k));
+            pos += rot * r;
+            rot *= rel;
+        }
+        pos + rot * self.point
+    }
+
+    /// A ball the point never leaves, whatever the joints do: its centre
+    /// (the first joint's hinge, which no joint on the path moves) and
+    /// radius (every later offset and the point's distance laid end to end,
+    /// each prismatic joint stretched to `travel(link)`, its largest
+    /// |position|). `None` when a prismatic joint's travel is unbounded.
+    pub fn reach(&self, travel: impl Fn(usize) -> Option<f64>) -> Option<(Vector3<f64>, f64)> {
+        let (rot, pos) = self.root;
+        let Some((_, _, first)) = self.path.first() else {
+            return Some((pos + rot * self.point, 0.0));
+        };
+        let mut radius = self.point.norm();
+        for (k, (i, joint, l)) in self.path.iter().enumerate() {
+            if k > 0 {
+                radius += l.norm();
+            }
+            if let Joint::Prismatic { .. } = joint {
+                radius += travel(*i)?;
+            }
+        }
+        Some((pos + rot * first, radius))
+    }
+}
+
+/// The rotation and hinge offset of a one-DOF joint's link at position `q`,
+/// as [`placement`] gives them.
+fn one_dof_placement(joint: &Joint, l: &Vector3<f64>, q: f64) -> (Matrix3<f64>, Vector3<f64>) {
+    match *joint {
+        Joint::Revolute { origin, axis } => {
+            let turn = Rotation3::from_axis_angle(&Unit::new_unchecked(axis), q);
+            (origin * turn.into_inner(), *l)
+        }
+        Joint::Prismatic { origin, axis } => (origin, l + origin * (axis * q)),
+        Joint::Ball => unreachable!("a chain point's path has no ball hinge"),
+    }
+}
+
 /// The rotation of link `i` relative to its parent (columns: its axes in
 /// parent coordinates) and its hinge's position in the parent's frame.
 fn placement(link: &Link, state: &State, i: usize) -> (Matrix3<f64>, Vector3<f64>) {
     match link.joint {
         Joint::Ball => (state.orient[i].to_rotation_matrix().into_inner(), link.l),
-        Joint::Revolute { origin, axis } => {
-            let turn = Rotation3::from_axis_angle(&Unit::new_unchecked(axis), state.q[i]);
-            (origin * turn.into_inner(), link.l)
-        }
-        Joint::Prismatic { origin, axis } => (origin, link.l + origin * (axis * state.q[i])),
+        _ => one_dof_placement(&link.joint, &link.l, state.q[i]),
     }
 }
 

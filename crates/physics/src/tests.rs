@@ -779,3 +779,40 @@ fn noisy_joint_sensors_log_the_truth_plus_their_noise() {
         "{mean} {sd}"
     );
 }
+
+/// A frame placed from joint positions alone is where the full kinematics
+/// (the log's `/tf`) put it, at seeded joint positions; its reach bounds it.
+#[test]
+fn a_chain_point_is_where_the_kinematics_put_its_frame() {
+    use crate::dynamics::{ChainPoint, Kinematics};
+    use rand::{RngExt, SeedableRng};
+    let p = Prepared::new(&ur5(0.1));
+    let robot = p.robot.as_ref().unwrap();
+    let tool = robot.frame("tool0").expect("ur5 has tool0");
+    let root = nalgebra::Matrix3::identity();
+    let root_p = Vector3::new(0.0, 0.0, 0.3);
+    let chain = ChainPoint::new(
+        &p.model,
+        root,
+        root_p,
+        tool.body,
+        tool.placement.translation.vector,
+    )
+    .unwrap();
+    assert_eq!(chain.links().count(), 6, "ur5's six joints carry tool0");
+    let (centre, radius) = chain.reach(|_| None).unwrap();
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
+    let mut kin = Kinematics::new(&p.model);
+    for _ in 0..20 {
+        let mut state = State::rest(&p.model, root_p);
+        for q in state.q.iter_mut().skip(1) {
+            *q = rng.random_range(-3.0..3.0);
+        }
+        kin.update(&p.model, &state);
+        let full = kin.point_position(tool.body, &tool.placement.translation.vector);
+        let links: Vec<usize> = chain.links().collect();
+        let alone = chain.position(|k| state.q[links[k]]);
+        assert!((full - alone).norm() < 1e-12, "{full} {alone}");
+        assert!((alone - centre).norm() <= radius + 1e-12);
+    }
+}

@@ -182,7 +182,7 @@ mod tests {
             name: "bend".into(),
             targets: BTreeMap::from([("pitch.2".into(), 0.6), ("pitch.3".into(), -0.6)]),
         };
-        let cost = task.over(&p.layout.variables).unwrap();
+        let cost = task.over(&p.layout.variables, &p).unwrap();
         let controls = Controls::of(&p).unwrap();
         let mut rng = ChaCha8Rng::seed_from_u64(5);
         let start = p.scene.initial_state(&p.model, &mut rng);

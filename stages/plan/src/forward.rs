@@ -674,7 +674,7 @@ mod tests {
             name: "hold".into(),
             targets: BTreeMap::from([("pitch.2".into(), 0.5)]),
         };
-        let cost = task.over(&p.layout.variables).unwrap();
+        let cost = task.over(&p.layout.variables, &p).unwrap();
         let controls = Controls::of(&p).unwrap();
         let mut model =
             Learned::new(Nudge, entries.iter().collect(), &p, &controls, cost.clone()).unwrap();
@@ -705,7 +705,7 @@ mod tests {
             name: "h".into(),
             targets: BTreeMap::from([("roll.3".into(), 0.0)]),
         };
-        let cost = other.over(&p.layout.variables).unwrap();
+        let cost = other.over(&p.layout.variables, &p).unwrap();
         let e = Learned::new(Nudge, entries.iter().collect(), &p, &controls, cost)
             .err()
             .unwrap();

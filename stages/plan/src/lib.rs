@@ -182,10 +182,10 @@ impl Params {
             task.validate()
                 .map_err(|(field, m)| (format!("task.{i}.{field}"), m))?;
             if let Some(p) = &prepared {
-                task.over(&p.variables.names())
-                    .map_err(|m| (format!("task.{i}"), m))?;
                 task.within(p)
                     .map_err(|(field, m)| (format!("task.{i}.{field}"), m))?;
+                task.over(&p.variables.names(), p)
+                    .map_err(|m| (format!("task.{i}"), m))?;
             }
             if self.task[..i].iter().any(|t| t.name() == task.name()) {
                 return Err((
@@ -457,7 +457,7 @@ pub fn run(
         };
         pool.install(|| -> Result<()> {
             for (t, task) in params.task.iter().enumerate() {
-                let cost = task.over(&p.layout.variables).map_err(Error::Invalid)?;
+                let cost = task.over(&p.layout.variables, p).map_err(Error::Invalid)?;
                 let task_run = TaskRun {
                     context: &context,
                     task: task.name(),

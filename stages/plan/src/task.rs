@@ -9,12 +9,20 @@
 //! - `spin`: spin about an axis at a target rate — the squared difference
 //!   of an angular velocity component and `rate` (rad/s); components are in
 //!   the link's own frame, so `omega.3.x` is the third link's spin about its
-//!   long axis.
+//!   long axis;
+//! - `reach-point`: bring a robot's named URDF frame (a link's frame, as the
+//!   log's `/tf` shows it) to a `target` point (m, world frame) — the squared
+//!   distance still to go. The frame is placed from the positions of the
+//!   joints between it and the robot's welded base, so each of those must
+//!   be a variable.
 
 use std::collections::BTreeMap;
 use std::f64::consts::{PI, TAU};
 
 use alnlab_physics::Prepared;
+use alnlab_physics::dynamics::ChainPoint;
+use alnlab_physics::model::Root;
+use nalgebra::{Matrix3, Vector3};
 use serde::{Deserialize, Serialize};
 
 /// One `[[plan.task]]` table.
@@ -37,13 +45,23 @@ pub enum Task {
         /// Target rate (rad/s).
         rate: f64,
     },
+    /// Bring a robot's URDF frame to a point.
+    ReachPoint {
+        name: String,
+        /// The URDF link whose frame is brought there, e.g. `tool0`.
+        frame: String,
+        /// The point (m, world frame).
+        target: [f64; 3],
+    },
 }
 
 impl Task {
     /// The task's name.
     pub fn name(&self) -> &str {
         match self {
-            Task::HoldAngles { name, .. } | Task::Spin { name, .. } => name,
+            Task::HoldAngles { name, .. }
+            | Task::Spin { name, .. }
+            | Task::ReachPoint { name, .. } => name,
         }
     }
 
@@ -67,6 +85,11 @@ impl Task {
                 "spin `{variable}` at {rate} rad/s; a frame costs the squared difference from \
                  that rate ((rad/s)²)"
             ),
+            Task::ReachPoint { frame, target, .. } => format!(
+                "bring frame `{frame}` to ({}, {}, {}) m; a frame costs the squared distance \
+                 still to go (m²)",
+                target[0], target[1], target[2]
+            ),
         }
     }
 
@@ -75,6 +98,7 @@ impl Task {
         match self {
             Task::HoldAngles { .. } => "rad²",
             Task::Spin { .. } => "(rad/s)²",
+            Task::ReachPoint { .. } => "m²",
         }
     }
 
@@ -115,40 +139,56 @@ impl Task {
                     return Err(("rate", "expected a finite rate".into()));
                 }
             }
-        }
-        Ok(())
-    }
-
-    /// Checks the task against scene `p`: a joint's target within the
-    /// joint's limits, where the robot description gives them. On error,
-    /// the field and the message.
-    pub fn within(&self, p: &Prepared) -> Result<(), (&'static str, String)> {
-        let (Task::HoldAngles { targets, .. }, Some(robot)) = (self, &p.robot) else {
-            return Ok(());
-        };
-        for (variable, &target) in targets {
-            let Some(joint) = variable.strip_prefix("q.") else {
-                continue;
-            };
-            let range = (1..p.model.len())
-                .find(|&i| robot.joints[i] == joint)
-                .and_then(|i| p.laws[i].as_ref()?.range);
-            if let Some((low, high)) = range.filter(|(l, h)| !(*l..=*h).contains(&target)) {
-                return Err((
-                    "targets",
-                    format!(
-                        "`{variable}` = {target} rad is out of the joint's reach: its limits \
-                         are {low} to {high} rad"
-                    ),
-                ));
+            Task::ReachPoint { target, .. } => {
+                if !target.iter().all(|x| x.is_finite()) {
+                    return Err(("target", "expected three finite coordinates (m)".into()));
+                }
             }
         }
         Ok(())
     }
 
+    /// Checks the task against scene `p`: a joint's target within the
+    /// joint's limits, where the robot description gives them; a frame to
+    /// reach that the robot has, on a welded base, and a target within the
+    /// frame's reach. On error, the field and the message.
+    pub fn within(&self, p: &Prepared) -> Result<(), (&'static str, String)> {
+        match self {
+            Task::HoldAngles { targets, .. } => within_limits(targets, p),
+            Task::ReachPoint { frame, target, .. } => {
+                let (chain, robot) = chain_point(frame, p).map_err(|m| ("frame", m))?;
+                let travel = |i: usize| {
+                    let (low, high) = robot.specs[i].range?;
+                    Some(low.abs().max(high.abs()))
+                };
+                let target = Vector3::from(*target);
+                match chain.reach(travel) {
+                    Some((centre, radius)) if (target - centre).norm() > radius => Err((
+                        "target",
+                        format!(
+                            "({}, {}, {}) m is out of `{frame}`'s reach: it is {:.3} m from the \
+                             first joint's origin at ({:.3}, {:.3}, {:.3}) m, and the links \
+                             between reach at most {radius:.3} m",
+                            target.x,
+                            target.y,
+                            target.z,
+                            (target - centre).norm(),
+                            centre.x,
+                            centre.y,
+                            centre.z
+                        ),
+                    )),
+                    _ => Ok(()),
+                }
+            }
+            Task::Spin { .. } => Ok(()),
+        }
+    }
+
     /// The task over variables in the order of `names` (a scene's learned
-    /// or logged variables); an error names a variable the scene lacks.
-    pub fn over(&self, names: &[String]) -> Result<Cost, String> {
+    /// or logged variables) of scene `p`; an error names a variable the
+    /// scene lacks.
+    pub fn over(&self, names: &[String], p: &Prepared) -> Result<Cost, String> {
         let index = |v: &str| {
             names.iter().position(|n| n == v).ok_or_else(|| {
                 format!(
@@ -158,27 +198,115 @@ impl Task {
                 )
             })
         };
-        let terms = match self {
-            Task::HoldAngles { targets, .. } => targets
-                .iter()
-                .map(|(v, &target)| Ok((index(v)?, target, true)))
-                .collect::<Result<_, String>>()?,
-            Task::Spin { variable, rate, .. } => vec![(index(variable)?, *rate, false)],
+        let (terms, reach) = match self {
+            Task::HoldAngles { targets, .. } => (
+                targets
+                    .iter()
+                    .map(|(v, &target)| Ok((index(v)?, target, true)))
+                    .collect::<Result<_, String>>()?,
+                None,
+            ),
+            Task::Spin { variable, rate, .. } => (vec![(index(variable)?, *rate, false)], None),
+            Task::ReachPoint { frame, target, .. } => {
+                let (chain, robot) =
+                    chain_point(frame, p).map_err(|m| format!("task `{}`: {m}", self.name()))?;
+                let terms = chain
+                    .links()
+                    .map(|i| Ok((index(&format!("q.{}", robot.joints[i]))?, 0.0, true)))
+                    .collect::<Result<_, String>>()?;
+                (terms, Some((chain, Vector3::from(*target))))
+            }
         };
-        Ok(Cost { terms })
+        Ok(Cost { terms, reach })
     }
+}
+
+/// A joint target's check against the joint's limits.
+fn within_limits(
+    targets: &BTreeMap<String, f64>,
+    p: &Prepared,
+) -> Result<(), (&'static str, String)> {
+    let Some(robot) = &p.robot else {
+        return Ok(());
+    };
+    for (variable, &target) in targets {
+        let Some(joint) = variable.strip_prefix("q.") else {
+            continue;
+        };
+        let range = (1..p.model.len())
+            .find(|&i| robot.joints[i] == joint)
+            .and_then(|i| p.laws[i].as_ref()?.range);
+        if let Some((low, high)) = range.filter(|(l, h)| !(*l..=*h).contains(&target)) {
+            return Err((
+                "targets",
+                format!(
+                    "`{variable}` = {target} rad is out of the joint's reach: its limits \
+                     are {low} to {high} rad"
+                ),
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// The point a `reach-point` task brings to its target — URDF frame
+/// `frame`'s origin, placed from the joints between it and the welded base
+/// — and the robot; an error when scene `p` has no such frame or its base
+/// moves.
+fn chain_point<'p>(
+    frame: &str,
+    p: &'p Prepared,
+) -> Result<(ChainPoint, &'p alnlab_physics::urdf::Robot), String> {
+    let Some(robot) = &p.robot else {
+        return Err(format!(
+            "scene `{}` is no robot (a urdf scene), so it has no frame `{frame}`",
+            p.scene.name
+        ));
+    };
+    let Some(f) = robot.frame(frame) else {
+        let names: Vec<&str> = robot.frames.iter().map(|f| f.name.as_str()).collect();
+        return Err(format!(
+            "robot `{}` has no frame `{frame}` (its URDF links are {})",
+            robot.name,
+            names.join(", ")
+        ));
+    };
+    if p.model.root != Root::Fixed {
+        return Err(format!(
+            "robot `{}`'s base is not welded to the world (the scene's `root`), so where \
+             `{frame}` is depends on the base's motion too; reach-point plans arms on a fixed base",
+            robot.name
+        ));
+    }
+    // A urdf scene welds its base, unturned, at the initial height.
+    let base = Vector3::new(0.0, 0.0, p.scene.initial_height.unwrap_or(0.0));
+    let chain = ChainPoint::new(
+        &p.model,
+        Matrix3::identity(),
+        base,
+        f.body,
+        f.placement.translation.vector,
+    )?;
+    Ok((chain, robot))
 }
 
 /// A task's cost per frame over a scene's variables.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Cost {
-    /// (variable index, target, whether the difference is an angle's).
+    /// (variable index, target, whether the difference is an angle's); for
+    /// a point to reach, its joints' positions (their targets unused).
     terms: Vec<(usize, f64, bool)>,
+    /// The point to reach and its target (m), placed from the terms'
+    /// variables in order.
+    reach: Option<(ChainPoint, Vector3<f64>)>,
 }
 
 impl Cost {
     /// The cost of one frame's variable values (SI).
     pub fn of(&self, values: &[f64]) -> f64 {
+        if let Some((chain, target)) = &self.reach {
+            return (chain.position(|k| values[self.terms[k].0]) - target).norm_squared();
+        }
         self.terms
             .iter()
             .map(|&(i, target, angle)| {
@@ -198,9 +326,13 @@ impl Cost {
     }
 
     /// The RMS distance of two sets of the task's variables' values (each in
-    /// the order of [`Cost::variables`]), angles on the circle: how far a
+    /// the order of [`Cost::variables`]), angles on the circle — for a point
+    /// to reach, the distance between where each places it (m): how far a
     /// prediction is from what happened, in the task's own terms.
     pub fn distance(&self, a: &[f64], b: &[f64]) -> f64 {
+        if let Some((chain, _)) = &self.reach {
+            return (chain.position(|k| a[k]) - chain.position(|k| b[k])).norm();
+        }
         let squares: f64 = self
             .terms
             .iter()
@@ -250,6 +382,84 @@ mod tests {
             .to_vec()
     }
 
+    /// A worm, for tasks that need no robot.
+    fn worm() -> Prepared {
+        Prepared::new(&alnlab_physics::Scene::default())
+    }
+
+    /// The UR5 of the workspace's `robots/`, welded at the initial height.
+    fn ur5() -> Prepared {
+        let mut scene = alnlab_physics::Scene {
+            name: "ur5".into(),
+            kind: alnlab_physics::SceneKind::Urdf,
+            file: Some("robots/ur5/ur5_robot.urdf".into()),
+            ..alnlab_physics::Scene::default()
+        };
+        let workspace = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
+        scene.read_description(&workspace).unwrap();
+        Prepared::new(&scene)
+    }
+
+    fn reach(frame: &str, target: [f64; 3]) -> Task {
+        Task::ReachPoint {
+            name: "reach".into(),
+            frame: frame.into(),
+            target,
+        }
+    }
+
+    #[test]
+    fn reach_point_costs_the_squared_distance_of_the_frame_from_its_target() {
+        let p = ur5();
+        let names = p.variables.names();
+        let task = reach("tool0", [0.3, 0.2, 0.5]);
+        task.validate().unwrap();
+        task.within(&p).unwrap();
+        let cost = task.over(&names, &p).unwrap();
+        let joints: Vec<&str> = cost.variables().map(|i| names[i].as_str()).collect();
+        assert_eq!(joints.len(), 6, "{joints:?}");
+        assert!(joints.iter().all(|j| j.starts_with("q.")), "{joints:?}");
+        // At every joint zero, tool0 is where the physics places it; the
+        // cost is its squared distance from the target, the one-step
+        // distance of two poses the distance between their tool points.
+        let zero = vec![0.0; names.len()];
+        let (chain, _) = chain_point("tool0", &p).unwrap();
+        let at_zero = chain.position(|_| 0.0);
+        let to_go = (at_zero - Vector3::new(0.3, 0.2, 0.5)).norm_squared();
+        assert!((cost.of(&zero) - to_go).abs() < 1e-12);
+        let mut bent = zero.clone();
+        let first = cost.variables().next().unwrap();
+        bent[first] = 0.5;
+        let moved = chain.position(|k| if k == 0 { 0.5 } else { 0.0 });
+        let d = cost.distance(&[0.0; 6], &[0.5, 0.0, 0.0, 0.0, 0.0, 0.0]);
+        assert!((d - (moved - at_zero).norm()).abs() < 1e-12, "{d}");
+        assert!(d > 0.01, "turning the base joint moves the tool: {d}");
+        assert_eq!(task.cost_unit(), "m²");
+        assert!(
+            task.describe()
+                .starts_with("bring frame `tool0` to (0.3, 0.2, 0.5) m")
+        );
+    }
+
+    #[test]
+    fn reach_point_refuses_unknown_frames_unreachable_targets_and_non_robots() {
+        let p = ur5();
+        let (field, message) = reach("gripper", [0.3, 0.0, 0.5]).within(&p).unwrap_err();
+        assert_eq!(field, "frame");
+        assert!(
+            message.contains("no frame `gripper`") && message.contains("tool0"),
+            "{message}"
+        );
+        let (field, message) = reach("tool0", [3.0, 0.0, 0.5]).within(&p).unwrap_err();
+        assert_eq!(field, "target");
+        assert!(message.contains("out of `tool0`'s reach"), "{message}");
+        let (field, message) = reach("tool0", [0.3, 0.0, 0.5]).within(&worm()).unwrap_err();
+        assert_eq!(field, "frame");
+        assert!(message.contains("is no robot"), "{message}");
+        let (field, _) = reach("tool0", [f64::NAN, 0.0, 0.0]).validate().unwrap_err();
+        assert_eq!(field, "target");
+    }
+
     #[test]
     fn hold_angles_costs_squared_angles_on_the_circle() {
         let task = Task::HoldAngles {
@@ -257,7 +467,7 @@ mod tests {
             targets: BTreeMap::from([("roll.2".into(), 0.5), ("pitch.2".into(), 3.0)]),
         };
         task.validate().unwrap();
-        let cost = task.over(&names()).unwrap();
+        let cost = task.over(&names(), &worm()).unwrap();
         // roll 0.5 on target; pitch −3.0 is 2π − 6 ≈ 0.283 from 3.0 the short way.
         let c = cost.of(&[9.0, 0.5, -3.0, 1.0]);
         let short = TAU - 6.0;
@@ -277,7 +487,7 @@ mod tests {
             variable: "omega.1.x".into(),
             rate: 3.0,
         };
-        let cost = task.over(&names()).unwrap();
+        let cost = task.over(&names(), &worm()).unwrap();
         assert_eq!(cost.of(&[1.0, 0.0, 0.0, 0.0]), 4.0);
         assert_eq!(cost.of(&[3.0, 9.0, 9.0, 9.0]), 0.0);
     }
@@ -294,7 +504,7 @@ mod tests {
             variable: "omega.4.x".into(),
             rate: 1.0,
         };
-        let e = missing.over(&names()).unwrap_err();
+        let e = missing.over(&names(), &worm()).unwrap_err();
         assert!(e.contains("no variable `omega.4.x`"), "{e}");
         let parsed: Task =
             toml::from_str("kind = \"spin\"\nname = \"s\"\nvariable = \"omega.1.x\"\nrate = 2.0")
