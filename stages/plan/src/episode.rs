@@ -61,21 +61,38 @@ pub struct Step {
     pub expected: Vec<f64>,
 }
 
+/// What an episode came to.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Outcome {
+    /// The task's cost summed over the frames.
+    pub cost: f64,
+    /// A planner's model fed its own predictions over `horizon` frames of
+    /// the torques executed, from every frame the episode reached that has
+    /// `horizon` more: the RMS over those windows of
+    /// [`Cost::distance`] between its prediction and the frame reached —
+    /// how wrong it is over the horizon it plans on, on the states its
+    /// planner visited. +∞ if a prediction blew up; NaN for the references
+    /// and episodes shorter than the horizon.
+    pub horizon_rms: f64,
+}
+
 /// Runs `frames` frames of scene `p` (with its plant, if any) from `start`
 /// under `controls`; hands each [`Step`], the frame reached and its link
-/// poses to `on_step`; returns the summed cost. `seed` seeds the random
-/// reference's torques (and a plant's actuator noise).
+/// poses to `on_step`; returns the summed cost and, for a planner, its
+/// model's error over `horizon` frames. `seed` seeds the random reference's
+/// torques (and a plant's actuator noise).
 #[allow(clippy::too_many_arguments)]
 pub fn run(
     p: &Prepared,
     controls: &Controls,
     start: &State,
     frames: u32,
+    horizon: usize,
     cost: &Cost,
     policy: &mut Policy,
     seed: u64,
     mut on_step: impl FnMut(&Step, &StateFrame, &Kinematics) -> Result<()>,
-) -> Result<f64> {
+) -> Result<Outcome> {
     let hinges = p.model.len() - 1;
     let mut runner = Runner::new(p, seed, 0, 0);
     let mut state = start.clone();
@@ -102,6 +119,14 @@ pub fn run(
         reached: vec![0.0; cost.variables().count()],
         expected: vec![f64::NAN; cost.variables().count()],
     };
+    // Every state reached and the torques chosen after it, for the
+    // planner's model to be replayed on once the episode is done.
+    let planned = matches!(policy, Policy::Plan { .. });
+    let mut visited: Vec<(State, Vec<f64>)> = Vec::new();
+    let mut chosen: Vec<f64> = Vec::new();
+    if planned {
+        visited.push((state.clone(), frame.variables.clone()));
+    }
     for f in 0..frames {
         match policy {
             Policy::Zero => {
@@ -120,7 +145,8 @@ pub fn run(
                 step.predicted = planner.decide(&mut **model, *sequences, &mut action);
                 step.spread = planner.cost_spread();
                 step.seconds = clock.elapsed().as_secs_f64();
-                model.predict(&action, &mut step.expected);
+                model.predict(&action, 1, &mut step.expected);
+                chosen.extend_from_slice(&action);
                 controls.set(&action, &mut torques);
                 runner.drive(Some(&torques));
             }
@@ -143,9 +169,50 @@ pub fn run(
             *r = frame.variables[s];
         }
         total += step.cost;
+        if planned {
+            visited.push((state.clone(), frame.variables.clone()));
+        }
         on_step(&step, &frame, runner.kinematics())?;
     }
-    Ok(total)
+    let horizon_rms = match policy {
+        Policy::Plan { model, .. } if horizon > 0 && visited.len() > horizon => {
+            horizon_error(&mut **model, &visited, &chosen, horizon, cost)
+        }
+        _ => f64::NAN,
+    };
+    Ok(Outcome {
+        cost: total,
+        horizon_rms,
+    })
+}
+
+/// The RMS over every window of `horizon` frames of the distance between
+/// `model`'s prediction of the window's end, from its start under the
+/// torques `chosen`, and the frame `visited` there; +∞ if one blew up.
+fn horizon_error(
+    model: &mut dyn Model,
+    visited: &[(State, Vec<f64>)],
+    chosen: &[f64],
+    horizon: usize,
+    cost: &Cost,
+) -> f64 {
+    let d = chosen.len() / (visited.len() - 1).max(1);
+    let (mut predicted, mut reached) = (vec![0.0; cost.variables().count()], Vec::new());
+    let mut squares = 0.0;
+    let windows = visited.len() - horizon;
+    for t in 0..windows {
+        let (state, variables) = &visited[t];
+        model.start(state, variables);
+        model.predict(&chosen[t * d..(t + horizon) * d], horizon, &mut predicted);
+        reached.clear();
+        reached.extend(cost.variables().map(|s| visited[t + horizon].1[s]));
+        let distance = cost.distance(&predicted, &reached);
+        if !distance.is_finite() {
+            return f64::INFINITY;
+        }
+        squares += distance * distance;
+    }
+    (squares / windows as f64).sqrt()
 }
 
 #[cfg(test)]
@@ -194,6 +261,7 @@ mod tests {
                 &controls,
                 &start,
                 frames,
+                10,
                 &cost,
                 policy,
                 9,
@@ -207,6 +275,8 @@ mod tests {
         };
         let (zero, _) = episode(&mut Policy::Zero);
         let (random, random_steps) = episode(&mut Policy::Random);
+        assert!(zero.horizon_rms.is_nan() && random.horizon_rms.is_nan());
+        let (zero, random) = (zero.cost, random.cost);
         let bounds = controls.bounds().clone();
         assert_eq!(bounds.high, [1.0, 10.0, 10.0, 1.0, 10.0, 10.0]);
         let cem = CemSettings {
@@ -215,11 +285,15 @@ mod tests {
         };
         let mut planner = Planner::new(PlannerKind::Cem, cem, 10, bounds, 60, 1);
         let mut model = Simulator::new(&p, &controls, p.scene.steps_per_frame(), cost.clone());
-        let (planned, steps) = episode(&mut Policy::Plan {
+        let (outcome, steps) = episode(&mut Policy::Plan {
             planner: &mut planner,
             model: &mut model,
             sequences: 60,
         });
+        // The true model, fed its own predictions over the horizon, lands
+        // where the simulator did.
+        assert!(outcome.horizon_rms < 1e-9, "{}", outcome.horizon_rms);
+        let planned = outcome.cost;
         assert!(
             planned < 0.5 * zero.min(random),
             "planned {planned}, zero {zero}, random {random}"

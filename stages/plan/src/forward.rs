@@ -38,12 +38,12 @@ pub trait Model: Forward {
     /// scene's layout order, are `variables`).
     fn start(&mut self, state: &State, variables: &[f64]);
 
-    /// The next frame's values of the task's variables (in the order of
-    /// [`Cost::variables`]) predicted from the started state under one
-    /// frame of `action` (D torques): what the model expects the executed
-    /// torques to do, to set beside what the simulator then does. NaN where
-    /// the prediction blew up.
-    fn predict(&mut self, action: &[f64], out: &mut [f64]);
+    /// The task's variables (in the order of [`Cost::variables`]) `frames`
+    /// frames on, predicted from the started state under `actions` (D
+    /// torques a frame), the model fed its own predictions between: what
+    /// the model expects the executed torques to do, to set beside what the
+    /// simulator then did. NaN where the prediction blew up.
+    fn predict(&mut self, actions: &[f64], frames: usize, out: &mut [f64]);
 }
 
 /// A simulator at `steps` integration steps per frame.
@@ -109,10 +109,11 @@ impl Model for Simulator<'_> {
         copy_state(&mut self.start, state);
     }
 
-    fn predict(&mut self, action: &[f64], out: &mut [f64]) {
+    fn predict(&mut self, actions: &[f64], frames: usize, out: &mut [f64]) {
         copy_state(&mut self.state, &self.start);
         self.runner.restart();
-        let reached = self.frame(action);
+        let d = actions.len() / frames.max(1);
+        let reached = actions.chunks(d.max(1)).all(|action| self.frame(action));
         for (o, s) in out.iter_mut().zip(self.cost.variables()) {
             *o = if reached {
                 self.frame.variables[s]
@@ -241,12 +242,15 @@ impl<S: LevelStep> Model for Learned<'_, S> {
         }
     }
 
-    fn predict(&mut self, action: &[f64], out: &mut [f64]) {
+    fn predict(&mut self, actions: &[f64], frames: usize, out: &mut [f64]) {
         let mut x: Vec<Vec<u16>> = self.start.iter().map(|&l| vec![l]).collect();
-        self.set_torques(&mut x, action, action.len(), 0);
-        let y = self.step.next(&x);
+        let d = actions.len() / frames.max(1);
+        for h in 0..frames {
+            self.set_torques(&mut x, actions, actions.len(), h * d);
+            x = self.step.next(&x);
+        }
         for (o, &(v, _)) in out.iter_mut().zip(&self.costed) {
-            *o = self.entries[v].quantizer.value(usize::from(y[v][0]));
+            *o = self.entries[v].quantizer.value(usize::from(x[v][0]));
         }
     }
 }
@@ -325,9 +329,9 @@ fn wiring(
 
 /// A piecewise-linear ALN as a forward model, in real values: the true
 /// state's learned variables, each frame's controls set as their
-/// variables' values, the predicted variables advanced (every piece, one
-/// candidate at a time, nothing allocated), and the task's variables costed
-/// at the predicted values.
+/// variables' values, the predicted variables advanced (every piece, all of
+/// a decision's candidates together), and the task's variables costed at
+/// the predicted values.
 pub struct Piecewise<'a> {
     predictor: &'a Predictor<'a>,
     scratch: Scratch<'a>,
@@ -342,6 +346,11 @@ pub struct Piecewise<'a> {
     state: Vec<f64>,
     next: Vec<f64>,
     values: Vec<f64>,
+    /// A decision's candidates' learned variables, `[variable][candidate]`
+    /// flattened, and their predicted next values `[output][candidate]`:
+    /// sized once for the budget.
+    columns: Vec<f64>,
+    batch_next: Vec<Vec<f64>>,
 }
 
 impl<'a> Piecewise<'a> {
@@ -378,6 +387,8 @@ impl<'a> Piecewise<'a> {
             torques,
             costed,
             cost,
+            columns: Vec::new(),
+            batch_next: Vec::new(),
         })
     }
 
@@ -401,9 +412,11 @@ impl Model for Piecewise<'_> {
         }
     }
 
-    fn predict(&mut self, action: &[f64], out: &mut [f64]) {
+    fn predict(&mut self, actions: &[f64], frames: usize, out: &mut [f64]) {
         self.state.copy_from_slice(&self.start);
-        self.step(action);
+        for frame in actions.chunks((actions.len() / frames.max(1)).max(1)) {
+            self.step(frame);
+        }
         for (o, &(v, _)) in out.iter_mut().zip(&self.costed) {
             *o = self.state[v];
         }
@@ -411,16 +424,40 @@ impl Model for Piecewise<'_> {
 }
 
 impl Forward for Piecewise<'_> {
+    /// Every candidate advanced together, frame by frame, through the
+    /// predictor's batched path ([`Predictor::values`]): the same numbers
+    /// as stepping each alone, so the same plans, for a fraction of the
+    /// time.
     fn costs(&mut self, actions: &[f64], horizon: usize, costs: &mut [f64]) {
-        let len = actions.len() / costs.len().max(1);
+        let n = costs.len();
+        let len = actions.len() / n.max(1);
         let d = len / horizon.max(1);
-        for (sequence, cost) in actions.chunks(len.max(1)).zip(costs.iter_mut()) {
-            self.state.copy_from_slice(&self.start);
-            *cost = 0.0;
-            for frame in sequence.chunks(d.max(1)).take(horizon) {
-                self.step(frame);
+        let width = self.start.len();
+        // The candidates' learned variables, `[variable][candidate]`.
+        self.columns.resize(width * n, 0.0);
+        for (column, &x) in self.columns.chunks_mut(n.max(1)).zip(&self.start) {
+            column.fill(x);
+        }
+        self.batch_next.resize(self.predicted.len(), Vec::new());
+        for next in &mut self.batch_next {
+            next.resize(n, 0.0);
+        }
+        costs.fill(0.0);
+        for h in 0..horizon {
+            for &(k, v) in &self.torques {
+                for (i, x) in self.columns[v * n..(v + 1) * n].iter_mut().enumerate() {
+                    *x = actions[i * len + h * d + k];
+                }
+            }
+            let columns: Vec<&[f64]> = self.columns.chunks(n.max(1)).collect();
+            self.predictor
+                .values(&columns, &mut self.scratch, &mut self.batch_next);
+            for (&v, next) in self.predicted.iter().zip(&self.batch_next) {
+                self.columns[v * n..(v + 1) * n].copy_from_slice(next);
+            }
+            for (i, cost) in costs.iter_mut().enumerate() {
                 for &(v, s) in &self.costed {
-                    self.values[s] = self.state[v];
+                    self.values[s] = self.columns[v * n + i];
                 }
                 *cost += self.cost.of(&self.values);
             }
@@ -582,10 +619,11 @@ impl Model for Hybrid<'_> {
         copy_state(&mut self.nominal.start, state);
     }
 
-    fn predict(&mut self, action: &[f64], out: &mut [f64]) {
+    fn predict(&mut self, actions: &[f64], frames: usize, out: &mut [f64]) {
         let width = self.start.len();
         self.inputs[..width].copy_from_slice(&self.start);
-        let reached = self.step(action, true);
+        let d = (actions.len() / frames.max(1)).max(1);
+        let reached = (0..frames).all(|h| self.step(&actions[h * d..(h + 1) * d], h == 0));
         for (o, &(v, _)) in out.iter_mut().zip(&self.costed) {
             *o = if reached { self.inputs[v] } else { f64::NAN };
         }
@@ -710,5 +748,82 @@ mod tests {
             .err()
             .unwrap();
         assert!(e.contains("does not learn `roll.3`"), "{e}");
+    }
+
+    /// The piecewise forward model costs all candidates together through
+    /// the batched path, and its costs are, number for number, those of
+    /// stepping each candidate alone.
+    #[test]
+    fn piecewise_candidates_batched_cost_what_each_alone_costs() {
+        use alnlab_aln::model::Reads;
+        use alnlab_aln::pwl::{Node, Tree};
+        let p = Prepared::new(&Scene {
+            controller: Some(ControllerParams {
+                kind: ControllerKind::Random,
+                ..ControllerParams::default()
+            }),
+            ..Scene::default()
+        });
+        let entries = [
+            entry("pitch.2", -2.0, 2.0, 41),
+            entry("g.2.y", -10.0, 10.0, 21),
+        ];
+        let learned: Vec<&Entry> = entries.iter().collect();
+        // pitch.2's change in levels: max(min(0.3 p + g, 4 − p), −2 + 0.1 g).
+        let tree = Tree::from_parts(
+            2,
+            vec![
+                Node::Max(1, 2),
+                Node::Min(3, 4),
+                Node::Piece(0),
+                Node::Piece(1),
+                Node::Piece(2),
+            ],
+            vec![-2.0, 0.0, 0.1, 0.0, 0.3, 1.0, 4.0, -1.0, 0.0],
+        )
+        .unwrap();
+        let trees = [tree];
+        let reads = [Reads {
+            variable: 0,
+            inputs: vec![0, 1],
+        }];
+        let box_points = [-1.0, -5.0, 1.0, 5.0];
+        let predictor = Predictor::new(&trees, &reads, &learned, &box_points);
+        let task = Task::HoldAngles {
+            name: "hold".into(),
+            targets: BTreeMap::from([("pitch.2".into(), 0.5)]),
+        };
+        let cost = task.over(&p.layout.variables, &p).unwrap();
+        let controls = Controls::of(&p).unwrap();
+        let mut model = Piecewise::new(&predictor, &learned, &p, &controls, cost.clone()).unwrap();
+        let mut variables = vec![0.0; p.layout.variables.len()];
+        let pitch = p.layout.variables.iter().position(|n| n == "pitch.2");
+        variables[pitch.unwrap()] = -0.3;
+        let rest = State::rest(&p.model, Vector3::zeros());
+        model.start(&rest, &variables);
+        // 70 candidates (a whole block and a part) over 4 frames.
+        let (n, horizon, d) = (70, 4, controls.dims());
+        let actions: Vec<f64> = (0..n * horizon * d)
+            .map(|i| ((i as f64 * 0.618_033_988_7).fract() * 2.0 - 1.0) * 8.0)
+            .collect();
+        let mut costs = vec![0.0; n];
+        model.costs(&actions, horizon, &mut costs);
+        for (i, &batched) in costs.iter().enumerate() {
+            model.state.copy_from_slice(&model.start);
+            let mut alone = 0.0;
+            for frame in actions[i * horizon * d..(i + 1) * horizon * d].chunks(d) {
+                model.step(frame);
+                let mut values = vec![0.0; p.layout.variables.len()];
+                for &(v, s) in &model.costed {
+                    values[s] = model.state[v];
+                }
+                alone += cost.of(&values);
+            }
+            assert_eq!(batched, alone, "candidate {i}");
+        }
+        assert!(
+            costs.iter().any(|&c| c != costs[0]),
+            "torques move the costs"
+        );
     }
 }

@@ -79,8 +79,9 @@ use crate::transitions::Transitions;
 
 /// Version of what this stage writes (part of every cache key; 4: the
 /// spread of predicted costs; 5: robots, plants and hybrids, the ALN's
-/// planned frames as pairs).
-pub const FORMAT_VERSION: u32 = 5;
+/// planned frames as pairs; 6: each model's error over the horizon on its
+/// planner's states).
+pub const FORMAT_VERSION: u32 = 6;
 /// File name of the per-frame table.
 pub const PLAN_FILE: &str = "plan.parquet";
 /// File name of the per-episode table.
@@ -664,11 +665,12 @@ impl TaskRun<'_> {
             _ => None,
         };
         let Outputs { frames, view, .. } = out;
-        let total = episode::run(
+        let outcome = episode::run(
             c.p,
             c.controls,
             &c.starts[e],
             c.params.frames.get() as u32,
+            c.params.horizon.get(),
             self.cost,
             policy,
             seed,
@@ -718,12 +720,13 @@ impl TaskRun<'_> {
             budget,
             episode: e as u32,
             evaluations: u64::from(budget) * c.params.horizon.get() as u64,
-            cost: total,
+            cost: outcome.cost,
             ms_per_decision,
             ms_min,
             ms_max,
             real_time_ms: c.p.scene.frame_dt.get() * 1e3,
             prediction_rms: (squared_error / frames_run).sqrt(),
+            horizon_rms: outcome.horizon_rms,
         });
         c.progress.advance(1);
         Ok(())

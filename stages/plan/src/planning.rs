@@ -3,7 +3,8 @@
 //! episode: the summed cost, the evaluations per decision, the decision
 //! time in ms (median and range over the episode's decisions), real time
 //! (the simulated time a decision stands for: one frame), and the model's
-//! one-step error on the task's variables over the episode.
+//! one-step error on the task's variables over the episode, and its error
+//! over the planning horizon fed its own predictions.
 
 use std::path::Path;
 use std::sync::Arc;
@@ -38,6 +39,11 @@ pub struct Episode {
     /// RMS over frames of the model's one-step error on the task's
     /// variables.
     pub prediction_rms: f64,
+    /// RMS over the episode's windows of the model's error at the end of
+    /// the planning horizon, fed its own predictions under the torques
+    /// executed ([`crate::episode::Outcome::horizon_rms`]); NaN for a
+    /// reference.
+    pub horizon_rms: f64,
 }
 
 /// Writes `rows` to `path`.
@@ -69,6 +75,7 @@ pub fn write(path: &Path, rows: &[Episode], provenance: &Provenance) -> Result<(
         ("ms_max", real(|r| r.ms_max)),
         ("real_time_ms", real(|r| r.real_time_ms)),
         ("prediction_rms", real(|r| r.prediction_rms)),
+        ("horizon_rms", real(|r| r.horizon_rms)),
     ]);
     table::write_parquet(path, &batch, provenance)
 }
@@ -88,6 +95,7 @@ pub fn read(path: &Path) -> Result<Vec<Episode>> {
     let (cost, ms) = (real("cost")?, real("ms_per_decision")?);
     let (ms_min, ms_max) = (real("ms_min")?, real("ms_max")?);
     let (real_time, rms) = (real("real_time_ms")?, real("prediction_rms")?);
+    let horizon_rms = real("horizon_rms")?;
     Ok((0..t.num_rows())
         .map(|i| Episode {
             task: task[i].clone(),
@@ -102,6 +110,7 @@ pub fn read(path: &Path) -> Result<Vec<Episode>> {
             ms_max: ms_max[i],
             real_time_ms: real_time[i],
             prediction_rms: rms[i],
+            horizon_rms: horizon_rms[i],
         })
         .collect())
 }
@@ -125,6 +134,7 @@ mod tests {
             ms_max: 2.0,
             real_time_ms: 10.0,
             prediction_rms: 0.03,
+            horizon_rms: 0.25,
         }];
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("planning.parquet");

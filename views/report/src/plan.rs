@@ -585,8 +585,10 @@ struct Contender {
     /// `[replicate][episode]`.
     costs: Vec<Vec<f64>>,
     /// Its one-step error on the task's variables in the frames it
-    /// planned, mean over episodes and replicates.
+    /// planned, mean over episodes and replicates …
     one_step: f64,
+    /// … and over the planning horizon, fed its own predictions.
+    horizon: f64,
 }
 
 impl Contender {
@@ -691,10 +693,8 @@ fn at_real_time_of(md: &mut String, variants: &[Planned]) {
                     (Some(round), false) => format!("ALN{round}"),
                     _ => model.to_string(),
                 };
-                let one_step: Vec<f64> = v
-                    .planning
-                    .iter()
-                    .flat_map(|rows| {
+                let chosen_episodes = || {
+                    v.planning.iter().flat_map(|rows| {
                         rows.iter().filter(|e| {
                             e.task == task
                                 && e.model == model
@@ -702,14 +702,16 @@ fn at_real_time_of(md: &mut String, variants: &[Planned]) {
                                 && e.budget == chosen.budget
                         })
                     })
-                    .map(|e| e.prediction_rms)
-                    .collect();
+                };
+                let one_step: Vec<f64> = chosen_episodes().map(|e| e.prediction_rms).collect();
+                let horizon: Vec<f64> = chosen_episodes().map(|e| e.horizon_rms).collect();
                 contenders.push(Contender {
                     label: format!("{name}, {planner} ({} sequences)", chosen.budget),
                     model: model.to_string(),
                     ms: chosen.ms(),
                     costs,
                     one_step: mean(&one_step),
+                    horizon: mean(&horizon),
                 });
             }
         }
@@ -724,7 +726,7 @@ fn at_real_time_of(md: &mut String, variants: &[Planned]) {
             .numbers(&["ms / decision", "cost"])
             .column(&format!("− {}", nominal.label), Align::Left)
             .column("signed-rank p, median difference (episodes)", Align::Left)
-            .numbers(&["one-step error"]);
+            .numbers(&["one-step error", "error at the horizon"]);
         let mut order: Vec<&Contender> = contenders.iter().collect();
         order.sort_by(|a, b| a.mean().total_cmp(&b.mean()));
         let over = if replicates > 1 {
@@ -797,6 +799,7 @@ fn at_real_time_of(md: &mut String, variants: &[Planned]) {
                 difference,
                 p,
                 sig3(c.one_step),
+                sig3(c.horizon),
             ]);
         }
         let best = order[0];
@@ -811,7 +814,10 @@ fn at_real_time_of(md: &mut String, variants: &[Planned]) {
              interval across replicates is the verdict) and the median paired difference; \
              one-step error: the model's prediction of the task's variables one frame \
              ahead against what the plant then did, RMS over each episode's frames, mean over \
-             episodes — on the states its own planner visited.{}{}\n",
+             episodes — on the states its own planner visited; error at the horizon: the same, \
+             the model fed its own predictions for as many frames as the planner looks ahead \
+             ({} frames, the torques executed), from every frame with that many after it — the \
+             error its plans were scored with.{}{}\n",
             sig3(limit),
             match (aln_lower.as_slice(), aln_words.is_empty()) {
                 (_, true) => "No ALN planned.".to_string(),
@@ -845,6 +851,10 @@ fn at_real_time_of(md: &mut String, variants: &[Planned]) {
             } else {
                 format!("Against the nominal simulator: {}. ", aln_words.join("; "))
             },
+            first.planning[0]
+                .iter()
+                .find(|e| e.budget > 0)
+                .map_or(0, |e| e.evaluations / u64::from(e.budget)),
             if contenders.iter().any(|c| c.model.contains("(round ")) {
                 " A model \"(round r)\" was trained again after r rounds of the ALN's planned \
                  frames joined the training rows (DAgger for models), and planned the same \
@@ -886,6 +896,7 @@ mod tests {
                 ms_max: ms,
                 real_time_ms: 10.0,
                 prediction_rms: 0.1,
+                horizon_rms: 0.4,
             })
             .collect()
     }

@@ -432,6 +432,31 @@ impl<'m> Predictor<'m> {
             .collect()
     }
 
+    /// The next real values of the states whose values are `columns`
+    /// (`[variable][row]`, the learned variables), into `next`
+    /// (`[output][row]`, each as long as a column): [`Predictor::levels`]'
+    /// batched evaluation, not quantized, nothing allocated — for a planner
+    /// that advances every candidate of a decision together.
+    pub fn values(&self, columns: &[&[f64]], scratch: &mut Scratch<'m>, next: &mut [Vec<f64>]) {
+        let rows = columns.first().map_or(0, |c| c.len());
+        let wide = self.vectors;
+        for (o, next) in next.iter_mut().enumerate().take(self.outputs.len()) {
+            let out = &self.outputs[o];
+            let current = columns[out.variable];
+            for start in (0..rows).step_by(BLOCK) {
+                let block = BLOCK.min(rows - start);
+                let values = self.block_values(o, columns, start, block, wide, scratch);
+                for ((n, &x), &change) in next[start..start + block]
+                    .iter_mut()
+                    .zip(&current[start..])
+                    .zip(values)
+                {
+                    *n = out.advance_from(x, change);
+                }
+            }
+        }
+    }
+
     /// Output `o`'s change for the `rows` states from `start` of `columns`
     /// (at most [`BLOCK`]): the root's values among the scratch's node
     /// values. A whole block reads the columns in place; a part is copied
@@ -726,7 +751,7 @@ mod tests {
     }
 
     #[test]
-    fn every_path_and_the_blocked_batch_give_the_same_levels() {
+    fn every_path_and_the_blocked_batch_give_the_same_levels_and_values() {
         let tau = std::f64::consts::TAU;
         let (a, roll) = (
             entry("a.1.x", -4.0, 4.0),
@@ -761,6 +786,14 @@ mod tests {
                 predictor.next_levels(state, path, &mut scratch, &mut next);
                 assert_eq!(next, [batch[0][r], batch[1][r]], "{path:?}, row {r}");
             }
+        }
+        // The batched real values are the plain path's, number for number.
+        let mut values = vec![vec![0.0; 77]; 2];
+        predictor.values(&columns, &mut scratch, &mut values);
+        let mut next = [0.0; 2];
+        for (r, state) in states.chunks_exact(2).enumerate() {
+            predictor.next_values(state, Path::Plain, &mut scratch, &mut next);
+            assert_eq!(next, [values[0][r], values[1][r]], "row {r}");
         }
     }
 
