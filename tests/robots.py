@@ -78,6 +78,10 @@ def robots():
          {"amplitude": 5.0, "link_velocities": ["slide", "arm"]}),
         ("anymal", data / "anymal_c_simple_description/urdf/anymal.urdf",
          {"base": "free", "amplitude": 5.0, "initial_height": 1.0, "link_velocities": ["LF_SHANK"]}),
+        # Driven hard, with drives that hold the URDF's velocity limits:
+        # the efforts they applied are logged, and must explain the motion.
+        ("ur5-held", ROOT / "robots/ur5/ur5_robot.urdf",
+         {"link_velocities": ["wrist_3_link"], "amplitude": 60.0, "velocity_limits": True}),
         # A plant that is not its description (issue 43): heavier links, a
         # payload on the flange (a link merged into the last body), friction,
         # and weak, slow and late actuators — checked against Pinocchio's

@@ -35,7 +35,7 @@ const STEPS: &[Step] = &[
         quickstart_circuit,
     ),
     (
-        "robots from URDF: eight robots' logs against Pinocchio, and bench sim beside it",
+        "robots from URDF: nine robots' logs against Pinocchio, and bench sim beside it",
         robots_against_pinocchio,
     ),
     (

@@ -90,8 +90,9 @@ impl Prepared {
                     .zip(&robot.specs)
                     .enumerate()
                     .map(|(i, (link, spec))| {
-                        (i > 0 && link.joint.dof() == 1)
-                            .then(|| JointLaw::new(link, spec, added, friction, dt))
+                        (i > 0 && link.joint.dof() == 1).then(|| {
+                            JointLaw::new(link, spec, added, friction, scene.velocity_limits, dt)
+                        })
                     })
                     .collect();
                 (
@@ -102,7 +103,7 @@ impl Prepared {
                 )
             }
         };
-        let applied = scene.plant.as_ref().is_some_and(Plant::has_actuators);
+        let applied = scene.logs_applied();
         let layout = StateLayout {
             scene: scene.name.clone(),
             state: state_names(&model, &labels.0, &labels.1, applied),
@@ -365,10 +366,11 @@ impl Forces for SceneForces<'_> {
         for (i, law) in self.laws.iter().enumerate() {
             if let Some(law) = law {
                 self.passive[i] = law.passive(state.q[i], state.qd[i]);
-                let applied = match &self.actuated {
+                let commanded = match &self.actuated {
                     Some(actuated) => law.clamp(actuated[i].x),
                     None => self.g[i].x,
                 };
+                let applied = law.drive(commanded, state.qd[i]);
                 self.applied[i] = applied;
                 loads.effort[i] = applied + self.passive[i];
             }
@@ -627,7 +629,7 @@ impl<'a> Runner<'a> {
         frame
             .state
             .extend(one_dof(&p.model).map(|i| self.forces.passive[i]));
-        if self.forces.actuated.is_some() {
+        if p.scene.logs_applied() {
             frame
                 .state
                 .extend(one_dof(&p.model).map(|i| self.forces.applied[i]));

@@ -126,6 +126,11 @@ pub struct Scene {
     /// nominal model); none when it is the scene as written.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub plant: Option<Plant>,
+    /// `urdf`: the drives hold every joint within the description's
+    /// velocity limit (soft bounds on the effort, as ros_control's) and
+    /// each run starts within it, so the robot moves as a real one could.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub velocity_limits: bool,
     /// `urdf`: the description's text, read from `file`.
     #[serde(skip)]
     pub description: Option<Arc<str>>,
@@ -173,6 +178,7 @@ impl Default for Scene {
             base: None,
             contact_links: None,
             link_velocities: None,
+            velocity_limits: false,
             plant: None,
             description: None,
         }
@@ -284,6 +290,7 @@ impl Scene {
                 ("base", self.base.is_some()),
                 ("contact_links", self.contact_links.is_some()),
                 ("link_velocities", self.link_velocities.is_some()),
+                ("velocity_limits", self.velocity_limits),
             ];
             return match robot_only.iter().find(|(_, set)| *set) {
                 None => Ok(()),
@@ -356,6 +363,13 @@ impl Scene {
             plant: None,
             ..self.clone()
         }
+    }
+
+    /// Whether a frame logs each one-DOF joint's applied effort
+    /// (`joint.<joint>.applied`): where it differs from the command, by a
+    /// plant's actuators or drives holding velocity limits.
+    pub fn logs_applied(&self) -> bool {
+        self.plant.as_ref().is_some_and(Plant::has_actuators) || self.velocity_limits
     }
 
     /// The viscous damping added at every joint: the scene's
@@ -797,6 +811,9 @@ impl Scene {
                     let u = (uniform(1.0).x + 1.0) / 2.0;
                     state.q[i] = low + (high - low) * u;
                     state.qd[i] = uniform(spin).x;
+                    if let Some(v) = robot.specs[i].velocity.filter(|_| self.velocity_limits) {
+                        state.qd[i] = state.qd[i].clamp(-v, v);
+                    }
                 }
                 if model.root == Root::Free {
                     state.rates[0] = uniform(spin);
