@@ -131,6 +131,12 @@ pub struct Scene {
     /// each run starts within it, so the robot moves as a real one could.
     #[serde(default, skip_serializing_if = "std::ops::Not::not")]
     pub velocity_limits: bool,
+    /// Integration steps a frame of the nominal model a user has — the
+    /// scene as written, stepping the nominal stage's predictions and the
+    /// hybrids' — when not the scene's own (`frame_dt / dt`): a coarser,
+    /// cheaper simulator for a learned correction to mend.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub nominal_steps: Option<Count>,
     /// `urdf`: the description's text, read from `file`.
     #[serde(skip)]
     pub description: Option<Arc<str>>,
@@ -179,6 +185,7 @@ impl Default for Scene {
             contact_links: None,
             link_velocities: None,
             velocity_limits: false,
+            nominal_steps: None,
             plant: None,
             description: None,
         }
@@ -691,6 +698,13 @@ impl Scene {
     /// Integration steps per logged frame.
     pub fn steps_per_frame(&self) -> u64 {
         (self.frame_dt.get() / self.dt.get()).round() as u64
+    }
+
+    /// Integration steps a frame of the nominal model: `nominal_steps`, or
+    /// the scene's own.
+    pub fn nominal_steps_per_frame(&self) -> u64 {
+        self.nominal_steps
+            .map_or_else(|| self.steps_per_frame(), |k| k.0)
     }
 
     /// Logged frames per run (the initial state included).

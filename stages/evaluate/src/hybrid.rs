@@ -190,7 +190,7 @@ pub fn path<'a>(
                 else {
                     continue;
                 };
-                let steps = replays[row.scene].prepared.scene.steps_per_frame();
+                let steps = replays[row.scene].prepared.scene.nominal_steps_per_frame();
                 if replayer.next_frame(from, steps, &mut next).is_err() {
                     continue;
                 }
@@ -321,7 +321,10 @@ impl<'a> Restep<'a> {
         for &(state, v) in fill {
             self.from.state[state] = values[v];
         }
-        let steps = self.replays[row.scene].prepared.scene.steps_per_frame();
+        let steps = self.replays[row.scene]
+            .prepared
+            .scene
+            .nominal_steps_per_frame();
         replayer.next_frame(&self.from, steps, &mut self.next)?;
         for (v, value) in nominal.iter_mut().enumerate() {
             *value = self

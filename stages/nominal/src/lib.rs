@@ -12,8 +12,8 @@
 //! (`alnlab_tables::pairs`): the same keys row for row, the `x.` columns the
 //! pair's current values as logged, the `y.` columns the nominal
 //! simulator's next frame. The simulator steps at each scene's own
-//! integration step (`frame_dt / dt`): the nominal model at its most
-//! accurate.
+//! integration step (`frame_dt / dt`), the nominal model at its most
+//! accurate, unless the scene's `nominal_steps` names a coarser one.
 
 use std::collections::{BTreeMap, HashMap};
 use std::path::Path;
@@ -94,7 +94,7 @@ pub fn run(
             .get(&(scene, key.run, key.step))
             .ok_or_else(missing)?;
         let replayer = replayers.get_mut(scene).ok_or_else(missing)?;
-        let steps = replays[scene].prepared.scene.steps_per_frame();
+        let steps = replays[scene].prepared.scene.nominal_steps_per_frame();
         replayer
             .next_frame(from, steps, &mut next)
             .map_err(|e| match e {
@@ -194,6 +194,19 @@ mod tests {
         assert!(
             off > 1e-3,
             "the heavier, damped plant moves otherwise: {off}"
+        );
+    }
+
+    #[test]
+    fn a_coarser_nominal_step_is_a_cheaper_and_wronger_simulator() {
+        let dir = tempfile::tempdir().unwrap();
+        let pendulum = "[[scene]]\nname = \"p\"\nkind = \"pendulum\"\nlinks = 2\nruns = 1\n\
+                        duration = 1.0\nnominal_steps = 2\n";
+        let (pairs, nominal) = nominal(dir.path(), pendulum).unwrap();
+        let off = most_apart(&pairs, &nominal, Side::Next, "omega.2.y");
+        assert!(
+            off > 1e-6 && off < 0.5,
+            "two steps a frame instead of ten: near the log, not on it ({off})"
         );
     }
 

@@ -466,7 +466,8 @@ impl Forward for Piecewise<'_> {
 }
 
 /// A hybrid as a forward model: each frame the simulator of the scene as
-/// written steps the state at its own step, and a piecewise-linear ALN
+/// written steps the state at the nominal model's step (the scene's own,
+/// or its `nominal_steps`), and a piecewise-linear ALN
 /// trained as its correction (`[train] base = "nominal"`) turns that
 /// nominal prediction into the next values of the predicted variables,
 /// from which the next frame's state is rebuilt — a robot's joint
@@ -552,7 +553,7 @@ impl<'a> Hybrid<'a> {
             nominal: Simulator::new(
                 nominal,
                 controls,
-                nominal.scene.steps_per_frame(),
+                nominal.scene.nominal_steps_per_frame(),
                 cost.clone(),
             ),
             scratch: predictor.scratch(),

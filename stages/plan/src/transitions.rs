@@ -94,7 +94,7 @@ impl<'a> Transitions<'a> {
         self.controls.set(executed, &mut self.torques);
         self.runner.restart();
         self.runner.drive(Some(&self.torques));
-        let steps = p.scene.steps_per_frame();
+        let steps = p.scene.nominal_steps_per_frame();
         let dt = p.scene.frame_dt.get() / steps as f64;
         if self.runner.advance(&mut state, 0, steps, dt).is_err() {
             return Ok(());
