@@ -21,8 +21,10 @@
 //!   the effort is clamped to [−k (q̇ + v), −k (q̇ − v)] (within ± the effort
 //!   limit E), so no effort speeds the joint past its limit and one beyond
 //!   it is braked; k = min(E / (0.1 v), I / (2 dt)) — the whole effort
-//!   until within a tenth of the limit, and no stiffer than an explicit
-//!   step resolves (friction's cap). A soft brake: a joint pushed on by
+//!   until within a tenth of the limit, unless that is stiffer than an
+//!   explicit step resolves (friction's cap, on the link's own inertia:
+//!   then a light distal link's drive gives less than its effort limit
+//!   near the velocity limit, k v at rest). A soft brake: a joint pushed on by
 //!   the rest of the robot may pass its limit by a margin that grows as
 //!   its own inertia shrinks (the UR5 driven hard: by at most 15%, where
 //!   without it the wrist spins at 94 rad/s against 3.2).

@@ -131,9 +131,10 @@ impl Prepared {
 /// joint (named by `joints`), its position `joint.<joint>.q` and velocity
 /// `joint.<joint>.qd`; last, each one-DOF joint's passive effort
 /// `joint.<joint>.passive` (damping, friction and limits at that instant,
-/// which replay the dynamics; not part of the state) and, where the plant's
-/// actuators produce other than the command (`applied`), each one-DOF
-/// joint's applied effort `joint.<joint>.applied`.
+/// which replay the dynamics; not part of the state) and, where the
+/// effort applied differs from the command (`applied`: a plant's actuators,
+/// drives holding velocity limits), each one-DOF joint's applied effort
+/// `joint.<joint>.applied`.
 pub fn state_names(
     model: &Model,
     links: &[String],
@@ -261,7 +262,7 @@ pub fn state_from_generalized(model: &Model, values: &[f64]) -> Option<State> {
             Logged::Axis => 2,
         };
     }
-    // Passive efforts follow the state, and applied ones where the plant
+    // Passive efforts follow the state, and applied ones where the scene
     // logs them.
     let efforts = one_dof(model).count();
     if values.len() != expected + efforts && values.len() != expected + 2 * efforts {

@@ -151,7 +151,8 @@ pub fn with_own_nominal(linear: &[Reads], width: usize) -> Vec<Reads> {
 /// The path to time of a hybrid under `model`'s name: each test row's frame
 /// (`rows`, the states' frames in the log, in the order of `states`, rows of
 /// `width` values, the learned variables) stepped by the nominal simulator
-/// at the scene's own step, then `correct(inputs, nominal, next)` writing
+/// at the nominal step (the scene's own, or its `nominal_steps`), then
+/// `correct(inputs, nominal, next)` writing
 /// the hybrid's next values from the state and its nominal prediction side
 /// by side (`inputs`, as [`Hybrids::x`]'s columns), one state at a time on
 /// one thread.
@@ -241,7 +242,8 @@ pub fn peer_correction<'p>(
 
 /// The nominal simulator stepping a state a model predicted: the logged
 /// frame the state stands in for, its generalized state rebuilt from the
-/// predicted variables, re-simulated one frame at the scene's own step.
+/// predicted variables, re-simulated one frame at the nominal step (the
+/// scene's own, or its `nominal_steps`).
 pub struct Restep<'a> {
     frames: &'a LoggedFrames<'a>,
     replays: &'a BTreeMap<String, SceneReplay>,

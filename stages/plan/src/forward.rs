@@ -430,26 +430,29 @@ impl Forward for Piecewise<'_> {
     /// time.
     fn costs(&mut self, actions: &[f64], horizon: usize, costs: &mut [f64]) {
         let n = costs.len();
-        let len = actions.len() / n.max(1);
-        let d = len / horizon.max(1);
+        costs.fill(0.0);
+        if n == 0 || horizon == 0 {
+            return;
+        }
+        let len = actions.len() / n;
+        let d = len / horizon;
         let width = self.start.len();
         // The candidates' learned variables, `[variable][candidate]`.
         self.columns.resize(width * n, 0.0);
-        for (column, &x) in self.columns.chunks_mut(n.max(1)).zip(&self.start) {
+        for (column, &x) in self.columns.chunks_mut(n).zip(&self.start) {
             column.fill(x);
         }
         self.batch_next.resize(self.predicted.len(), Vec::new());
         for next in &mut self.batch_next {
             next.resize(n, 0.0);
         }
-        costs.fill(0.0);
         for h in 0..horizon {
             for &(k, v) in &self.torques {
                 for (i, x) in self.columns[v * n..(v + 1) * n].iter_mut().enumerate() {
                     *x = actions[i * len + h * d + k];
                 }
             }
-            let columns: Vec<&[f64]> = self.columns.chunks(n.max(1)).collect();
+            let columns: Vec<&[f64]> = self.columns.chunks(n).collect();
             self.predictor
                 .values(&columns, &mut self.scratch, &mut self.batch_next);
             for (&v, next) in self.predicted.iter().zip(&self.batch_next) {
@@ -495,7 +498,7 @@ pub struct Hybrid<'a> {
 }
 
 impl<'a> Hybrid<'a> {
-    /// The hybrid of `nominal` (the scene as written, at its own step,
+    /// The hybrid of `nominal` (the scene as written, at its nominal step,
     /// set by `controls`) and `predictor` (over the `learned` entries and
     /// their nominal predictions), costing with `cost`. An error says what
     /// the scene or model lacks for it.

@@ -95,7 +95,11 @@ pub fn read(path: &Path) -> Result<Vec<Episode>> {
     let (cost, ms) = (real("cost")?, real("ms_per_decision")?);
     let (ms_min, ms_max) = (real("ms_min")?, real("ms_max")?);
     let (real_time, rms) = (real("real_time_ms")?, real("prediction_rms")?);
-    let horizon_rms = real("horizon_rms")?;
+    // Tables written before the column (plan format 5) read as NaN.
+    let horizon_rms = match t.batch.column_by_name("horizon_rms") {
+        Some(_) => Some(real("horizon_rms")?),
+        None => None,
+    };
     Ok((0..t.num_rows())
         .map(|i| Episode {
             task: task[i].clone(),
@@ -110,7 +114,7 @@ pub fn read(path: &Path) -> Result<Vec<Episode>> {
             ms_max: ms_max[i],
             real_time_ms: real_time[i],
             prediction_rms: rms[i],
-            horizon_rms: horizon_rms[i],
+            horizon_rms: horizon_rms.map_or(f64::NAN, |h| h[i]),
         })
         .collect())
 }

@@ -228,7 +228,8 @@ pub(super) fn definitions(md: &mut String) {
          each variable's change (least absolute deviations, from the real values of the inputs \
          the ALN reads); *boosted* (where present) gradient-boosted trees fitted to the same \
          change; *linear+nominal* and *boosted+nominal* (where present) are hybrids: the \
-         nominal simulator's prediction (the scene as written, at its own step) plus the same \
+         nominal simulator's prediction (the scene as written, at its own step or its \
+         `nominal_steps`) plus the same \
          fits of the change from it to the next value, what the plant did beyond its nominal \
          model; *simulator@k/frame* re-steps the physics from the logged frame with k \
          integration steps per frame (the logged step is exact by construction — unless the \

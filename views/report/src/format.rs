@@ -23,11 +23,13 @@ pub fn sig3(x: f64) -> String {
     if x.is_nan() {
         return "—".into();
     }
-    if x.fract() == 0.0 && x.abs() < 1e15 {
-        return format!("{x:.0}");
-    }
-    if x.abs() < 1e-3 {
+    // Beyond seven digits a number is read by its exponent (a prediction
+    // that blew up, an enormous count).
+    if x.abs() >= 1e7 || x.abs() < 1e-3 && x != 0.0 {
         return format!("{x:.2e}");
+    }
+    if x.fract() == 0.0 {
+        return format!("{x:.0}");
     }
     // Round first: 9.996 has three figures as 10.0.
     let rounded: f64 = format!("{x:.2e}").parse().unwrap_or(x);
@@ -208,6 +210,10 @@ mod tests {
             (0.0, "0"),
             (2.0, "2"),
             (17.0, "17"),
+            (87_912.4, "87900"),
+            (2.87e18, "2.87e18"),
+            (-12_345_678.0, "-1.23e7"),
+            (3.05e-17, "3.05e-17"),
         ];
         for (x, s) in cases {
             assert_eq!(sig3(x), s, "{x}");

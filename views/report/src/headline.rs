@@ -325,7 +325,7 @@ pub(super) fn first_screen(
             if shown("linear+nominal") || shown("boosted+nominal") {
                 words.push_str(
                     "; a +nominal model is a hybrid: the nominal simulator's prediction (the \
-                     scene as written, at its own step) plus that fit of what the data did \
+                     scene as written, at its own step or its `nominal_steps`) plus that fit of what the data did \
                      beyond it",
                 );
             }

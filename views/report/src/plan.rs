@@ -582,6 +582,8 @@ struct Contender {
     label: String,
     model: String,
     ms: f64,
+    /// Forward-model evaluations (states predicted) a decision.
+    evaluations: u64,
     /// `[replicate][episode]`.
     costs: Vec<Vec<f64>>,
     /// Its one-step error on the task's variables in the frames it
@@ -709,6 +711,7 @@ fn at_real_time_of(md: &mut String, variants: &[Planned]) {
                     label: format!("{name}, {planner} ({} sequences)", chosen.budget),
                     model: model.to_string(),
                     ms: chosen.ms(),
+                    evaluations: chosen.evaluations,
                     costs,
                     one_step: mean(&one_step),
                     horizon: mean(&horizon),
@@ -723,7 +726,7 @@ fn at_real_time_of(md: &mut String, variants: &[Planned]) {
             continue;
         };
         let mut table = MdTable::new(&["forward model, planner (budget)"])
-            .numbers(&["ms / decision", "cost"])
+            .numbers(&["ms / decision", "µs / state", "cost"])
             .column(&format!("− {}", nominal.label), Align::Left)
             .column("signed-rank p, median difference (episodes)", Align::Left)
             .numbers(&["one-step error", "error at the horizon"]);
@@ -795,6 +798,7 @@ fn at_real_time_of(md: &mut String, variants: &[Planned]) {
             table.row(vec![
                 label,
                 sig3(c.ms),
+                sig3(c.ms * 1e3 / c.evaluations.max(1) as f64),
                 cost,
                 difference,
                 p,
@@ -807,7 +811,9 @@ fn at_real_time_of(md: &mut String, variants: &[Planned]) {
             md,
             "**Planning `{task}` within real time** ({} ms a decision): {} {} has the lowest \
              mean cost of the forward models a user could have{}. {}Every model and planner at its largest budget \
-             whose median decision fits a frame in replicate 1, on the same episodes; cost: the \
+             whose median decision fits a frame in replicate 1, on the same episodes; µs / state: \
+             the decision's time over the states its model predicted (sequences × horizon), the \
+             planner's own work included; cost: the \
              task's summed cost, mean {over}; differences from the nominal simulator of the lowest \
              mean cost, paired, {over}, with the Wilcoxon signed-rank p-value over every paired \
              episode (a replicate's episodes share its model, so they are not independent: the \
