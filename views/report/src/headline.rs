@@ -473,11 +473,16 @@ fn abstract_(
             Some((model, phrases)) => {
                 let _ = write!(
                     md,
-                    "; by the same rule with {}, the true model, as forward model: {}.\n\n",
+                    "; by the same rule with {} as forward model: {}. (The table under \
+                     the planning paragraph below pairs every forward model with the best \
+                     nominal simulator.)\n\n",
                     if model.starts_with("plant@") {
-                        format!("{model}, the plant's own simulator (no user has it)")
+                        format!(
+                            "{model}, the plant's own simulator (no user has it; it knows \
+                             neither the torque noise nor its actuators' state)"
+                        )
                     } else {
-                        format!("{model}/frame")
+                        format!("{model}/frame, the true model")
                     },
                     phrases.join("; ")
                 );
