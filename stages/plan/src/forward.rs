@@ -683,6 +683,24 @@ mod tests {
         }
     }
 
+    /// A controlled worm and codebook entries of its `pitch.2` and `g.2.y`:
+    /// pitch.2 in 41 levels over [−2, 2] (0.1 rad each), g.2.y in 21 levels
+    /// over [−10, 10] (1 N m each).
+    fn worm_pitch_and_torque() -> (Prepared, [Entry; 2]) {
+        let p = Prepared::new(&Scene {
+            controller: Some(ControllerParams {
+                kind: ControllerKind::Random,
+                ..ControllerParams::default()
+            }),
+            ..Scene::default()
+        });
+        let entries = [
+            entry("pitch.2", -2.0, 2.0, 41),
+            entry("g.2.y", -10.0, 10.0, 21),
+        ];
+        (p, entries)
+    }
+
     /// pitch.2 (learned variable 0) moves by g.2.y's level − 10 per frame.
     struct Nudge;
 
@@ -699,19 +717,7 @@ mod tests {
 
     #[test]
     fn learned_models_take_torques_as_levels_and_cost_their_predictions() {
-        let p = Prepared::new(&Scene {
-            controller: Some(ControllerParams {
-                kind: ControllerKind::Random,
-                ..ControllerParams::default()
-            }),
-            ..Scene::default()
-        });
-        // pitch.2 in 41 levels over [−2, 2] (0.1 rad each); g.2.y in 21
-        // levels over [−10, 10] (1 N m each).
-        let entries = [
-            entry("pitch.2", -2.0, 2.0, 41),
-            entry("g.2.y", -10.0, 10.0, 21),
-        ];
+        let (p, entries) = worm_pitch_and_torque();
         let task = Task::HoldAngles {
             name: "hold".into(),
             targets: BTreeMap::from([("pitch.2".into(), 0.5)]),
@@ -761,17 +767,7 @@ mod tests {
     fn piecewise_candidates_batched_cost_what_each_alone_costs() {
         use alnlab_aln::model::Reads;
         use alnlab_aln::pwl::{Node, Tree};
-        let p = Prepared::new(&Scene {
-            controller: Some(ControllerParams {
-                kind: ControllerKind::Random,
-                ..ControllerParams::default()
-            }),
-            ..Scene::default()
-        });
-        let entries = [
-            entry("pitch.2", -2.0, 2.0, 41),
-            entry("g.2.y", -10.0, 10.0, 21),
-        ];
+        let (p, entries) = worm_pitch_and_torque();
         let learned: Vec<&Entry> = entries.iter().collect();
         // pitch.2's change in levels: max(min(0.3 p + g, 4 − p), −2 + 0.1 g).
         let tree = Tree::from_parts(
