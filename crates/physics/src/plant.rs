@@ -256,6 +256,7 @@ impl Plant {
 /// The plant's actuators in one run: what they produce from the commands
 /// over time — delayed, lagging, scaled and noisy — one update per
 /// integration step, however often a step's torques are asked for.
+#[derive(Clone)]
 pub struct Actuators {
     gain: f64,
     /// The lag's weight of the new command in one step, 1 − e^(−dt/τ);

@@ -621,7 +621,19 @@ impl<'a> Runner<'a> {
         }
     }
 
-    /// The frame of `state` at time `t`: its generalized state and variables.
+    /// [`Runner::observe`] without committing a plant's actuators to the
+    /// torques driven now: a look at the frame before the torques to apply
+    /// from it are chosen, after which observing or stepping at `t` takes
+    /// the torques then driven.
+    pub fn preview(&mut self, state: &State, t: f64, frame: &mut StateFrame) {
+        let actuators = self.actuators.clone();
+        self.observe(state, t, frame);
+        self.actuators = actuators;
+    }
+
+    /// The frame of `state` at time `t`: its generalized state and
+    /// variables, under the torques driven now (or the controller's), to
+    /// which a plant's actuators are committed at `t`.
     pub fn observe(&mut self, state: &State, t: f64, frame: &mut StateFrame) {
         let p = self.p;
         self.torques(t);

@@ -77,10 +77,13 @@ pub struct Outcome {
 }
 
 /// Runs `frames` frames of scene `p` (with its plant, if any) from `start`
-/// under `controls`; hands each [`Step`], the frame reached and its link
-/// poses to `on_step`; returns the summed cost and, for a planner, its
-/// model's error over `horizon` frames. `seed` seeds the random reference's
-/// torques (and a plant's actuator noise).
+/// under `controls`; hands each [`Step`], the frame reached (as seen before
+/// the next torques are chosen), the frame it started from as the log
+/// records frames (under the torques applied from it on: its accelerations
+/// and efforts those torques'), and the reached frame's link poses to
+/// `on_step`; returns the summed cost and, for a planner, its model's error
+/// over `horizon` frames. `seed` seeds the random reference's torques (and a
+/// plant's actuator noise).
 #[allow(clippy::too_many_arguments)]
 pub fn run(
     p: &Prepared,
@@ -91,7 +94,7 @@ pub fn run(
     cost: &Cost,
     policy: &mut Policy,
     seed: u64,
-    mut on_step: impl FnMut(&Step, &StateFrame, &Kinematics) -> Result<()>,
+    mut on_step: impl FnMut(&Step, &StateFrame, &StateFrame, &Kinematics) -> Result<()>,
 ) -> Result<Outcome> {
     let hinges = p.model.len() - 1;
     let mut runner = Runner::new(p, seed, 0, 0);
@@ -103,7 +106,10 @@ pub fn run(
         state: Vec::with_capacity(p.layout.state.len()),
         variables: Vec::with_capacity(p.layout.variables.len()),
     };
-    runner.observe(&state, 0.0, &mut frame);
+    // Seen before the first torques are chosen; `applied`, as logged once
+    // they are.
+    runner.preview(&state, 0.0, &mut frame);
+    let mut applied = frame.clone();
     let steps = p.scene.steps_per_frame();
     let dt = p.scene.dt.get();
     let mut action = vec![0.0; controls.dims()];
@@ -152,6 +158,7 @@ pub fn run(
             }
         }
         let first = u64::from(f) * steps;
+        runner.observe(&state, first as f64 * dt, &mut applied);
         runner.advance(&mut state, first, steps, dt).map_err(|at| {
             Error::Diverged(format!(
                 "scene `{}`: the episode blew up at step {at} (frame {f})",
@@ -162,7 +169,7 @@ pub fn run(
         // controller's.
         controls.read(runner.hinge_torques(), &mut step.torques);
         let t = (first + steps) as f64 * dt;
-        runner.observe(&state, t, &mut frame);
+        runner.preview(&state, t, &mut frame);
         step.frame = f + 1;
         step.cost = cost.of(&frame.variables);
         for (r, s) in step.reached.iter_mut().zip(cost.variables()) {
@@ -172,7 +179,7 @@ pub fn run(
         if planned {
             visited.push((state.clone(), frame.variables.clone()));
         }
-        on_step(&step, &frame, runner.kinematics())?;
+        on_step(&step, &frame, &applied, runner.kinematics())?;
     }
     let horizon_rms = match policy {
         Policy::Plan { model, .. } if horizon > 0 && visited.len() > horizon => {
@@ -230,7 +237,13 @@ mod tests {
     use crate::task::Task;
 
     fn worm() -> Prepared {
+        worm_with(None)
+    }
+
+    /// The worm, as the plant `plant` where one is given.
+    fn worm_with(plant: Option<alnlab_physics::plant::Plant>) -> Prepared {
         Prepared::new(&Scene {
+            plant,
             controller: Some(ControllerParams {
                 kind: ControllerKind::Random,
                 amplitude: vec![alnlab_physics::controller::Amplitude::Ball([
@@ -265,7 +278,7 @@ mod tests {
                 &cost,
                 policy,
                 9,
-                |s, _, _| {
+                |s, _, _, _| {
                     steps.push(s.clone());
                     Ok(())
                 },
@@ -325,5 +338,74 @@ mod tests {
                 .any(|s| s.torques.iter().any(|&g| g != 0.0))
         );
         assert!(random_steps.iter().all(|s| s.torques[0].abs() <= 1.0));
+    }
+
+    /// A plant's actuators take each decision's torques from the frame's
+    /// first step: its own simulator, which starts them afresh, then
+    /// predicts every frame it reaches, and every frame the episode hands on
+    /// as the log records it carries the torques applied from it.
+    #[test]
+    fn a_plants_actuators_execute_each_decision_from_its_first_step() {
+        let p = worm_with(Some(alnlab_physics::plant::Plant {
+            actuator_gain: 0.5,
+            ..Default::default()
+        }));
+        let task = Task::HoldAngles {
+            name: "bend".into(),
+            targets: BTreeMap::from([("pitch.2".into(), 0.6)]),
+        };
+        let cost = task.over(&p.layout.variables, &p).unwrap();
+        let controls = Controls::of(&p).unwrap();
+        let start = p
+            .scene
+            .initial_state(&p.model, &mut ChaCha8Rng::seed_from_u64(5));
+        let cem = CemSettings {
+            iterations: 2,
+            elite: 0.25,
+        };
+        let mut planner = Planner::new(PlannerKind::Cem, cem, 3, controls.bounds().clone(), 8, 1);
+        let mut model = Simulator::new(&p, &controls, p.scene.steps_per_frame(), cost.clone());
+        let tau = p
+            .layout
+            .variables
+            .iter()
+            .position(|n| n == "g.2.y")
+            .unwrap();
+        let mut steps = Vec::new();
+        run(
+            &p,
+            &controls,
+            &start,
+            12,
+            3,
+            &cost,
+            &mut Policy::Plan {
+                planner: &mut planner,
+                model: &mut model,
+                sequences: 8,
+            },
+            9,
+            |s, _, applied, _| {
+                let k = controls.names().iter().position(|n| n == "g.2.y").unwrap();
+                assert_eq!(
+                    applied.variables[tau],
+                    s.torques[k],
+                    "frame {}",
+                    s.frame - 1
+                );
+                steps.push(s.clone());
+                Ok(())
+            },
+        )
+        .unwrap();
+        for s in &steps {
+            for (e, r) in s.expected.iter().zip(&s.reached) {
+                assert!(
+                    (e - r).abs() <= 1e-9 * r.abs().max(1.0),
+                    "frame {}: {e} {r}",
+                    s.frame
+                );
+            }
+        }
     }
 }

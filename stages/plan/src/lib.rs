@@ -80,8 +80,9 @@ use crate::transitions::Transitions;
 /// Version of what this stage writes (part of every cache key; 4: the
 /// spread of predicted costs; 5: robots, plants and hybrids, the ALN's
 /// planned frames as pairs; 6: each model's error over the horizon on its
-/// planner's states).
-pub const FORMAT_VERSION: u32 = 6;
+/// planner's states; 7: frames as the log records them, the plant's
+/// actuators given each decision's torques from its first step).
+pub const FORMAT_VERSION: u32 = 7;
 /// File name of the per-frame table.
 pub const PLAN_FILE: &str = "plan.parquet";
 /// File name of the per-episode table.
@@ -654,13 +655,13 @@ impl TaskRun<'_> {
             ]);
             out.view.start_run(c.p, record, &c.starts[e])?;
         }
-        // The ALN's planned frames are the next round's training pairs.
+        // The ALN's planned frames are the next round's training pairs, each
+        // frame as the log records it (under the torques applied from it
+        // on), so a pair is complete once the next frame's are chosen.
         let mut recorded = match &mut out.transitions {
             Some(t) if model == "aln" && !planner.is_empty() => {
                 t.start_episode();
-                let mut start = StateFrame::default();
-                Runner::new(c.p, 0, 0, 0).observe(&c.starts[e], 0.0, &mut start);
-                Some((t, start))
+                Some((t, None::<(StateFrame, Vec<f64>)>))
             }
             _ => None,
         };
@@ -674,7 +675,7 @@ impl TaskRun<'_> {
             self.cost,
             policy,
             seed,
-            |step, frame, kin| {
+            |step, frame, applied, kin| {
                 frames.task.push(self.task.to_string());
                 frames.model.push(model.to_string());
                 frames.planner.push(planner);
@@ -690,8 +691,20 @@ impl TaskRun<'_> {
                 frames.expected.push(step.expected.clone());
                 squared_error += self.cost.distance(&step.expected, &step.reached).powi(2);
                 if let Some((transitions, before)) = &mut recorded {
-                    transitions.record(step.frame - 1, before, frame, &step.torques)?;
-                    before.clone_from(frame);
+                    match before {
+                        Some((x, torques)) => {
+                            transitions.record(
+                                step.frame - 2,
+                                x,
+                                applied,
+                                torques,
+                                &step.torques,
+                            )?;
+                            x.clone_from(applied);
+                            torques.clone_from(&step.torques);
+                        }
+                        None => *before = Some((applied.clone(), step.torques.clone())),
+                    }
                 }
                 times.push(step.seconds * 1e3);
                 if viewed {

@@ -7,7 +7,8 @@
 //! (`transitions-nominal.parquet`). A next round trains on them too.
 //!
 //! Each episode is a run of its own (numbered in the order recorded), each
-//! frame a step; every pair is a training pair. A frame the nominal
+//! frame but the last a step (the last has no torques after it, so no
+//! frame as the log records it); every pair is a training pair. A frame the nominal
 //! simulator cannot step (it blew up) is left out, as the nominal stage
 //! would refuse it.
 
@@ -74,14 +75,18 @@ impl<'a> Transitions<'a> {
         self.runs += 1;
     }
 
-    /// Records the pair of frame `step` (`before`, as logged) and the next
-    /// (`after`) under the controls `executed`.
+    /// Records the pair of frame `step` (`before`, as logged: under the
+    /// controls `executed` from it) and the next (`after`, under the
+    /// controls `next` executed from it); the nominal simulator's prediction
+    /// of `after` is stepped under `executed` and seen under `next`, as
+    /// the nominal stage sees a logged pair.
     pub fn record(
         &mut self,
         step: u32,
         before: &StateFrame,
         after: &StateFrame,
         executed: &[f64],
+        next: &[f64],
     ) -> Result<()> {
         let p = self.nominal;
         let mut state: State =
@@ -99,6 +104,8 @@ impl<'a> Transitions<'a> {
         if self.runner.advance(&mut state, 0, steps, dt).is_err() {
             return Ok(());
         }
+        self.controls.set(next, &mut self.torques);
+        self.runner.drive(Some(&self.torques));
         self.runner.observe(&state, 0.0, &mut self.frame);
         let mut x = before.variables.clone();
         for (&v, &value) in self.control_variables.iter().zip(executed) {
