@@ -236,6 +236,19 @@ mod tests {
     use crate::planner::{CemSettings, PlannerKind};
     use crate::task::Task;
 
+    /// Every step's prediction is the frame then reached, to 1e-9.
+    fn predicted_as_reached(steps: &[Step]) {
+        for s in steps {
+            for (e, r) in s.expected.iter().zip(&s.reached) {
+                assert!(
+                    (e - r).abs() <= 1e-9 * r.abs().max(1.0),
+                    "frame {}: {e} {r}",
+                    s.frame
+                );
+            }
+        }
+    }
+
     fn worm() -> Prepared {
         worm_with(None)
     }
@@ -318,15 +331,7 @@ mod tests {
                 .all(|s| s.seconds > 0.0 && s.predicted.is_finite())
         );
         // The true model predicts the frame the simulator then reaches.
-        for s in &steps {
-            for (e, r) in s.expected.iter().zip(&s.reached) {
-                assert!(
-                    (e - r).abs() <= 1e-9 * r.abs().max(1.0),
-                    "frame {}: {e} {r}",
-                    s.frame
-                );
-            }
-        }
+        predicted_as_reached(&steps);
         assert!(
             random_steps
                 .iter()
@@ -398,14 +403,6 @@ mod tests {
             },
         )
         .unwrap();
-        for s in &steps {
-            for (e, r) in s.expected.iter().zip(&s.reached) {
-                assert!(
-                    (e - r).abs() <= 1e-9 * r.abs().max(1.0),
-                    "frame {}: {e} {r}",
-                    s.frame
-                );
-            }
-        }
+        predicted_as_reached(&steps);
     }
 }
