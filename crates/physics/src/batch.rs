@@ -2,7 +2,10 @@
 //! algorithm of [`crate::dynamics`] and the semi-implicit Euler step of
 //! [`crate::integrate`], computed for [`LANES`] states together in
 //! structure-of-arrays form — every number a SIMD vector holding that
-//! number of each state — so one pass over the tree serves them all.
+//! number of each state — so one pass over the tree serves them all. The
+//! loads are held ([`Batch::step`]) or computed from each state at every
+//! step ([`Batch::step_under`] with [`LaneForces`], as
+//! [`crate::batch_scene`] does a scene's).
 //!
 //! The tree's shape (parents, joint kinds) is the same for every state, so
 //! the states never branch apart; only the numbers differ. A batch is
@@ -53,6 +56,47 @@ pub struct AccelLanes {
     pub qdd: Vec<Lanes>,
 }
 
+/// The kinematics of [`LANES`] states (see [`crate::dynamics::Kinematics`]).
+#[derive(Clone, Debug)]
+pub struct KinematicsLanes {
+    /// Link → inertial rotation.
+    pub rot: Vec<Matrix3<Lanes>>,
+    /// Hinge position, inertial frame.
+    pub pos: Vec<Vector3<Lanes>>,
+    /// Spatial velocity, link frame.
+    pub vel: Vec<Vector6<Lanes>>,
+}
+
+/// The loads on a group of states at one instant, from the states
+/// themselves (as [`crate::integrate::Forces`] gives one state's).
+pub trait LaneForces {
+    /// Fills `loads` (every field; gravity excluded) for group `g`'s states
+    /// `state`, whose kinematics are `kin`.
+    fn apply(
+        &mut self,
+        model: &Model,
+        g: usize,
+        state: &StateLanes,
+        kin: &KinematicsLanes,
+        loads: &mut LoadsLanes,
+    );
+}
+
+/// The loads packed with the states, held.
+struct Held;
+
+impl LaneForces for Held {
+    fn apply(
+        &mut self,
+        _: &Model,
+        _: usize,
+        _: &StateLanes,
+        _: &KinematicsLanes,
+        _: &mut LoadsLanes,
+    ) {
+    }
+}
+
 /// Many states packed in groups of [`LANES`], with their loads, and the
 /// scratch space that steps them; allocates nothing after [`Batch::pack`].
 pub struct Batch {
@@ -61,6 +105,10 @@ pub struct Batch {
     pub len: usize,
     pub states: Vec<StateLanes>,
     pub loads: Vec<LoadsLanes>,
+    /// A free root's linear momentum per group, tracked across steps (as
+    /// [`crate::integrate::Stepper`] tracks one state's) until the states
+    /// are set again; `None` until the first step.
+    momentum: Vec<Option<Vector3<Lanes>>>,
     accel: AccelLanes,
     ws: Scratch,
 }
@@ -69,9 +117,8 @@ pub struct Batch {
 struct Scratch {
     inertia: Vec<Matrix6<Lanes>>,
     gravity: Vector3<Lanes>,
-    rot: Vec<Matrix3<Lanes>>,
+    kin: KinematicsLanes,
     x: Vec<Transform<Lanes>>,
-    vel: Vec<Vector6<Lanes>>,
     articulated: Vec<Matrix6<Lanes>>,
     bias: Vec<Vector6<Lanes>>,
     velocity_product: Vec<Vector6<Lanes>>,
@@ -206,6 +253,7 @@ impl Batch {
             loads: (0..groups)
                 .map(|g| LoadsLanes::pack(model, &group(loads, g)))
                 .collect(),
+            momentum: vec![None; groups],
             accel: AccelLanes {
                 root_v: zero3,
                 rates: vec![zero3; n],
@@ -218,7 +266,11 @@ impl Batch {
                     .map(|l| l.spatial_inertia().map(Lanes::splat))
                     .collect(),
                 gravity: splat3(&model.gravity),
-                rot: vec![zero33; n],
+                kin: KinematicsLanes {
+                    rot: vec![zero33; n],
+                    pos: vec![zero3; n],
+                    vel: vec![zero6; n],
+                },
                 x: vec![
                     Transform {
                         e: zero33,
@@ -226,7 +278,6 @@ impl Batch {
                     };
                     n
                 ],
-                vel: vec![zero6; n],
                 articulated: vec![zero66; n],
                 bias: vec![zero6; n],
                 velocity_product: vec![zero6; n],
@@ -241,7 +292,7 @@ impl Batch {
     }
 
     /// Sets every state to `other`'s (a batch of the same model and size),
-    /// allocating nothing.
+    /// allocating nothing; a free root's momentum is tracked afresh.
     pub fn copy_states_from(&mut self, other: &Batch) {
         for (to, from) in self.states.iter_mut().zip(&other.states) {
             to.root_p = from.root_p;
@@ -251,6 +302,29 @@ impl Batch {
             to.q.copy_from_slice(&from.q);
             to.qd.copy_from_slice(&from.qd);
         }
+        self.momentum.fill(None);
+    }
+
+    /// Sets every state to `state`, allocating nothing; a free root's
+    /// momentum is tracked afresh.
+    pub fn fill(&mut self, state: &State) {
+        for to in &mut self.states {
+            to.root_p = splat3(&state.root_p);
+            to.root_v = splat3(&state.root_v);
+            for (o, q) in to.orient.iter_mut().zip(&state.orient) {
+                *o = Quaternion::from(q.coords.map(Lanes::splat));
+            }
+            for (r, w) in to.rates.iter_mut().zip(&state.rates) {
+                *r = splat3(w);
+            }
+            for (q, x) in to.q.iter_mut().zip(&state.q) {
+                *q = Lanes::splat(*x);
+            }
+            for (qd, x) in to.qd.iter_mut().zip(&state.qd) {
+                *qd = Lanes::splat(*x);
+            }
+        }
+        self.momentum.fill(None);
     }
 
     /// Writes every packed state back into `states` (as many as were packed).
@@ -258,6 +332,22 @@ impl Batch {
         for (k, state) in states.iter_mut().enumerate().take(self.len) {
             self.states[k / LANES].unpack(k % LANES, state);
         }
+    }
+
+    /// Whether every number of state `k` is finite.
+    pub fn is_finite(&self, k: usize) -> bool {
+        let (s, j) = (&self.states[k / LANES], k % LANES);
+        let finite = |x: &Lanes| x.extract(j).is_finite();
+        s.root_p.iter().chain(&s.root_v).all(finite)
+            && s.orient.iter().all(|q| q.coords.iter().all(finite))
+            && s.rates.iter().all(|w| w.iter().all(finite))
+            && s.q.iter().chain(&s.qd).all(finite)
+    }
+
+    /// Group `g`'s states and their kinematics.
+    pub fn kinematics(&mut self, model: &Model, g: usize) -> (&StateLanes, &KinematicsLanes) {
+        self.ws.kinematics(model, &self.states[g]);
+        (&self.states[g], &self.ws.kin)
     }
 
     /// The accelerations of group `g`'s states under their loads
@@ -271,13 +361,24 @@ impl Batch {
     }
 
     /// Advances every state by `dt` with semi-implicit Euler under its held
-    /// loads, as [`crate::integrate::Stepper::step`] does one state's (a
-    /// free root's linear momentum tracked over this one step).
+    /// loads, as [`crate::integrate::Stepper::step`] does one state's.
     pub fn step(&mut self, model: &Model, dt: f64) {
+        self.step_under(model, dt, &mut Held);
+    }
+
+    /// Advances every state by `dt` with semi-implicit Euler under the loads
+    /// `forces` gives at the step's start, as
+    /// [`crate::integrate::Stepper::step`] does one state's (a free root's
+    /// linear momentum tracked across steps, from the first after the
+    /// states were set).
+    pub fn step_under(&mut self, model: &Model, dt: f64, forces: &mut impl LaneForces) {
         let h = Lanes::splat(dt);
         for g in 0..self.states.len() {
             self.ws.kinematics(model, &self.states[g]);
-            let momentum = (model.root == Root::Free).then(|| self.ws.linear_momentum(model));
+            forces.apply(model, g, &self.states[g], &self.ws.kin, &mut self.loads[g]);
+            if model.root == Root::Free && self.momentum[g].is_none() {
+                self.momentum[g] = Some(self.ws.linear_momentum(model));
+            }
             let external = self.ws.external_force(model, &self.loads[g]);
             self.ws
                 .forward(model, &self.states[g], &self.loads[g], &mut self.accel);
@@ -293,38 +394,42 @@ impl Batch {
                 *q += *qd * h;
             }
             if model.root == Root::Free {
-                s.root_p += self.ws.rot[0] * s.root_v * h;
+                s.root_p += self.ws.kin.rot[0] * s.root_v * h;
             }
             for (q, w) in s.orient.iter_mut().zip(&s.rates) {
                 let turn = UnitQuaternion::from_scaled_axis(w * h);
                 let turned = *q * turn.into_inner();
                 *q = turned / turned.norm();
             }
-            if let Some(momentum) = momentum {
-                let target = momentum + external * h;
+            if let Some(momentum) = &mut self.momentum[g] {
+                *momentum += external * h;
+                let target = *momentum;
                 self.ws.kinematics(model, &self.states[g]);
                 let error = target - self.ws.linear_momentum(model);
                 let s = &mut self.states[g];
-                s.root_v += self.ws.rot[0].transpose() * error / Lanes::splat(model.total_mass());
+                s.root_v +=
+                    self.ws.kin.rot[0].transpose() * error / Lanes::splat(model.total_mass());
             }
         }
     }
 }
 
 impl Scratch {
-    /// Link rotations, joint transforms and spatial velocities.
+    /// Link rotations and positions, joint transforms and spatial
+    /// velocities.
     fn kinematics(&mut self, model: &Model, s: &StateLanes) {
         for (i, link) in model.links.iter().enumerate() {
             match link.parent {
                 None => {
                     let rel = rotation(&s.orient[i]);
-                    self.rot[i] = rel;
+                    self.kin.rot[i] = rel;
+                    self.kin.pos[i] = s.root_p;
                     self.x[i] = Transform {
                         e: rel.transpose(),
                         r: s.root_p,
                     };
                     let zero = Vector3::from_element(Lanes::splat(0.0));
-                    self.vel[i] = match model.root {
+                    self.kin.vel[i] = match model.root {
                         Root::Free => spatial(&s.rates[i], &s.root_v),
                         Root::Pinned => spatial(&s.rates[i], &zero),
                         Root::Fixed => Vector6::from_element(Lanes::splat(0.0)),
@@ -345,13 +450,14 @@ impl Scratch {
                             splat3(&link.l) + splat33(&origin) * (splat3(&axis) * s.q[i]),
                         ),
                     };
-                    self.rot[i] = self.rot[p] * rel;
+                    self.kin.rot[i] = self.kin.rot[p] * rel;
+                    self.kin.pos[i] = self.kin.pos[p] + self.kin.rot[p] * r;
                     self.x[i] = Transform {
                         e: rel.transpose(),
                         r,
                     };
-                    self.vel[i] =
-                        self.x[i].motion(&self.vel[p]) + joint_velocity(&link.joint, s, i);
+                    self.kin.vel[i] =
+                        self.x[i].motion(&self.kin.vel[p]) + joint_velocity(&link.joint, s, i);
                 }
             }
         }
@@ -361,9 +467,9 @@ impl Scratch {
     fn linear_momentum(&self, model: &Model) -> Vector3<Lanes> {
         let mut sum = Vector3::from_element(Lanes::splat(0.0));
         for (i, link) in model.links.iter().enumerate() {
-            let v = &self.vel[i];
+            let v = &self.kin.vel[i];
             let point = linear(v) + angular(v).cross(&splat3(&link.c));
-            sum += self.rot[i] * point * Lanes::splat(link.mass);
+            sum += self.kin.rot[i] * point * Lanes::splat(link.mass);
         }
         sum
     }
@@ -372,7 +478,7 @@ impl Scratch {
     /// linear momentum.
     fn external_force(&self, model: &Model, loads: &LoadsLanes) -> Vector3<Lanes> {
         let mut sum = self.gravity * Lanes::splat(model.total_mass());
-        for (rot, f) in self.rot.iter().zip(&loads.f_ext) {
+        for (rot, f) in self.kin.rot.iter().zip(&loads.f_ext) {
             sum += rot * linear(f);
         }
         sum
@@ -385,14 +491,14 @@ impl Scratch {
         let zero3 = Vector3::from_element(Lanes::splat(0.0));
         for i in 0..n {
             let link = &model.links[i];
-            let v = self.vel[i];
+            let v = self.kin.vel[i];
             let inertia = &self.inertia[i];
             self.velocity_product[i] = match link.parent {
                 Some(_) => cross_motion(&v, &joint_velocity(&link.joint, s, i)),
                 None => Vector6::from_element(Lanes::splat(0.0)),
             };
             self.articulated[i] = *inertia;
-            let gravity = self.rot[i].transpose() * self.gravity * Lanes::splat(link.mass);
+            let gravity = self.kin.rot[i].transpose() * self.gravity * Lanes::splat(link.mass);
             let f_gravity = spatial(&splat3(&link.c).cross(&gravity), &gravity);
             self.bias[i] = cross_force(&v, &(inertia * v)) - loads.f_ext[i] - f_gravity;
         }

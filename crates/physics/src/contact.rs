@@ -108,26 +108,40 @@ impl Surfaces {
     ) {
         for point in points {
             let x = kin.point_position(point.link, &point.offset);
-            let max_viscosity = model.links[point.link].mass / (2.0 * self.dt);
-            let mut force = Vector3::zeros();
-            let reach = self.point_radius;
-            if self.floor && x.z < reach {
-                let v = kin.point_velocity(point.link, &point.offset);
-                force += self.force(reach - x.z, &Vector3::z(), &v, max_viscosity);
-            }
-            if let Some(radius) = self.arena_radius {
-                let r = x.xy().norm();
-                if r > radius - reach {
-                    let inward = Vector3::new(-x.x / r, -x.y / r, 0.0);
-                    let v = kin.point_velocity(point.link, &point.offset);
-                    force += self.force(r - (radius - reach), &inward, &v, max_viscosity);
-                }
-            }
+            let force = self.point_force(model, point, &x, || {
+                kin.point_velocity(point.link, &point.offset)
+            });
             if force != Vector3::zeros() {
                 let local = kin.rot[point.link].transpose() * force;
                 f_ext[point.link] += spatial(&point.offset.cross(&local), &local);
             }
         }
+    }
+
+    /// The force of the surfaces on `point`, at `x` (inertial frame) and
+    /// moving at `velocity()` (asked only when touching); zero when it
+    /// touches none.
+    pub fn point_force(
+        &self,
+        model: &Model,
+        point: &ContactPoint,
+        x: &Vector3<f64>,
+        velocity: impl Fn() -> Vector3<f64>,
+    ) -> Vector3<f64> {
+        let max_viscosity = model.links[point.link].mass / (2.0 * self.dt);
+        let mut force = Vector3::zeros();
+        let reach = self.point_radius;
+        if self.floor && x.z < reach {
+            force += self.force(reach - x.z, &Vector3::z(), &velocity(), max_viscosity);
+        }
+        if let Some(radius) = self.arena_radius {
+            let r = x.xy().norm();
+            if r > radius - reach {
+                let inward = Vector3::new(-x.x / r, -x.y / r, 0.0);
+                force += self.force(r - (radius - reach), &inward, &velocity(), max_viscosity);
+            }
+        }
+        force
     }
 
     /// The force of one surface with inward `normal` on a point penetrating it

@@ -9,7 +9,9 @@
 //!   energy and momenta.
 //! - [`integrate`]: semi-implicit Euler and RK4 over a reusable [`Stepper`].
 //! - [`batch`]: many states at once on one thread (SIMD lanes), the
-//!   articulated-body algorithm and the semi-implicit Euler step.
+//!   articulated-body algorithm and the semi-implicit Euler step;
+//!   [`batch_scene`]: a scene's states stepped so, each under its own
+//!   torques, as a planner tries candidates.
 //! - [`contact`], [`controller`]: floor and arena wall; hinge torques.
 //! - [`joints`]: a robot joint's effort limit, damping, friction and soft
 //!   position limits.
@@ -24,6 +26,7 @@
 //! [`Stepper`]: integrate::Stepper
 
 pub mod batch;
+pub mod batch_scene;
 pub mod contact;
 pub mod controller;
 pub mod dynamics;

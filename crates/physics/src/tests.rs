@@ -860,3 +860,101 @@ fn drives_holding_velocity_limits_keep_a_robot_moving_as_a_real_one_could() {
         "held within 15% of the limits: {held} rad/s"
     );
 }
+
+/// A scene's batch steps every state under its own torques as a runner
+/// steps it alone: the worm on its floor (contacts, hinge damping, a free
+/// root) and the UR5 under a plant's heavier links and friction with its
+/// drives holding their velocity limits (the joint laws), torques past the
+/// limits clamped, seven states so the last group is padded.
+#[test]
+fn a_scene_batch_steps_each_state_as_a_runner_does() {
+    use crate::batch_scene::SceneBatch;
+    use alnlab_common::state_log::StateFrame;
+    use rand::{RngExt, SeedableRng};
+
+    let mut arm = ur5(1.0);
+    arm.velocity_limits = true;
+    arm.plant = Some(crate::plant::Plant {
+        mass_scale: 1.2,
+        viscous_friction: 0.5,
+        coulomb_friction: 1.0,
+        ..crate::plant::Plant::default()
+    });
+    arm.validate().unwrap();
+    for scene in [Scene::default().resolve(), arm] {
+        let p = Prepared::new(&scene);
+        let read: Vec<usize> = (0..p.layout.variables.len())
+            .filter(|&v| p.variables.state_variable(v).is_some())
+            .collect();
+        assert!(read.len() >= 12, "{}: {read:?}", scene.name);
+        let mut batch = SceneBatch::new(&p, &read).expect("batchable");
+        let mut start = scene.initial_state(&p.model, &mut crate::scene::run_rng(5, 0, 0));
+        // A second under the scene's own controller: the worm lands.
+        Runner::new(&p, 5, 0, 0)
+            .advance(&mut start, 0, 1000, scene.dt.get())
+            .unwrap();
+        let mut kin = crate::dynamics::Kinematics::new(&p.model);
+        kin.update(&p.model, &start);
+        let touching = p
+            .points
+            .iter()
+            .any(|c| kin.point_position(c.link, &c.offset).z < p.surfaces.point_radius);
+        assert_eq!(
+            touching,
+            scene.kind == SceneKind::Worm,
+            "the worm starts on its floor"
+        );
+        let (n, frames, steps) = (7, 3, scene.steps_per_frame());
+        let dt = scene.dt.get();
+        let limit = scene.controller().torque_limit.get();
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(9);
+        let hinges = p.model.len() - 1;
+        let torques: Vec<Vec<Vec<Vector3<f64>>>> = (0..frames)
+            .map(|_| {
+                (0..n)
+                    .map(|_| {
+                        (0..hinges)
+                            .map(|_| Vector3::from_fn(|_, _| rng.random_range(-1.5..1.5) * limit))
+                            .collect()
+                    })
+                    .collect()
+            })
+            .collect();
+        batch.start(&start, n);
+        let mut frame = StateFrame {
+            time: 0.0,
+            run: 0,
+            frame: 0,
+            state: Vec::new(),
+            variables: Vec::new(),
+        };
+        let mut states = vec![start.clone(); n];
+        let mut runners: Vec<Runner> = (0..n).map(|_| Runner::new(&p, 0, 0, 0)).collect();
+        let mut worst: f64 = 0.0;
+        for (f, frame_torques) in torques.iter().enumerate() {
+            for (k, torques) in frame_torques.iter().enumerate() {
+                batch.drive(k, torques);
+                runners[k].drive(Some(torques));
+                runners[k].advance(&mut states[k], 0, steps, dt).unwrap();
+            }
+            batch.advance(steps, dt);
+            batch.observe();
+            for k in 0..n {
+                runners[k].observe(&states[k], 0.0, &mut frame);
+                let got = batch.values(k).expect("finite");
+                for (&v, g) in read.iter().zip(got) {
+                    let e = frame.variables[v];
+                    let error = (g - e).abs() / e.abs().max(1.0);
+                    worst = worst.max(error);
+                    assert!(
+                        error < 1e-9,
+                        "{}: frame {f}, state {k}, {}: {g} against {e}",
+                        scene.name,
+                        p.layout.variables[v]
+                    );
+                }
+            }
+        }
+        eprintln!("{}: worst relative difference {worst:e}", scene.name);
+    }
+}

@@ -14,8 +14,9 @@
 //! contact forces on the bodies that touch — links named after the URDF
 //! (`v.wrist_3_link.x`, `f_E.FL_LOWER_LEG.z`).
 
-use nalgebra::{Matrix3, UnitQuaternion, Vector3};
+use nalgebra::{Matrix3, Quaternion, SimdValue, UnitQuaternion, Vector3};
 
+use crate::batch::{KinematicsLanes, LANES, Lanes, StateLanes};
 use crate::contact::ContactPoint;
 use crate::dynamics::State;
 use crate::integrate::Evaluation;
@@ -207,6 +208,38 @@ impl VariableSet {
         }
     }
 
+    /// Variable `index` (in log order), if the state alone gives it — a
+    /// position, angle or velocity, not an acceleration, force or torque —
+    /// so that it can be read from batched states.
+    pub fn state_variable(&self, index: usize) -> Option<StateVariable> {
+        let mut at = 0;
+        for &(quantity, link) in &self.entries {
+            let width = match quantity {
+                Quantity::Roll | Quantity::Pitch => 1,
+                _ if quantity.is_joint() => 1,
+                _ => 3,
+            };
+            if index < at + width {
+                let from_state = matches!(
+                    quantity,
+                    Quantity::V
+                        | Quantity::Omega
+                        | Quantity::Roll
+                        | Quantity::Pitch
+                        | Quantity::JointPosition
+                        | Quantity::JointVelocity
+                );
+                return from_state.then_some(StateVariable {
+                    quantity,
+                    link,
+                    component: index - at,
+                });
+            }
+            at += width;
+        }
+        None
+    }
+
     /// The variable names, in order.
     pub fn names(&self) -> Vec<String> {
         let mut names = Vec::new();
@@ -264,6 +297,47 @@ impl VariableSet {
                 }
             };
             out.extend(vector.iter());
+        }
+    }
+}
+
+/// A variable a state gives alone ([`VariableSet::state_variable`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct StateVariable {
+    quantity: Quantity,
+    link: usize,
+    /// The axis of a vector quantity (0 otherwise).
+    component: usize,
+}
+
+impl StateVariable {
+    /// Its value in each of a batch group's states, whose kinematics are
+    /// `kin` — what [`VariableSet::values`] gives each one.
+    pub fn lanes(&self, state: &StateLanes, kin: &KinematicsLanes) -> Lanes {
+        let i = self.link;
+        match self.quantity {
+            Quantity::V => linear(&kin.vel[i])[self.component],
+            Quantity::Omega => angular(&kin.vel[i])[self.component],
+            Quantity::JointPosition => state.q[i],
+            Quantity::JointVelocity => state.qd[i],
+            Quantity::Roll | Quantity::Pitch => {
+                let q = &state.orient[i];
+                Lanes::from(std::array::from_fn::<f64, LANES, _>(|j| {
+                    let lane = Quaternion::new(
+                        q.w.extract(j),
+                        q.i.extract(j),
+                        q.j.extract(j),
+                        q.k.extract(j),
+                    );
+                    let (roll, pitch) = roll_pitch(&UnitQuaternion::new_unchecked(lane));
+                    if self.quantity == Quantity::Roll {
+                        roll
+                    } else {
+                        pitch
+                    }
+                }))
+            }
+            _ => unreachable!("only a state's own variables are made StateVariables"),
         }
     }
 }

@@ -23,6 +23,7 @@ use alnlab_aln::pwl::predict::{Path, Predictor, Scratch};
 use alnlab_aln::runtime::Runtime;
 use alnlab_codes::Entry;
 use alnlab_common::state_log::StateFrame;
+use alnlab_physics::batch_scene::SceneBatch;
 use alnlab_physics::dynamics::State;
 use alnlab_physics::{Prepared, Runner};
 use nalgebra::Vector3;
@@ -46,17 +47,24 @@ pub trait Model: Forward {
     fn predict(&mut self, actions: &[f64], frames: usize, out: &mut [f64]);
 }
 
-/// A simulator at `steps` integration steps per frame.
+/// A simulator at `steps` integration steps per frame. It costs a
+/// decision's candidates together, in SIMD lanes ([`SceneBatch`]), where
+/// the scene allows; one at a time otherwise (an RK4 scene, a plant's
+/// actuators, a task reading a variable the state alone does not give).
 pub struct Simulator<'a> {
     p: &'a Prepared,
     controls: Controls,
     runner: Runner<'a>,
+    /// The batched path, where the scene allows it.
+    lanes: Option<SceneBatch<'a>>,
     steps: u64,
     cost: Cost,
     start: State,
     state: State,
     torques: Vec<Vector3<f64>>,
     frame: StateFrame,
+    /// The scene's variables, of which the batched path fills the cost's.
+    values: Vec<f64>,
 }
 
 impl<'a> Simulator<'a> {
@@ -65,9 +73,12 @@ impl<'a> Simulator<'a> {
     pub fn new(p: &'a Prepared, controls: &Controls, steps: u64, cost: Cost) -> Simulator<'a> {
         let hinges = p.model.len() - 1;
         let rest = State::rest(&p.model, Vector3::zeros());
+        let read: Vec<usize> = cost.variables().collect();
         Simulator {
             controls: controls.clone(),
             runner: Runner::new(p, 0, 0, 0),
+            lanes: SceneBatch::new(p, &read),
+            values: vec![0.0; p.layout.variables.len()],
             steps: steps.max(1),
             cost,
             start: rest.clone(),
@@ -86,6 +97,47 @@ impl<'a> Simulator<'a> {
 }
 
 impl Simulator<'_> {
+    /// Whether it costs candidates together.
+    pub fn is_batched(&self) -> bool {
+        self.lanes.is_some()
+    }
+
+    /// [`Forward::costs`] with every candidate advanced together, frame by
+    /// frame; false (nothing costed) where the scene has no batched path.
+    fn batched_costs(&mut self, actions: &[f64], horizon: usize, costs: &mut [f64]) -> bool {
+        let Some(lanes) = &mut self.lanes else {
+            return false;
+        };
+        let d = self.controls.dims();
+        let dt = self.p.scene.frame_dt.get() / self.steps as f64;
+        lanes.start(&self.start, costs.len());
+        costs.fill(0.0);
+        for h in 0..horizon {
+            for k in 0..costs.len() {
+                let at = (k * horizon + h) * d;
+                self.controls.set(&actions[at..at + d], &mut self.torques);
+                lanes.drive(k, &self.torques);
+            }
+            lanes.advance(self.steps, dt);
+            lanes.observe();
+            for (k, cost) in costs.iter_mut().enumerate() {
+                if *cost == f64::INFINITY {
+                    continue;
+                }
+                match lanes.values(k) {
+                    Some(read) => {
+                        for (s, &x) in self.cost.variables().zip(read) {
+                            self.values[s] = x;
+                        }
+                        *cost += self.cost.of(&self.values);
+                    }
+                    None => *cost = f64::INFINITY,
+                }
+            }
+        }
+        true
+    }
+
     /// Steps `self.state` one frame under `action`'s torques and observes
     /// the frame reached; false if it blew up.
     fn frame(&mut self, action: &[f64]) -> bool {
@@ -126,6 +178,9 @@ impl Model for Simulator<'_> {
 
 impl Forward for Simulator<'_> {
     fn costs(&mut self, actions: &[f64], horizon: usize, costs: &mut [f64]) {
+        if self.batched_costs(actions, horizon, costs) {
+            return;
+        }
         let d = self.controls.dims();
         for (sequence, cost) in actions.chunks(horizon * d).zip(costs.iter_mut()) {
             copy_state(&mut self.state, &self.start);
@@ -825,5 +880,58 @@ mod tests {
             costs.iter().any(|&c| c != costs[0]),
             "torques move the costs"
         );
+    }
+
+    /// The simulator costs a decision's candidates together in SIMD lanes,
+    /// equal to stepping each alone to rounding: on the worm landed on its
+    /// floor (contacts), for a task on angles and one on a rate, at two and
+    /// ten steps a frame, torques past the limit included.
+    #[test]
+    fn simulator_candidates_batched_cost_what_each_alone_costs() {
+        let (p, _) = worm_pitch_and_torque();
+        let mut start = p
+            .scene
+            .initial_state(&p.model, &mut alnlab_physics::scene::run_rng(1, 0, 0));
+        Runner::new(&p, 1, 0, 0)
+            .advance(&mut start, 0, 1000, p.scene.dt.get())
+            .unwrap();
+        let controls = Controls::of(&p).unwrap();
+        let tasks = [
+            Task::HoldAngles {
+                name: "bend".into(),
+                targets: BTreeMap::from([("pitch.2".into(), 0.6), ("pitch.3".into(), -0.6)]),
+            },
+            Task::Spin {
+                name: "spin".into(),
+                variable: "omega.3.x".into(),
+                rate: 2.0,
+            },
+        ];
+        let (n, horizon, d) = (9, 5, controls.dims());
+        let actions: Vec<f64> = (0..n * horizon * d)
+            .map(|i| ((i as f64 * 0.618_033_988_7).fract() * 2.0 - 1.0) * 40.0)
+            .collect();
+        for task in &tasks {
+            for steps in [2, 10] {
+                let cost = task.over(&p.layout.variables, &p).unwrap();
+                let mut batched = Simulator::new(&p, &controls, steps, cost.clone());
+                let mut alone = Simulator::new(&p, &controls, steps, cost);
+                assert!(batched.is_batched());
+                alone.lanes = None;
+                let (mut a, mut b) = (vec![0.0; n], vec![0.0; n]);
+                for (model, costs) in [(&mut batched, &mut a), (&mut alone, &mut b)] {
+                    model.start(&start, &[]);
+                    model.costs(&actions, horizon, costs);
+                }
+                for (k, (x, y)) in a.iter().zip(&b).enumerate() {
+                    assert!(
+                        (x - y).abs() <= 1e-9 * y.abs().max(1.0),
+                        "{}, {steps} steps, candidate {k}: {x} against {y}",
+                        task.name()
+                    );
+                }
+                assert!(a.iter().any(|&c| c != a[0]), "torques move the costs");
+            }
+        }
     }
 }

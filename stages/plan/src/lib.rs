@@ -81,8 +81,10 @@ use crate::transitions::Transitions;
 /// spread of predicted costs; 5: robots, plants and hybrids, the ALN's
 /// planned frames as pairs; 6: each model's error over the horizon on its
 /// planner's states; 7: frames as the log records them, the plant's
-/// actuators given each decision's torques from its first step).
-pub const FORMAT_VERSION: u32 = 7;
+/// actuators given each decision's torques from its first step; 8: the
+/// simulator costs a decision's candidates together in SIMD lanes, which
+/// round differently).
+pub const FORMAT_VERSION: u32 = 8;
 /// File name of the per-frame table.
 pub const PLAN_FILE: &str = "plan.parquet";
 /// File name of the per-episode table.

@@ -1,0 +1,196 @@
+//! A scene's many states stepped together ([`crate::batch`]), each under
+//! torques of its own held over the steps: what a planner needs to try a
+//! decision's candidate torque sequences at once. The forces are those
+//! [`crate::runner::SceneForces`] gives one state — hinge torques and
+//! damping, a robot's joint laws, contacts with floor and wall — computed
+//! for every state at every step. A joint law and a contact branch on each
+//! state's own numbers, so they are evaluated lane by lane; the tree's
+//! dynamics, where the time goes, run in SIMD lanes.
+//!
+//! Results equal [`crate::Runner`]'s stepping to rounding, not bit for bit
+//! (see [`crate::batch`]).
+
+use nalgebra::{Matrix3, SimdValue, Vector3, Vector6};
+
+use crate::Integrator;
+use crate::batch::{Batch, KinematicsLanes, LANES, LaneForces, Lanes, LoadsLanes, StateLanes};
+use crate::dynamics::{Loads, State};
+use crate::model::{Model, Root};
+use crate::runner::Prepared;
+use crate::spatial::{angular, linear, spatial};
+use crate::variables::StateVariable;
+
+/// Many states of one scene, each driven by torques of its own, and the
+/// variables read from them after a stretch of steps.
+pub struct SceneBatch<'a> {
+    p: &'a Prepared,
+    batch: Option<Batch>,
+    forces: BatchForces<'a>,
+    /// The variables read ([`SceneBatch::observe`]), scene layout indices.
+    read: Vec<StateVariable>,
+    /// State by state, the values of the variables read.
+    values: Vec<f64>,
+    /// State by state, whether it stayed finite.
+    finite: Vec<bool>,
+}
+
+impl<'a> SceneBatch<'a> {
+    /// A batch of scene `p` reading its variables `read` (indices into its
+    /// layout's variables); `None` where the scene cannot be stepped in
+    /// lanes: an integrator other than semi-implicit Euler, a plant whose
+    /// actuators produce other than the command (their lag, delay and noise
+    /// are tracked state by state by [`crate::Runner`]), or a variable read
+    /// that is not the state's alone.
+    pub fn new(p: &'a Prepared, read: &[usize]) -> Option<SceneBatch<'a>> {
+        let actuators = p.scene.plant.as_ref().is_some_and(|pl| pl.has_actuators());
+        if p.scene.integrator != Integrator::SemiImplicitEuler || actuators {
+            return None;
+        }
+        let read = read
+            .iter()
+            .map(|&v| p.variables.state_variable(v))
+            .collect::<Option<Vec<_>>>()?;
+        Some(SceneBatch {
+            p,
+            batch: None,
+            forces: BatchForces {
+                p,
+                g: Vec::new(),
+                damping: Lanes::splat(p.scene.added_damping()),
+                limit: p.scene.controller().torque_limit.get(),
+            },
+            read,
+            values: Vec::new(),
+            finite: Vec::new(),
+        })
+    }
+
+    /// Starts `n` states from `state`, with no torques; allocates only when
+    /// `n` differs from the last start's.
+    pub fn start(&mut self, state: &State, n: usize) {
+        let model = &self.p.model;
+        match &mut self.batch {
+            Some(batch) if batch.len == n => batch.fill(state),
+            _ => {
+                let states = vec![state.clone(); n];
+                let loads = vec![Loads::zeros(model); n];
+                let batch = Batch::pack(model, &states, &loads);
+                let zero = Vector3::from_element(Lanes::splat(0.0));
+                self.forces.g = vec![vec![zero; model.len()]; batch.states.len()];
+                self.values = vec![0.0; n * self.read.len()];
+                self.finite = vec![true; n];
+                self.batch = Some(batch);
+            }
+        }
+    }
+
+    /// Holds `torques` (one per hinge, as [`crate::Runner::drive`] takes
+    /// them, clamped the same way) on state `k` from now on.
+    pub fn drive(&mut self, k: usize, torques: &[Vector3<f64>]) {
+        let (g, j) = (k / LANES, k % LANES);
+        let limit = self.forces.limit;
+        for (i, torque) in torques.iter().enumerate() {
+            let link = i + 1;
+            let mut t = torque.map(|x| x.clamp(-limit, limit));
+            if let Some(law) = &self.p.laws[link] {
+                t.x = law.clamp(t.x);
+            }
+            for (lanes, value) in self.forces.g[g][link].iter_mut().zip(t.iter()) {
+                lanes.replace(j, *value);
+            }
+        }
+    }
+
+    /// Advances every state `steps` steps of `dt`.
+    pub fn advance(&mut self, steps: u64, dt: f64) {
+        let batch = self.batch.as_mut().expect("started");
+        for _ in 0..steps {
+            batch.step_under(&self.p.model, dt, &mut self.forces);
+        }
+    }
+
+    /// Reads the variables of every state as it is now.
+    pub fn observe(&mut self) {
+        let batch = self.batch.as_mut().expect("started");
+        let (n, m) = (batch.len, self.read.len());
+        for k in 0..n {
+            self.finite[k] = batch.is_finite(k);
+        }
+        for g in 0..batch.states.len() {
+            let (state, kin) = batch.kinematics(&self.p.model, g);
+            for (r, variable) in self.read.iter().enumerate() {
+                let lanes = variable.lanes(state, kin);
+                for j in 0..LANES.min(n - g * LANES) {
+                    self.values[(g * LANES + j) * m + r] = lanes.extract(j);
+                }
+            }
+        }
+    }
+
+    /// State `k`'s variables read at the last [`SceneBatch::observe`], in
+    /// the order given to [`SceneBatch::new`]; `None` if it blew up (a
+    /// number not finite) since its start.
+    pub fn values(&self, k: usize) -> Option<&[f64]> {
+        let m = self.read.len();
+        self.finite[k].then(|| &self.values[k * m..(k + 1) * m])
+    }
+}
+
+/// The scene's forces on a batch's states, per group of [`LANES`].
+struct BatchForces<'a> {
+    p: &'a Prepared,
+    /// Per group, per link, the control torque g on its parent (a one-DOF
+    /// joint's effort in x, already clamped to its limit).
+    g: Vec<Vec<Vector3<Lanes>>>,
+    /// Viscous damping at every ball hinge.
+    damping: Lanes,
+    /// The controller's torque limit.
+    limit: f64,
+}
+
+impl LaneForces for BatchForces<'_> {
+    fn apply(
+        &mut self,
+        model: &Model,
+        g: usize,
+        state: &StateLanes,
+        kin: &KinematicsLanes,
+        loads: &mut LoadsLanes,
+    ) {
+        let torques = &self.g[g];
+        for ((tau, t), w) in loads.tau.iter_mut().zip(torques).zip(&state.rates) {
+            *tau = -t - w * self.damping;
+        }
+        if model.root == Root::Pinned {
+            loads.tau[0] = Vector3::from_element(Lanes::splat(0.0));
+        }
+        for (i, law) in self.p.laws.iter().enumerate() {
+            loads.effort[i] = match law {
+                Some(law) => Lanes::from(std::array::from_fn::<f64, LANES, _>(|j| {
+                    let (q, qd) = (state.q[i].extract(j), state.qd[i].extract(j));
+                    law.drive(torques[i].x.extract(j), qd) + law.passive(q, qd)
+                })),
+                None => Lanes::splat(0.0),
+            };
+        }
+        loads.f_ext.fill(Vector6::from_element(Lanes::splat(0.0)));
+        for point in &self.p.points {
+            let i = point.link;
+            for j in 0..LANES {
+                let rot: Matrix3<f64> = kin.rot[i].map(|x| x.extract(j));
+                let x = kin.pos[i].map(|x| x.extract(j)) + rot * point.offset;
+                let force = self.p.surfaces.point_force(model, point, &x, || {
+                    let v: Vector6<f64> = kin.vel[i].map(|x| x.extract(j));
+                    rot * (linear(&v) + angular(&v).cross(&point.offset))
+                });
+                if force != Vector3::zeros() {
+                    let local = rot.transpose() * force;
+                    let f = spatial(&point.offset.cross(&local), &local);
+                    for (lanes, value) in loads.f_ext[i].iter_mut().zip(f.iter()) {
+                        lanes.replace(j, lanes.extract(j) + value);
+                    }
+                }
+            }
+        }
+    }
+}
