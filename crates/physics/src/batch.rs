@@ -350,6 +350,21 @@ impl Batch {
         (&self.states[g], &self.ws.kin)
     }
 
+    /// Group `g`'s states, their kinematics and their accelerations under
+    /// the loads `forces` gives them now.
+    pub fn evaluate(
+        &mut self,
+        model: &Model,
+        g: usize,
+        forces: &mut impl LaneForces,
+    ) -> (&StateLanes, &KinematicsLanes, &AccelLanes) {
+        self.ws.kinematics(model, &self.states[g]);
+        forces.apply(model, g, &self.states[g], &self.ws.kin, &mut self.loads[g]);
+        self.ws
+            .forward(model, &self.states[g], &self.loads[g], &mut self.accel);
+        (&self.states[g], &self.ws.kin, &self.accel)
+    }
+
     /// The accelerations of group `g`'s states under their loads
     /// (kinematics and the articulated-body algorithm, as
     /// [`crate::dynamics::Workspace::forward`] computes them).

@@ -18,7 +18,7 @@ use crate::dynamics::{Loads, State};
 use crate::model::{Model, Root};
 use crate::runner::Prepared;
 use crate::spatial::{angular, linear, spatial};
-use crate::variables::StateVariable;
+use crate::variables::LaneVariable;
 
 /// Many states of one scene, each driven by torques of its own, and the
 /// variables read from them after a stretch of steps.
@@ -27,7 +27,9 @@ pub struct SceneBatch<'a> {
     batch: Option<Batch>,
     forces: BatchForces<'a>,
     /// The variables read ([`SceneBatch::observe`]), scene layout indices.
-    read: Vec<StateVariable>,
+    read: Vec<LaneVariable>,
+    /// Whether a variable read takes the accelerations.
+    accelerations: bool,
     /// State by state, the values of the variables read.
     values: Vec<f64>,
     /// State by state, whether it stayed finite.
@@ -40,7 +42,8 @@ impl<'a> SceneBatch<'a> {
     /// lanes: an integrator other than semi-implicit Euler, a plant whose
     /// actuators produce other than the command (their lag, delay and noise
     /// are tracked state by state by [`crate::Runner`]), or a variable read
-    /// that is not the state's alone.
+    /// that a batch does not give (a link's acceleration or external
+    /// force).
     pub fn new(p: &'a Prepared, read: &[usize]) -> Option<SceneBatch<'a>> {
         let actuators = p.scene.plant.as_ref().is_some_and(|pl| pl.has_actuators());
         if p.scene.integrator != Integrator::SemiImplicitEuler || actuators {
@@ -48,8 +51,9 @@ impl<'a> SceneBatch<'a> {
         }
         let read = read
             .iter()
-            .map(|&v| p.variables.state_variable(v))
+            .map(|&v| p.variables.lane_variable(v))
             .collect::<Option<Vec<_>>>()?;
+        let accelerations = read.iter().any(LaneVariable::needs_accelerations);
         Some(SceneBatch {
             p,
             batch: None,
@@ -60,6 +64,7 @@ impl<'a> SceneBatch<'a> {
                 limit: p.scene.controller().torque_limit.get(),
             },
             read,
+            accelerations,
             values: Vec::new(),
             finite: Vec::new(),
         })
@@ -101,6 +106,15 @@ impl<'a> SceneBatch<'a> {
         }
     }
 
+    /// Sets state `k`'s one-DOF joint at `link` to position `q` and velocity
+    /// `qd`.
+    pub fn set_joint(&mut self, k: usize, link: usize, q: f64, qd: f64) {
+        let batch = self.batch.as_mut().expect("started");
+        let s = &mut batch.states[k / LANES];
+        s.q[link].replace(k % LANES, q);
+        s.qd[link].replace(k % LANES, qd);
+    }
+
     /// Advances every state `steps` steps of `dt`.
     pub fn advance(&mut self, steps: u64, dt: f64) {
         let batch = self.batch.as_mut().expect("started");
@@ -109,17 +123,28 @@ impl<'a> SceneBatch<'a> {
         }
     }
 
-    /// Reads the variables of every state as it is now.
+    /// Reads the variables of every state as it is now, under the torques
+    /// driven now.
     pub fn observe(&mut self) {
         let batch = self.batch.as_mut().expect("started");
         let (n, m) = (batch.len, self.read.len());
         for k in 0..n {
             self.finite[k] = batch.is_finite(k);
         }
+        let model = &self.p.model;
         for g in 0..batch.states.len() {
-            let (state, kin) = batch.kinematics(&self.p.model, g);
+            let (state, kin, accel) = match self.accelerations {
+                true => {
+                    let (state, kin, accel) = batch.evaluate(model, g, &mut self.forces);
+                    (state, kin, Some(accel))
+                }
+                false => {
+                    let (state, kin) = batch.kinematics(model, g);
+                    (state, kin, None)
+                }
+            };
             for (r, variable) in self.read.iter().enumerate() {
-                let lanes = variable.lanes(state, kin);
+                let lanes = variable.lanes(state, kin, accel, &self.forces.g[g]);
                 for j in 0..LANES.min(n - g * LANES) {
                     self.values[(g * LANES + j) * m + r] = lanes.extract(j);
                 }

@@ -865,7 +865,8 @@ fn drives_holding_velocity_limits_keep_a_robot_moving_as_a_real_one_could() {
 /// steps it alone: the worm on its floor (contacts, hinge damping, a free
 /// root) and the UR5 under a plant's heavier links and friction with its
 /// drives holding their velocity limits (the joint laws), torques past the
-/// limits clamped, seven states so the last group is padded.
+/// limits clamped, seven states so the last group is padded; every variable
+/// a batch reads, the arm's joint accelerations and efforts among them.
 #[test]
 fn a_scene_batch_steps_each_state_as_a_runner_does() {
     use crate::batch_scene::SceneBatch;
@@ -884,7 +885,7 @@ fn a_scene_batch_steps_each_state_as_a_runner_does() {
     for scene in [Scene::default().resolve(), arm] {
         let p = Prepared::new(&scene);
         let read: Vec<usize> = (0..p.layout.variables.len())
-            .filter(|&v| p.variables.state_variable(v).is_some())
+            .filter(|&v| p.variables.lane_variable(v).is_some())
             .collect();
         assert!(read.len() >= 12, "{}: {read:?}", scene.name);
         let mut batch = SceneBatch::new(&p, &read).expect("batchable");

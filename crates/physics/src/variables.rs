@@ -16,7 +16,7 @@
 
 use nalgebra::{Matrix3, Quaternion, SimdValue, UnitQuaternion, Vector3};
 
-use crate::batch::{KinematicsLanes, LANES, Lanes, StateLanes};
+use crate::batch::{AccelLanes, KinematicsLanes, LANES, Lanes, StateLanes};
 use crate::contact::ContactPoint;
 use crate::dynamics::State;
 use crate::integrate::Evaluation;
@@ -208,10 +208,9 @@ impl VariableSet {
         }
     }
 
-    /// Variable `index` (in log order), if the state alone gives it — a
-    /// position, angle or velocity, not an acceleration, force or torque —
-    /// so that it can be read from batched states.
-    pub fn state_variable(&self, index: usize) -> Option<StateVariable> {
+    /// Variable `index` (in log order), if a batch of states can give it
+    /// ([`LaneVariable`]): not a link's acceleration or external force.
+    pub fn lane_variable(&self, index: usize) -> Option<LaneVariable> {
         let mut at = 0;
         for &(quantity, link) in &self.entries {
             let width = match quantity {
@@ -220,16 +219,11 @@ impl VariableSet {
                 _ => 3,
             };
             if index < at + width {
-                let from_state = matches!(
+                let batched = !matches!(
                     quantity,
-                    Quantity::V
-                        | Quantity::Omega
-                        | Quantity::Roll
-                        | Quantity::Pitch
-                        | Quantity::JointPosition
-                        | Quantity::JointVelocity
+                    Quantity::A | Quantity::OmegaDot | Quantity::FE | Quantity::GE
                 );
-                return from_state.then_some(StateVariable {
+                return batched.then_some(LaneVariable {
                     quantity,
                     link,
                     component: index - at,
@@ -301,25 +295,43 @@ impl VariableSet {
     }
 }
 
-/// A variable a state gives alone ([`VariableSet::state_variable`]).
+/// A variable read from a batch's states ([`VariableSet::lane_variable`]):
+/// a position, angle or velocity, a joint's acceleration, or a control
+/// torque.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct StateVariable {
+pub struct LaneVariable {
     quantity: Quantity,
     link: usize,
     /// The axis of a vector quantity (0 otherwise).
     component: usize,
 }
 
-impl StateVariable {
+impl LaneVariable {
+    /// Whether reading it takes the states' accelerations.
+    pub fn needs_accelerations(&self) -> bool {
+        self.quantity == Quantity::JointAcceleration
+    }
+
     /// Its value in each of a batch group's states, whose kinematics are
-    /// `kin` — what [`VariableSet::values`] gives each one.
-    pub fn lanes(&self, state: &StateLanes, kin: &KinematicsLanes) -> Lanes {
+    /// `kin`, accelerations `accel` (needed only where
+    /// [`LaneVariable::needs_accelerations`]) and control torques `g` (per
+    /// link) — what [`VariableSet::values`] gives each one.
+    pub fn lanes(
+        &self,
+        state: &StateLanes,
+        kin: &KinematicsLanes,
+        accel: Option<&AccelLanes>,
+        g: &[Vector3<Lanes>],
+    ) -> Lanes {
         let i = self.link;
         match self.quantity {
             Quantity::V => linear(&kin.vel[i])[self.component],
             Quantity::Omega => angular(&kin.vel[i])[self.component],
+            Quantity::G => g[i][self.component],
             Quantity::JointPosition => state.q[i],
             Quantity::JointVelocity => state.qd[i],
+            Quantity::JointAcceleration => accel.expect("accelerations evaluated").qdd[i],
+            Quantity::JointEffort => g[i].x,
             Quantity::Roll | Quantity::Pitch => {
                 let q = &state.orient[i];
                 Lanes::from(std::array::from_fn::<f64, LANES, _>(|j| {
@@ -337,7 +349,9 @@ impl StateVariable {
                     }
                 }))
             }
-            _ => unreachable!("only a state's own variables are made StateVariables"),
+            Quantity::A | Quantity::OmegaDot | Quantity::FE | Quantity::GE => {
+                unreachable!("not made a LaneVariable")
+            }
         }
     }
 }

@@ -97,11 +97,6 @@ impl<'a> Simulator<'a> {
 }
 
 impl Simulator<'_> {
-    /// Whether it costs candidates together.
-    pub fn is_batched(&self) -> bool {
-        self.lanes.is_some()
-    }
-
     /// [`Forward::costs`] with every candidate advanced together, frame by
     /// frame; false (nothing costed) where the scene has no batched path.
     fn batched_costs(&mut self, actions: &[f64], horizon: usize, costs: &mut [f64]) -> bool {
@@ -530,9 +525,14 @@ impl Forward for Piecewise<'_> {
 /// nominal prediction into the next values of the predicted variables,
 /// from which the next frame's state is rebuilt — a robot's joint
 /// positions and velocities are predicted variables, so its state is made
-/// of them. Costed at the corrected values.
+/// of them. Costed at the corrected values. A decision's candidates are
+/// advanced together — the simulator in SIMD lanes ([`SceneBatch`]), the
+/// correction through the predictor's batched path — where the scene
+/// allows, one at a time otherwise.
 pub struct Hybrid<'a> {
     nominal: Simulator<'a>,
+    /// The nominal simulator's batched path, reading the learned variables.
+    lanes: Option<SceneBatch<'a>>,
     predictor: &'a Predictor<'a>,
     scratch: Scratch<'a>,
     /// Per learned variable, its index among the scene's variables.
@@ -550,6 +550,10 @@ pub struct Hybrid<'a> {
     inputs: Vec<f64>,
     next: Vec<f64>,
     values: Vec<f64>,
+    /// A decision's candidates' `inputs`, `[variable][candidate]`
+    /// flattened, and their predicted next values `[output][candidate]`.
+    columns: Vec<f64>,
+    batch_next: Vec<Vec<f64>>,
 }
 
 impl<'a> Hybrid<'a> {
@@ -608,6 +612,9 @@ impl<'a> Hybrid<'a> {
         }
         let width = learned.len();
         Ok(Hybrid {
+            lanes: SceneBatch::new(nominal, &in_scene),
+            columns: Vec::new(),
+            batch_next: Vec::new(),
             nominal: Simulator::new(
                 nominal,
                 controls,
@@ -668,6 +675,81 @@ impl<'a> Hybrid<'a> {
         }
         true
     }
+
+    /// [`Forward::costs`] with every candidate advanced together, frame by
+    /// frame, as [`Hybrid::step`] advances one; false (nothing costed)
+    /// where the scene has no batched path.
+    fn batched_costs(&mut self, actions: &[f64], horizon: usize, costs: &mut [f64]) -> bool {
+        let Some(lanes) = &mut self.lanes else {
+            return false;
+        };
+        let n = costs.len();
+        costs.fill(0.0);
+        if n == 0 || horizon == 0 {
+            return true;
+        }
+        let (len, width) = (actions.len() / n, self.start.len());
+        let d = len / horizon;
+        let sim = &mut self.nominal;
+        let dt = sim.p.scene.frame_dt.get() / sim.steps as f64;
+        self.columns.resize(2 * width * n, 0.0);
+        for (column, &x) in self.columns.chunks_mut(n).zip(&self.start) {
+            column.fill(x);
+        }
+        self.batch_next.resize(self.predicted.len(), Vec::new());
+        for next in &mut self.batch_next {
+            next.resize(n, 0.0);
+        }
+        lanes.start(&sim.start, n);
+        for h in 0..horizon {
+            for k in 0..n {
+                let frame = &actions[k * len + h * d..k * len + (h + 1) * d];
+                if h > 0 {
+                    for &(link, q, qd) in &self.joints {
+                        let column = |v: usize| self.columns[v * n + k];
+                        lanes.set_joint(k, link, column(q), column(qd));
+                    }
+                }
+                for &(c, v) in &self.torques {
+                    self.columns[v * n + k] = frame[c];
+                }
+                sim.controls.set(frame, &mut sim.torques);
+                lanes.drive(k, &sim.torques);
+            }
+            lanes.advance(sim.steps, dt);
+            lanes.observe();
+            for (k, cost) in costs.iter_mut().enumerate() {
+                match lanes.values(k) {
+                    Some(read) => {
+                        for (v, &x) in read.iter().enumerate() {
+                            self.columns[(width + v) * n + k] = x;
+                        }
+                    }
+                    None => *cost = f64::INFINITY,
+                }
+            }
+            let columns: Vec<&[f64]> = self.columns.chunks(n).collect();
+            self.predictor.values_from(
+                &columns,
+                &columns[width..],
+                &mut self.scratch,
+                &mut self.batch_next,
+            );
+            for (&v, next) in self.predicted.iter().zip(&self.batch_next) {
+                self.columns[v * n..(v + 1) * n].copy_from_slice(next);
+            }
+            for (k, cost) in costs.iter_mut().enumerate() {
+                if *cost == f64::INFINITY {
+                    continue;
+                }
+                for &(v, s) in &self.costed {
+                    self.values[s] = self.columns[v * n + k];
+                }
+                *cost += self.cost.of(&self.values);
+            }
+        }
+        true
+    }
 }
 
 impl Model for Hybrid<'_> {
@@ -691,6 +773,9 @@ impl Model for Hybrid<'_> {
 
 impl Forward for Hybrid<'_> {
     fn costs(&mut self, actions: &[f64], horizon: usize, costs: &mut [f64]) {
+        if self.batched_costs(actions, horizon, costs) {
+            return;
+        }
         let width = self.start.len();
         let len = actions.len() / costs.len().max(1);
         let d = len / horizon.max(1);
@@ -916,7 +1001,7 @@ mod tests {
                 let cost = task.over(&p.layout.variables, &p).unwrap();
                 let mut batched = Simulator::new(&p, &controls, steps, cost.clone());
                 let mut alone = Simulator::new(&p, &controls, steps, cost);
-                assert!(batched.is_batched());
+                assert!(batched.lanes.is_some());
                 alone.lanes = None;
                 let (mut a, mut b) = (vec![0.0; n], vec![0.0; n]);
                 for (model, costs) in [(&mut batched, &mut a), (&mut alone, &mut b)] {
@@ -933,5 +1018,99 @@ mod tests {
                 assert!(a.iter().any(|&c| c != a[0]), "torques move the costs");
             }
         }
+    }
+
+    /// The hybrid costs a decision's candidates together — its simulator
+    /// in SIMD lanes, its correction batched — equal to advancing each
+    /// alone to rounding: on the UR5, every joint's position and velocity
+    /// corrected from its own value and nominal prediction, efforts past the
+    /// wrists' limits clamped.
+    #[test]
+    fn hybrid_candidates_batched_cost_what_each_alone_costs() {
+        use alnlab_aln::model::Reads;
+        use alnlab_aln::pwl::Tree;
+        use alnlab_physics::SceneKind;
+        use alnlab_physics::controller::Amplitude;
+        let mut scene = Scene {
+            name: "ur5".into(),
+            kind: SceneKind::Urdf,
+            file: Some("robots/ur5/ur5_robot.urdf".into()),
+            controller: Some(ControllerParams {
+                kind: ControllerKind::Random,
+                amplitude: vec![Amplitude::Axis(60.0)],
+                ..ControllerParams::default()
+            }),
+            ..Scene::default()
+        };
+        let workspace = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
+        scene.read_description(&workspace).unwrap();
+        let p = Prepared::new(&scene);
+        let entries: Vec<Entry> = p
+            .layout
+            .variables
+            .iter()
+            .map(|v| entry(v, -10.0, 10.0, 201))
+            .collect();
+        let learned: Vec<&Entry> = entries.iter().collect();
+        let width = learned.len();
+        let predicted: Vec<usize> = (0..width)
+            .filter(|&v| entries[v].variable.starts_with("q"))
+            .filter(|&v| !entries[v].variable.starts_with("qdd"))
+            .collect();
+        assert_eq!(predicted.len(), 12, "six joints' q and qd");
+        let trees: Vec<Tree> = predicted
+            .iter()
+            .map(|_| Tree::affine(0.3, &[0.02, -0.01]))
+            .collect();
+        let reads: Vec<Reads> = predicted
+            .iter()
+            .map(|&v| Reads {
+                variable: v,
+                inputs: vec![v, width + v],
+            })
+            .collect();
+        let inputs: Vec<&Entry> = learned.iter().chain(&learned).copied().collect();
+        let points = vec![0.0; 2 * width];
+        let predictor = Predictor::new(&trees, &reads, &inputs, &points);
+        let task = Task::HoldAngles {
+            name: "raise".into(),
+            targets: BTreeMap::from([
+                ("q.shoulder_lift_joint".into(), -1.2),
+                ("q.elbow_joint".into(), 0.8),
+            ]),
+        };
+        let cost = task.over(&p.layout.variables, &p).unwrap();
+        let controls = Controls::of(&p).unwrap();
+        let start = p
+            .scene
+            .initial_state(&p.model, &mut alnlab_physics::scene::run_rng(2, 0, 0));
+        let mut frame = StateFrame {
+            time: 0.0,
+            run: 0,
+            frame: 0,
+            state: Vec::new(),
+            variables: Vec::new(),
+        };
+        Runner::new(&p, 2, 0, 0).observe(&start, 0.0, &mut frame);
+        let (n, horizon, d) = (9, 4, controls.dims());
+        let actions: Vec<f64> = (0..n * horizon * d)
+            .map(|i| ((i as f64 * 0.618_033_988_7).fract() * 2.0 - 1.0) * 60.0)
+            .collect();
+        let hybrid = || Hybrid::new(&p, &predictor, &learned, &controls, cost.clone()).unwrap();
+        let (mut batched, mut alone) = (hybrid(), hybrid());
+        assert!(batched.lanes.is_some());
+        alone.lanes = None;
+        let (mut a, mut b) = (vec![0.0; n], vec![0.0; n]);
+        for (model, costs) in [(&mut batched, &mut a), (&mut alone, &mut b)] {
+            model.start(&start, &frame.variables);
+            model.costs(&actions, horizon, costs);
+        }
+        for (k, (x, y)) in a.iter().zip(&b).enumerate() {
+            assert!(
+                (x - y).abs() <= 1e-9 * y.abs().max(1.0),
+                "candidate {k}: {x} against {y}"
+            );
+        }
+        assert!(a.iter().any(|&c| c != a[0]), "torques move the costs");
     }
 }

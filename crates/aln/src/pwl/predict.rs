@@ -438,11 +438,25 @@ impl<'m> Predictor<'m> {
     /// batched evaluation, not quantized, nothing allocated — for a planner
     /// that advances every candidate of a decision together.
     pub fn values(&self, columns: &[&[f64]], scratch: &mut Scratch<'m>, next: &mut [Vec<f64>]) {
+        self.values_from(columns, columns, scratch, next);
+    }
+
+    /// [`Predictor::values`] with each output advanced from its value in
+    /// `base` (a column per learned variable) instead of `columns`: a
+    /// correction on another model's predictions, as
+    /// [`Predictor::next_values_from`] for one state.
+    pub fn values_from(
+        &self,
+        columns: &[&[f64]],
+        base: &[&[f64]],
+        scratch: &mut Scratch<'m>,
+        next: &mut [Vec<f64>],
+    ) {
         let rows = columns.first().map_or(0, |c| c.len());
         let wide = self.vectors;
         for (o, next) in next.iter_mut().enumerate().take(self.outputs.len()) {
             let out = &self.outputs[o];
-            let current = columns[out.variable];
+            let current = base[out.variable];
             for start in (0..rows).step_by(BLOCK) {
                 let block = BLOCK.min(rows - start);
                 let values = self.block_values(o, columns, start, block, wide, scratch);
