@@ -202,6 +202,13 @@ def check(name: str, log: Path) -> dict:
     if any(k in plant for k in actuators[:3]) and "torque_noise" not in plant:
         limits = {j: float(model.effortLimit[model.joints[ids[j]].idx_v]) for j in joints}
         recomputed = actuated(frames, joints, scene, plant, limits)
+    # A log of applied efforts says its total effort is theirs plus the
+    # passive one, as summed below.
+    total = model_record["robot_conventions"]["passive"]
+    if any(k.endswith(".applied") for k in frames[0][1]):
+        assert total.endswith("applied + passive"), (name, total)
+    else:
+        assert total.endswith("tau + passive"), (name, total)
     compared = {"velocity": 0, "pose": 0}
     largest_acceleration = 0.0
     for index, (log_time, x) in enumerate(frames):

@@ -30,8 +30,9 @@ pub use alnlab_physics::replay::SCENE_RECORD;
 pub use alnlab_physics::{Integrator, Scene, SceneKind};
 
 /// Version of what this stage writes; part of every cache key, bumped when the
-/// same parameters would produce different bytes.
-pub const FORMAT_VERSION: u32 = 4;
+/// same parameters would produce different bytes (5: a log of applied
+/// efforts says its total effort is applied + passive).
+pub const FORMAT_VERSION: u32 = 5;
 
 /// File name of the trajectory log.
 pub const TRAJECTORY_FILE: &str = "trajectory.mcap";
@@ -272,6 +273,15 @@ fn model_record(p: &Prepared) -> std::collections::BTreeMap<String, String> {
                         total effort is tau + passive",
             "links": "model links are the URDF's moving bodies; links fixed to one are merged into it",
         });
+        if scene.logs_applied() {
+            json["robot_conventions"]["passive"] = "damping, friction and soft-limit effort at the \
+                frame's state; the joint's total effort is applied + passive"
+                .into();
+            json["robot_conventions"]["applied"] = "joint.<j>.applied: the effort the joint's \
+                drive applied, where it differs from the command tau (drives holding the URDF's \
+                velocity limits, a plant's actuators)"
+                .into();
+        }
     }
     if let Some(plant) = &scene.plant {
         json["plant"] = serde_json::json!({
