@@ -85,6 +85,15 @@ impl Base {
     pub fn is_current(&self) -> bool {
         *self == Base::Current
     }
+
+    /// The entries of a model's inputs over the `learned` ones: those, and
+    /// for [`Base::Nominal`] the same again for their nominal predictions.
+    pub fn inputs<'e>(self, learned: &[&'e Entry]) -> Vec<&'e Entry> {
+        match self {
+            Base::Current => learned.to_vec(),
+            Base::Nominal => learned.iter().chain(learned).copied().collect(),
+        }
+    }
 }
 
 /// The name under which a hybrid's tree reads the nominal simulator's

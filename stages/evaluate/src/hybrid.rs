@@ -103,7 +103,7 @@ impl<'e> Hybrids<'e> {
         rows: &[usize],
         peer: bool,
     ) -> Hybrids<'e> {
-        let inputs = inputs(learned);
+        let inputs = alnlab_aln::model::Base::Nominal.inputs(learned);
         let x = columns(x, &nominal);
         let linear = piecewise::robust_linear(&inputs, &reads, &x, &nominal, y, rows);
         let peer = peer.then(|| Peer::fit(learned, scored, &x, &nominal, y, rows));
@@ -116,12 +116,6 @@ impl<'e> Hybrids<'e> {
             peer,
         }
     }
-}
-
-/// A hybrid's input entries: the learned variables, then the same again
-/// for their nominal predictions.
-pub fn inputs<'e>(learned: &[&'e Entry]) -> Vec<&'e Entry> {
-    learned.iter().chain(learned).copied().collect()
 }
 
 /// A hybrid's input columns `[input][row]`: the current values `x`, then
@@ -191,15 +185,16 @@ pub fn path<'a>(
                 else {
                     continue;
                 };
-                let steps = replays[row.scene].prepared.scene.nominal_steps_per_frame();
-                if replayer.next_frame(from, steps, &mut next).is_err() {
+                let (current, nominal) = inputs.split_at_mut(width);
+                let replay = &replays[row.scene];
+                if step_nominal(
+                    frames, replay, replayer, row.scene, from, &mut next, nominal,
+                )
+                .is_err()
+                {
                     continue;
                 }
-                let (current, nominal) = inputs.split_at_mut(width);
                 current.copy_from_slice(state);
-                for (v, value) in nominal.iter_mut().enumerate() {
-                    *value = frames.value(row.scene, &next, v).unwrap_or(f64::NAN);
-                }
                 correct(&inputs, &inputs[width..], &mut corrected);
                 std::hint::black_box(&corrected);
             }
@@ -323,19 +318,37 @@ impl<'a> Restep<'a> {
         for &(state, v) in fill {
             self.from.state[state] = values[v];
         }
-        let steps = self.replays[row.scene]
-            .prepared
-            .scene
-            .nominal_steps_per_frame();
-        replayer.next_frame(&self.from, steps, &mut self.next)?;
-        for (v, value) in nominal.iter_mut().enumerate() {
-            *value = self
-                .frames
-                .value(row.scene, &self.next, v)
-                .unwrap_or(f64::NAN);
-        }
-        Ok(())
+        let replay = &self.replays[row.scene];
+        step_nominal(
+            self.frames,
+            replay,
+            replayer,
+            row.scene,
+            &self.from,
+            &mut self.next,
+            nominal,
+        )
     }
+}
+
+/// The nominal simulator's prediction `nominal` (every learned variable)
+/// one frame after `from`, a frame of `scene` (whose replay is `replay`),
+/// stepped by `replayer` at the nominal step (the scene's own, or its
+/// `nominal_steps`) into `next`; NaN for a variable the frame lacks.
+fn step_nominal(
+    frames: &LoggedFrames,
+    replay: &SceneReplay,
+    replayer: &mut Replayer,
+    scene: &str,
+    from: &StateFrame,
+    next: &mut StateFrame,
+    nominal: &mut [f64],
+) -> Result<()> {
+    replayer.next_frame(from, replay.prepared.scene.nominal_steps_per_frame(), next)?;
+    for (v, value) in nominal.iter_mut().enumerate() {
+        *value = frames.value(scene, next, v).unwrap_or(f64::NAN);
+    }
+    Ok(())
 }
 
 /// A hybrid's closed loop from the real states `start` (`[variable][s]`,

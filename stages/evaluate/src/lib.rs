@@ -266,7 +266,7 @@ pub fn run(
     // advances from that prediction.
     let aln_hybrid = piecewise && data.model.header.base == Base::Nominal;
     let aln_entries = match aln_hybrid {
-        true => hybrid::inputs(&learned),
+        true => Base::Nominal.inputs(&learned),
         false => learned.clone(),
     };
     let aln_x = aln_hybrid.then(|| hybrid::columns(&real_x, &nominal));

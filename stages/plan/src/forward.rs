@@ -377,6 +377,28 @@ fn wiring(
     Ok((in_scene, torques, costed))
 }
 
+/// The variables `predictor` predicts (indices among the learned ones); an
+/// error names a variable the task reads (`costed`, as [`wiring`] pairs
+/// them) that is neither predicted nor one of the planner's `torques`.
+fn predicted_and_read(
+    predictor: &Predictor,
+    p: &Prepared,
+    torques: &[(usize, usize)],
+    costed: &[(usize, usize)],
+) -> Result<Vec<usize>, String> {
+    let predicted: Vec<usize> = predictor.variables().collect();
+    if let Some(&(_, s)) = costed
+        .iter()
+        .find(|(v, _)| !predicted.contains(v) && !torques.iter().any(|(_, t)| t == v))
+    {
+        return Err(format!(
+            "the model does not predict `{}`, which the task reads",
+            p.layout.variables[s]
+        ));
+    }
+    Ok(predicted)
+}
+
 /// A piecewise-linear ALN as a forward model, in real values: the true
 /// state's learned variables, each frame's controls set as their
 /// variables' values, the predicted variables advanced (every piece, all of
@@ -415,16 +437,7 @@ impl<'a> Piecewise<'a> {
         cost: Cost,
     ) -> Result<Piecewise<'a>, String> {
         let (in_scene, torques, costed) = wiring(learned, p, controls, &cost)?;
-        let predicted: Vec<usize> = predictor.variables().collect();
-        if let Some(&(_, s)) = costed
-            .iter()
-            .find(|(v, _)| !predicted.contains(v) && !torques.iter().any(|(_, t)| t == v))
-        {
-            return Err(format!(
-                "the model does not predict `{}`, which the task reads",
-                p.layout.variables[s]
-            ));
-        }
+        let predicted = predicted_and_read(predictor, p, &torques, &costed)?;
         Ok(Piecewise {
             scratch: predictor.scratch(),
             next: vec![0.0; predicted.len()],
@@ -569,7 +582,7 @@ impl<'a> Hybrid<'a> {
         cost: Cost,
     ) -> Result<Hybrid<'a>, String> {
         let (in_scene, torques, costed) = wiring(learned, nominal, controls, &cost)?;
-        let predicted: Vec<usize> = predictor.variables().collect();
+        let predicted = predicted_and_read(predictor, nominal, &torques, &costed)?;
         // The state the simulator re-steps must be made of predicted
         // variables: a fixed-root robot's joint positions and velocities.
         let refused = |why: String| {
@@ -601,15 +614,6 @@ impl<'a> Hybrid<'a> {
                 Ok((i, find(format!("q.{joint}"))?, find(format!("qd.{joint}"))?))
             })
             .collect::<Result<_, String>>()?;
-        if let Some(&(_, s)) = costed
-            .iter()
-            .find(|(v, _)| !predicted.contains(v) && !torques.iter().any(|(_, t)| t == v))
-        {
-            return Err(format!(
-                "the model does not predict `{}`, which the task reads",
-                nominal.layout.variables[s]
-            ));
-        }
         let width = learned.len();
         Ok(Hybrid {
             lanes: SceneBatch::new(nominal, &in_scene),
@@ -1069,7 +1073,7 @@ mod tests {
                 inputs: vec![v, width + v],
             })
             .collect();
-        let inputs: Vec<&Entry> = learned.iter().chain(&learned).copied().collect();
+        let inputs = alnlab_aln::model::Base::Nominal.inputs(&learned);
         let points = vec![0.0; 2 * width];
         let predictor = Predictor::new(&trees, &reads, &inputs, &points);
         let task = Task::HoldAngles {

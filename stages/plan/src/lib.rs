@@ -52,7 +52,6 @@ use alnlab_aln::linear::Linear;
 use alnlab_aln::model::Base;
 use alnlab_aln::pwl::predict::Predictor;
 use alnlab_aln::runtime::Trained;
-use alnlab_codes::Entry;
 use alnlab_common::hash::mix_seed;
 use alnlab_common::params::{self, Count, Fraction, ParamError};
 use alnlab_common::state_log::{StateFrame, StateLayout, StateLog, StateLogWriter};
@@ -423,10 +422,7 @@ pub fn run(
         // A hybrid's trees read the nominal predictions too, after the
         // state: the state's values stand in for them in the cuts.
         let hybrid = trained.model.header.base == Base::Nominal;
-        let inputs: Vec<&Entry> = match hybrid {
-            true => learned.iter().chain(&learned).copied().collect(),
-            false => learned.clone(),
-        };
+        let inputs = trained.model.header.base.inputs(&learned);
         let piecewise = (trained.model.header.model == ModelKind::PiecewiseLinear).then(|| {
             let points: Vec<f64> = (0..train_rows.len())
                 .flat_map(|r| {

@@ -274,9 +274,10 @@ fn model_record(p: &Prepared) -> std::collections::BTreeMap<String, String> {
             "links": "model links are the URDF's moving bodies; links fixed to one are merged into it",
         });
         if scene.logs_applied() {
-            json["robot_conventions"]["passive"] = "damping, friction and soft-limit effort at the \
+            json["robot_conventions"]["passive"] =
+                "damping, friction and soft-limit effort at the \
                 frame's state; the joint's total effort is applied + passive"
-                .into();
+                    .into();
             json["robot_conventions"]["applied"] = "joint.<j>.applied: the effort the joint's \
                 drive applied, where it differs from the command tau (drives holding the URDF's \
                 velocity limits, a plant's actuators)"
