@@ -922,13 +922,7 @@ fn a_scene_batch_steps_each_state_as_a_runner_does() {
             })
             .collect();
         batch.start(&start, n);
-        let mut frame = StateFrame {
-            time: 0.0,
-            run: 0,
-            frame: 0,
-            state: Vec::new(),
-            variables: Vec::new(),
-        };
+        let mut frame = StateFrame::default();
         let mut states = vec![start.clone(); n];
         let mut runners: Vec<Runner> = (0..n).map(|_| Runner::new(&p, 0, 0, 0)).collect();
         let mut worst: f64 = 0.0;

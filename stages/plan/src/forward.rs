@@ -1088,13 +1088,7 @@ mod tests {
         let start = p
             .scene
             .initial_state(&p.model, &mut alnlab_physics::scene::run_rng(2, 0, 0));
-        let mut frame = StateFrame {
-            time: 0.0,
-            run: 0,
-            frame: 0,
-            state: Vec::new(),
-            variables: Vec::new(),
-        };
+        let mut frame = StateFrame::default();
         Runner::new(&p, 2, 0, 0).observe(&start, 0.0, &mut frame);
         let (n, horizon, d) = (9, 4, controls.dims());
         let actions: Vec<f64> = (0..n * horizon * d)
