@@ -813,10 +813,11 @@ fn at_real_time_of(md: &mut String, variants: &[Planned]) {
              mean cost of the forward models a user could have{}. {}Every model and planner at its largest budget \
              whose median decision fits a frame in replicate 1, on the same episodes; µs / state: \
              the decision's time over the states its model predicted (sequences × horizon), the \
-             planner's own work included — every model predicts a decision's candidates \
-             together (a simulator, and a hybrid's nominal step, in SIMD lanes), but for a \
-             plant's own simulator whose actuators lag, delay or add noise, or a scene \
-             integrated by RK4, which steps them one at a time; cost: the \
+             planner's own work included; every model predicts a decision's candidates \
+             together (a simulator, and a hybrid's nominal step, in SIMD lanes) except three \
+             kinds of simulator, which step one candidate at a time: a plant's own whose \
+             actuators lag, delay or add noise, one of a scene integrated by RK4, and one \
+             costing a task that reads a link's acceleration or external force; cost: the \
              task's summed cost, mean {over}; differences from the nominal simulator of the lowest \
              mean cost, paired, {over}, with the Wilcoxon signed-rank p-value over every paired \
              episode (a replicate's episodes share its model, so they are not independent: the \
