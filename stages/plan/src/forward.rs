@@ -418,11 +418,8 @@ pub struct Piecewise<'a> {
     state: Vec<f64>,
     next: Vec<f64>,
     values: Vec<f64>,
-    /// A decision's candidates' learned variables, `[variable][candidate]`
-    /// flattened, and their predicted next values `[output][candidate]`:
-    /// sized once for the budget.
-    columns: Vec<f64>,
-    batch_next: Vec<Vec<f64>>,
+    /// A decision's candidates' learned variables.
+    columns: Columns,
 }
 
 impl<'a> Piecewise<'a> {
@@ -450,8 +447,7 @@ impl<'a> Piecewise<'a> {
             torques,
             costed,
             cost,
-            columns: Vec::new(),
-            batch_next: Vec::new(),
+            columns: Columns::default(),
         })
     }
 
@@ -500,33 +496,84 @@ impl Forward for Piecewise<'_> {
         let len = actions.len() / n;
         let d = len / horizon;
         let width = self.start.len();
-        // The candidates' learned variables, `[variable][candidate]`.
-        self.columns.resize(width * n, 0.0);
-        for (column, &x) in self.columns.chunks_mut(n).zip(&self.start) {
-            column.fill(x);
-        }
-        self.batch_next.resize(self.predicted.len(), Vec::new());
-        for next in &mut self.batch_next {
-            next.resize(n, 0.0);
-        }
+        let columns = &mut self.columns;
+        columns.reset(&self.start, width, self.predicted.len(), n);
         for h in 0..horizon {
             for &(k, v) in &self.torques {
-                for (i, x) in self.columns[v * n..(v + 1) * n].iter_mut().enumerate() {
+                for (i, x) in columns.column_mut(v).iter_mut().enumerate() {
                     *x = actions[i * len + h * d + k];
                 }
             }
-            let columns: Vec<&[f64]> = self.columns.chunks(n).collect();
-            self.predictor
-                .values(&columns, &mut self.scratch, &mut self.batch_next);
-            for (&v, next) in self.predicted.iter().zip(&self.batch_next) {
-                self.columns[v * n..(v + 1) * n].copy_from_slice(next);
-            }
+            columns.advance(self.predictor, &mut self.scratch, &self.predicted, 0);
             for (i, cost) in costs.iter_mut().enumerate() {
                 for &(v, s) in &self.costed {
-                    self.values[s] = self.columns[v * n + i];
+                    self.values[s] = columns.at(v, i);
                 }
                 *cost += self.cost.of(&self.values);
             }
+        }
+    }
+}
+
+/// A decision's candidates' real values, `[variable][candidate]`, advanced
+/// together through a piecewise-linear predictor's batched path: what
+/// [`Piecewise`] and [`Hybrid`] cost their candidates with. Sized by the
+/// largest budget, then allocation-free.
+#[derive(Default)]
+struct Columns {
+    /// `[variable][candidate]`, flattened.
+    values: Vec<f64>,
+    /// The predicted variables' next values, `[output][candidate]`.
+    next: Vec<Vec<f64>>,
+    /// Candidates.
+    n: usize,
+}
+
+impl Columns {
+    /// `n` candidates of `variables` columns, the first `start.len()` of
+    /// them each candidate's `start`, for `outputs` predicted variables.
+    fn reset(&mut self, start: &[f64], variables: usize, outputs: usize, n: usize) {
+        self.n = n;
+        self.values.resize(variables * n, 0.0);
+        for (column, &x) in self.values.chunks_mut(n).zip(start) {
+            column.fill(x);
+        }
+        self.next.resize(outputs, Vec::new());
+        for next in &mut self.next {
+            next.resize(n, 0.0);
+        }
+    }
+
+    /// Variable `v` of candidate `k`.
+    fn at(&self, v: usize, k: usize) -> f64 {
+        self.values[v * self.n + k]
+    }
+
+    fn at_mut(&mut self, v: usize, k: usize) -> &mut f64 {
+        &mut self.values[v * self.n + k]
+    }
+
+    /// Variable `v` of every candidate.
+    fn column_mut(&mut self, v: usize) -> &mut [f64] {
+        &mut self.values[v * self.n..(v + 1) * self.n]
+    }
+
+    /// Advances the `predicted` variables one frame, each from its value
+    /// in the columns from `base` on ([`Predictor::values_from`]): 0 for
+    /// its current value, a hybrid's state width for its nominal
+    /// prediction.
+    fn advance<'m>(
+        &mut self,
+        predictor: &Predictor<'m>,
+        scratch: &mut Scratch<'m>,
+        predicted: &[usize],
+        base: usize,
+    ) {
+        let n = self.n;
+        let columns: Vec<&[f64]> = self.values.chunks(n).collect();
+        predictor.values_from(&columns, &columns[base..], scratch, &mut self.next);
+        for (&v, next) in predicted.iter().zip(&self.next) {
+            self.values[v * n..(v + 1) * n].copy_from_slice(next);
         }
     }
 }
@@ -563,10 +610,8 @@ pub struct Hybrid<'a> {
     inputs: Vec<f64>,
     next: Vec<f64>,
     values: Vec<f64>,
-    /// A decision's candidates' `inputs`, `[variable][candidate]`
-    /// flattened, and their predicted next values `[output][candidate]`.
-    columns: Vec<f64>,
-    batch_next: Vec<Vec<f64>>,
+    /// A decision's candidates' `inputs`.
+    columns: Columns,
 }
 
 impl<'a> Hybrid<'a> {
@@ -617,8 +662,7 @@ impl<'a> Hybrid<'a> {
         let width = learned.len();
         Ok(Hybrid {
             lanes: SceneBatch::new(nominal, &in_scene),
-            columns: Vec::new(),
-            batch_next: Vec::new(),
+            columns: Columns::default(),
             nominal: Simulator::new(
                 nominal,
                 controls,
@@ -696,26 +740,19 @@ impl<'a> Hybrid<'a> {
         let d = len / horizon;
         let sim = &mut self.nominal;
         let dt = sim.p.scene.frame_dt.get() / sim.steps as f64;
-        self.columns.resize(2 * width * n, 0.0);
-        for (column, &x) in self.columns.chunks_mut(n).zip(&self.start) {
-            column.fill(x);
-        }
-        self.batch_next.resize(self.predicted.len(), Vec::new());
-        for next in &mut self.batch_next {
-            next.resize(n, 0.0);
-        }
+        let columns = &mut self.columns;
+        columns.reset(&self.start, 2 * width, self.predicted.len(), n);
         lanes.start(&sim.start, n);
         for h in 0..horizon {
             for k in 0..n {
                 let frame = &actions[k * len + h * d..k * len + (h + 1) * d];
                 if h > 0 {
                     for &(link, q, qd) in &self.joints {
-                        let column = |v: usize| self.columns[v * n + k];
-                        lanes.set_joint(k, link, column(q), column(qd));
+                        lanes.set_joint(k, link, columns.at(q, k), columns.at(qd, k));
                     }
                 }
                 for &(c, v) in &self.torques {
-                    self.columns[v * n + k] = frame[c];
+                    *columns.at_mut(v, k) = frame[c];
                 }
                 sim.controls.set(frame, &mut sim.torques);
                 lanes.drive(k, &sim.torques);
@@ -726,28 +763,19 @@ impl<'a> Hybrid<'a> {
                 match lanes.values(k) {
                     Some(read) => {
                         for (v, &x) in read.iter().enumerate() {
-                            self.columns[(width + v) * n + k] = x;
+                            *columns.at_mut(width + v, k) = x;
                         }
                     }
                     None => *cost = f64::INFINITY,
                 }
             }
-            let columns: Vec<&[f64]> = self.columns.chunks(n).collect();
-            self.predictor.values_from(
-                &columns,
-                &columns[width..],
-                &mut self.scratch,
-                &mut self.batch_next,
-            );
-            for (&v, next) in self.predicted.iter().zip(&self.batch_next) {
-                self.columns[v * n..(v + 1) * n].copy_from_slice(next);
-            }
+            columns.advance(self.predictor, &mut self.scratch, &self.predicted, width);
             for (k, cost) in costs.iter_mut().enumerate() {
                 if *cost == f64::INFINITY {
                     continue;
                 }
                 for &(v, s) in &self.costed {
-                    self.values[s] = self.columns[v * n + k];
+                    self.values[s] = columns.at(v, k);
                 }
                 *cost += self.cost.of(&self.values);
             }
