@@ -369,10 +369,7 @@ impl Batch {
     /// (kinematics and the articulated-body algorithm, as
     /// [`crate::dynamics::Workspace::forward`] computes them).
     pub fn accelerations(&mut self, model: &Model, g: usize) -> &AccelLanes {
-        self.ws.kinematics(model, &self.states[g]);
-        self.ws
-            .forward(model, &self.states[g], &self.loads[g], &mut self.accel);
-        &self.accel
+        self.evaluate(model, g, &mut Held).2
     }
 
     /// Advances every state by `dt` with semi-implicit Euler under its held

@@ -74,6 +74,15 @@ impl Quantity {
         }
     }
 
+    /// How many variables it stands for: a vector's three, one otherwise.
+    fn width(self) -> usize {
+        match self {
+            Quantity::Roll | Quantity::Pitch => 1,
+            _ if self.is_joint() => 1,
+            _ => 3,
+        }
+    }
+
     /// Whether it is one number per joint (rather than a link's vector or
     /// angle).
     fn is_joint(self) -> bool {
@@ -213,11 +222,7 @@ impl VariableSet {
     pub fn lane_variable(&self, index: usize) -> Option<LaneVariable> {
         let mut at = 0;
         for &(quantity, link) in &self.entries {
-            let width = match quantity {
-                Quantity::Roll | Quantity::Pitch => 1,
-                _ if quantity.is_joint() => 1,
-                _ => 3,
-            };
+            let width = quantity.width();
             if index < at + width {
                 let batched = !matches!(
                     quantity,
@@ -243,9 +248,8 @@ impl VariableSet {
                 false => &self.link_labels[i],
             };
             let base = format!("{}.{label}", q.name());
-            match q {
-                Quantity::Roll | Quantity::Pitch => names.push(base),
-                _ if q.is_joint() => names.push(base),
+            match q.width() {
+                1 => names.push(base),
                 _ => names.extend(["x", "y", "z"].map(|axis| format!("{base}.{axis}"))),
             }
         }

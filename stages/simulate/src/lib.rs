@@ -264,20 +264,21 @@ fn model_record(p: &Prepared) -> std::collections::BTreeMap<String, String> {
     if let Some(robot) = &p.robot {
         json["robot"] = robot.name.clone().into();
         json["base"] = serde_json::json!(scene.base);
+        // Where the drives apply other than the command, the log says so.
+        let total = match scene.logs_applied() {
+            true => "applied + passive",
+            false => "tau + passive",
+        };
         json["robot_conventions"] = serde_json::json!({
             "origin": "the joint frame's rotation at q = 0 relative to the parent link, row-major",
             "axis": "unit joint axis, joint (= link) frame",
             "q": "joint position (rad or m)", "qd": "joint velocity", "qdd": "joint acceleration",
             "tau": "control effort, parent on child, clamped to the URDF's effort limit",
-            "passive": "damping, friction and soft-limit effort at the frame's state; the joint's \
-                        total effort is tau + passive",
+            "passive": format!("damping, friction and soft-limit effort at the frame's state; the \
+                                joint's total effort is {total}"),
             "links": "model links are the URDF's moving bodies; links fixed to one are merged into it",
         });
         if scene.logs_applied() {
-            json["robot_conventions"]["passive"] =
-                "damping, friction and soft-limit effort at the \
-                frame's state; the joint's total effort is applied + passive"
-                    .into();
             json["robot_conventions"]["applied"] = "joint.<j>.applied: the effort the joint's \
                 drive applied, where it differs from the command tau (drives holding the URDF's \
                 velocity limits, a plant's actuators)"
