@@ -588,12 +588,7 @@ fn stage_tables(table: &DeTable) -> BTreeSet<&'static str> {
         .collect()
 }
 
-/// Whether `s` is a non-empty name of ASCII letters, digits, `-` and `_`.
-pub fn is_identifier(s: &str) -> bool {
-    !s.is_empty()
-        && s.chars()
-            .all(|c| c.is_ascii_alphanumeric() || c == '-' || c == '_')
-}
+pub use alnlab_records::is_identifier;
 
 #[cfg(test)]
 mod tests {

@@ -178,7 +178,9 @@ pub fn run(manifest: &Manifest, options: &RunOptions) -> Result<RunRecord> {
     }
     if options.until.is_none() {
         for record in &mut records {
-            record.metrics = Some(record.read_metrics(|a| Some(PathBuf::from(&a.path)))?);
+            record.metrics = Some(records::read_metrics(record, |a| {
+                Some(PathBuf::from(&a.path))
+            })?);
         }
     }
     let record = RunRecord {

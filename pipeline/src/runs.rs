@@ -85,7 +85,7 @@ impl<'a> VariantRun<'a> {
                 // A format-1 record's, from its artifacts while the cache holds them.
                 v.metrics
                     .clone()
-                    .or_else(|| v.read_metrics(|a| records::locate(out, a)).ok())
+                    .or_else(|| records::read_metrics(v, |a| records::locate(out, a)).ok())
             })
             .collect();
         VariantRun {

@@ -41,6 +41,13 @@ pub fn group_of(variable: &str) -> &str {
     }
 }
 
+/// Whether a variable is a control a planner or a user sets: the
+/// controller's hinge torques `g.<link>.<axis>`, or a robot's joint
+/// efforts `tau.<joint>`.
+pub fn is_control(variable: &str) -> bool {
+    matches!(group_of(variable), "g" | "tau")
+}
+
 /// The SI unit of a variable of the paper's groups (§4.1) or a robot's, by
 /// its name's quantity (a robot joint's: revolute or prismatic); empty for a
 /// name of no known quantity.

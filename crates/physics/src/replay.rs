@@ -44,8 +44,10 @@ pub struct SceneReplay {
     pub prepared: Prepared,
     /// The scene as simulated, where it differs: with its plant.
     pub plant: Option<Prepared>,
-    index: usize,
-    seed: u64,
+    /// The scene's index in the experiment and the experiment's seed, which
+    /// seed a runner of it ([`Runner::new`]).
+    pub index: usize,
+    pub seed: u64,
 }
 
 impl SceneReplay {

@@ -35,7 +35,46 @@ pub struct Prepared {
     pub layout: StateLayout,
 }
 
+/// One component of what drives a scene: a torque about one axis of a
+/// ball hinge, logged as `g.<link>.x|y|z`, or a robot's one-DOF joint's
+/// effort, logged as `tau.<joint>` (in the hinge's x).
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Control {
+    /// The hinge (link index − 1).
+    pub hinge: usize,
+    /// The axis it turns (0 for a one-DOF joint).
+    pub axis: usize,
+    /// The variable that logs it.
+    pub name: String,
+}
+
 impl Prepared {
+    /// What drives the scene, component by component in link order: what
+    /// a planner sets and [`Runner::drive`] takes.
+    pub fn controls(&self) -> Vec<Control> {
+        let mut controls = Vec::new();
+        for i in 1..self.model.len() {
+            match (self.model.links[i].joint.dof(), &self.robot) {
+                (1, Some(robot)) => controls.push(Control {
+                    hinge: i - 1,
+                    axis: 0,
+                    name: format!("tau.{}", robot.joints[i]),
+                }),
+                (3, _) => {
+                    for (axis, name) in ["x", "y", "z"].iter().enumerate() {
+                        controls.push(Control {
+                            hinge: i - 1,
+                            axis,
+                            name: format!("g.{}.{name}", i + 1),
+                        });
+                    }
+                }
+                _ => {}
+            }
+        }
+        controls
+    }
+
     /// Builds the model and variable set of a (validated) scene.
     pub fn new(scene: &Scene) -> Prepared {
         let scene = scene.clone().resolve();

@@ -8,7 +8,7 @@ use alnlab_common::{Error, Result};
 use crate::dataset::{
     Archive, BASE_ROLES, DatasetProvenance, Entry, LEVEL_ROLES, Source, check_name,
 };
-use crate::records::VariantRecord;
+use crate::records::pick_variant;
 use crate::records::read_record;
 use clap::Subcommand;
 
@@ -235,101 +235,6 @@ fn archive_run(
         println!("already archived as {} (nothing stored)", entry.label());
     }
     Ok(())
-}
-
-/// The variant and replicate to archive: the one named (`replicate` counts
-/// from 1), or — where several are left — the first when they all share the
-/// same data files. Otherwise an error listing every variant and its
-/// replicates, so that the choice is the user's.
-pub(crate) fn pick_variant<'a>(
-    variants: &'a [VariantRecord],
-    name: Option<&str>,
-    replicate: Option<u32>,
-    roles: &[&str],
-    run_dir: &Path,
-) -> Result<&'a VariantRecord> {
-    let run_has = || {
-        format!(
-            "the run has {}",
-            describe(&variants.iter().collect::<Vec<_>>())
-        )
-    };
-    let named: Vec<&VariantRecord> = variants
-        .iter()
-        .filter(|v| name.is_none_or(|n| v.name == n))
-        .collect();
-    if let (Some(name), []) = (name, named.as_slice()) {
-        return Err(Error::Invalid(format!(
-            "{}: no variant `{name}`; {}",
-            run_dir.display(),
-            run_has()
-        )));
-    }
-    let chosen: Vec<&VariantRecord> = named
-        .iter()
-        .copied()
-        .filter(|v| replicate.is_none_or(|r| v.replicate == r - 1))
-        .collect();
-    if let (Some(replicate), []) = (replicate, chosen.as_slice()) {
-        return Err(Error::Invalid(format!(
-            "{}: no replicate {replicate}{}; {}",
-            run_dir.display(),
-            name.map(|n| format!(" of variant `{n}`"))
-                .unwrap_or_default(),
-            run_has()
-        )));
-    }
-    let data = |v: &VariantRecord| -> Vec<Option<String>> {
-        roles
-            .iter()
-            .map(|r| v.artifacts.get(*r).map(|a| a.sha256.clone()))
-            .collect()
-    };
-    match chosen.as_slice() {
-        [] => Err(Error::bad_file(
-            &run_dir.join("run.json"),
-            "the run has no variants",
-        )),
-        [first, rest @ ..] if rest.iter().all(|v| data(v) == data(first)) => Ok(first),
-        _ => Err(Error::Invalid(format!(
-            "{}: the data of {} differ; choose one with --variant and --replicate ({})",
-            run_dir.display(),
-            describe(&chosen),
-            run_has()
-        ))),
-    }
-}
-
-/// Variants with their replicates and seeds, for people: `walk
-/// (replicates 1, 2 — seeds 7, 8), gray (replicate 1 — seed 7)`.
-fn describe(variants: &[&VariantRecord]) -> String {
-    let mut names: Vec<&str> = Vec::new();
-    for v in variants {
-        if !names.contains(&v.name.as_str()) {
-            names.push(&v.name);
-        }
-    }
-    let each: Vec<String> = names
-        .iter()
-        .map(|&name| {
-            let of: Vec<&VariantRecord> = variants
-                .iter()
-                .copied()
-                .filter(|v| v.name == name)
-                .collect();
-            let join = |f: &dyn Fn(&VariantRecord) -> String| {
-                of.iter().map(|v| f(v)).collect::<Vec<_>>().join(", ")
-            };
-            format!(
-                "variant `{name}`: replicate{} {} with seed{} {}",
-                if of.len() == 1 { "" } else { "s" },
-                join(&|v| (u64::from(v.replicate) + 1).to_string()),
-                if of.len() == 1 { "" } else { "s" },
-                join(&|v| v.seed.to_string()),
-            )
-        })
-        .collect();
-    each.join("; ")
 }
 
 /// A catalog entry for people.

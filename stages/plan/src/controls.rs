@@ -35,22 +35,11 @@ impl Controls {
                 p.scene.name
             ));
         }
-        let (mut components, mut names) = (Vec::new(), Vec::new());
-        for i in 1..p.model.len() {
-            match (p.model.links[i].joint.dof(), &p.robot) {
-                (1, Some(robot)) => {
-                    components.push((i - 1, 0));
-                    names.push(format!("tau.{}", robot.joints[i]));
-                }
-                (3, _) => {
-                    for (axis, name) in ["x", "y", "z"].iter().enumerate() {
-                        components.push((i - 1, axis));
-                        names.push(format!("g.{}.{name}", i + 1));
-                    }
-                }
-                _ => {}
-            }
-        }
+        let (components, names): (Vec<(usize, usize)>, Vec<String>) = p
+            .controls()
+            .into_iter()
+            .map(|c| ((c.hinge, c.axis), c.name))
+            .unzip();
         let limit = controller.torque_limit.get();
         let a = &controller.amplitude;
         let (low, high) = components

@@ -250,7 +250,10 @@ pub fn run(
         };
         let predicted = learned
             .iter()
-            .filter(|e| !(params.controls == Controls::Given && piecewise::is_control(&e.variable)))
+            .filter(|e| {
+                !(params.controls == Controls::Given
+                    && alnlab_codes::codebook::is_control(&e.variable))
+            })
             .count();
         progress.start("train", predicted as u64, "trees");
         let tick = || progress.advance(1);

@@ -31,7 +31,7 @@ use alnlab_aln::linear::least_absolute;
 use alnlab_aln::pwl::predict::change;
 use alnlab_aln::pwl::{MAX_PIECES, Tree};
 use alnlab_codes::Entry;
-use alnlab_codes::codebook::group_of;
+use alnlab_codes::codebook::{group_of, is_control};
 use alnlab_codes::residual::change as level_change;
 use alnlab_common::{Error, Result};
 use alnlab_tables::levels::Levels;
@@ -172,13 +172,6 @@ impl PwlParams {
             ..Settings::default()
         }
     }
-}
-
-/// Whether a variable is a control the planner sets: the controller's
-/// hinge torques `g.<link>.<axis>`, or a robot's joint efforts
-/// `tau.<joint>`.
-pub fn is_control(variable: &str) -> bool {
-    matches!(alnlab_codes::codebook::group_of(variable), "g" | "tau")
 }
 
 /// One trained output: its variable, the inputs its tree reads (indices

@@ -21,7 +21,6 @@ use std::collections::BTreeMap;
 use std::path::Path;
 
 use alnlab_common::Result;
-use serde::{Deserialize, Serialize};
 
 use crate::{aln_against, overall, split_rows};
 use alnlab_summarize::{Rows, read_comparisons, read_horizons};
@@ -29,16 +28,8 @@ use alnlab_summarize::{Rows, read_comparisons, read_horizons};
 /// The prefix of the per-variable figures' names.
 pub const BY_VARIABLE: &str = "error_by_variable/";
 
-/// A variant's headline figures.
-#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
-pub struct Metrics {
-    /// The rows the figures are over: `held-out` or `all`.
-    pub rows: String,
-    /// Figure name → value.
-    pub values: BTreeMap<String, f64>,
-    /// Series name → (step, value), steps ascending.
-    pub steps: BTreeMap<String, Vec<(u32, f64)>>,
-}
+/// A variant's headline figures (kept in its run record).
+pub use alnlab_records::Metrics;
 
 /// The files a variant's metrics are read from.
 pub struct Sources<'a> {
