@@ -1,7 +1,8 @@
 //! The workspace's layering, read from `cargo metadata`: a stage crate
 //! (`stages/<name>/`) never depends on another stage crate — what several
 //! stages need is a library crate under `crates/`; a view (`views/<name>/`,
-//! the report) reads every stage's tables and only the pipeline uses it. A dev-dependency may
+//! the report) reads every stage's tables and only the pipeline uses it; the
+//! Python package (`python/`) uses only libraries. A dev-dependency may
 //! build a stage's test input with an upstream stage; nothing of it reaches
 //! the stage's library.
 
@@ -171,5 +172,22 @@ fn libraries_depend_only_on_libraries() {
                 "library {name} depends on {dep} in {dep_folder}"
             );
         }
+    }
+}
+
+/// The Python package's native core (`python/`) predicts with the
+/// libraries only: no stage, view or pipeline is compiled into it.
+#[test]
+fn the_python_package_uses_only_libraries() {
+    let packages = workspace();
+    let (folder, deps) = &packages["alnlab-python"];
+    assert_eq!(folder, "python");
+    assert!(!deps.is_empty());
+    for dep in deps {
+        let (dep_folder, _) = &packages[dep];
+        assert!(
+            dep_folder.starts_with("crates/"),
+            "the Python package depends on {dep} in {dep_folder}"
+        );
     }
 }

@@ -31,6 +31,11 @@ const STEPS: &[Step] = &[
         quickstart_interop,
     ),
     (
+        "the Python package: built into the suite's environment, tested by pytest on the \
+         quickstart's models, its rollout benchmark and MPC example run once",
+        python_package,
+    ),
+    (
         "the quickstart's Gray forest as a circuit, placed and routed on an iCE40",
         quickstart_circuit,
     ),
@@ -132,6 +137,64 @@ fn quickstart_interop(suite: &Suite) -> Result<(), String> {
         suite,
         &runs(suite).join("quickstart/run.json"),
         &reports(suite).join("quickstart"),
+    )
+}
+
+/// The package in `python/` installed into the suite's environment as a
+/// user installs it (pip, maturin; the dev profile, whose dependencies the
+/// cargo-test step built), then its tests on the quickstart's run (their
+/// models' predictions against the test stage's), its benchmark and the
+/// model-predictive control example of `docs/` once each (how fast is
+/// theirs to say, not a test's).
+fn python_package(suite: &Suite) -> Result<(), String> {
+    let bin = suite
+        .python
+        .parent()
+        .ok_or("the environment's python has no folder")?;
+    let path = std::env::join_paths(std::iter::once(bin.to_path_buf()).chain(
+        std::env::split_paths(&std::env::var_os("PATH").unwrap_or_default()),
+    ))
+    .map_err(|e| format!("PATH: {e}"))?;
+    run_in_root(
+        Command::new(&suite.python)
+            .args([
+                "-m",
+                "pip",
+                "install",
+                "--quiet",
+                "--no-deps",
+                "--no-build-isolation",
+            ])
+            .args(["./python", "--config-settings=build-args=--profile dev"])
+            // maturin, from the environment.
+            .env("PATH", &path),
+    )?;
+    let python = |command: &mut Command| {
+        command
+            .env("ALNLAB_TEST_RUNS", runs(suite))
+            .env("ALNLAB_BIN", target_dir().join("debug/alnlab"))
+            .env("PYTHONDONTWRITEBYTECODE", "1");
+        run_in_root(command)
+    };
+    python(Command::new(&suite.python).args([
+        "-m",
+        "pytest",
+        "python/tests",
+        "-p",
+        "no:cacheprovider",
+        "--import-mode=importlib",
+    ]))?;
+    python(
+        Command::new(&suite.python)
+            .arg("python/bench/rollout.py")
+            .arg(runs(suite).join("quickstart/run.json"))
+            .arg("--json"),
+    )?;
+    python(
+        Command::new(&suite.python)
+            .args(["docs/mpc.py", "--out"])
+            .arg(runs(suite))
+            .args(["--decisions", "3", "--candidates", "32", "--horizon", "4"]),
     )
 }
 

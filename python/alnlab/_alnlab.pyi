@@ -1,0 +1,120 @@
+"""Type stubs of alnlab's native core (python/src)."""
+
+import os
+
+import numpy as np
+import numpy.typing as npt
+
+class AlnlabError(Exception):
+    """An error of alnlab's, with the message its CLI prints after ``error: ``."""
+
+    exit_code: int
+
+class InputError(AlnlabError):
+    """Input the user can correct (the CLI's exit code 2)."""
+
+class DamagedError(AlnlabError):
+    """Damaged or corrupt stored data (the CLI's exit code 1)."""
+
+class Model:
+    """A trained model of a run: predicts the next frame of its state
+    variables from the current one and the controls held over the frame."""
+
+    def __init__(self, model_path: str | os.PathLike[str], codebook_path: str | os.PathLike[str]) -> None: ...
+    @property
+    def kind(self) -> str:
+        """``piecewise-linear``, ``bit-forest`` or ``threshold``."""
+    @property
+    def state_names(self) -> list[str]:
+        """The state variables' names (D), in the columns' order."""
+    @property
+    def control_names(self) -> list[str]:
+        """The controls' names (U)."""
+    @property
+    def ranges(self) -> list[tuple[str, tuple[float, float, int]]]:
+        """Each learned variable's (min, max, levels)."""
+    def predict(
+        self,
+        states: npt.NDArray[np.float64],
+        controls: npt.NDArray[np.float64],
+        *,
+        levels: bool = False,
+        threads: int | None = None,
+    ) -> npt.NDArray[np.float64] | npt.NDArray[np.uint16]:
+        """The next states (B×D) from ``states`` (B×D) under ``controls`` (B×U)."""
+    def rollout(
+        self,
+        x0: npt.NDArray[np.float64],
+        controls: npt.NDArray[np.float64],
+        *,
+        levels: bool = False,
+        threads: int | None = None,
+    ) -> npt.NDArray[np.float64] | npt.NDArray[np.uint16]:
+        """The states over H frames (B×(H+1)×D) from ``x0`` (B×D) under ``controls`` (B×H×U)."""
+
+class Scene:
+    """A scene of a run, rebuilt from its trajectory log, ready to step."""
+
+    def __init__(
+        self, trajectory_path: str | os.PathLike[str], scene: str | None = None, *, plant: bool = False
+    ) -> None: ...
+    @property
+    def name(self) -> str:
+        """The scene's name."""
+    @property
+    def plant(self) -> bool:
+        """Whether this is the scene's plant rather than its model as written."""
+    @property
+    def state_names(self) -> list[str]:
+        """The generalized state's components (S)."""
+    @property
+    def variable_names(self) -> list[str]:
+        """The variables (V) a step reads."""
+    @property
+    def control_names(self) -> list[str]:
+        """The controls (U)."""
+    @property
+    def frame_dt(self) -> float:
+        """Seconds per frame."""
+    @property
+    def steps_per_frame(self) -> int:
+        """Integration steps per frame as the scene was simulated."""
+    def logged(
+        self,
+    ) -> tuple[npt.NDArray[np.uint32], npt.NDArray[np.uint32], npt.NDArray[np.float64], npt.NDArray[np.float64]]:
+        """The log's frames: (runs F, frames F, states F×S, variables F×V)."""
+    def step(
+        self,
+        states: npt.NDArray[np.float64],
+        controls: npt.NDArray[np.float64],
+        *,
+        frames: int = 1,
+        steps: int | None = None,
+        threads: int | None = None,
+    ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
+        """Each state (B×S) advanced under its controls (B×U): the states (B×S) and variables (B×V) after."""
+
+def reference_rollout_ns(
+    model: Model,
+    x0: npt.NDArray[np.float64],
+    controls: npt.NDArray[np.float64],
+    repeats: int = 7,
+) -> list[float]:
+    """The Rust batched path's nanoseconds per state, one thread, per repeat."""
+
+def find_artifacts(
+    out: str | os.PathLike[str],
+    run: str,
+    roles: list[str],
+    *,
+    variant: str | None = None,
+    replicate: int | None = None,
+    verify: bool = False,
+) -> tuple[str, str, str, int, dict[str, str]]:
+    """A run's variant's files by role: (id, experiment, variant, replicate from 1, {role: path})."""
+
+def run_record(out: str | os.PathLike[str], run: str) -> str:
+    """A run's record, as JSON."""
+
+def run_records(out: str | os.PathLike[str]) -> tuple[list[str], list[tuple[str, str]]]:
+    """Every readable record under ``out`` as JSON, and (path, why) of the unreadable."""

@@ -1,0 +1,101 @@
+"""How fast a model rolls out through Python, beside the Rust batched path.
+
+Times `Model.rollout` of B starts over H frames (logged states of the run's
+pairs, controls drawn from the logged ones) on one thread, interleaved with
+the same rollout on Rust-owned columns timed inside Rust
+(`_alnlab.reference_rollout_ns`: the plan stage's batched path), each the
+median of `--repeat` runs with their range; and a one-state `predict`
+call's time, beside the Rust path's time per state. Prints JSON with
+--json.
+
+Example:
+    python python/bench/rollout.py target/xtask/runs/quickstart/run.json \\
+        --variant piecewise --json
+"""
+
+import argparse
+import json
+import os
+import statistics
+import sys
+import time
+from pathlib import Path
+
+# NumPy's BLAS threads spin for a while after its calls, on the cores the
+# timed paths need: one thread is what is measured.
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+import numpy as np  # noqa: E402
+import pyarrow.parquet as pq  # noqa: E402
+
+import alnlab  # noqa: E402
+from alnlab import _alnlab  # noqa: E402
+
+
+def spread(samples: list[float]) -> dict:
+    return {"median": statistics.median(samples), "min": min(samples), "max": max(samples)}
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("run_json", type=Path, help="a run's run.json")
+    parser.add_argument("--variant", default="piecewise", help="a piecewise-linear variant (default: piecewise)")
+    parser.add_argument("--starts", type=int, default=256, help="B, states rolled out together (default: 256)")
+    parser.add_argument("--frames", type=int, default=10, help="H, frames each (default: 10)")
+    parser.add_argument("--repeat", type=int, default=7, help="timed runs of each path (default: 7, at least 5)")
+    parser.add_argument("--json", action="store_true", help="print JSON")
+    args = parser.parse_args()
+    if args.repeat < 5:
+        parser.error("--repeat: at least 5 runs make a median")
+    record = json.loads(args.run_json.read_text())
+    found = next(
+        (v["artifacts"] for v in record["variants"] if v["name"] == args.variant and v["replicate"] == 0), None
+    )
+    if found is None:
+        parser.error(f"{args.run_json}: no variant `{args.variant}`")
+    model = alnlab.Model(found["model"]["path"], found["codebook"]["path"])
+    pairs = pq.read_table(found["pairs"]["path"])
+    rng = np.random.default_rng(0)
+    b, h = args.starts, args.frames
+    rows = rng.integers(0, pairs.num_rows, size=b)
+    x0 = np.column_stack([pairs.column(f"x.{n}").to_numpy()[rows] for n in model.state_names])
+    logged = np.column_stack([pairs.column(f"x.{n}").to_numpy() for n in model.control_names])
+    controls = logged[rng.integers(0, len(logged), size=b * h)].reshape(b, h, -1)
+
+    python_ns, rust_ns = [], []
+    for _ in range(args.repeat):
+        start = time.perf_counter_ns()
+        model.rollout(x0, controls, threads=1)
+        python_ns.append((time.perf_counter_ns() - start) / (b * h))
+        rust_ns.extend(_alnlab.reference_rollout_ns(model, x0, controls, repeats=1))
+    one_x, one_u = x0[:1].copy(), controls[:1, 0].copy()
+    calls = 2000
+    one_ns = []
+    for _ in range(args.repeat):
+        start = time.perf_counter_ns()
+        for _ in range(calls):
+            model.predict(one_x, one_u, threads=1)
+        one_ns.append((time.perf_counter_ns() - start) / calls)
+    result = {
+        "model": model.kind,
+        "variant": args.variant,
+        "starts": b,
+        "frames": h,
+        "threads": 1,
+        "repeats": args.repeat,
+        "python_rollout_ns_per_state": spread(python_ns),
+        "rust_batched_ns_per_state": spread(rust_ns),
+        "python_over_rust": statistics.median(python_ns) / statistics.median(rust_ns),
+        "one_state_predict_ns": spread(one_ns),
+    }
+    if args.json:
+        print(json.dumps(result, indent=2))
+    else:
+        p, r, o = (result[k]["median"] for k in ("python_rollout_ns_per_state", "rust_batched_ns_per_state", "one_state_predict_ns"))
+        print(f"{b}×{h} rollout, one thread: Python {p:.0f} ns a state, Rust batched {r:.0f} ns ({p / r:.2f}×)")
+        print(f"one-state predict call: {o / 1000:.1f} µs")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,578 @@
+//! A trained model in Python: `Model(model_path, codebook_path)`, its
+//! variables' names and ranges, and `predict` and `rollout` over NumPy
+//! arrays — the stages' own prediction paths (a piecewise-linear model's
+//! batched evaluation, a bit-forest's or threshold model's runtime), rows
+//! split among threads with the GIL released.
+
+use std::path::PathBuf;
+use std::sync::Mutex;
+use std::time::Instant;
+
+use alnlab_aln::ModelKind;
+use alnlab_aln::model::Base;
+use alnlab_aln::pwl::predict::{Path, Predictor, Scratch};
+use alnlab_aln::runtime::{Runtime, Trained};
+use alnlab_codes::codebook::{Quantizer, is_control};
+use alnlab_common::Error;
+use numpy::ndarray::{Array2, Array3, ArrayView2, ArrayView3, Axis};
+use numpy::{IntoPyArray, PyReadonlyArray2, PyReadonlyArray3};
+use pyo3::prelude::*;
+use rayon::prelude::*;
+
+use crate::{invalid, raise, threads};
+
+/// What predicts, borrowing the trained model it is made from.
+enum Predicts<'a> {
+    /// A piecewise-linear model's compiled trees.
+    Piecewise(Predictor<'a>),
+    /// A bit-forest's or threshold model's runtime, from levels to levels.
+    Levels(Runtime<'a>),
+}
+
+/// What predicts, and a piecewise-linear predictor's buffers kept between
+/// calls: making them costs more than predicting one state.
+struct Ready<'a> {
+    predicts: Predicts<'a>,
+    spare: Mutex<Vec<Scratch<'a>>>,
+}
+
+self_cell::self_cell!(
+    /// A trained model kept together with what predicts with it.
+    struct Loaded {
+        owner: Trained,
+        #[not_covariant]
+        dependent: Ready,
+    }
+);
+
+/// A trained model of a run: predicts the next frame of its state
+/// variables from the current one and the controls held over the frame.
+#[pyclass(module = "alnlab._alnlab", frozen)]
+pub struct Model {
+    loaded: Loaded,
+    model_path: PathBuf,
+    /// The learned variables' names and quantizers, in the codebook's order.
+    names: Vec<String>,
+    quantizers: Vec<Quantizer>,
+    /// The state variables (learned, not controls) and the controls, as
+    /// indices among the learned variables.
+    state: Vec<usize>,
+    controls: Vec<usize>,
+    /// A piecewise-linear model's outputs: the learned variable each
+    /// writes, none for a control it predicts (the caller gives controls).
+    writes: Vec<Option<usize>>,
+}
+
+impl Model {
+    fn kind(&self) -> ModelKind {
+        self.loaded.borrow_owner().model.header.model
+    }
+
+    /// Checks that `x0` is B×D and `controls` B×H×U and finite; `frames`
+    /// says whether the caller gave H (a rollout) or one frame, B×U.
+    fn check(
+        &self,
+        x0: &ArrayView2<f64>,
+        controls: &ArrayView3<f64>,
+        frames: bool,
+    ) -> PyResult<()> {
+        let (d, u) = (self.state.len(), self.controls.len());
+        let names = |of: &[usize]| {
+            of.iter()
+                .map(|&v| self.names[v].as_str())
+                .collect::<Vec<_>>()
+                .join(", ")
+        };
+        if x0.ncols() != d {
+            return Err(invalid(format!(
+                "states: expected shape (B, {d}), one column per state variable ({}), got {:?}",
+                names(&self.state),
+                x0.shape()
+            )));
+        }
+        let (b, h, given) = controls.dim();
+        let shown = |index: [usize; 3]| match frames {
+            true => format!("{index:?}"),
+            false => format!("{:?}", [index[0], index[2]]),
+        };
+        if b != x0.nrows() || given != u {
+            return Err(invalid(format!(
+                "controls: expected shape ({}, {}{u}) — a row per state, a column per control \
+                 ({}) — got {}",
+                x0.nrows(),
+                if frames { "H, " } else { "" },
+                names(&self.controls),
+                shown([b, h, given])
+            )));
+        }
+        let bad = |what: &str, index: String, name: &str| {
+            invalid(format!(
+                "{what}: not a finite number at index {index} (`{name}`)"
+            ))
+        };
+        if let Some(((r, s), _)) = x0.indexed_iter().find(|(_, x)| !x.is_finite()) {
+            let index = format!("{:?}", [r, s]);
+            return Err(bad("states", index, &self.names[self.state[s]]));
+        }
+        if let Some(((r, f, c), _)) = controls.indexed_iter().find(|(_, x)| !x.is_finite()) {
+            return Err(bad(
+                "controls",
+                shown([r, f, c]),
+                &self.names[self.controls[c]],
+            ));
+        }
+        Ok(())
+    }
+
+    /// The states from `x0` (B×D) under `controls` (B×H×U): B×(H+1)×D
+    /// values, row-major, the first frame `x0`'s; on `threads` threads.
+    fn roll(
+        &self,
+        x0: &[f64],
+        controls: &[f64],
+        horizon: usize,
+        threads: Option<usize>,
+    ) -> PyResult<Vec<f64>> {
+        threads::check(threads)?;
+        let (d, u) = (self.state.len(), self.controls.len());
+        let rows = x0.len().checked_div(d).unwrap_or(0);
+        let mut out = vec![0.0; rows * (horizon + 1) * d];
+        if rows == 0 {
+            return Ok(out);
+        }
+        let chunk = threads::chunk_rows(rows, threads);
+        self.loaded.with_dependent(|_, ready| {
+            let task = |first: usize, n: usize, out: &mut [f64]| {
+                let x0 = &x0[first * d..(first + n) * d];
+                let controls = &controls[first * horizon * u..(first + n) * horizon * u];
+                let mut work = Work::new(self, ready, n);
+                work.roll(self, ready, x0, controls, horizon, out);
+                work.finish(ready);
+            };
+            match ready.predicts {
+                // One task: no thread pool to hand it to and wait on.
+                Predicts::Piecewise(_) if chunk >= rows => task(0, rows, &mut out),
+                Predicts::Piecewise(_) => threads::run(threads, || {
+                    out.par_chunks_mut(chunk * (horizon + 1) * d)
+                        .enumerate()
+                        .for_each(|(k, out)| task(k * chunk, chunk.min(rows - k * chunk), out));
+                })?,
+                // One row at a time, on this thread.
+                Predicts::Levels(_) if rows < ONE_ROW_BELOW => task(0, rows, &mut out),
+                // The runtime spreads its own work over the threads.
+                Predicts::Levels(_) => threads::run(threads, || task(0, rows, &mut out))?,
+            }
+            Ok(out)
+        })
+    }
+
+    /// `values` (state variables last) as their levels.
+    fn levels(&self, values: &[f64]) -> Vec<u16> {
+        let d = self.state.len();
+        values
+            .iter()
+            .enumerate()
+            .map(|(i, &x)| self.quantizers[self.state[i % d]].level(x).0)
+            .collect()
+    }
+}
+
+/// Rows below which a bit-forest or threshold model predicts one row at a
+/// time: a bit-sliced word's.
+const ONE_ROW_BELOW: usize = 64;
+
+/// Rows below which a piecewise-linear model predicts one row at a time
+/// (every piece of a row, the test stage's fastest one-row path), not in
+/// blocks of 32 rows that cost
+/// the same for one row as for 32; both give the same values.
+const PIECEWISE_ONE_ROW_BELOW: usize = 16;
+
+/// One task's rows: their learned variables' values as columns
+/// (`[variable][row]`), and the predictor's buffers.
+struct Work<'m> {
+    columns: Vec<f64>,
+    rows: usize,
+    scratch: Option<Scratch<'m>>,
+    /// The outputs' next values, `[output][row]`.
+    next: Vec<Vec<f64>>,
+    /// One row's learned variables and its outputs' next values.
+    row: Vec<f64>,
+    row_next: Vec<f64>,
+}
+
+impl<'m> Work<'m> {
+    fn new(model: &Model, ready: &Ready<'m>, rows: usize) -> Work<'m> {
+        let scratch = match &ready.predicts {
+            Predicts::Piecewise(p) => Some(spare(ready).pop().unwrap_or_else(|| p.scratch())),
+            Predicts::Levels(_) => None,
+        };
+        let outputs = model.writes.len();
+        let batched = rows >= PIECEWISE_ONE_ROW_BELOW;
+        Work {
+            columns: vec![0.0; model.names.len() * rows],
+            rows,
+            scratch,
+            next: vec![vec![0.0; if batched { rows } else { 0 }]; outputs],
+            row: vec![0.0; model.names.len()],
+            row_next: vec![0.0; outputs],
+        }
+    }
+
+    /// Gives the predictor's buffers back for the next call.
+    fn finish(self, ready: &Ready<'m>) {
+        if let Some(scratch) = self.scratch {
+            spare(ready).push(scratch);
+        }
+    }
+
+    fn column_mut(&mut self, v: usize) -> &mut [f64] {
+        &mut self.columns[v * self.rows..(v + 1) * self.rows]
+    }
+
+    /// Sets `of` (indices among the learned variables) from `values`, rows
+    /// of `stride` values whose first `of.len()` from `at` on are theirs.
+    fn set(&mut self, of: &[usize], values: &[f64], stride: usize, at: usize) {
+        for (k, &v) in of.iter().enumerate() {
+            for (i, x) in self.column_mut(v).iter_mut().enumerate() {
+                *x = values[i * stride + at + k];
+            }
+        }
+    }
+
+    /// Advances the state variables one frame.
+    fn step(&mut self, model: &Model, ready: &Ready<'m>) {
+        let rows = self.rows;
+        match &ready.predicts {
+            Predicts::Piecewise(predictor) if rows < PIECEWISE_ONE_ROW_BELOW => {
+                let scratch = self.scratch.as_mut().expect("made for a piecewise model");
+                for r in 0..rows {
+                    for (v, x) in self.row.iter_mut().enumerate() {
+                        *x = self.columns[v * rows + r];
+                    }
+                    predictor.next_values(&self.row, Path::Plain, scratch, &mut self.row_next);
+                    for (write, &x) in model.writes.iter().zip(&self.row_next) {
+                        if let Some(v) = *write {
+                            self.columns[v * rows + r] = x;
+                        }
+                    }
+                }
+            }
+            Predicts::Piecewise(predictor) => {
+                let scratch = self.scratch.as_mut().expect("made for a piecewise model");
+                let columns: Vec<&[f64]> = self.columns.chunks(rows).collect();
+                predictor.values(&columns, scratch, &mut self.next);
+                for (write, next) in model.writes.iter().zip(&self.next) {
+                    if let Some(v) = *write {
+                        self.columns[v * rows..(v + 1) * rows].copy_from_slice(next);
+                    }
+                }
+            }
+            Predicts::Levels(runtime) => {
+                let x: Vec<Vec<u16>> = self
+                    .columns
+                    .chunks(rows)
+                    .zip(&model.quantizers)
+                    .map(|(column, q)| column.iter().map(|&x| q.level(x).0).collect())
+                    .collect();
+                // Below a word of rows, coding and decoding bit-sliced
+                // costs more than the one-row path; both give the same
+                // levels.
+                let next = if rows < ONE_ROW_BELOW {
+                    runtime.one_row(&x, &runtime.encode(&x), None)
+                } else {
+                    runtime.levels(&x, None)
+                };
+                for &v in &model.state {
+                    let q = model.quantizers[v];
+                    for (x, &level) in self.column_mut(v).iter_mut().zip(&next[v]) {
+                        *x = q.value(usize::from(level));
+                    }
+                }
+            }
+        }
+    }
+
+    /// Rolls these rows out: `x0` (rows×D) under `controls` (rows×H×U)
+    /// into `out` (rows×(H+1)×D).
+    fn roll(
+        &mut self,
+        model: &Model,
+        ready: &Ready<'m>,
+        x0: &[f64],
+        controls: &[f64],
+        horizon: usize,
+        out: &mut [f64],
+    ) {
+        let (d, u) = (model.state.len(), model.controls.len());
+        self.set(&model.state, x0, d, 0);
+        for (r, row) in x0.chunks(d).enumerate() {
+            out[r * (horizon + 1) * d..][..d].copy_from_slice(row);
+        }
+        for h in 0..horizon {
+            self.set(&model.controls, controls, horizon * u, h * u);
+            self.step(model, ready);
+            for (k, &v) in model.state.iter().enumerate() {
+                let column = &self.columns[v * self.rows..(v + 1) * self.rows];
+                for (r, &x) in column.iter().enumerate() {
+                    out[(r * (horizon + 1) + h + 1) * d + k] = x;
+                }
+            }
+        }
+    }
+}
+
+/// The spare buffers, whatever a panicking thread left them as (each is
+/// overwritten before it is read).
+fn spare<'r, 'm>(ready: &'r Ready<'m>) -> std::sync::MutexGuard<'r, Vec<Scratch<'m>>> {
+    ready
+        .spare
+        .lock()
+        .unwrap_or_else(|poisoned| poisoned.into_inner())
+}
+
+/// A NumPy array of `shape` from `values`, as levels on request.
+fn array<'py>(
+    py: Python<'py>,
+    model: &Model,
+    values: Vec<f64>,
+    shape: &[usize],
+    levels: bool,
+) -> PyResult<Bound<'py, PyAny>> {
+    let shaped = |e: numpy::ndarray::ShapeError| invalid(format!("internal shape error: {e}"));
+    Ok(match (levels, shape) {
+        (false, &[b, d]) => Array2::from_shape_vec((b, d), values)
+            .map_err(shaped)?
+            .into_pyarray(py)
+            .into_any(),
+        (false, &[b, h, d]) => Array3::from_shape_vec((b, h, d), values)
+            .map_err(shaped)?
+            .into_pyarray(py)
+            .into_any(),
+        (true, &[b, d]) => Array2::from_shape_vec((b, d), model.levels(&values))
+            .map_err(shaped)?
+            .into_pyarray(py)
+            .into_any(),
+        (true, &[b, h, d]) => Array3::from_shape_vec((b, h, d), model.levels(&values))
+            .map_err(shaped)?
+            .into_pyarray(py)
+            .into_any(),
+        _ => unreachable!("two or three dimensions"),
+    })
+}
+
+#[pymethods]
+impl Model {
+    /// Loads `model_path` (a run's `model.aln`) with the codebook it was
+    /// trained with (`codebook.parquet`); an error names the file that
+    /// does not fit.
+    #[new]
+    fn new(model_path: PathBuf, codebook_path: PathBuf) -> PyResult<Model> {
+        let trained = Trained::read(&model_path, &codebook_path).map_err(raise)?;
+        if trained.model.header.base == Base::Nominal {
+            return Err(raise(Error::bad_file(
+                &model_path,
+                "is a hybrid (a learned correction on the nominal simulator's prediction), \
+                 which predicts only with the simulator beside it: the Python package \
+                 loads models of the dynamics (piecewise-linear, bit-forest, threshold)",
+            )));
+        }
+        let learned: Vec<_> = trained.codebook.learned().collect();
+        let names: Vec<String> = learned.iter().map(|e| e.variable.clone()).collect();
+        let quantizers = learned.iter().map(|e| e.quantizer).collect();
+        let (controls, state): (Vec<usize>, Vec<usize>) =
+            (0..names.len()).partition(|&v| is_control(&names[v]));
+        let writes: Vec<Option<usize>> = trained
+            .reads
+            .iter()
+            .map(|r| (!controls.contains(&r.variable)).then_some(r.variable))
+            .collect();
+        if trained.model.header.model == ModelKind::PiecewiseLinear
+            && let Some(&v) = state.iter().find(|v| !writes.contains(&Some(**v)))
+        {
+            return Err(raise(Error::bad_file(
+                &model_path,
+                format!(
+                    "does not predict `{}`, a state variable it reads: it cannot be rolled out",
+                    names[v]
+                ),
+            )));
+        }
+        let loaded = Loaded::new(trained, |t| Ready {
+            predicts: if t.model.header.model == ModelKind::PiecewiseLinear {
+                let learned: Vec<_> = t.codebook.learned().collect();
+                // The compiled boxes speed only the compiled one-row path,
+                // which this package does not take: no points.
+                Predicts::Piecewise(Predictor::new(&t.model.pieces, &t.reads, &learned, &[]))
+            } else {
+                Predicts::Levels(t.runtime())
+            },
+            spare: Mutex::new(Vec::new()),
+        });
+        Ok(Model {
+            loaded,
+            model_path,
+            names,
+            quantizers,
+            state,
+            controls,
+            writes,
+        })
+    }
+
+    /// The model's kind: `piecewise-linear`, `bit-forest` or `threshold`.
+    #[getter(kind)]
+    fn kind_name(&self) -> &'static str {
+        self.kind().name()
+    }
+
+    /// The state variables' names (D), in the columns' order.
+    #[getter]
+    fn state_names(&self) -> Vec<String> {
+        self.state.iter().map(|&v| self.names[v].clone()).collect()
+    }
+
+    /// The controls' names (U): joint efforts `tau.<joint>` or hinge
+    /// torques `g.<link>.<axis>`, held over a frame.
+    #[getter]
+    fn control_names(&self) -> Vec<String> {
+        self.controls
+            .iter()
+            .map(|&v| self.names[v].clone())
+            .collect()
+    }
+
+    /// Each learned variable's range and levels: `{name: (min, max,
+    /// levels)}`; level k stands for min + (max − min)·k/(levels − 1).
+    #[getter]
+    fn ranges(&self) -> Vec<(String, (f64, f64, usize))> {
+        self.names
+            .iter()
+            .zip(&self.quantizers)
+            .map(|(n, q)| (n.clone(), (q.min, q.max, q.levels)))
+            .collect()
+    }
+
+    fn __repr__(&self) -> String {
+        format!(
+            "Model({}, {} state variables, {} controls, {})",
+            self.kind().name(),
+            self.state.len(),
+            self.controls.len(),
+            self.model_path.display()
+        )
+    }
+
+    /// The next states (B×D) from `states` (B×D) under `controls` (B×U),
+    /// as values or, with `levels`, their levels (uint16).
+    #[pyo3(signature = (states, controls, *, levels = false, threads = None))]
+    fn predict<'py>(
+        &self,
+        py: Python<'py>,
+        states: PyReadonlyArray2<'py, f64>,
+        controls: PyReadonlyArray2<'py, f64>,
+        levels: bool,
+        threads: Option<usize>,
+    ) -> PyResult<Bound<'py, PyAny>> {
+        let x0 = states.as_array();
+        // One frame of controls: B×1×U.
+        let c3 = controls.as_array().insert_axis(Axis(1));
+        self.check(&x0, &c3, false)?;
+        let x0: Vec<f64> = x0.iter().copied().collect();
+        let c: Vec<f64> = c3.iter().copied().collect();
+        let d = self.state.len();
+        let rolled = py.detach(|| self.roll(&x0, &c, 1, threads))?;
+        let next: Vec<f64> = rolled
+            .chunks(2 * d.max(1))
+            .flat_map(|r| &r[d..])
+            .copied()
+            .collect();
+        array(py, self, next, &[x0.len() / d.max(1), d], levels)
+    }
+
+    /// The states over `H` frames (B×(H+1)×D, the first `x0`) from `x0`
+    /// (B×D) under `controls` (B×H×U), each frame predicted from the last
+    /// prediction; as values or, with `levels`, their levels (uint16).
+    #[pyo3(signature = (x0, controls, *, levels = false, threads = None))]
+    fn rollout<'py>(
+        &self,
+        py: Python<'py>,
+        x0: PyReadonlyArray2<'py, f64>,
+        controls: PyReadonlyArray3<'py, f64>,
+        levels: bool,
+        threads: Option<usize>,
+    ) -> PyResult<Bound<'py, PyAny>> {
+        let (x0, c) = (x0.as_array(), controls.as_array());
+        self.check(&x0, &c, true)?;
+        let (b, horizon, _) = c.dim();
+        let x0: Vec<f64> = x0.iter().copied().collect();
+        let c: Vec<f64> = c.iter().copied().collect();
+        let rolled = py.detach(|| self.roll(&x0, &c, horizon, threads))?;
+        array(
+            py,
+            self,
+            rolled,
+            &[b, horizon + 1, self.state.len()],
+            levels,
+        )
+    }
+}
+
+/// The Rust batched path a rollout is measured against: the piecewise
+/// model's candidates advanced as the plan stage advances them
+/// (controls set, [`Predictor::values`], the predicted columns written
+/// back), on Rust-owned columns, one thread, `repeats` times. Returns
+/// each repeat's nanoseconds per predicted state (B·H states).
+#[pyfunction]
+#[pyo3(signature = (model, x0, controls, repeats = 7))]
+pub fn reference_rollout_ns(
+    py: Python<'_>,
+    model: &Model,
+    x0: PyReadonlyArray2<'_, f64>,
+    controls: PyReadonlyArray3<'_, f64>,
+    repeats: usize,
+) -> PyResult<Vec<f64>> {
+    let (x0, c) = (x0.as_array(), controls.as_array());
+    model.check(&x0, &c, true)?;
+    let (b, horizon, u) = c.dim();
+    let d = model.state.len();
+    let x0: Vec<f64> = x0.iter().copied().collect();
+    let c: Vec<f64> = c.iter().copied().collect();
+    py.detach(|| {
+        model.loaded.with_dependent(|_, ready| {
+            let Predicts::Piecewise(predictor) = &ready.predicts else {
+                return Err(invalid("the reference path is a piecewise-linear model's"));
+            };
+            threads::run(Some(1), || {
+                let mut scratch = predictor.scratch();
+                let mut columns = vec![0.0; model.names.len() * b];
+                let mut next = vec![vec![0.0; b]; model.writes.len()];
+                (0..repeats)
+                    .map(|_| {
+                        let start = Instant::now();
+                        for (k, &v) in model.state.iter().enumerate() {
+                            for (i, x) in columns[v * b..(v + 1) * b].iter_mut().enumerate() {
+                                *x = x0[i * d + k];
+                            }
+                        }
+                        for h in 0..horizon {
+                            for (k, &v) in model.controls.iter().enumerate() {
+                                for (i, x) in columns[v * b..(v + 1) * b].iter_mut().enumerate() {
+                                    *x = c[(i * horizon + h) * u + k];
+                                }
+                            }
+                            let view: Vec<&[f64]> = columns.chunks(b).collect();
+                            predictor.values(&view, &mut scratch, &mut next);
+                            for (write, next) in model.writes.iter().zip(&next) {
+                                if let Some(v) = *write {
+                                    columns[v * b..(v + 1) * b].copy_from_slice(next);
+                                }
+                            }
+                        }
+                        std::hint::black_box(&columns);
+                        start.elapsed().as_nanos() as f64 / (b * horizon).max(1) as f64
+                    })
+                    .collect()
+            })
+        })
+    })
+}

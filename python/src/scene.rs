@@ -1,0 +1,361 @@
+//! A run's scene in Python: `Scene(trajectory_path, scene=None,
+//! plant=False)` rebuilt from its trajectory log (the nominal model as
+//! written, or the plant where the scene declares one), its logged frames,
+//! and `step`: many states advanced under torques held over the frames —
+//! the simulator the test and plan stages compare the ALN with.
+
+use std::path::PathBuf;
+
+use alnlab_common::Error;
+use alnlab_common::state_log::{StateFrame, StateLog};
+use alnlab_physics::replay::SceneReplay;
+use alnlab_physics::runner::Control;
+use alnlab_physics::{Prepared, Runner, state_from_generalized};
+use nalgebra::Vector3;
+use numpy::ndarray::{Array1, Array2, ArrayView2};
+use numpy::{IntoPyArray, PyArray1, PyArray2, PyReadonlyArray2};
+use pyo3::prelude::*;
+use rayon::prelude::*;
+
+use crate::{invalid, raise, threads};
+
+/// States a parallel task of [`Scene::step`] takes.
+const TASK_ROWS: usize = 16;
+
+/// A scene of a run, ready to step.
+#[pyclass(module = "alnlab._alnlab", frozen)]
+pub struct Scene {
+    prepared: Prepared,
+    plant: bool,
+    controls: Vec<Control>,
+    /// The log's frames of this scene.
+    frames: Vec<StateFrame>,
+    /// The experiment seed and the scene's index: what a runner's
+    /// controller and noise are seeded from.
+    seed: u64,
+    index: usize,
+}
+
+/// A row of a NumPy array per state, and what was asked of it.
+struct Rows {
+    values: Vec<f64>,
+    width: usize,
+}
+
+impl Rows {
+    fn of(array: &ArrayView2<f64>) -> Rows {
+        Rows {
+            values: array.iter().copied().collect(),
+            width: array.ncols(),
+        }
+    }
+
+    fn row(&self, r: usize) -> &[f64] {
+        &self.values[r * self.width..(r + 1) * self.width]
+    }
+}
+
+impl Scene {
+    fn state_width(&self) -> usize {
+        self.prepared.layout.state.len()
+    }
+
+    /// One state stepped `frames` frames of `steps` steps under `torques`
+    /// (one per control) into `out_state` and `out_variables`; NaN where
+    /// it left the finite numbers. `runner` starts afresh for it.
+    #[allow(clippy::too_many_arguments)]
+    fn step_one(
+        &self,
+        runner: &mut Runner,
+        start: &[f64],
+        torques: &[f64],
+        frames: u32,
+        steps: u64,
+        out_state: &mut [f64],
+        out_variables: &mut [f64],
+    ) {
+        let p = &self.prepared;
+        let mut state = state_from_generalized(&p.model, start).expect("checked to fit");
+        runner.restart();
+        let mut g = vec![Vector3::zeros(); p.model.len() - 1];
+        for (c, &t) in self.controls.iter().zip(torques) {
+            g[c.hinge][c.axis] = t;
+        }
+        runner.drive(Some(&g));
+        let dt = p.scene.frame_dt.get() / steps as f64;
+        let mut first = 0;
+        for _ in 0..frames {
+            if runner.advance(&mut state, first, steps, dt).is_err() {
+                out_state.fill(f64::NAN);
+                out_variables.fill(f64::NAN);
+                return;
+            }
+            first += steps;
+        }
+        let mut frame = StateFrame::default();
+        runner.observe(&state, 0.0, &mut frame);
+        out_state.copy_from_slice(&frame.state);
+        out_variables.copy_from_slice(&frame.variables);
+    }
+}
+
+#[pymethods]
+impl Scene {
+    /// Rebuilds scene `scene` (the log's only one by default) of the
+    /// trajectory log `trajectory_path` (a run's `trajectory.mcap`): the
+    /// model as written — the simulator a user has — or, with `plant`,
+    /// the plant it was simulated as, where the scene declares one.
+    #[new]
+    #[pyo3(signature = (trajectory_path, scene = None, *, plant = false))]
+    fn new(trajectory_path: PathBuf, scene: Option<&str>, plant: bool) -> PyResult<Scene> {
+        let path = &trajectory_path;
+        let log = StateLog::read(path).map_err(raise)?;
+        let mut replays =
+            SceneReplay::from_log(&log).map_err(|m| raise(Error::bad_file(path, m)))?;
+        let names: Vec<String> = replays.keys().cloned().collect();
+        let name = match (scene, names.as_slice()) {
+            (Some(name), _) => name.to_string(),
+            (None, [one]) => one.clone(),
+            (None, _) => {
+                return Err(invalid(format!(
+                    "{}: holds scenes {}: name one (scene=)",
+                    path.display(),
+                    names.join(", ")
+                )));
+            }
+        };
+        let replay = replays.remove(&name).ok_or_else(|| {
+            invalid(format!(
+                "{}: has no scene `{name}`; it has {}",
+                path.display(),
+                names.join(", ")
+            ))
+        })?;
+        let (index, seed) = (replay.index, replay.seed);
+        let prepared = match (plant, replay.plant) {
+            (false, _) => replay.prepared,
+            (true, Some(plant)) => plant,
+            (true, None) => {
+                return Err(invalid(format!(
+                    "{}: scene `{name}` declares no plant: its model as written is what was \
+                     simulated (plant=False)",
+                    path.display()
+                )));
+            }
+        };
+        let frames = log
+            .scenes
+            .into_iter()
+            .find(|s| s.layout.scene == name)
+            .map(|s| s.frames)
+            .unwrap_or_default();
+        Ok(Scene {
+            controls: prepared.controls(),
+            prepared,
+            plant,
+            frames,
+            seed,
+            index,
+        })
+    }
+
+    /// The scene's name.
+    #[getter]
+    fn name(&self) -> String {
+        self.prepared.scene.name.clone()
+    }
+
+    /// Whether this is the scene's plant rather than its model as written.
+    #[getter]
+    fn plant(&self) -> bool {
+        self.plant
+    }
+
+    /// The generalized state's components (S), in the columns' order: the
+    /// root's position (and velocity, if free), each ball hinge's
+    /// orientation and rates, each one-DOF joint's position and velocity,
+    /// then its passive (and, where logged, applied) effort.
+    #[getter]
+    fn state_names(&self) -> Vec<String> {
+        self.prepared.layout.state.clone()
+    }
+
+    /// The variables (V) a step reads, in the columns' order: the names a
+    /// model's `state_names` and `control_names` use.
+    #[getter]
+    fn variable_names(&self) -> Vec<String> {
+        self.prepared.layout.variables.clone()
+    }
+
+    /// The controls (U): each ball hinge's torque about its axes
+    /// (`g.<link>.x|y|z`), each robot joint's effort (`tau.<joint>`).
+    #[getter]
+    fn control_names(&self) -> Vec<String> {
+        self.controls.iter().map(|c| c.name.clone()).collect()
+    }
+
+    /// Seconds per frame, and integration steps per frame as simulated.
+    #[getter]
+    fn frame_dt(&self) -> f64 {
+        self.prepared.scene.frame_dt.get()
+    }
+
+    /// Integration steps per frame as the scene was simulated.
+    #[getter]
+    fn steps_per_frame(&self) -> u64 {
+        (self.prepared.scene.frame_dt.get() / self.prepared.scene.dt.get()).round() as u64
+    }
+
+    fn __repr__(&self) -> String {
+        format!(
+            "Scene({}{}, {} state components, {} variables, {} controls)",
+            self.prepared.scene.name,
+            if self.plant { ", plant" } else { "" },
+            self.state_width(),
+            self.prepared.layout.variables.len(),
+            self.controls.len()
+        )
+    }
+
+    /// The log's frames of this scene: (runs F, frames F, states F×S,
+    /// variables F×V), runs one after another.
+    #[allow(clippy::type_complexity)]
+    fn logged<'py>(
+        &self,
+        py: Python<'py>,
+    ) -> PyResult<(
+        Bound<'py, PyArray1<u32>>,
+        Bound<'py, PyArray1<u32>>,
+        Bound<'py, PyArray2<f64>>,
+        Bound<'py, PyArray2<f64>>,
+    )> {
+        let n = self.frames.len();
+        let (s, v) = (self.state_width(), self.prepared.layout.variables.len());
+        let shaped = |e: numpy::ndarray::ShapeError| invalid(format!("internal shape error: {e}"));
+        let runs = Array1::from_iter(self.frames.iter().map(|f| f.run));
+        let frames = Array1::from_iter(self.frames.iter().map(|f| f.frame));
+        let states = Array2::from_shape_vec(
+            (n, s),
+            self.frames
+                .iter()
+                .flat_map(|f| f.state.iter().copied())
+                .collect(),
+        )
+        .map_err(shaped)?;
+        let variables = Array2::from_shape_vec(
+            (n, v),
+            self.frames
+                .iter()
+                .flat_map(|f| f.variables.iter().copied())
+                .collect(),
+        )
+        .map_err(shaped)?;
+        Ok((
+            runs.into_pyarray(py),
+            frames.into_pyarray(py),
+            states.into_pyarray(py),
+            variables.into_pyarray(py),
+        ))
+    }
+
+    /// Each of `states` (B×S) advanced `frames` frames under `controls`
+    /// (B×U, held), at `steps` integration steps a frame (the scene's own
+    /// by default; fewer is a cheaper simulator): the states (B×S) and
+    /// their variables (B×V) after. A state that leaves the finite
+    /// numbers comes back as NaN. Each state steps on its own, as the
+    /// test stage's simulator does, from rest of whatever the scene tracks
+    /// besides the state (a plant's actuators' lag and delay start at rest,
+    /// so a plant stepped from mid-run does not reproduce its run); the
+    /// states are split among threads.
+    #[pyo3(signature = (states, controls, *, frames = 1, steps = None, threads = None))]
+    #[allow(clippy::type_complexity)]
+    fn step<'py>(
+        &self,
+        py: Python<'py>,
+        states: PyReadonlyArray2<'py, f64>,
+        controls: PyReadonlyArray2<'py, f64>,
+        frames: u32,
+        steps: Option<u64>,
+        threads: Option<usize>,
+    ) -> PyResult<(Bound<'py, PyArray2<f64>>, Bound<'py, PyArray2<f64>>)> {
+        let (x, c) = (states.as_array(), controls.as_array());
+        let (s, u) = (self.state_width(), self.controls.len());
+        let b = x.nrows();
+        if x.ncols() != s {
+            return Err(invalid(format!(
+                "states: expected shape (B, {s}), a column per state component ({}), got {:?}",
+                self.prepared.layout.state.join(", "),
+                x.shape()
+            )));
+        }
+        if c.dim() != (b, u) {
+            return Err(invalid(format!(
+                "controls: expected shape ({b}, {u}), a column per control ({}), got {:?}",
+                self.control_names().join(", "),
+                c.shape()
+            )));
+        }
+        let steps = steps.unwrap_or_else(|| self.steps_per_frame());
+        if steps == 0 {
+            return Err(invalid("steps: expected at least 1 a frame"));
+        }
+        let (x, c) = (Rows::of(&x), Rows::of(&c));
+        for r in 0..b {
+            let row = x.row(r);
+            if row.iter().any(|v| !v.is_finite())
+                || state_from_generalized(&self.prepared.model, row).is_none()
+            {
+                return Err(invalid(format!("states: row {r} is not a finite state")));
+            }
+            if let Some(k) = c.row(r).iter().position(|v| !v.is_finite()) {
+                return Err(invalid(format!(
+                    "controls: not a finite number at index [{r}, {k}] (`{}`)",
+                    self.controls[k].name
+                )));
+            }
+        }
+        let v = self.prepared.layout.variables.len();
+        let (mut out_states, mut out_variables) = (vec![0.0; b * s], vec![0.0; b * v]);
+        threads::check(threads)?;
+        py.detach(|| {
+            threads::run(threads, || {
+                // Tasks of a fixed size, each with a runner of its own,
+                // restarted for every state: the same numbers on any
+                // number of threads.
+                out_states
+                    .par_chunks_mut(s * TASK_ROWS)
+                    .zip(out_variables.par_chunks_mut(v * TASK_ROWS))
+                    .enumerate()
+                    .for_each(|(t, (states, variables))| {
+                        let p = &self.prepared;
+                        let mut runner = Runner::new(p, self.seed, self.index, 0);
+                        for (k, (state, variables)) in states
+                            .chunks_mut(s)
+                            .zip(variables.chunks_mut(v))
+                            .enumerate()
+                        {
+                            let r = t * TASK_ROWS + k;
+                            self.step_one(
+                                &mut runner,
+                                x.row(r),
+                                c.row(r),
+                                frames,
+                                steps,
+                                state,
+                                variables,
+                            );
+                        }
+                    });
+            })
+        })?;
+        let shaped = |e: numpy::ndarray::ShapeError| invalid(format!("internal shape error: {e}"));
+        Ok((
+            Array2::from_shape_vec((b, s), out_states)
+                .map_err(shaped)?
+                .into_pyarray(py),
+            Array2::from_shape_vec((b, v), out_variables)
+                .map_err(shaped)?
+                .into_pyarray(py),
+        ))
+    }
+}

@@ -1,0 +1,196 @@
+"""A run's trained models in Python predict what the test stage predicted,
+roll out as chained predictions, on any thread count, and fail as the CLI
+fails."""
+
+import ast
+import shutil
+import subprocess
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import pyarrow.parquet as pq
+import pytest
+
+import alnlab
+from alnlab import _alnlab
+
+VARIANTS = ["piecewise", "walk", "gray"]
+
+
+def load(artifacts, variant: str) -> alnlab.Model:
+    found = artifacts(variant)
+    return alnlab.Model(found["model"], found["codebook"])
+
+
+def test_predict_levels_equal_the_test_stage_predictions(artifacts):
+    """Every test row's predicted level, state variable by state variable,
+    equals predictions.parquet's for the model (`aln`), bit for bit."""
+    for variant in VARIANTS:
+        found = artifacts(variant)
+        model = alnlab.Model(found["model"], found["codebook"])
+        pairs = pq.read_table(found["pairs"])
+        states = np.column_stack([pairs.column(f"x.{n}").to_numpy() for n in model.state_names])
+        controls = np.column_stack([pairs.column(f"x.{n}").to_numpy() for n in model.control_names])
+        predicted = model.predict(states, controls, levels=True)
+        assert predicted.dtype == np.uint16 and predicted.shape == states.shape
+        table = pq.read_table(found["predictions"], columns=["model", "variable", "row", "predicted_level"])
+        model_of = np.array(table.column("model").to_pylist())
+        variable_of = np.array(table.column("variable").to_pylist())
+        row_of = table.column("row").to_numpy()
+        level_of = table.column("predicted_level").to_numpy()
+        compared = 0
+        for k, name in enumerate(model.state_names):
+            at = (model_of == "aln") & (variable_of == name)
+            assert at.sum() > 100, (variant, name)
+            got = predicted[row_of[at], k]
+            np.testing.assert_array_equal(got, level_of[at], err_msg=f"{variant}: {name}")
+            compared += int(at.sum())
+        assert compared > 1000
+
+
+def test_values_are_the_levels_values(artifacts):
+    """A prediction's values quantize to its levels; a bit-forest's values
+    are exactly its levels' values."""
+    for variant in VARIANTS:
+        model = load(artifacts, variant)
+        x0, u = starts(artifacts, variant, model, 64)
+        values = model.predict(x0, u)
+        levels = model.predict(x0, u, levels=True)
+        ranges = dict(model.ranges)
+        for k, name in enumerate(model.state_names):
+            low, high, count = ranges[name]
+            expected = np.clip(np.round((values[:, k] - low) / (high - low) * (count - 1)), 0, count - 1)
+            np.testing.assert_array_equal(levels[:, k], expected.astype(np.uint16))
+            if model.kind != "piecewise-linear":
+                np.testing.assert_array_equal(values[:, k], low + (high - low) * levels[:, k] / (count - 1))
+
+
+def starts(artifacts, variant: str, model: alnlab.Model, b: int, h: int = 1, seed: int = 0):
+    """`b` logged states of the variant's pairs and `h` frames of controls
+    drawn from the logged ones."""
+    pairs = pq.read_table(artifacts(variant)["pairs"])
+    rng = np.random.default_rng(seed)
+    rows = rng.choice(pairs.num_rows, size=b, replace=False)
+    x0 = np.column_stack([pairs.column(f"x.{n}").to_numpy()[rows] for n in model.state_names])
+    logged = np.column_stack([pairs.column(f"x.{n}").to_numpy() for n in model.control_names])
+    controls = logged[rng.integers(0, len(logged), size=b * h)].reshape(b, h, len(model.control_names))
+    return x0, (controls[:, 0, :] if h == 1 else controls)
+
+
+def test_rollout_is_chained_predictions(artifacts):
+    """A rollout starts at x0 and each frame is `predict` of the last."""
+    for variant in VARIANTS:
+        model = load(artifacts, variant)
+        x0, controls = starts(artifacts, variant, model, 70, h=6, seed=1)
+        path = model.rollout(x0, controls)
+        assert path.shape == (70, 7, len(model.state_names)) and path.dtype == np.float64
+        np.testing.assert_array_equal(path[:, 0], x0)
+        state = x0
+        for h in range(6):
+            state = model.predict(state, controls[:, h])
+            np.testing.assert_array_equal(path[:, h + 1], state, err_msg=f"{variant}, frame {h + 1}")
+        np.testing.assert_array_equal(
+            model.rollout(x0, controls, levels=True)[:, 6], model.predict(path[:, 5], controls[:, 5], levels=True)
+        )
+
+
+def test_one_thread_gives_the_same_bytes(artifacts):
+    for variant in VARIANTS:
+        model = load(artifacts, variant)
+        x0, controls = starts(artifacts, variant, model, 300, h=4, seed=2)
+        every = model.rollout(x0, controls)
+        assert every.tobytes() == model.rollout(x0, controls, threads=1).tobytes()
+        assert every.tobytes() == model.rollout(x0, controls, threads=3).tobytes()
+
+
+def test_the_gil_is_released_while_predicting(artifacts):
+    """Another Python thread runs while a long rollout runs: it stamps the
+    time in a loop, and stamps fall well inside the call."""
+    model = load(artifacts, "piecewise")
+    x0, controls = starts(artifacts, "piecewise", model, 1000, h=1, seed=3)
+    x0 = np.repeat(x0, 20, axis=0)
+    controls = np.repeat(np.repeat(controls[:, None, :], 20, axis=0), 40, axis=1)
+    stamps, done = [], threading.Event()
+
+    def stamp():
+        while not done.is_set():
+            stamps.append(time.perf_counter())
+
+    other = threading.Thread(target=stamp)
+    other.start()
+    time.sleep(0.02)
+    start = time.perf_counter()
+    model.rollout(x0, controls, threads=1)
+    end = time.perf_counter()
+    done.set()
+    other.join()
+    margin = 0.02
+    assert end - start > 4 * margin, "the rollout is too short to tell"
+    inside = [s for s in stamps if start + margin < s < end - margin]
+    assert inside, "no other thread ran during the rollout: the GIL was held"
+
+
+def cli_message(alnlab_bin: Path, model: Path, codebook: Path, tmp_path: Path) -> tuple[int, str]:
+    """What `alnlab export verilog`, which loads a model as the package
+    does, says of these files: its exit code and message."""
+    done = subprocess.run(
+        [alnlab_bin, "export", "verilog", model, "--codebook", codebook, "--output", tmp_path / "v"],
+        capture_output=True,
+        text=True,
+    )
+    lines = [line for line in done.stderr.splitlines() if line.startswith("error: ")]
+    assert lines, done.stderr
+    return done.returncode, lines[0].removeprefix("error: ")
+
+
+def test_errors_carry_the_cli_messages(artifacts, alnlab_bin, tmp_path):
+    found = artifacts("walk")
+    damaged = tmp_path / "model.aln"
+    shutil.copy(found["model"], damaged)
+    data = bytearray(damaged.read_bytes())
+    data[len(data) // 2] ^= 0x10
+    damaged.write_bytes(bytes(data))
+    cases = [
+        (tmp_path / "missing.aln", found["codebook"], alnlab.InputError, "No such file"),
+        (found["model"], found["pairs"], alnlab.InputError, "was trained with another codebook than"),
+        (damaged, found["codebook"], alnlab.DamagedError, "damaged"),
+    ]
+    for model, codebook, kind, words in cases:
+        with pytest.raises(kind) as raised:
+            alnlab.Model(model, codebook)
+        code, message = cli_message(alnlab_bin, model, codebook, tmp_path)
+        assert str(raised.value) == message
+        assert words in message
+        assert raised.value.exit_code == code == (2 if kind is alnlab.InputError else 1)
+        assert isinstance(raised.value, alnlab.AlnlabError)
+
+
+def test_bad_arrays_are_refused_with_the_expected_shape(artifacts):
+    model = load(artifacts, "piecewise")
+    d, u = len(model.state_names), len(model.control_names)
+    x0 = np.zeros((5, d))
+    with pytest.raises(alnlab.InputError, match=rf"states: expected shape \(B, {d}\).*{model.state_names[0]}.*got \[5, {d + 1}\]"):
+        model.predict(np.zeros((5, d + 1)), np.zeros((5, u)))
+    with pytest.raises(alnlab.InputError, match=rf"controls: expected shape \(5, H, {u}\).*{model.control_names[0]}"):
+        model.rollout(x0, np.zeros((4, 3, u)))
+    bad = x0.copy()
+    bad[3, 2] = np.nan
+    with pytest.raises(alnlab.InputError, match=rf"states: not a finite number at index \[3, 2\] \(`{model.state_names[2]}`\)"):
+        model.predict(bad, np.zeros((5, u)))
+    with pytest.raises(alnlab.InputError, match="threads: expected at least 1"):
+        model.predict(x0, np.zeros((5, u)), threads=0)
+
+
+def test_every_public_name_is_documented_and_stubbed():
+    stubs = ast.parse((Path(alnlab.__file__).parent / "_alnlab.pyi").read_text())
+    stubbed = {node.name: node for node in stubs.body if isinstance(node, (ast.ClassDef, ast.FunctionDef))}
+    public = [name for name in dir(_alnlab) if not name.startswith("__")]
+    assert public
+    for name in public:
+        stub_name = name.lstrip("_") if name.startswith("_") else name
+        assert (getattr(_alnlab, name).__doc__ or "").strip(), name
+        assert name in stubbed or stub_name in stubbed, f"{name} has no stub"
+    for name in ["kind", "state_names", "control_names", "ranges", "predict", "rollout"]:
+        assert (getattr(alnlab.Model, name).__doc__ or "").strip(), name

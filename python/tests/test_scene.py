@@ -1,0 +1,87 @@
+"""A run's scene stepped from Python reproduces its own log: from a logged
+frame, under the torques logged there, the next frame."""
+
+import numpy as np
+import pytest
+
+import alnlab
+
+
+@pytest.fixture(scope="module")
+def worm(runs):
+    return alnlab.scene("quickstart", variant="walk", out=runs)
+
+
+def successors(worm, held: bool):
+    """Indices f of logged frames followed by f + 1 in the same run (with
+    the torques unchanged at f + 1, if `held`), and the control columns."""
+    run, frame, _, variables = worm.logged()
+    controls = [worm.variable_names.index(n) for n in worm.control_names]
+    f = np.flatnonzero((run[:-1] == run[1:]) & (frame[1:] == frame[:-1] + 1))
+    if held:
+        f = f[np.all(variables[f][:, controls] == variables[f + 1][:, controls], axis=1)]
+    return f, controls
+
+
+def test_a_step_from_a_logged_frame_is_the_next_logged_frame(worm):
+    _, _, states, variables = worm.logged()
+    assert states.shape[1] == len(worm.state_names) and variables.shape[1] == len(worm.variable_names)
+    f, controls = successors(worm, held=False)
+    assert len(f) > 10000
+    stepped, _ = worm.step(states[f], variables[f][:, controls])
+    np.testing.assert_allclose(stepped, states[f + 1], rtol=0, atol=1e-9)
+    # Where the torques stay, every variable is the next frame's too (where
+    # they change, the next frame reads the new torques and what they do).
+    f, controls = successors(worm, held=True)
+    stepped, read = worm.step(states[f], variables[f][:, controls])
+    np.testing.assert_allclose(read, variables[f + 1], rtol=1e-9, atol=1e-9)
+
+
+def test_frames_step_on_and_fewer_steps_are_a_coarser_simulator(worm):
+    _, _, states, variables = worm.logged()
+    f, controls = successors(worm, held=True)
+    two = f[np.isin(f + 1, f)][:500]
+    stepped, _ = worm.step(states[two], variables[two][:, controls], frames=2)
+    np.testing.assert_allclose(stepped, states[two + 2], rtol=0, atol=1e-9)
+    coarse, _ = worm.step(states[two], variables[two][:, controls], frames=2, steps=2)
+    # Two steps of 5 ms miss what twenty of 0.5 ms make, by far more than
+    # rounding.
+    assert np.abs(coarse - states[two + 2]).max() > 1e-6
+
+
+def test_any_thread_count_gives_the_same_bytes(worm):
+    _, _, states, variables = worm.logged()
+    f, controls = successors(worm, held=False)
+    f = f[:333]
+    every = worm.step(states[f], variables[f][:, controls])
+    for threads in [1, 3]:
+        again = worm.step(states[f], variables[f][:, controls], threads=threads)
+        assert all(a.tobytes() == b.tobytes() for a, b in zip(every, again))
+
+
+def test_the_scene_names_what_the_models_read(runs, worm):
+    for variant in ["piecewise", "walk"]:
+        model = alnlab.load("quickstart", variant=variant, out=runs)
+        assert set(model.state_names) <= set(worm.variable_names)
+        assert model.control_names == worm.control_names
+    assert worm.name == "worm" and not worm.plant
+    assert worm.steps_per_frame == 10 and worm.frame_dt == pytest.approx(0.01)
+
+
+def test_bad_steps_are_refused(runs, worm):
+    _, _, states, _ = worm.logged()
+    s, u = len(worm.state_names), len(worm.control_names)
+    with pytest.raises(alnlab.InputError, match=rf"states: expected shape \(B, {s}\).*root.p.x"):
+        worm.step(np.zeros((2, s - 1)), np.zeros((2, u)))
+    with pytest.raises(alnlab.InputError, match=rf"controls: expected shape \(2, {u}\).*g.2.x"):
+        worm.step(states[:2], np.zeros((2, u + 1)))
+    bad = states[:3].copy()
+    bad[1, 0] = np.inf
+    with pytest.raises(alnlab.InputError, match="states: row 1 is not a finite state"):
+        worm.step(bad, np.zeros((3, u)))
+    with pytest.raises(alnlab.InputError, match="steps: expected at least 1"):
+        worm.step(states[:1], np.zeros((1, u)), steps=0)
+    with pytest.raises(alnlab.InputError, match="scene `worm` declares no plant"):
+        alnlab.scene("quickstart", variant="walk", out=runs, plant=True)
+    with pytest.raises(alnlab.InputError, match="has no scene `arm`; it has worm"):
+        alnlab.scene("quickstart", variant="walk", out=runs, name="arm")
