@@ -8,6 +8,7 @@
 pub mod atomic;
 pub mod error;
 pub mod hash;
+pub mod mcap_read;
 pub mod params;
 pub mod progress;
 pub mod provenance;

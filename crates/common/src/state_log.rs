@@ -15,7 +15,7 @@ use std::fs::File;
 use std::io::BufWriter;
 use std::path::{Path, PathBuf};
 
-use crate::{Error, Provenance, Result, atomic};
+use crate::{Error, Provenance, Result, atomic, mcap_read};
 
 /// The topic of the full-rate state messages.
 pub const STATE_TOPIC: &str = "/state";
@@ -367,68 +367,23 @@ impl StateLog {
         StateLog::from_bytes(path, &bytes)
     }
 
-    /// Decodes a whole log held in `bytes` (`path` names it in errors).
-    ///
-    /// The file is read front to back once, trusting nothing it has not
-    /// checked: the data section's, the summary section's and every chunk's
-    /// CRC-32 are verified (where the writer stored them; alnlab always
-    /// does), every chunk before any of its messages is used, and no record
-    /// or decompressed chunk may be larger than [`RECORD_LIMIT`], so a
-    /// damaged length cannot make the reader allocate without bound.
+    /// Decodes a whole log held in `bytes` (`path` names it in errors),
+    /// every check of [`mcap_read::read`] made.
     pub fn from_bytes(path: &Path, bytes: &[u8]) -> Result<StateLog> {
         use mcap::records::Record;
-        use mcap::sans_io::{LinearReadEvent, LinearReader, LinearReaderOptions};
 
         let bad = |what: String| Error::bad_file(path, what);
-        // A file that starts as MCAP does and then fails is damaged; one
-        // that does not is another kind of file.
-        let corrupt = |e: mcap::McapError| {
-            if bytes.starts_with(mcap::MAGIC) {
-                Error::damaged(path, format!("not an intact MCAP file ({e})"))
-            } else {
-                bad(format!("not an MCAP file ({e})"))
-            }
-        };
-        // Fuzzing explores the parser behind the CRCs.
-        let check = !cfg!(fuzzing);
-        let mut reader = LinearReader::new_with_options(
-            LinearReaderOptions::default()
-                .with_validate_data_section_crc(check)
-                .with_validate_summary_section_crc(check)
-                .with_prevalidate_chunk_crcs(check)
-                .with_record_length_limit(RECORD_LIMIT),
-        );
-        let mut unread = bytes;
         let mut scenes: Vec<SceneFrames> = Vec::new();
         let mut scene_of_channel = BTreeMap::new();
         let mut metadata = Vec::new();
-        let mut data_ended = false;
-        let mut footer_seen = false;
-        while let Some(event) = reader.next_event() {
-            let (opcode, data) = match event.map_err(corrupt)? {
-                LinearReadEvent::ReadRequest(need) => {
-                    let n = need.min(unread.len());
-                    reader.insert(n).copy_from_slice(&unread[..n]);
-                    reader.notify_read(n);
-                    unread = &unread[n..];
-                    continue;
-                }
-                LinearReadEvent::Record { opcode, data } => (opcode, data),
-            };
-            if !used(opcode) {
-                continue;
-            }
-            if !fields_fit(opcode, data) {
-                return Err(bad(format!(
-                    "record with opcode {opcode:#04x} has a field longer than the record"
-                )));
-            }
-            // The summary section repeats channels and metadata: read the
-            // data section's own records only.
-            match mcap::parse_record(opcode, data).map_err(corrupt)? {
-                Record::Footer(_) => footer_seen = true,
-                _ if data_ended => {}
-                Record::DataEnd(_) => data_ended = true,
+        let wanted = mcap_read::Wanted {
+            schemas: false,
+            channels: true,
+            messages: true,
+            metadata: true,
+        };
+        mcap_read::read(path, bytes, wanted, |record| {
+            match record {
                 Record::Channel(channel) if channel.topic == STATE_TOPIC => {
                     let layout =
                         StateLayout::from_channel_metadata(&channel.metadata).ok_or_else(|| {
@@ -448,7 +403,7 @@ impl StateLog {
                 Record::Metadata(record) => metadata.push((record.name, record.metadata)),
                 Record::Message { header, data } => {
                     let Some(&scene) = scene_of_channel.get(&header.channel_id) else {
-                        continue;
+                        return Ok(());
                     };
                     let entry = &mut scenes[scene];
                     let frame = entry.layout.decode(&data).ok_or_else(|| {
@@ -464,88 +419,11 @@ impl StateLog {
                 }
                 _ => {}
             }
-        }
-        if !data_ended || !footer_seen {
-            return Err(bad(
-                "MCAP file ends before its footer (unfinished or truncated)".into(),
-            ));
-        }
+            Ok(())
+        })?;
         Ok(StateLog { scenes, metadata })
     }
 }
-
-/// Whether the log reader uses records of this kind; others (header,
-/// schemas, indexes, statistics) are passed over unparsed.
-fn used(opcode: u8) -> bool {
-    use mcap::records::op;
-    matches!(
-        opcode,
-        op::CHANNEL | op::METADATA | op::MESSAGE | op::DATA_END | op::FOOTER
-    )
-}
-
-/// Whether every length prefix in a record stays within the record. mcap's
-/// parser reserves the length a string declares before reading it, so an
-/// unchecked damaged prefix could ask for 4 GiB.
-fn fields_fit(opcode: u8, data: &[u8]) -> bool {
-    use mcap::records::op;
-    let mut fields = Fields(data);
-    match opcode {
-        // id, schema id, topic, message encoding, metadata
-        op::CHANNEL => fields.skip(4) && fields.string() && fields.string() && fields.map(),
-        // name, metadata
-        op::METADATA => fields.string() && fields.map(),
-        // fixed-size fields, then the rest of the record
-        _ => true,
-    }
-}
-
-/// The unread rest of a record, consumed field by field.
-struct Fields<'a>(&'a [u8]);
-
-impl Fields<'_> {
-    fn skip(&mut self, n: usize) -> bool {
-        match self.0.get(n..) {
-            Some(rest) => {
-                self.0 = rest;
-                true
-            }
-            None => false,
-        }
-    }
-
-    /// A `u32` length prefix, then that many bytes.
-    fn string(&mut self) -> bool {
-        let Some(prefix) = self.0.first_chunk::<4>() else {
-            return false;
-        };
-        let n = u32::from_le_bytes(*prefix) as usize;
-        self.skip(4) && self.skip(n)
-    }
-
-    /// A `u32` byte length, then string pairs filling exactly that many bytes.
-    fn map(&mut self) -> bool {
-        let Some(prefix) = self.0.first_chunk::<4>() else {
-            return false;
-        };
-        let n = u32::from_le_bytes(*prefix) as usize;
-        let Some(entries) = self.0.get(4..).and_then(|rest| rest.get(..n)) else {
-            return false;
-        };
-        let mut entries = Fields(entries);
-        while !entries.0.is_empty() {
-            if !(entries.string() && entries.string()) {
-                return false;
-            }
-        }
-        self.skip(4 + n)
-    }
-}
-
-/// The largest record, or decompressed chunk, a trajectory log may hold
-/// (1 GiB): alnlab's writer makes chunks of under 1 MiB, so only a damaged
-/// length field comes near it.
-pub const RECORD_LIMIT: usize = 1 << 30;
 
 #[cfg(test)]
 mod tests {
@@ -658,30 +536,6 @@ mod tests {
         bytes[size_at..size_at + 8].copy_from_slice(&(1u64 << 61).to_le_bytes());
         let err = StateLog::from_bytes(&path, &bytes).unwrap_err();
         assert!(err.to_string().contains("trajectory.mcap"), "{err}");
-    }
-
-    #[test]
-    fn length_prefixes_must_stay_within_their_record() {
-        use mcap::records::op;
-        let string = |s: &str| [&(s.len() as u32).to_le_bytes()[..], s.as_bytes()].concat();
-        let pair = [string("k"), string("v")].concat();
-        let map = [&(pair.len() as u32).to_le_bytes()[..], &pair].concat();
-        let channel = [&[1, 0, 1, 0][..], &string("/t"), &string("cdr"), &map].concat();
-        assert!(fields_fit(op::CHANNEL, &channel));
-        assert!(fields_fit(
-            op::METADATA,
-            &[string("m"), map.clone()].concat()
-        ));
-        // The topic claims nearly 4 GiB.
-        let mut long = channel.clone();
-        long[4..8].copy_from_slice(&0xFFFF_FFF0u32.to_le_bytes());
-        assert!(!fields_fit(op::CHANNEL, &long));
-        // The map claims one byte more than it holds.
-        let mut over = channel.clone();
-        let at = channel.len() - map.len();
-        over[at] += 1;
-        assert!(!fields_fit(op::CHANNEL, &over));
-        assert!(!fields_fit(op::CHANNEL, &channel[..channel.len() - 1]));
     }
 
     #[test]
