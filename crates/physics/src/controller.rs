@@ -26,6 +26,10 @@ pub enum ControllerKind {
     /// Piecewise-constant torques, uniform in ±`amplitude`, redrawn every
     /// `hold` seconds from a seeded generator.
     Random,
+    /// The efforts a recording logged (a robot's data, not a simulation's):
+    /// whoever steps the scene drives them ([`crate::Runner::drive`]); the
+    /// controller itself gives none. Not for a manifest's scenes.
+    Logged,
 }
 
 /// A hinge's torque amplitude: three components for a ball hinge, one number
@@ -125,7 +129,7 @@ impl ControllerParams {
         if numbers.into_iter().any(|x| !x.is_finite()) {
             return Err(("amplitude", "expected finite numbers".into()));
         }
-        if self.kind != ControllerKind::None {
+        if !matches!(self.kind, ControllerKind::None | ControllerKind::Logged) {
             for (h, &dof) in dofs.iter().enumerate() {
                 let a = pick(&self.amplitude, h);
                 if a.dof() != dof {
@@ -169,7 +173,7 @@ impl Controller {
     pub fn torques(&mut self, t: f64, g: &mut [Vector3<f64>]) {
         let p = &self.params;
         match p.kind {
-            ControllerKind::None => g.fill(Vector3::zeros()),
+            ControllerKind::None | ControllerKind::Logged => g.fill(Vector3::zeros()),
             ControllerKind::Constant => {
                 for (h, out) in g.iter_mut().enumerate() {
                     let a = pick(&p.amplitude, h);

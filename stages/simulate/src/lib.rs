@@ -12,7 +12,6 @@
 //! this stage runs a manifest's scenes with it and writes what it saw.
 
 pub mod bench;
-mod stats;
 #[cfg(test)]
 mod tests;
 
@@ -21,12 +20,11 @@ use std::path::Path;
 use alnlab_common::params::{self, ParamError, Positive};
 use alnlab_common::state_log::{StateLayout, StateLogWriter};
 use alnlab_common::{Progress, Provenance, Result};
-use alnlab_physics::model::{Joint, Root};
+use alnlab_physics::controller::ControllerKind;
 use alnlab_physics::{Prepared, simulate_run};
 use alnlab_physics::{foxglove, replay};
 use serde::{Deserialize, Serialize};
 
-pub use alnlab_physics::replay::SCENE_RECORD;
 pub use alnlab_physics::{Integrator, Scene, SceneKind};
 
 /// Version of what this stage writes; part of every cache key, bumped when the
@@ -38,8 +36,7 @@ pub const FORMAT_VERSION: u32 = 5;
 pub const TRAJECTORY_FILE: &str = "trajectory.mcap";
 /// File name of the statistics table ([`alnlab_tables::stats`]).
 pub const STATS_FILE: &str = alnlab_tables::stats::FILE;
-/// Name of the metadata records holding each scene's model.
-pub const MODEL_RECORD: &str = "alnlab.model";
+pub use alnlab_physics::replay::{MODEL_RECORD, SCENE_RECORD};
 
 /// The `[simulate]` table of a manifest.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -119,11 +116,18 @@ impl Params {
                     format!("scene name {:?} is used twice", scene.name),
                 ));
             }
-            scene
-                .clone()
-                .resolve()
+            let resolved = scene.clone().resolve();
+            resolved
                 .validate()
                 .map_err(|(field, message)| (at(&field), message))?;
+            if resolved.controller().kind == ControllerKind::Logged {
+                return Err((
+                    at("controller.kind"),
+                    "`logged` is a recording's (the ingest stage's); a simulated scene's \
+                     controller is none, constant, sine or random"
+                        .into(),
+                ));
+            }
         }
         Ok(())
     }
@@ -152,10 +156,10 @@ pub fn run(
 
     let mut log = StateLogWriter::create(&out_dir.join(TRAJECTORY_FILE), &layouts)?;
     let (tf, scene_channel) = foxglove::add_channels(&mut log)?;
-    let mut stats = stats::VariableStats::default();
+    let mut stats = alnlab_tables::stats::VariableStats::default();
     let mut log_time_ns = 0u64;
     for (scene_index, p) in prepared.iter().enumerate() {
-        log.metadata(MODEL_RECORD, model_record(p))?;
+        log.metadata(MODEL_RECORD, replay::model_record(p))?;
         log.metadata(
             SCENE_RECORD,
             replay::scene_record(&p.scene, scene_index, seed),
@@ -191,113 +195,4 @@ pub fn run(
     // Stats first: if it fails, no log is renamed into place either.
     stats.write(&out_dir.join(STATS_FILE), provenance)?;
     log.finish(provenance)
-}
-
-/// The `alnlab.model` metadata record of a scene: the model as JSON.
-fn model_record(p: &Prepared) -> std::collections::BTreeMap<String, String> {
-    let scene = &p.scene;
-    let links: Vec<serde_json::Value> = p
-        .model
-        .links
-        .iter()
-        .enumerate()
-        .map(|(i, link)| {
-            let mut entry = serde_json::json!({
-                "parent": link.parent.map_or(-1, |p| p as i64),
-                "joint": match (link.parent, p.model.root, link.joint) {
-                    (None, Root::Free, _) => "free",
-                    (None, Root::Fixed, _) => "fixed",
-                    (Some(_), _, Joint::Revolute { .. }) => "revolute",
-                    (Some(_), _, Joint::Prismatic { .. }) => "prismatic",
-                    _ => "ball",
-                },
-                "mass": link.mass,
-                "c": link.c.as_slice(),
-                "J": link.inertia_hinge().transpose().as_slice(),
-                "l": link.l.as_slice(),
-            });
-            if let Some(robot) = &p.robot {
-                let fields = entry.as_object_mut().expect("object");
-                fields.insert("link".into(), robot.links[i].clone().into());
-                fields.insert("joint_name".into(), robot.joints[i].clone().into());
-                if let Joint::Revolute { origin, axis } | Joint::Prismatic { origin, axis } =
-                    link.joint
-                {
-                    fields.insert("axis".into(), axis.as_slice().into());
-                    fields.insert("origin".into(), origin.transpose().as_slice().into());
-                }
-            }
-            entry
-        })
-        .collect();
-    let json = serde_json::json!({
-        "scene": scene.name,
-        "kind": scene.kind,
-        "gravity": p.model.gravity.as_slice(),
-        "dt": scene.dt,
-        "frame_dt": scene.frame_dt,
-        "integrator": scene.integrator,
-        "floor": p.surfaces.floor,
-        "arena_radius": p.surfaces.arena_radius,
-        "contact": scene.contact,
-        "contact_model": "penalty spring-damper N = max(0, k d + c d'), regularised Coulomb \
-                          friction F_t = -mu N v_t / max(|v_t|, slip_speed)",
-        "links": links,
-        "conventions": {
-            "units": "SI",
-            "quaternion_order": ["x", "y", "z", "w"],
-            "J": "inertia about the proximal hinge, link frame, row-major",
-            "l": "hinge offset from the parent's hinge, parent frame (pinned root: the pivot, inertial frame)",
-            "frames": {
-                "root.p": "inertial", "root.v": "root link", "q.1": "root link to inertial",
-                "q.i": "link i to its parent", "w.1": "root angular velocity, root link",
-                "w.i": "hinge i relative angular velocity, link i",
-                "v": "link", "a": "link", "omega": "link", "omega_dot": "link",
-                "g": "link", "f_E": "link", "g_E": "link",
-            },
-            "g": "control torque the link exerts on its parent (paper §2); the link feels -g",
-            "roll_pitch": "x and y angles of R = Rz(yaw) Ry(pitch) Rx(roll) of the hinge \
-                           rotation; at pitch = ±90° roll is defined as 0",
-        },
-    });
-    let mut json = json;
-    if let Some(robot) = &p.robot {
-        json["robot"] = robot.name.clone().into();
-        json["base"] = serde_json::json!(scene.base);
-        // Where the drives apply other than the command, the log says so.
-        let total = match scene.logs_applied() {
-            true => "applied + passive",
-            false => "tau + passive",
-        };
-        json["robot_conventions"] = serde_json::json!({
-            "origin": "the joint frame's rotation at q = 0 relative to the parent link, row-major",
-            "axis": "unit joint axis, joint (= link) frame",
-            "q": "joint position (rad or m)", "qd": "joint velocity", "qdd": "joint acceleration",
-            "tau": "control effort, parent on child, clamped to the URDF's effort limit",
-            "passive": format!("damping, friction and soft-limit effort at the frame's state; the \
-                                joint's total effort is {total}"),
-            "links": "model links are the URDF's moving bodies; links fixed to one are merged into it",
-        });
-        if scene.logs_applied() {
-            json["robot_conventions"]["applied"] = "joint.<j>.applied: the effort the joint's \
-                drive applied, where it differs from the command tau (drives holding the URDF's \
-                velocity limits, a plant's actuators)"
-                .into();
-        }
-    }
-    if let Some(plant) = &scene.plant {
-        json["plant"] = serde_json::json!({
-            "departure": plant,
-            "note": "the links' masses, centres and inertias above are the plant's, which the \
-                     data come from; the scene as written (its description) is the nominal model",
-            "applied": "where the actuators have a gain, joint.<j>.applied is the effort the \
-                        actuator applied and the joint's total effort is applied + passive; \
-                        tau stays the command",
-        });
-    }
-    [
-        ("scene".to_string(), scene.name.clone()),
-        ("json".to_string(), json.to_string()),
-    ]
-    .into()
 }

@@ -26,6 +26,23 @@ fn frame_dt_must_be_a_multiple_of_dt() {
 }
 
 #[test]
+fn a_recordings_logged_controller_is_refused() {
+    let params = Params {
+        scene: vec![Scene {
+            controller: Some(alnlab_physics::controller::ControllerParams {
+                kind: ControllerKind::Logged,
+                ..Default::default()
+            }),
+            ..Scene::default()
+        }],
+        ..Params::default()
+    };
+    let err = params.validate().unwrap_err();
+    assert_eq!(err.0, "scene.0.controller.kind");
+    assert!(err.1.contains("`logged` is a recording's"), "{}", err.1);
+}
+
+#[test]
 fn writes_log_and_stats_that_read_back() {
     let dir = tempfile::tempdir().unwrap();
     let params = Params {
