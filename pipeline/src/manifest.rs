@@ -89,14 +89,57 @@ pub fn replicate_seed(seed: u64, r: u32) -> u64 {
     z ^ (z >> 31)
 }
 
-/// The `[data]` table: where the data come from instead of simulate and
-/// stride.
+/// The `[data]` table: where the data come from instead of a simulation —
+/// an archived dataset (standing for simulate and stride), or a robot's
+/// recording (the ingest stage standing for simulate).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Data {
     /// An archived dataset: `NAME@VERSION`, or a prefix of at least 8 hex
     /// digits of its sha256 (see `alnlab dataset list`).
-    pub dataset: String,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub dataset: Option<String>,
+    /// A ROS 2 recording (MCAP) of `sensor_msgs/msg/JointState`, relative
+    /// to the manifest; `[ingest]` says how it becomes frames.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub recording: Option<String>,
+    /// The recording's topic (default `/joint_states`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub topic: Option<String>,
+}
+
+/// Where a manifest's data come from.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Source {
+    Simulated,
+    /// `[data] dataset`: the archive stands for the stages it holds.
+    Archived,
+    /// `[data] recording`: the ingest stage stands for simulate.
+    Recorded,
+}
+
+impl Source {
+    fn of(data: Option<&Data>) -> Source {
+        match data {
+            Some(Data {
+                dataset: Some(_), ..
+            }) => Source::Archived,
+            Some(Data {
+                recording: Some(_), ..
+            }) => Source::Recorded,
+            _ => Source::Simulated,
+        }
+    }
+
+    /// Whether the stage's parameters are left out because the data stand
+    /// for it.
+    fn stands_for(self, stage: &Stage) -> bool {
+        match self {
+            Source::Simulated => false,
+            Source::Archived => stage.archived == Archived::Always,
+            Source::Recorded => stage.name == "simulate",
+        }
+    }
 }
 
 /// One variant: the stage parameters with its overrides applied.
@@ -134,6 +177,8 @@ struct Document {
     plan: alnlab_plan::Params,
     #[serde(default)]
     circuit: alnlab_circuit::Params,
+    #[serde(default)]
+    ingest: alnlab_ingest::Params,
 }
 
 /// An error in a manifest, located in the file.
@@ -198,15 +243,14 @@ impl Manifest {
         let (experiment, data, base_stages) =
             split(deserialize(&base, root_span.clone(), &locate, None)?);
         check_experiment(&experiment, &base, &locate)?;
-        let from_dataset = data.is_some();
+        check_data(data.as_ref(), &base, &locate)?;
+        let source = Source::of(data.as_ref());
         let mut variants = Vec::new();
         if variant_entries.is_empty() {
             let mut stages = base_stages;
-            if !from_dataset {
-                read_descriptions(&mut stages, &base, &locate, None)?;
-            }
-            validate(&stages, &base, &locate, None, from_dataset)?;
-            within_budget(&stages, &experiment, &base, &locate, None, from_dataset)?;
+            read_descriptions(&mut stages, data.as_ref(), &base, &locate, None)?;
+            validate(&stages, &base, &locate, None, source)?;
+            within_budget(&stages, &experiment, &base, &locate, None, source)?;
             variants.push(Variant {
                 name: "base".into(),
                 description: String::new(),
@@ -220,18 +264,9 @@ impl Manifest {
             merge(&mut merged, overrides);
             let doc = deserialize(&merged, root_span.clone(), &locate, Some(&name))?;
             let (_, _, mut stages) = split(doc);
-            if !from_dataset {
-                read_descriptions(&mut stages, &merged, &locate, Some(&name))?;
-            }
-            validate(&stages, &merged, &locate, Some(&name), from_dataset)?;
-            within_budget(
-                &stages,
-                &experiment,
-                &merged,
-                &locate,
-                Some(&name),
-                from_dataset,
-            )?;
+            read_descriptions(&mut stages, data.as_ref(), &merged, &locate, Some(&name))?;
+            validate(&stages, &merged, &locate, Some(&name), source)?;
+            within_budget(&stages, &experiment, &merged, &locate, Some(&name), source)?;
             variants.push(Variant {
                 name,
                 description,
@@ -308,10 +343,12 @@ impl Manifest {
         };
         let mut table =
             toml::Table::try_from(&resolved).expect("resolved parameters serialize to TOML");
-        if self.data.is_some() {
-            for stage in STAGES.iter().filter(|s| s.archived == Archived::Always) {
-                table.remove(stage.name);
-            }
+        let source = Source::of(self.data.as_ref());
+        for stage in STAGES.iter().filter(|s| source.stands_for(s)) {
+            table.remove(stage.name);
+        }
+        if source != Source::Recorded {
+            table.remove(crate::stages::INGEST.name);
         }
         table
     }
@@ -360,6 +397,7 @@ fn split(document: Document) -> (Experiment, Option<Data>, Stages) {
         test: document.test,
         plan: document.plan,
         circuit: document.circuit,
+        ingest: document.ingest,
     };
     (document.experiment, document.data, stages)
 }
@@ -498,22 +536,91 @@ fn check_experiment(
     ))
 }
 
-/// Reads the robot descriptions of `urdf` scenes, relative to the
-/// manifest's folder.
+/// Reads the files the data come from, relative to the manifest's folder:
+/// the robot descriptions of the simulation's `urdf` scenes, or a
+/// recording and its robot's (none for an archived dataset).
 fn read_descriptions(
     stages: &mut Stages,
+    data: Option<&Data>,
     table: &DeTable,
     locate: &Locator,
     variant: Option<&str>,
 ) -> Result<(), ManifestError> {
     let dir = locate.file.parent().unwrap_or(Path::new(""));
-    stages
-        .simulate
-        .read_descriptions(dir)
-        .map_err(|(key, message)| {
-            let path: Vec<&str> = std::iter::once("simulate").chain(key.split('.')).collect();
-            locate.error(span_of(table, &path), path.join("."), variant, message)
-        })
+    let located = |stage: &str, key: String, message: String| {
+        let path: Vec<&str> = std::iter::once(stage).chain(key.split('.')).collect();
+        match (stage, key.as_str()) {
+            ("ingest", "recording") => locate.error(
+                span_of(table, &["data", "recording"]),
+                "data.recording".into(),
+                variant,
+                message,
+            ),
+            _ => locate.error(span_of(table, &path), path.join("."), variant, message),
+        }
+    };
+    match Source::of(data) {
+        Source::Simulated => stages
+            .simulate
+            .read_descriptions(dir)
+            .map_err(|(key, message)| located("simulate", key, message)),
+        Source::Archived => Ok(()),
+        Source::Recorded => {
+            let data = data.expect("a recording");
+            let recording = data.recording.as_deref().expect("a recording");
+            stages
+                .ingest
+                .read_sources(dir, recording, data.topic.as_deref())
+                .map_err(|(key, message)| located("ingest", key, message))
+        }
+    }
+}
+
+/// Refuses a `[data]` table that names no source or two, a topic without
+/// a recording, and `[ingest]` without a recording.
+fn check_data(data: Option<&Data>, table: &DeTable, locate: &Locator) -> Result<(), ManifestError> {
+    let at = |path: &[&str], message: &str| {
+        Err(locate.error(
+            span_of(table, path),
+            path.join("."),
+            None,
+            message.to_string(),
+        ))
+    };
+    match data {
+        Some(Data {
+            dataset: Some(_),
+            recording: Some(_),
+            ..
+        }) => at(
+            &["data", "recording"],
+            "the data come from an archived dataset or a recording, not both",
+        ),
+        Some(Data {
+            dataset: None,
+            recording: None,
+            ..
+        }) => at(
+            &["data"],
+            "expected `dataset` (an archived dataset) or `recording`",
+        ),
+        Some(Data {
+            recording: None,
+            topic: Some(_),
+            ..
+        }) => at(
+            &["data", "topic"],
+            "a topic is a recording's: add `recording`",
+        ),
+        Some(Data {
+            recording: Some(_), ..
+        }) => Ok(()),
+        _ if has_key(table, crate::stages::INGEST.name) => at(
+            &[crate::stages::INGEST.name],
+            "[ingest] frames a recording: add [data] recording (or remove [ingest])",
+        ),
+        _ => Ok(()),
+    }
 }
 
 /// The checks between fields that each stage makes, located in the file.
@@ -522,34 +629,53 @@ fn validate(
     table: &DeTable,
     locate: &Locator,
     variant: Option<&str>,
-    from_dataset: bool,
+    source: Source,
 ) -> Result<(), ManifestError> {
-    // With `[data]`, the dataset holds the outputs of the stages it always
-    // stands for: their parameters would be silently ignored, so they are an
-    // error, and they are not checked.
-    let archived = |stage: &&Stage| from_dataset && stage.archived == Archived::Always;
-    if let Some(stage) = STAGES
-        .iter()
-        .filter(archived)
-        .find(|s| has_key(table, s.name))
-    {
-        let held: Vec<&str> = STAGES.iter().filter(archived).map(|s| s.name).collect();
+    // With `[data]`, the data stand for some stages: their parameters would
+    // be silently ignored, so they are an error, and they are not checked.
+    let held = |stage: &&Stage| source.stands_for(stage);
+    if let Some(stage) = STAGES.iter().filter(held).find(|s| has_key(table, s.name)) {
+        let names: Vec<&str> = STAGES.iter().filter(held).map(|s| s.name).collect();
+        let message = match source {
+            Source::Recorded => format!(
+                "the data come from `[data] recording`, which the ingest stage turns into the \
+                 simulate stage's outputs; remove `{}` (the robot is [ingest.robot])",
+                stage.name
+            ),
+            _ => format!(
+                "the data come from `[data] dataset`, which holds the {} outputs; remove `{}` \
+                 (or `[data]`)",
+                names.join(" and "),
+                stage.name
+            ),
+        };
         return Err(locate.error(
             span_of(table, &[stage.name]),
             stage.name.into(),
             variant,
-            format!(
-                "the data come from `[data] dataset`, which holds the {} outputs; remove `{}` \
-                 (or `[data]`)",
-                held.join(" and "),
-                stage.name
-            ),
+            message,
         ));
     }
-    let failure = STAGES.iter().filter(|s| !archived(s)).find_map(|stage| {
-        let check = (stage.validate)(stages, !from_dataset);
-        check.err().map(|(key, message)| (stage.name, key, message))
-    });
+    if source == Source::Recorded && !stages.plan.task.is_empty() {
+        return Err(locate.error(
+            span_of(table, &["plan", "task"]),
+            "plan.task".into(),
+            variant,
+            "planning executes its torques in the plant the data come from, and a recording \
+             has none (the robot is not here to try them; its URDF is only the nominal model): \
+             remove [[plan.task]]"
+                .into(),
+        ));
+    }
+    let recorded = (source == Source::Recorded).then_some(&crate::stages::INGEST);
+    let failure = STAGES
+        .iter()
+        .filter(|s| !held(s))
+        .chain(recorded)
+        .find_map(|stage| {
+            let check = (stage.validate)(stages, source == Source::Simulated);
+            check.err().map(|(key, message)| (stage.name, key, message))
+        });
     match failure {
         None => Ok(()),
         Some((stage, key, message)) => {
@@ -567,11 +693,11 @@ fn within_budget(
     table: &DeTable,
     locate: &Locator,
     variant: Option<&str>,
-    from_dataset: bool,
+    source: Source,
 ) -> Result<(), ManifestError> {
     let estimate = crate::budget::Estimate::of(stages);
     match estimate.exceeds(&experiment.budget) {
-        Some(("simulate", _)) if from_dataset => Ok(()),
+        Some(("simulate", _)) if source != Source::Simulated => Ok(()),
         Some((stage, message)) => {
             Err(locate.error(span_of(table, &[stage]), stage.into(), variant, message))
         }
@@ -642,7 +768,7 @@ simulate.scene = [{ name = "box", duration = 2.0, integrator = "rk4" }]
         let text = "[experiment]\nname = \"x\"\nseed = 1\n\n[data]\ndataset = \"worm@2\"\n\n\
                     [train]\nleaves = 64\n\n[[variant]]\nname = \"q\"\nquantize.levels = 16\n";
         let m = parse(text).unwrap();
-        assert_eq!(m.data.as_ref().unwrap().dataset, "worm@2");
+        assert_eq!(m.data.as_ref().unwrap().dataset.as_deref(), Some("worm@2"));
         assert!(m.variants[0].tables.contains("quantize"));
         let toml = m.resolved_toml(&m.variants[0]);
         assert!(

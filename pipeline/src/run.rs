@@ -99,10 +99,10 @@ pub fn run(manifest: &Manifest, options: &RunOptions) -> Result<RunRecord> {
         None => manifest.variants.iter().collect(),
     };
     let archive = Archive::new(&options.datasets);
-    let dataset = match &manifest.data {
-        Some(data) => {
+    let dataset = match manifest.data.as_ref().and_then(|d| d.dataset.as_ref()) {
+        Some(dataset) => {
             let entry = archive
-                .find_pinned(&data.dataset)
+                .find_pinned(dataset)
                 .map_err(|e| e.context(&format!("{}: [data] dataset", manifest.path.display())))?;
             archive.require_whole(&entry)?;
             for variant in &variants {
@@ -255,8 +255,15 @@ impl Graph<'_> {
             let from_archive = archived
                 .as_ref()
                 .filter(|(_, entry)| stage.archived.holds(entry.has_levels()));
+            let recorded = variant.stages.ingest.recording.is_some() && stage.name == "simulate";
             let artifact = match from_archive {
                 Some((artifact, _)) => artifact.clone(),
+                // A recording stands where the simulation would, the same
+                // for every replicate (no seed in its key).
+                None if recorded => {
+                    let params = stage_params(0, (stages::INGEST.params)(&variant.stages));
+                    self.stage(&stages::INGEST, &params, &[], variant)?
+                }
                 None => {
                     let inputs: Vec<(&'static str, &Artifact)> = stage
                         .inputs

@@ -40,6 +40,10 @@ pub struct Stages {
     /// `[circuit]`
     #[serde(default)]
     pub circuit: alnlab_circuit::Params,
+    /// `[ingest]`: with `[data] recording`, how the recording becomes
+    /// frames, and the robot it records.
+    #[serde(default)]
+    pub ingest: alnlab_ingest::Params,
 }
 
 /// One stage of the graph.
@@ -669,6 +673,33 @@ pub const AGGREGATE: Stage = Stage {
         threads: 1,
         mem_mb: 1024,
         runtime: 10,
+        holds_forest: false,
+    },
+};
+
+/// The ingest stage (with `[data] recording`): a robot's recording turned
+/// into what the simulate stage writes, standing in its place. Its key has
+/// no seed: every replicate reads the same recording.
+pub const INGEST: Stage = Stage {
+    name: "ingest",
+    about: "The ingest stage (with [data] recording): a ROS 2 recording of a robot's joint \
+            states turned into a trajectory log and its statistics",
+    format_version: alnlab_ingest::FORMAT_VERSION,
+    inputs: &[],
+    outputs: &[
+        ("trajectory", alnlab_simulate::TRAJECTORY_FILE),
+        ("stats", alnlab_simulate::STATS_FILE),
+    ],
+    archived: Archived::Never,
+    every_replicate: true,
+    params: |s| json(&s.ingest),
+    validate: |s, _| s.ingest.validate(),
+    run: |c| alnlab_ingest::run(&c.stages.ingest, c.provenance, c.out_dir, c.progress),
+    merge_shards: None,
+    hints: Hints {
+        threads: 1,
+        mem_mb: 1024,
+        runtime: 5,
         holds_forest: false,
     },
 };

@@ -138,7 +138,7 @@ fn a_recorded_simulation_is_ingested_as_its_own_log_and_replays() {
         max_gap: 0.05,
         gaps: Gaps::Error,
     };
-    run(&source, &grid, &Provenance::default(), dir.path()).unwrap();
+    ingest(&source, &grid, &Provenance::default(), dir.path()).unwrap();
 
     let log = StateLog::read(&dir.path().join(log::TRAJECTORY_FILE)).unwrap();
     let ingested = &log.scenes[0];

@@ -391,6 +391,15 @@ pub fn run(
                 replays.keys().cloned().collect::<Vec<_>>().join(", ")
             ))
         })?;
+        if replay.logged_efforts.is_some() {
+            return Err(Error::bad_file(
+                trajectory_path,
+                format!(
+                    "scene `{scene_name}` comes from a recording: planning executes its torques \
+                     in the plant the data come from, and a recording has none"
+                ),
+            ));
+        }
         // Episodes execute in the plant (where the scene has one); the
         // simulators a user has run the scene as written.
         let (p, nominal) = (replay.simulated(), &replay.prepared);
