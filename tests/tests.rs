@@ -13,6 +13,7 @@ mod headlines;
 mod hostile;
 mod plan;
 mod provenance;
+mod recordings;
 mod reports;
 mod robots;
 mod scale_out;
