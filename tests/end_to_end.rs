@@ -627,7 +627,7 @@ fn the_report_renders_with_its_charts_and_renders_again_the_same() {
     assert!(first.lines().count() <= 250);
     // One replicate: the ALN's interval is labelled as over rows.
     assert!(
-        first.contains("over the test rows of one simulation"),
+        first.contains("over the test rows of one replicate"),
         "{first}"
     );
     let html = std::fs::read_to_string(report_path.with_file_name("report.html")).unwrap();
@@ -712,18 +712,25 @@ fn cut_down(text: &str) -> String {
                 *v = v.min(most);
             }
         };
+        // A robot's description and a recording, relative to experiments/,
+        // from wherever the cut-down manifest is run.
+        let absolute = |table: &mut toml::Table, key: &str| {
+            if let Some(toml::Value::String(file)) = table.get_mut(key) {
+                let experiments = Path::new(env!("CARGO_MANIFEST_DIR")).join("experiments");
+                *file = experiments.join(&*file).display().to_string();
+            }
+        };
         if let Some(toml::Value::Array(scenes)) = table.get_mut("scene") {
             for scene in scenes.iter_mut().filter_map(toml::Value::as_table_mut) {
                 cap(scene, "runs", 1);
                 cap_float(scene, "duration", 20.0);
-                // A robot's description, relative to experiments/, from
-                // wherever the cut-down manifest is run.
-                if let Some(toml::Value::String(file)) = scene.get_mut("file") {
-                    let experiments = Path::new(env!("CARGO_MANIFEST_DIR")).join("experiments");
-                    *file = experiments.join(&*file).display().to_string();
-                }
+                absolute(scene, "file");
             }
         }
+        if let Some(toml::Value::Table(robot)) = table.get_mut("robot") {
+            absolute(robot, "file");
+        }
+        absolute(table, "recording");
         // Two replicates still take every across-replicate path.
         cap(table, "replicates", 2);
         cap(table, "train_rows", 60);

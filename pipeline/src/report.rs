@@ -105,6 +105,10 @@ pub fn render(record: &RunRecord, dir: &Path) -> Result<PathBuf> {
             .dataset
             .as_ref()
             .map(|d| (d.dataset.clone(), d.sha256.clone())),
+        recording: record
+            .recording
+            .as_ref()
+            .map(|r| (r.recording.clone(), r.sha256.clone(), r.topic.clone())),
     };
     report::render(&run, dir)
 }

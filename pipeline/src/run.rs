@@ -23,7 +23,9 @@ use crate::cache::{Artifact, Cache, StageKey};
 use crate::dataset::{Archive, Entry};
 use crate::manifest::{Manifest, Variant, replicate_seed};
 use crate::progress::{Bar, Overall};
-use crate::records::{self, ArtifactRef, DatasetRef, RunRecord, StageRecord, VariantRecord};
+use crate::records::{
+    self, ArtifactRef, DatasetRef, RecordingRef, RunRecord, StageRecord, VariantRecord,
+};
 use crate::stages::{self, Archived, Call, STAGES, Stage, stage_params};
 use alnlab_aln::shard::Shard;
 
@@ -203,6 +205,14 @@ pub fn run(manifest: &Manifest, options: &RunOptions) -> Result<RunRecord> {
         dataset: dataset.as_ref().map(|entry| DatasetRef {
             dataset: entry.label(),
             sha256: entry.sha256.clone(),
+        }),
+        recording: manifest.data.as_ref().and_then(|d| {
+            let ingest = &manifest.variants.first()?.stages.ingest;
+            Some(RecordingRef {
+                recording: d.recording.clone()?,
+                sha256: ingest.recording_sha256.clone()?,
+                topic: ingest.topic.clone(),
+            })
         }),
     };
     if options.until.is_none() {

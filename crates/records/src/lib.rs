@@ -69,6 +69,18 @@ pub struct RunRecord {
     /// The archived dataset the data came from, if any.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub dataset: Option<DatasetRef>,
+    /// The recording the data came from, if any.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub recording: Option<RecordingRef>,
+}
+
+/// A robot's recording, as a run record names it.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct RecordingRef {
+    /// Its path, as the manifest names it.
+    pub recording: String,
+    pub sha256: String,
+    pub topic: String,
 }
 
 /// An archived dataset, as a run record names it.

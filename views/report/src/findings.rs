@@ -96,7 +96,7 @@ pub(super) fn against_simulator(aln_single: &Timing, rival: &Rival) -> String {
     let over = if rival.across_replicates {
         "across replicates"
     } else {
-        "over the test rows of one simulation"
+        "over the test rows of one replicate"
     };
     let standing = if rival.as_accurate {
         "the cheapest simulator setting at least as accurate as the ALN"
@@ -217,7 +217,8 @@ pub(super) fn definitions(md: &mut String) {
          training rows too (the paper's protocol), the figure over all of them is given once per \
          variant, apart.\n\
          - **Variant, replicate**: a variant is one configuration of the manifest; a replicate \
-         runs it again from a new seed — a new simulation, split and model.\n\
+         runs it again from a new seed — a new split and model, and a new simulation unless \
+         the data come from an archived dataset or a recording.\n\
          - **ALN**: the adaptive logic network under test — a *bit-forest* (the 1991 form: \
          AND/OR trees over input bits, one per output bit, decoded to a level) or a \
          *piecewise-linear* ALN (MIN/MAX trees over affine pieces of the real inputs, predicting \
@@ -240,7 +241,7 @@ pub(super) fn definitions(md: &mut String) {
          level counts or codes compare.\n\
          - **Comparison and interval**: the mean paired difference of two models' errors on the \
          same rows and variables (below zero: the first is better) with its 95% t-interval — \
-         across replicates where there are several, else over the test rows of one simulation, \
+         across replicates where there are several, else over the test rows of one replicate, \
          which treats rows as independent (neighbouring frames are not quite, so it is on the \
          narrow side, and it says nothing of seed-to-seed spread). \"Better\" or \"worse\" \
          only when the interval excludes zero, otherwise \"indistinguishable\" (\"tied\" \

@@ -6,7 +6,7 @@
 //! Every figure is on held-out rows, in levels (the one primary metric).
 //! With replicates, a figure is the mean across them with its 95% interval
 //! across replicates (seeds before rows); with one replicate the ALN's
-//! interval is over the test rows of one simulation and is labelled so,
+//! interval is over the test rows of one replicate and is labelled so,
 //! the other models' figures have none.
 
 use std::fmt::Write as _;
@@ -32,7 +32,7 @@ const TABLE_ROWS: usize = 10;
 enum Over {
     /// Replicates (seeds): this many.
     Seeds(usize),
-    /// The test rows of one simulation.
+    /// The test rows of one replicate.
     Rows,
     /// No interval: one replicate, and no paired comparison over rows.
     Nothing,
@@ -230,11 +230,11 @@ fn same_data(variants: &[Loaded]) -> bool {
     variants.windows(2).all(|w| super::same_rows(&w[0], &w[1]))
 }
 
-/// "across 5 replicates" / "over the rows of one simulation".
+/// "across 5 replicates" / "over the rows of one replicate".
 fn over_words(over: Over) -> String {
     match over {
         Over::Seeds(n) => format!("95% interval across {n} replicates"),
-        Over::Rows => "95% interval over the test rows of one simulation".into(),
+        Over::Rows => "95% interval over the test rows of one replicate".into(),
         Over::Nothing => "one replicate: no interval".into(),
     }
 }
@@ -294,7 +294,7 @@ pub(super) fn first_screen(
         (Over::Seeds(_), _) => over_words(best.error.over),
         (_, Some(Over::Rows)) => "one replicate: errors without an interval, the ALN's \
                                   difference from persistence with its 95% interval over the test \
-                                  rows of one simulation (rows, not seeds: narrower than seed to \
+                                  rows of one replicate (rows, not seeds: narrower than seed to \
                                   seed)"
             .into(),
         _ => "one replicate: no intervals".into(),
@@ -388,13 +388,17 @@ fn abstract_(
     let description = run.description.trim().trim_end_matches('.');
     let _ = write!(
         md,
-        "**Abstract.** {description} — {} variant{}, {replicates} replicate{}{} (a new \
-         simulation, split and model), every error in quantization levels on rows held out of \
-         training.",
+        "**Abstract.** {description} — {} variant{}, {replicates} replicate{}{} ({}), every error \
+         in quantization levels on rows held out of training.",
         variants.len(),
         if variants.len() == 1 { "" } else { "s" },
         if replicates == 1 { "" } else { "s" },
         if variants.len() == 1 { "" } else { " each" },
+        match (&run.dataset, &run.recording) {
+            (Some(_), _) => "a new split and model of the same archived data",
+            (_, Some(_)) => "a new split and model of the same recording",
+            _ => "a new simulation, split and model",
+        },
     );
     let name = if variants.len() == 1 {
         "The ALN".to_string()

@@ -64,6 +64,9 @@ pub struct RunInfo {
     pub notes: String,
     /// The archived dataset the data came from (`name@version`, sha256).
     pub dataset: Option<(String, String)>,
+    /// The recording the data came from (its path as the manifest names
+    /// it, its sha256, the topic).
+    pub recording: Option<(String, String, String)>,
 }
 
 /// The paper's §4.6 results table (Armstrong, Supynuk & Green, "Adaptive
@@ -879,6 +882,12 @@ fn reproducibility(md: &mut String, run: &RunInfo, variants: &[Loaded]) {
     add("manifest sha256", format!("`{}`", run.manifest_sha256));
     if let Some((dataset, sha256)) = &run.dataset {
         add("dataset", format!("{dataset} (sha256 `{sha256}`)"));
+    }
+    if let Some((recording, sha256, topic)) = &run.recording {
+        add(
+            "recording",
+            format!("`{recording}`, topic `{topic}` (sha256 `{sha256}`)"),
+        );
     }
     add("seed", run.seed.to_string());
     if let Some(v) = variants.first().filter(|v| v.info.replicates.len() > 1) {

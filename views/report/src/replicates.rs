@@ -1,5 +1,5 @@
-//! Replicates: a variant run again with new seeds (new simulation, split
-//! and trees). Each headline figure — a model's mean error over the
+//! Replicates: a variant run again with new seeds (a new split and
+//! trees, and a new simulation where the data are simulated). Each headline figure — a model's mean error over the
 //! variables, the ALN's paired difference against a baseline — becomes the
 //! mean across replicates with its 95% t-interval across replicates, each
 //! replicate one independent value. `replicates.csv`, beside the report,
@@ -181,7 +181,8 @@ pub(super) fn finding(md: &mut String, v: &Loaded) {
     }
     let rows = v.replicates[0].rows.as_str();
     let mut line = format!(
-        "  - **Across all {n} replicates** (each a new simulation, split and forest; mean and \
+        "  - **Across all {n} replicates** (each a new split and forest, and a new simulation \
+         where the data are simulated; mean and \
          95% interval across replicates, {rows} rows — where this and the replicate above \
          disagree, this is the finding):"
     );
