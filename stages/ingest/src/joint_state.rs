@@ -161,31 +161,32 @@ impl Reader<'_> {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use serde::Serialize;
 
     use super::*;
 
     #[derive(Serialize)]
-    struct Time {
-        sec: i32,
-        nanosec: u32,
+    pub(crate) struct Time {
+        pub sec: i32,
+        pub nanosec: u32,
     }
 
     #[derive(Serialize)]
-    struct Header {
-        stamp: Time,
-        frame_id: String,
+    pub(crate) struct Header {
+        pub stamp: Time,
+        pub frame_id: String,
     }
 
-    /// The message as the `cdr` crate (serde) encodes it: the reference.
+    /// The message as the `cdr` crate (serde) encodes it: the reference
+    /// the decoder is checked against, and what the stage's tests record.
     #[derive(Serialize)]
-    struct Message {
-        header: Header,
-        name: Vec<String>,
-        position: Vec<f64>,
-        velocity: Vec<f64>,
-        effort: Vec<f64>,
+    pub(crate) struct Message {
+        pub header: Header,
+        pub name: Vec<String>,
+        pub position: Vec<f64>,
+        pub velocity: Vec<f64>,
+        pub effort: Vec<f64>,
     }
 
     fn message() -> Message {

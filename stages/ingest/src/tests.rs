@@ -12,10 +12,10 @@ use alnlab_common::state_log::{StateFrame, StateLog};
 use alnlab_physics::replay::SceneReplay;
 use alnlab_physics::{Prepared, Scene, SceneKind, simulate_run};
 use mcap::records::MessageHeader;
-use serde::Serialize;
 
 use super::*;
 use crate::frames::{Gaps, Resample};
+use crate::joint_state::tests::{Header, Message, Time};
 
 fn workspace() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
@@ -36,27 +36,6 @@ fn ur5(duration: f64) -> Scene {
     let scene = scene.resolve();
     scene.validate().unwrap();
     scene
-}
-
-#[derive(Serialize)]
-struct Time {
-    sec: i32,
-    nanosec: u32,
-}
-
-#[derive(Serialize)]
-struct Header {
-    stamp: Time,
-    frame_id: String,
-}
-
-#[derive(Serialize)]
-struct Message {
-    header: Header,
-    name: Vec<String>,
-    position: Vec<f64>,
-    velocity: Vec<f64>,
-    effort: Vec<f64>,
 }
 
 /// `frames` of scene `p` as a JointState recording on `/joint_states`,

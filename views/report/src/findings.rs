@@ -217,8 +217,8 @@ pub(super) fn definitions(md: &mut String) {
          training rows too (the paper's protocol), the figure over all of them is given once per \
          variant, apart.\n\
          - **Variant, replicate**: a variant is one configuration of the manifest; a replicate \
-         runs it again from a new seed — a new split and model, and a new simulation unless \
-         the data come from an archived dataset or a recording.\n\
+         runs it again from a new seed — a new model, a new split where it is drawn at random, \
+         and a new simulation unless the data come from an archived dataset or a recording.\n\
          - **ALN**: the adaptive logic network under test — a *bit-forest* (the 1991 form: \
          AND/OR trees over input bits, one per output bit, decoded to a level) or a \
          *piecewise-linear* ALN (MIN/MAX trees over affine pieces of the real inputs, predicting \

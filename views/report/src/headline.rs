@@ -395,8 +395,14 @@ fn abstract_(
         if replicates == 1 { "" } else { "s" },
         if variants.len() == 1 { "" } else { " each" },
         match (&run.dataset, &run.recording) {
-            (Some(_), _) => "a new split and model of the same archived data",
-            (_, Some(_)) => "a new split and model of the same recording",
+            (Some(_), _) => {
+                "the same archived data; a new seed for the model and, where it is drawn at \
+                 random, the split"
+            }
+            (_, Some(_)) => {
+                "the same recording; a new seed for the model and, where it is drawn at random, \
+                 the split"
+            }
             _ => "a new simulation, split and model",
         },
     );

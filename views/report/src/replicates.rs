@@ -181,8 +181,8 @@ pub(super) fn finding(md: &mut String, v: &Loaded) {
     }
     let rows = v.replicates[0].rows.as_str();
     let mut line = format!(
-        "  - **Across all {n} replicates** (each a new split and forest, and a new simulation \
-         where the data are simulated; mean and \
+        "  - **Across all {n} replicates** (each from a new seed: the model, the split where it \
+         is drawn at random, the data where they are simulated; mean and \
          95% interval across replicates, {rows} rows — where this and the replicate above \
          disagree, this is the finding):"
     );
