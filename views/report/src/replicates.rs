@@ -215,8 +215,9 @@ pub(super) fn section(md: &mut String, variants: &[Loaded], dir: &Path) -> Resul
     }
     let _ = writeln!(
         md,
-        "## Replicates\n\nEach replicate re-draws the simulation, the split and the trees from a \
-         seed derived from the experiment's. Mean errors over the variables and the ALN's mean \
+        "## Replicates\n\nEach replicate re-draws the trees, the split where it is drawn at \
+         random and the data where they are simulated, from a seed derived from the \
+         experiment's. Mean errors over the variables and the ALN's mean \
          paired difference against each baseline, per replicate (on its held-out rows), then \
          their mean with the 95% t-interval across replicates. `replicates.csv` holds every \
          value.\n"
