@@ -788,7 +788,7 @@ fn describe_piecewise(model: &Model) -> String {
         pieces.iter().min().unwrap_or(&0),
         pieces.iter().max().unwrap_or(&0),
         if model.header.outputs.len() < variables {
-            "; the controller's torques are given, not predicted"
+            "; the controls (torques or efforts) are given, not predicted"
         } else {
             ""
         }
