@@ -172,7 +172,7 @@ fn python_package(suite: &Suite) -> Result<(), String> {
     let python = |command: &mut Command| {
         command
             .env("ALNLAB_TEST_RUNS", runs(suite))
-            .env("ALNLAB_BIN", target_dir().join("debug/alnlab"))
+            .env("ALNLAB_BIN", alnlab_bin())
             .env("PYTHONDONTWRITEBYTECODE", "1");
         run_in_root(command)
     };
@@ -223,7 +223,7 @@ fn robots_against_pinocchio(suite: &Suite) -> Result<(), String> {
     run_in_root(
         Command::new(&suite.python)
             .arg("tests/robots.py")
-            .arg(target_dir().join("debug/alnlab"))
+            .arg(alnlab_bin())
             .arg(&dir),
     )?;
     let harness = dir.join("pinocchio-aba");
@@ -411,7 +411,7 @@ fn snakemake(suite: &Suite) -> Result<(), String> {
     run_in_root(
         Command::new("bash")
             .arg("tests/snakemake.sh")
-            .arg(target_dir().join("debug/alnlab"))
+            .arg(alnlab_bin())
             .arg(bin.join("snakemake"))
             .arg(&suite.python)
             .arg(suite.work.join("snakemake")),
@@ -644,11 +644,17 @@ fn cargo() -> Command {
     Command::new(std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into()))
 }
 
-/// The alnlab binary (debug, as `cargo test` builds it).
+/// The alnlab binary as the first step's `cargo test --workspace` built
+/// it. Not `cargo run`: that resolves the root package's features alone,
+/// without the Python package's (NumPy's num-complex, pyo3's syn), and
+/// would build nalgebra and everything above it a second time.
 fn alnlab() -> Command {
-    let mut command = cargo();
-    command.args(["run", "--quiet", "--bin", "alnlab", "--"]);
-    command
+    Command::new(alnlab_bin())
+}
+
+/// Where the first step's `cargo test --workspace` put the alnlab binary.
+fn alnlab_bin() -> PathBuf {
+    target_dir().join("debug/alnlab")
 }
 
 /// Runs `command` in the workspace's root, its output passed through; an
