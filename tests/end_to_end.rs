@@ -118,6 +118,7 @@ fn cache_reuses_and_reruns_only_what_changed() {
         ]
     );
     assert!(first.variants[0].artifacts.keys().eq([
+        "boosted",
         "circuit",
         "codebook",
         "comparisons",
@@ -125,6 +126,7 @@ fn cache_reuses_and_reruns_only_what_changed() {
         "fpga",
         "horizons",
         "levels",
+        "linear",
         "model",
         "nominal",
         "pairs",

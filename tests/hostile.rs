@@ -315,8 +315,9 @@ fn runs_whose_artifacts_left_the_cache_still_list_show_and_diff() {
             variant["cached_files"].as_u64().unwrap(),
             variant["files"].as_u64().unwrap(),
         );
-        // summary, comparisons, horizons; predictions, timings, rollout.
-        assert_eq!(all - cached, 6, "{run}");
+        // summary, comparisons, horizons; predictions, timings, rollout,
+        // linear, boosted.
+        assert_eq!(all - cached, 8, "{run}");
         assert!(
             variant["metrics"]["error/aln"]["mean"].as_f64().unwrap() > 0.0,
             "{run}"

@@ -379,6 +379,8 @@ pub const STAGES: &[Stage] = &[
             ("predictions", alnlab_evaluate::PREDICTIONS_FILE),
             ("timings", alnlab_evaluate::TIMINGS_FILE),
             ("rollout", alnlab_evaluate::ROLLOUT_FILE),
+            ("linear", alnlab_evaluate::LINEAR_FILE),
+            ("boosted", alnlab_evaluate::BOOSTED_FILE),
         ],
         archived: Archived::Never,
         every_replicate: true,

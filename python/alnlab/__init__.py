@@ -12,8 +12,9 @@ records and tables as Arrow tables.
 
 What is here:
 
-- ``load(run, variant=, replicate=, out=)``: a run's trained model
-  (piecewise-linear, bit-forest or threshold), found as the CLI finds runs:
+- ``load(run, variant=, replicate=, out=, model=)``: a run's trained model
+  (piecewise-linear, bit-forest or threshold), or with ``model="linear"`` or
+  ``"boosted"`` a baseline its test stage fitted, found as the CLI finds runs:
   a run id, a unique prefix of one, an experiment's name (its latest run),
   ``NAME~N`` (N runs before it), or ``RUN:VARIANT``; or a run's folder.
   ``Model(model_path, codebook_path)`` loads the files themselves.

@@ -18,12 +18,15 @@ class DamagedError(AlnlabError):
 
 class Model:
     """A trained model of a run: predicts the next frame of its state
-    variables from the current one and the controls held over the frame."""
+    variables from the current one and the controls held over the frame.
+    ``model_path`` is a run's ``model.aln``, or its test stage's baselines
+    ``linear.aln`` and ``boosted.parquet``."""
 
     def __init__(self, model_path: str | os.PathLike[str], codebook_path: str | os.PathLike[str]) -> None: ...
     @property
     def kind(self) -> str:
-        """``piecewise-linear``, ``bit-forest`` or ``threshold``."""
+        """``piecewise-linear`` (the robust linear fit is one, of one piece
+        per output), ``bit-forest``, ``threshold`` or ``boosted``."""
     @property
     def state_names(self) -> list[str]:
         """The state variables' names (D), in the columns' order."""

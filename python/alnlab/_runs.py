@@ -27,14 +27,20 @@ def _where(run: PathLike, out: PathLike) -> tuple[str, str]:
     return str(out), str(run)
 
 
+#: The models ``load`` finds, by the artifact that holds each.
+MODELS = {"aln": "model", "linear": "linear", "boosted": "boosted"}
+
+
 def load(
     run: PathLike = "quickstart",
     *,
     variant: str | None = None,
     replicate: int = 1,
     out: PathLike = "runs",
+    model: str = "aln",
 ) -> Model:
-    """A run's trained model.
+    """A run's trained model, or one of the baselines its test stage fitted
+    on the same training rows.
 
     Parameters
     ----------
@@ -49,18 +55,27 @@ def load(
         report, as here by default.
     out
         The runs folder (``alnlab run --out``; default ``runs``).
+    model
+        ``aln`` (the trained model), ``linear`` (the robust linear fit of
+        each variable's change: a piecewise-linear model of one piece per
+        output) or ``boosted`` (the gradient-boosted trees, fitted where the
+        manifest sets ``[test] peer = true``). Each predicts as the test stage
+        scored it in ``predictions.parquet``.
 
     Raises
     ------
     InputError
-        No such run or variant, or its files are gone from the cache; the
-        message is the CLI's.
+        No such run, variant or model, or its files are gone from the cache;
+        the message is the CLI's.
     """
+    if model not in MODELS:
+        raise InputError(f"model: expected one of {', '.join(MODELS)}, got {model!r}")
     where, reference = _where(run, out)
+    role = MODELS[model]
     *_, files = _alnlab.find_artifacts(
-        where, reference, ["model", "codebook"], variant=variant, replicate=replicate
+        where, reference, [role, "codebook"], variant=variant, replicate=replicate
     )
-    return Model(files["model"], files["codebook"])
+    return Model(files[role], files["codebook"])
 
 
 def scene(

@@ -1,17 +1,21 @@
 //! A trained model in Python: `Model(model_path, codebook_path)`, its
 //! variables' names and ranges, and `predict` and `rollout` over NumPy
 //! arrays — the stages' own prediction paths (a piecewise-linear model's
-//! batched evaluation, a bit-forest's or threshold model's runtime), rows
-//! split among threads with the GIL released.
+//! batched evaluation, a bit-forest's or threshold model's runtime, the
+//! boosted trees' evaluation), rows split among threads with the GIL
+//! released. The robust linear baseline is a piecewise-linear model of one
+//! piece per output, and loads as one.
 
 use std::path::PathBuf;
 use std::sync::Mutex;
 use std::time::Instant;
 
 use alnlab_aln::ModelKind;
+use alnlab_aln::boosted::Kept;
 use alnlab_aln::model::Base;
-use alnlab_aln::pwl::predict::{Path, Predictor, Scratch};
+use alnlab_aln::pwl::predict::{Path, Predictor, Scratch, advance};
 use alnlab_aln::runtime::{Runtime, Trained};
+use alnlab_codes::Entry;
 use alnlab_codes::codebook::{Quantizer, is_control};
 use alnlab_common::Error;
 use numpy::ndarray::{Array2, Array3, ArrayView2, ArrayView3, Axis};
@@ -27,6 +31,28 @@ enum Predicts<'a> {
     Piecewise(Predictor<'a>),
     /// A bit-forest's or threshold model's runtime, from levels to levels.
     Levels(Runtime<'a>),
+    /// Boosted trees, with the learned variables' entries their changes
+    /// advance.
+    Boosted(&'a Kept, Vec<&'a Entry>),
+}
+
+/// The files a model is made from.
+enum Files {
+    /// A model file (`model.aln`, `linear.aln`) with its codebook (boxed:
+    /// the larger by far).
+    Aln(Box<Trained>),
+    /// Boosted trees (`boosted.parquet`) with theirs.
+    Boosted(Kept),
+}
+
+impl Files {
+    /// The model's kind: an ALN's (`piecewise-linear`, …) or `boosted`.
+    fn kind(&self) -> &'static str {
+        match self {
+            Files::Aln(t) => t.model.header.model.name(),
+            Files::Boosted(_) => "boosted",
+        }
+    }
 }
 
 /// What predicts, and a piecewise-linear predictor's buffers kept between
@@ -39,7 +65,7 @@ struct Ready<'a> {
 self_cell::self_cell!(
     /// A trained model kept together with what predicts with it.
     struct Loaded {
-        owner: Trained,
+        owner: Files,
         #[not_covariant]
         dependent: Ready,
     }
@@ -64,8 +90,8 @@ pub struct Model {
 }
 
 impl Model {
-    fn kind(&self) -> ModelKind {
-        self.loaded.borrow_owner().model.header.model
+    fn kind(&self) -> &'static str {
+        self.loaded.borrow_owner().kind()
     }
 
     /// Checks that `x0` is B×D and `controls` B×H×U and finite; `frames`
@@ -151,8 +177,10 @@ impl Model {
             };
             match ready.predicts {
                 // One task: no thread pool to hand it to and wait on.
-                Predicts::Piecewise(_) if chunk >= rows => task(0, rows, &mut out),
-                Predicts::Piecewise(_) => threads::run(threads, || {
+                Predicts::Piecewise(_) | Predicts::Boosted(..) if chunk >= rows => {
+                    task(0, rows, &mut out)
+                }
+                Predicts::Piecewise(_) | Predicts::Boosted(..) => threads::run(threads, || {
                     out.par_chunks_mut(chunk * (horizon + 1) * d)
                         .enumerate()
                         .for_each(|(k, out)| task(k * chunk, chunk.min(rows - k * chunk), out));
@@ -177,6 +205,17 @@ impl Model {
     }
 }
 
+/// Whether `path` is a Parquet file (boosted trees), not a model file.
+fn is_parquet(path: &std::path::Path) -> PyResult<bool> {
+    use std::io::Read;
+    let mut magic = [0u8; 4];
+    let mut file = std::fs::File::open(path).map_err(|e| raise(Error::io(path, e)))?;
+    let read = file
+        .read(&mut magic)
+        .map_err(|e| raise(Error::io(path, e)))?;
+    Ok(read == 4 && &magic == b"PAR1")
+}
+
 /// Rows below which a bit-forest or threshold model predicts one row at a
 /// time: a bit-sliced word's.
 const ONE_ROW_BELOW: usize = 64;
@@ -198,16 +237,19 @@ struct Work<'m> {
     /// One row's learned variables and its outputs' next values.
     row: Vec<f64>,
     row_next: Vec<f64>,
+    /// One row's learned variables as boosted trees read them.
+    features: Vec<f32>,
 }
 
 impl<'m> Work<'m> {
     fn new(model: &Model, ready: &Ready<'m>, rows: usize) -> Work<'m> {
         let scratch = match &ready.predicts {
             Predicts::Piecewise(p) => Some(spare(ready).pop().unwrap_or_else(|| p.scratch())),
-            Predicts::Levels(_) => None,
+            Predicts::Levels(_) | Predicts::Boosted(..) => None,
         };
         let outputs = model.writes.len();
-        let batched = rows >= PIECEWISE_ONE_ROW_BELOW;
+        let batched =
+            matches!(ready.predicts, Predicts::Piecewise(_)) && rows >= PIECEWISE_ONE_ROW_BELOW;
         Work {
             columns: vec![0.0; model.names.len() * rows],
             rows,
@@ -215,6 +257,10 @@ impl<'m> Work<'m> {
             next: vec![vec![0.0; if batched { rows } else { 0 }]; outputs],
             row: vec![0.0; model.names.len()],
             row_next: vec![0.0; outputs],
+            features: match ready.predicts {
+                Predicts::Boosted(..) => vec![0.0; model.names.len()],
+                _ => Vec::new(),
+            },
         }
     }
 
@@ -264,6 +310,23 @@ impl<'m> Work<'m> {
                 for (write, next) in model.writes.iter().zip(&self.next) {
                     if let Some(v) = *write {
                         self.columns[v * rows..(v + 1) * rows].copy_from_slice(next);
+                    }
+                }
+            }
+            Predicts::Boosted(kept, learned) => {
+                for r in 0..rows {
+                    for (v, x) in self.features.iter_mut().enumerate() {
+                        *x = self.columns[v * rows + r] as f32;
+                    }
+                    let outputs = kept.boosted.outputs.iter().zip(&kept.variables);
+                    for (next, (trees, &v)) in self.row_next.iter_mut().zip(outputs) {
+                        let change = f64::from(trees.change(&self.features));
+                        *next = advance(learned[v], self.columns[v * rows + r], change);
+                    }
+                    for (write, &x) in model.writes.iter().zip(&self.row_next) {
+                        if let Some(v) = *write {
+                            self.columns[v * rows + r] = x;
+                        }
                     }
                 }
             }
@@ -362,33 +425,43 @@ fn array<'py>(
 
 #[pymethods]
 impl Model {
-    /// Loads `model_path` (a run's `model.aln`) with the codebook it was
-    /// trained with (`codebook.parquet`); an error names the file that
-    /// does not fit.
+    /// Loads `model_path` — a run's `model.aln`, or its test stage's
+    /// baselines `linear.aln` (the robust linear fit) and `boosted.parquet`
+    /// — with the codebook it was trained with (`codebook.parquet`); an
+    /// error names the file that does not fit.
     #[new]
     fn new(model_path: PathBuf, codebook_path: PathBuf) -> PyResult<Model> {
-        let trained = Trained::read(&model_path, &codebook_path).map_err(raise)?;
-        if trained.model.header.base == Base::Nominal {
-            return Err(raise(Error::bad_file(
-                &model_path,
-                "is a hybrid (a learned correction on the nominal simulator's prediction), \
-                 which predicts only with the simulator beside it: the Python package \
-                 loads models of the dynamics (piecewise-linear, bit-forest, threshold)",
-            )));
-        }
-        let learned: Vec<_> = trained.codebook.learned().collect();
+        let files = match is_parquet(&model_path)? {
+            true => Files::Boosted(Kept::read(&model_path, &codebook_path).map_err(raise)?),
+            false => Files::Aln(Box::new(
+                Trained::read(&model_path, &codebook_path).map_err(raise)?,
+            )),
+        };
+        let (codebook, predicted) = match &files {
+            Files::Aln(t) if t.model.header.base == Base::Nominal => {
+                return Err(raise(Error::bad_file(
+                    &model_path,
+                    "is a hybrid (a learned correction on the nominal simulator's prediction), \
+                     which predicts only with the simulator beside it: the Python package \
+                     loads models of the dynamics (piecewise-linear, bit-forest, threshold, \
+                     boosted)",
+                )));
+            }
+            Files::Aln(t) => (&t.codebook, t.reads.iter().map(|r| r.variable).collect()),
+            Files::Boosted(k) => (&k.codebook, k.variables.clone()),
+        };
+        let learned: Vec<_> = codebook.learned().collect();
         let names: Vec<String> = learned.iter().map(|e| e.variable.clone()).collect();
         let quantizers = learned.iter().map(|e| e.quantizer).collect();
         let (controls, state): (Vec<usize>, Vec<usize>) =
             (0..names.len()).partition(|&v| is_control(&names[v]));
-        let writes: Vec<Option<usize>> = trained
-            .reads
+        let writes: Vec<Option<usize>> = predicted
             .iter()
-            .map(|r| (!controls.contains(&r.variable)).then_some(r.variable))
-            .collect();
-        if trained.model.header.model == ModelKind::PiecewiseLinear
-            && let Some(&v) = state.iter().find(|v| !writes.contains(&Some(**v)))
-        {
+            .map(|&v| (!controls.contains(&v)).then_some(v))
+            .collect::<Vec<_>>();
+        let bits =
+            matches!(&files, Files::Aln(t) if t.model.header.model != ModelKind::PiecewiseLinear);
+        if !bits && let Some(&v) = state.iter().find(|v| !writes.contains(&Some(**v))) {
             return Err(raise(Error::bad_file(
                 &model_path,
                 format!(
@@ -397,14 +470,16 @@ impl Model {
                 ),
             )));
         }
-        let loaded = Loaded::new(trained, |t| Ready {
-            predicts: if t.model.header.model == ModelKind::PiecewiseLinear {
-                let learned: Vec<_> = t.codebook.learned().collect();
-                // The compiled boxes speed only the compiled one-row path,
-                // which this package does not take: no points.
-                Predicts::Piecewise(Predictor::new(&t.model.pieces, &t.reads, &learned, &[]))
-            } else {
-                Predicts::Levels(t.runtime())
+        let loaded = Loaded::new(files, |files| Ready {
+            predicts: match files {
+                Files::Aln(t) if t.model.header.model == ModelKind::PiecewiseLinear => {
+                    let learned: Vec<_> = t.codebook.learned().collect();
+                    // The compiled boxes speed only the compiled one-row
+                    // path, which this package does not take: no points.
+                    Predicts::Piecewise(Predictor::new(&t.model.pieces, &t.reads, &learned, &[]))
+                }
+                Files::Aln(t) => Predicts::Levels(t.runtime()),
+                Files::Boosted(k) => Predicts::Boosted(k, k.codebook.learned().collect()),
             },
             spare: Mutex::new(Vec::new()),
         });
@@ -419,10 +494,11 @@ impl Model {
         })
     }
 
-    /// The model's kind: `piecewise-linear`, `bit-forest` or `threshold`.
+    /// The model's kind: `piecewise-linear` (the robust linear fit is one,
+    /// of one piece per output), `bit-forest`, `threshold` or `boosted`.
     #[getter(kind)]
     fn kind_name(&self) -> &'static str {
-        self.kind().name()
+        self.kind()
     }
 
     /// The state variables' names (D), in the columns' order.
@@ -455,7 +531,7 @@ impl Model {
     fn __repr__(&self) -> String {
         format!(
             "Model({}, {} state variables, {} controls, {})",
-            self.kind().name(),
+            self.kind(),
             self.state.len(),
             self.controls.len(),
             self.model_path.display()

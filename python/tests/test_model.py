@@ -24,30 +24,41 @@ def load(artifacts, variant: str) -> alnlab.Model:
     return alnlab.Model(found["model"], found["codebook"])
 
 
-def test_predict_levels_equal_the_test_stage_predictions(artifacts):
+def assert_predicts_as_scored(model: alnlab.Model, found: dict, scored_as: str, what: str) -> None:
     """Every test row's predicted level, state variable by state variable,
-    equals predictions.parquet's for the model (`aln`), bit for bit."""
+    equals predictions.parquet's for the model scored as `scored_as`, bit for
+    bit."""
+    pairs = pq.read_table(found["pairs"])
+    states = np.column_stack([pairs.column(f"x.{n}").to_numpy() for n in model.state_names])
+    controls = np.column_stack([pairs.column(f"x.{n}").to_numpy() for n in model.control_names])
+    predicted = model.predict(states, controls, levels=True)
+    assert predicted.dtype == np.uint16 and predicted.shape == states.shape
+    table = pq.read_table(found["predictions"], columns=["model", "variable", "row", "predicted_level"])
+    model_of = np.array(table.column("model").to_pylist())
+    variable_of = np.array(table.column("variable").to_pylist())
+    row_of = table.column("row").to_numpy()
+    level_of = table.column("predicted_level").to_numpy()
+    compared = 0
+    for k, name in enumerate(model.state_names):
+        at = (model_of == scored_as) & (variable_of == name)
+        assert at.sum() > 100, (what, name)
+        got = predicted[row_of[at], k]
+        np.testing.assert_array_equal(got, level_of[at], err_msg=f"{what}: {name}")
+        compared += int(at.sum())
+    assert compared > 1000
+
+
+def test_predict_levels_equal_the_test_stage_predictions(artifacts):
+    """The trained model (`aln`) and the robust linear fit (`linear`)
+    predict from Python what the test stage scored."""
     for variant in VARIANTS:
         found = artifacts(variant)
         model = alnlab.Model(found["model"], found["codebook"])
-        pairs = pq.read_table(found["pairs"])
-        states = np.column_stack([pairs.column(f"x.{n}").to_numpy() for n in model.state_names])
-        controls = np.column_stack([pairs.column(f"x.{n}").to_numpy() for n in model.control_names])
-        predicted = model.predict(states, controls, levels=True)
-        assert predicted.dtype == np.uint16 and predicted.shape == states.shape
-        table = pq.read_table(found["predictions"], columns=["model", "variable", "row", "predicted_level"])
-        model_of = np.array(table.column("model").to_pylist())
-        variable_of = np.array(table.column("variable").to_pylist())
-        row_of = table.column("row").to_numpy()
-        level_of = table.column("predicted_level").to_numpy()
-        compared = 0
-        for k, name in enumerate(model.state_names):
-            at = (model_of == "aln") & (variable_of == name)
-            assert at.sum() > 100, (variant, name)
-            got = predicted[row_of[at], k]
-            np.testing.assert_array_equal(got, level_of[at], err_msg=f"{variant}: {name}")
-            compared += int(at.sum())
-        assert compared > 1000
+        assert_predicts_as_scored(model, found, "aln", variant)
+        linear = alnlab.Model(found["linear"], found["codebook"])
+        assert linear.kind == "piecewise-linear"
+        assert linear.state_names == model.state_names
+        assert_predicts_as_scored(linear, found, "linear", f"{variant}: linear")
 
 
 def test_values_are_the_levels_values(artifacts):

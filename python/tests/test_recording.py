@@ -78,6 +78,7 @@ pwl.max_pieces = 8
 resimulate_steps = [10]
 rollout_starts = 20
 horizon = 5
+peer = true
 """
 
 
@@ -126,3 +127,19 @@ def test_a_ros2_recording_of_a_plant_is_learned_end_to_end(alnlab_bin, tmp_path)
             assert levels[row["row"], column[row["variable"]]] == row["predicted_level"]
             checked += 1
     assert checked > 100
+    # So do the baselines the test stage fitted, the boosted trees too.
+    for name in ["linear", "boosted"]:
+        baseline = alnlab.load("recorded", out=tmp_path / "runs", model=name)
+        assert baseline.state_names == model.state_names
+        assert baseline.kind == ("boosted" if name == "boosted" else "piecewise-linear")
+        levels = baseline.predict(x, u, levels=True)
+        rows = [r for r in table if r["model"] == name]
+        assert len(rows) > 100
+        for row in rows:
+            assert levels[row["row"], column[row["variable"]]] == row["predicted_level"], (name, row)
+        # A rollout is its predictions chained, on any thread count.
+        rolled = baseline.rollout(x[:40], np.repeat(u[:40, None, :], 3, axis=1), threads=2)
+        step = x[:40]
+        for h in range(3):
+            step = baseline.predict(step, u[:40], threads=1)
+            np.testing.assert_array_equal(rolled[:, h + 1], step)

@@ -82,3 +82,9 @@ def test_runs_errors_are_the_cli_messages(runs, alnlab_bin):
     with pytest.raises(alnlab.InputError, match="`trajectory` is not a table"):
         alnlab.table("quickstart", "trajectory", variant="walk", out=runs)
 
+    with pytest.raises(alnlab.InputError, match="model: expected one of aln, linear, boosted, got 'forest'"):
+        alnlab.load("quickstart", variant="walk", out=runs, model="forest")
+    with pytest.raises(alnlab.InputError, match=r"boosted.parquet: holds no boosted trees: .*\[test\] peer = true"):
+        alnlab.load("quickstart", variant="walk", out=runs, model="boosted")
+    linear = alnlab.load("quickstart", variant="piecewise", out=runs, model="linear")
+    assert repr(linear).startswith("Model(piecewise-linear,") and repr(linear).endswith("linear.aln)")

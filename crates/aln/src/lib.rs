@@ -15,7 +15,10 @@
 //! - [`shard`]: which trees a partial model holds.
 //! - [`pwl`]: piecewise-linear ALNs — MIN/MAX trees over affine pieces —
 //!   evaluated fully, lazily with cut-offs, or compiled over input boxes.
+//! - [`boosted`]: not an ALN: the test stage's boosted trees as kept in
+//!   their file, for everything that evaluates them.
 
+pub mod boosted;
 mod compiled;
 pub mod forest;
 pub mod linear;

@@ -21,7 +21,11 @@
 //!   machine's cores and CPU model: a measurement, the one artifact that
 //!   differs between equal runs;
 //! - `rollout.parquet`: the closed-loop errors ([`rollout`]) per model,
-//!   variable, horizon and start row.
+//!   variable, horizon and start row;
+//! - `linear.aln` and `boosted.parquet`: the robust linear fit as a
+//!   piecewise-linear model of one piece per output, and the boosted trees
+//!   ([`alnlab_aln::boosted`]; none without `peer`) — the baselines as
+//!   models, loadable like the ALN (the Python package's `load`).
 
 pub mod bench;
 mod hybrid;
@@ -35,10 +39,12 @@ pub mod timings;
 
 use std::path::Path;
 
-use alnlab_aln::model::{Base, Model, Reads};
+use alnlab_aln::boosted::Boosted;
+use alnlab_aln::model::{Base, Header, Model, Reads};
+use alnlab_aln::pwl::Tree;
 use alnlab_aln::pwl::predict::{Predictor, states};
 use alnlab_aln::runtime::{Runtime, Trained};
-use alnlab_aln::{ModelKind, Output};
+use alnlab_aln::{ModelKind, Output, Target};
 use alnlab_codes::codes::Codec;
 use alnlab_codes::{Codebook, Entry};
 use alnlab_common::params::{self, Count, Fraction, ParamError};
@@ -55,8 +61,8 @@ use serde::{Deserialize, Serialize};
 /// angle that wraps scored on the circle, its period in the predictions; 7:
 /// the robust linear fit timed one state at a time too; 8: hybrids, the
 /// nominal predictions an input; 9: the ALN as a hybrid, hybrids' closed
-/// loops).
-pub const FORMAT_VERSION: u32 = 9;
+/// loops; 10: the linear and boosted baselines kept as models).
+pub const FORMAT_VERSION: u32 = 10;
 
 /// File name of the predictions table ([`alnlab_tables::predictions`]).
 pub const PREDICTIONS_FILE: &str = alnlab_tables::predictions::FILE;
@@ -64,6 +70,10 @@ pub const PREDICTIONS_FILE: &str = alnlab_tables::predictions::FILE;
 pub const TIMINGS_FILE: &str = "timings.parquet";
 /// File name of the closed-loop rollout table ([`alnlab_tables::rollout`]).
 pub const ROLLOUT_FILE: &str = alnlab_tables::rollout::FILE;
+/// File name of the robust linear fit as a model.
+pub const LINEAR_FILE: &str = "linear.aln";
+/// File name of the boosted trees ([`alnlab_aln::boosted`]).
+pub const BOOSTED_FILE: &str = alnlab_aln::boosted::FILE;
 
 /// The `[test]` table of a manifest.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -333,6 +343,8 @@ pub fn run(
         &real_y,
         &train_rows,
     );
+    linear_model(&data, &learned, &linear_reads, &linear_trees)
+        .write(&out_dir.join(LINEAR_FILE))?;
     let linear = Predictor::new(&linear_trees, &linear_reads, &learned, &train_states);
     let (linear_levels, linear_paths) =
         piecewise::paths("linear", &linear, &test_columns, &test_states, &pool);
@@ -342,6 +354,12 @@ pub fn run(
     let peer_levels = peer
         .as_ref()
         .map(|p| p.levels(&learned, &real_x, &real_x, &test.rows));
+    let none = Boosted {
+        outputs: Vec::new(),
+        features: width,
+    };
+    let boosted = peer.as_ref().map_or(&none, |p| &p.boosted);
+    boosted.write(&out_dir.join(BOOSTED_FILE), provenance)?;
     // The hybrids: the nominal simulator's prediction, corrected. Beside an
     // ALN hybrid the linear correction reads what the ALN's trees read, so
     // that it is the ALN's one-piece form, as `linear` is beside a model of
@@ -627,6 +645,35 @@ pub fn run(
     rollout.write(&out_dir.join(ROLLOUT_FILE), provenance)?;
     let rows: Vec<timings::Row> = timings.iter().map(timings::Row::measured).collect();
     timings::write(&out_dir.join(TIMINGS_FILE), &rows, provenance)
+}
+
+/// The robust linear fit's `trees` (one piece each, reading `reads`) as a
+/// piecewise-linear model of the dynamics, trained with the model's
+/// codebook.
+fn linear_model(data: &Data, learned: &[&Entry], reads: &[Reads], trees: &[Tree]) -> Model {
+    let name = |v: usize| learned[v].variable.clone();
+    Model {
+        header: Header {
+            codebook_sha256: data.model.header.codebook_sha256.clone(),
+            params: serde_json::json!({
+                "fit": "least absolute deviations of each variable's change in level spacings",
+            }),
+            model: ModelKind::PiecewiseLinear,
+            target: Target::Change,
+            inputs: learned.len(),
+            outputs: reads.iter().map(|r| (name(r.variable), 1)).collect(),
+            reads: reads
+                .iter()
+                .map(|r| r.inputs.iter().map(|&i| name(i)).collect())
+                .collect(),
+            vote: 1,
+            counter_bound: 0,
+            shard: None,
+            base: Base::Current,
+        },
+        trees: Vec::new(),
+        pieces: trees.to_vec(),
+    }
 }
 
 /// The model, made ready: a bit model's runtime, or a piecewise-linear
