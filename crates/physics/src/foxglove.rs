@@ -8,7 +8,7 @@
 
 use alnlab_common::Result;
 use alnlab_common::state_log::StateLogWriter;
-use nalgebra::{Matrix3, UnitQuaternion, Vector3};
+use nalgebra::{Matrix3, Rotation3, UnitQuaternion, Vector3};
 use serde_json::{Value, json};
 
 use crate::Prepared;
@@ -37,6 +37,14 @@ fn quaternion(q: &UnitQuaternion<f64>) -> Value {
     json!({ "x": q.i, "y": q.j, "z": q.k, "w": q.w })
 }
 
+/// The unit quaternion of a rotation matrix, by Shepperd's method
+/// (`from_rotation_matrix`), exact for every turn. nalgebra's `from_matrix`
+/// searches iteratively from the identity and stalls at a turn of 180°,
+/// where it answered (nearly) the identity.
+fn rotation(rot: &Matrix3<f64>) -> UnitQuaternion<f64> {
+    UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(*rot))
+}
+
 /// The frame id of link `i` (0-based) of a run.
 pub fn link_frame(scene: &str, run: u32, i: usize) -> String {
     format!("{scene}/run{run}/link{}", i + 1)
@@ -57,7 +65,7 @@ pub fn transforms(p: &Prepared, run: u32, kin: &Kinematics, log_time_ns: u64) ->
             "parent_frame_id": "world",
             "child_frame_id": id,
             "translation": vector(pos),
-            "rotation": quaternion(&UnitQuaternion::from_matrix(rot)),
+            "rotation": quaternion(&rotation(rot)),
         })
     };
     let transforms: Vec<Value> = match &p.robot {
@@ -239,4 +247,42 @@ fn time_schema() -> Value {
     json!({ "type": "object", "title": "time", "properties": {
         "sec": { "type": "integer", "minimum": 0 },
         "nsec": { "type": "integer", "minimum": 0, "maximum": 999_999_999 } } })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Every turn converts exactly, half turns too — the frame fixed with
+    /// `rpy="π 0 π"` among them, which `/tf` once logged as the identity
+    /// (`from_matrix` answered it 2 off in a matrix entry).
+    #[test]
+    // 3.14159265 is what URDF files write, not π.
+    #[allow(clippy::approx_constant)]
+    fn a_half_turn_is_a_half_turn() {
+        let axes = [
+            Vector3::x(),
+            Vector3::y(),
+            Vector3::z(),
+            Vector3::new(0.3, -0.5, 0.8).normalize(),
+        ];
+        let mut turns: Vec<Matrix3<f64>> = axes
+            .iter()
+            .flat_map(|axis| {
+                [std::f64::consts::PI, 3.14159265, 2.0, 0.1].map(|angle| {
+                    Rotation3::from_axis_angle(&nalgebra::Unit::new_normalize(*axis), angle)
+                        .into_inner()
+                })
+            })
+            .collect();
+        let pi = std::f64::consts::PI;
+        for (roll, yaw) in [(3.14159265, 3.14159265), (pi, pi)] {
+            turns.push(Rotation3::from_euler_angles(roll, 0.0, yaw).into_inner());
+        }
+        for rot in turns {
+            let back = rotation(&rot).to_rotation_matrix().into_inner();
+            let error = (back - rot).abs().max();
+            assert!(error < 1e-15, "{rot}: off by {error:e}");
+        }
+    }
 }
