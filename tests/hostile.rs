@@ -743,3 +743,27 @@ fn piecewise_linear_models_refuse_what_they_cannot_do() {
     check_all(d, &cases);
     assert!(!d.join("v").exists(), "the refused export made its folder");
 }
+
+/// A reader that goes away before alnlab writes (`alnlab check M | head`)
+/// ends it quietly, by SIGPIPE as any Unix tool, never by a panic (exit
+/// 101 with a message on stderr).
+#[test]
+fn a_closed_pipe_ends_the_program_quietly() {
+    use std::os::unix::process::ExitStatusExt;
+    use std::process::{Command, Stdio};
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(dir.path().join("tiny.toml"), TINY).unwrap();
+    let mut child = Command::new(env!("CARGO_BIN_EXE_alnlab"))
+        .current_dir(dir.path())
+        .args(["check", "tiny.toml"])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    // The reader is gone before the first line is written.
+    drop(child.stdout.take());
+    let out = child.wait_with_output().unwrap();
+    let quiet = out.status.success() || out.status.signal() == Some(13);
+    assert!(quiet, "{:?}: {}", out.status, stderr(&out));
+    assert!(!stderr(&out).contains("panicked"), "{}", stderr(&out));
+}
