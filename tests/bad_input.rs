@@ -116,6 +116,18 @@ fn manifests_that_cannot_run_are_refused_at_check() {
             "train",
         ),
         (
+            "endless piecewise-linear epochs",
+            "epochs = 1",
+            "epochs = 1\nmodel = \"piecewise-linear\"\npwl.epochs = 1000000000000",
+            "pwl.epochs",
+        ),
+        (
+            "endless piecewise-linear rounds",
+            "epochs = 1",
+            "epochs = 1\nmodel = \"piecewise-linear\"\npwl.rounds = 1000000000000",
+            "pwl.rounds",
+        ),
+        (
             "sixteen million leaves",
             "leaves = 8",
             "leaves = 16777216",

@@ -10,6 +10,7 @@
 //! about what a large workstation holds — and a manifest may raise them in
 //! `[experiment.budget]`.
 
+use alnlab_aln::ModelKind;
 use alnlab_common::params::Positive;
 use serde::{Deserialize, Serialize};
 
@@ -27,7 +28,8 @@ pub struct Budget {
     #[serde(default = "default_log_bytes")]
     pub log_bytes: Positive,
     /// Tree-node evaluations in training: epochs × training rows × trees ×
-    /// leaves (default 1e15).
+    /// leaves, or for a piecewise-linear model pwl.epochs × (pwl.rounds +
+    /// 1) × training rows × variables × pwl.max_pieces (default 1e15).
     #[serde(default = "default_node_updates")]
     pub node_updates: Positive,
     /// Bytes of the trees in memory while training: trees × leaves × 16
@@ -130,7 +132,15 @@ impl Estimate {
         let width = f64::from(q.code.width(q.levels.0.max(2) as usize, q.width.0 as u32));
         let t = &stages.train;
         let trees = vars * width * t.vote.0 as f64;
-        let node_updates = t.epochs.0 as f64 * train_rows * trees * t.leaves.0 as f64;
+        let node_updates = match t.model {
+            // Every round's LMS epochs and the polish, each row through every
+            // piece of every variable's tree.
+            ModelKind::PiecewiseLinear => {
+                let (pwl, pieces) = (&t.pwl, t.pwl.max_pieces as f64);
+                pwl.epochs as f64 * (pwl.rounds as f64 + 1.0) * train_rows * vars * pieces
+            }
+            _ => t.epochs.0 as f64 * train_rows * trees * t.leaves.0 as f64,
+        };
         let test = &stages.test;
         let resimulated: f64 = test.resimulate_steps.iter().map(|s| s.0 as f64).sum();
         let closed_loop = test.rollout_starts.0 as f64 * test.horizon.0 as f64 * vars;
@@ -182,7 +192,8 @@ impl Estimate {
                 self.node_updates,
                 budget.node_updates,
                 "node_updates",
-                "fewer epochs, leaves, votes or training rows",
+                "fewer epochs, leaves, votes or training rows — for a piecewise-linear model, \
+                 fewer pwl.epochs, pwl.rounds or pwl.max_pieces",
             ),
             (
                 "train",
