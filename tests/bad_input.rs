@@ -245,6 +245,42 @@ fn manifests_that_cannot_run_are_refused_at_check() {
         std::fs::write(dir.path().join(&file), TINY.replacen(from, to, 1)).unwrap();
         cases.push(case(name, &["check", &file], &[&file, key], None));
     }
+    // Files that never end are refused at a stated size, not read until
+    // memory runs out.
+    cases.push(
+        case(
+            "an endless manifest",
+            &["check", "/dev/zero"],
+            &[
+                "/dev/zero",
+                "more than 16 MiB, far more than a manifest holds",
+            ],
+            None,
+        )
+        .exits(2),
+    );
+    std::fs::write(
+        dir.path().join("endless-robot.toml"),
+        TINY.replacen(
+            "kind = \"pendulum\"",
+            "kind = \"urdf\"\nfile = \"/dev/zero\"",
+            1,
+        ),
+    )
+    .unwrap();
+    cases.push(
+        case(
+            "an endless robot description",
+            &["check", "endless-robot.toml"],
+            &[
+                "endless-robot.toml",
+                "file",
+                "more than 64 MiB, far more than a robot description holds",
+            ],
+            None,
+        )
+        .exits(2),
+    );
     std::fs::write(dir.path().join("empty.toml"), "").unwrap();
     cases.push(case(
         "empty manifest",

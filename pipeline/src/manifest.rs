@@ -12,6 +12,7 @@ use std::collections::{BTreeMap, BTreeSet};
 use std::fmt;
 use std::path::{Path, PathBuf};
 
+use alnlab_common::bounded;
 use alnlab_common::hash::sha256_hex;
 use alnlab_common::params::Count;
 use serde::{Deserialize, Serialize};
@@ -224,7 +225,8 @@ impl From<ManifestError> for alnlab_common::Error {
 impl Manifest {
     /// Reads and validates the manifest at `path`.
     pub fn load(path: &Path) -> Result<Manifest, alnlab_common::Error> {
-        let bytes = std::fs::read(path).map_err(|e| alnlab_common::Error::io(path, e))?;
+        let bytes = bounded::read(path, bounded::MANIFEST_BYTES, "a manifest")
+            .map_err(|e| alnlab_common::Error::io(path, e))?;
         let text = String::from_utf8(bytes.clone())
             .map_err(|_| alnlab_common::Error::bad_file(path, "expected a UTF-8 TOML file"))?;
         let mut manifest = Manifest::parse(&text, path)?;

@@ -75,10 +75,12 @@ impl Error {
     /// unstable scene), 1 otherwise (a damaged file, corrupt stored data, a
     /// full disk).
     pub fn exit_code(&self) -> i32 {
-        use std::io::ErrorKind::{IsADirectory, NotADirectory, NotFound, PermissionDenied};
+        use std::io::ErrorKind::{
+            FileTooLarge, IsADirectory, NotADirectory, NotFound, PermissionDenied,
+        };
         match self {
             Error::Io { source, .. } => match source.kind() {
-                NotFound | PermissionDenied | IsADirectory | NotADirectory => 2,
+                NotFound | PermissionDenied | IsADirectory | NotADirectory | FileTooLarge => 2,
                 _ => 1,
             },
             Error::BadFile { .. } | Error::Invalid(_) | Error::Diverged(_) => 2,

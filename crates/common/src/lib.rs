@@ -6,6 +6,7 @@
 //! how to write and read.
 
 pub mod atomic;
+pub mod bounded;
 pub mod error;
 pub mod hash;
 pub mod mcap_read;

@@ -19,6 +19,7 @@
 
 use std::sync::Arc;
 
+use alnlab_common::bounded;
 use alnlab_common::params::{Count, Positive};
 use nalgebra::{UnitQuaternion, Vector3};
 use rand::{RngExt, SeedableRng};
@@ -328,12 +329,14 @@ impl Scene {
             )
         })?;
         let path = dir.join(file);
-        let text = std::fs::read_to_string(&path).map_err(|e| {
-            (
-                "file".to_string(),
-                format!("cannot read {}: {e}", path.display()),
-            )
-        })?;
+        let text =
+            bounded::read_to_string(&path, bounded::DESCRIPTION_BYTES, "a robot description")
+                .map_err(|e| {
+                    (
+                        "file".to_string(),
+                        format!("cannot read {}: {e}", path.display()),
+                    )
+                })?;
         self.set_description(&text)
             .map_err(|e| ("file".to_string(), format!("{}: {e}", path.display())))
     }

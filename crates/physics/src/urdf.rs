@@ -26,6 +26,7 @@
 
 use std::collections::HashMap;
 
+use alnlab_common::bounded;
 use nalgebra::{Isometry3, Matrix3, Rotation3, Translation3, UnitQuaternion, Vector3};
 
 use crate::model::{Joint, Link, Model, Root};
@@ -286,7 +287,7 @@ pub fn parse(text: &str, base: Base) -> Result<Robot> {
 
 /// Reads a robot from a URDF file; errors name the file.
 pub fn load(path: &std::path::Path, base: Base) -> std::result::Result<Robot, String> {
-    let text = std::fs::read_to_string(path)
+    let text = bounded::read_to_string(path, bounded::DESCRIPTION_BYTES, "a robot description")
         .map_err(|e| format!("cannot read robot description {}: {e}", path.display()))?;
     parse(&text, base).map_err(|e| format!("{}: {e}", path.display()))
 }
