@@ -281,6 +281,39 @@ fn manifests_that_cannot_run_are_refused_at_check() {
         )
         .exits(2),
     );
+    // A chain of 20 000 links overflowed the stack (signal 6).
+    let mut chain = String::from("<robot name=\"chain\">");
+    for i in 0..20_000 {
+        chain += &format!("<link name=\"l{i}\"/>");
+        if i > 0 {
+            chain += &format!(
+                "<joint name=\"j{i}\" type=\"fixed\"><parent link=\"l{}\"/><child link=\"l{i}\"/></joint>",
+                i - 1
+            );
+        }
+    }
+    std::fs::write(dir.path().join("chain.urdf"), chain + "</robot>").unwrap();
+    std::fs::write(
+        dir.path().join("chain.toml"),
+        TINY.replacen(
+            "kind = \"pendulum\"",
+            "kind = \"urdf\"\nfile = \"chain.urdf\"",
+            1,
+        ),
+    )
+    .unwrap();
+    cases.push(
+        case(
+            "a chain of 20 000 links",
+            &["check", "chain.toml"],
+            &[
+                "chain.urdf",
+                "has 20000 links; alnlab takes robots of at most 10000",
+            ],
+            None,
+        )
+        .exits(2),
+    );
     std::fs::write(dir.path().join("empty.toml"), "").unwrap();
     cases.push(case(
         "empty manifest",

@@ -150,6 +150,9 @@ struct LinkTag<'a> {
     node: roxmltree::Node<'a, 'a>,
 }
 
+/// The most `<link>` elements a robot may have.
+pub const MAX_LINKS: usize = 10_000;
+
 /// Reads a robot from URDF text, with gravity along −z of 9.81 m/s².
 pub fn parse(text: &str, base: Base) -> Result<Robot> {
     let doc = roxmltree::Document::parse(text).map_err(|e| UrdfError {
@@ -169,6 +172,16 @@ pub fn parse(text: &str, base: Base) -> Result<Robot> {
             "joint" => joints.push(joint_tag(node)?),
             _ => {}
         }
+    }
+    if links.len() > MAX_LINKS {
+        return Err(at(
+            &root,
+            format!(
+                "has {} links; alnlab takes robots of at most {MAX_LINKS} (the largest of the \
+                 example-robot-data collection has a few hundred)",
+                links.len()
+            ),
+        ));
     }
     let link_index = unique(&links, |l| (l.name, l.node), "link")?;
     unique(&joints, |j| (j.name, j.node), "joint")?;
@@ -233,7 +246,7 @@ pub fn parse(text: &str, base: Base) -> Result<Robot> {
         frames: Vec::new(),
         visited: vec![false; links.len()],
     };
-    builder.body(root_link, None, None, Isometry3::identity());
+    builder.walk(root_link);
     if let Some(stray) = builder.visited.iter().position(|v| !v) {
         return Err(at(
             &links[stray].node,
@@ -348,17 +361,83 @@ struct Builder<'t, 'a> {
     visited: Vec<bool>,
 }
 
+/// A step of the walk from the root: start a body at a link hung from a
+/// moving joint, or add a link to a body.
+enum Visit {
+    Body {
+        link: usize,
+        parent: Option<usize>,
+        joint: Option<usize>,
+        placement: Isometry3<f64>,
+    },
+    Attach {
+        link: usize,
+        body: usize,
+        pose: Isometry3<f64>,
+    },
+}
+
 impl Builder<'_, '_> {
+    /// Walks the tree from `root` depth first, children in document order,
+    /// on a stack of its own: a chain of thousands of links needs no call
+    /// stack.
+    fn walk(&mut self, root: usize) {
+        let mut stack = vec![Visit::Body {
+            link: root,
+            parent: None,
+            joint: None,
+            placement: Isometry3::identity(),
+        }];
+        while let Some(visit) = stack.pop() {
+            match visit {
+                Visit::Body {
+                    link,
+                    parent,
+                    joint,
+                    placement,
+                } => {
+                    let body = self.body(link, parent, joint, &placement);
+                    stack.push(Visit::Attach {
+                        link,
+                        body,
+                        pose: Isometry3::identity(),
+                    });
+                }
+                Visit::Attach { link, body, pose } => {
+                    self.attach(link, body, &pose);
+                    // Reversed, so that the first child is walked first.
+                    for &j in self.children[link].iter().rev() {
+                        let tag = &self.joints[j];
+                        let (pose, child) = (pose * tag.origin, self.joint_child[j]);
+                        stack.push(match tag.kind {
+                            Kind::Fixed => Visit::Attach {
+                                link: child,
+                                body,
+                                pose,
+                            },
+                            _ => Visit::Body {
+                                link: child,
+                                parent: Some(body),
+                                joint: Some(j),
+                                placement: pose,
+                            },
+                        });
+                    }
+                }
+            }
+        }
+    }
+
     /// Starts a body at `link`, hung from body `parent` by joint `joint`
-    /// (whose frame sits at `placement` in the parent body's frame).
+    /// (whose frame sits at `placement` in the parent body's frame); returns
+    /// its index.
     fn body(
         &mut self,
         link: usize,
         parent: Option<usize>,
         joint: Option<usize>,
-        placement: Isometry3<f64>,
-    ) {
-        let b = self.bodies.len();
+        placement: &Isometry3<f64>,
+    ) -> usize {
         let (kind, spec) = match joint {
             None => (Joint::Ball, no_spec()),
             Some(j) => {
@@ -386,33 +465,22 @@ impl Builder<'_, '_> {
             l: placement.translation.vector,
             mass: MassMoments::default(),
         });
-        self.attach(link, b, Isometry3::identity());
+        self.bodies.len() - 1
     }
 
-    /// Adds URDF `link` to body `b` at `pose` (body frame), then its
-    /// children: fixed ones into the same body, moving ones as new bodies.
-    fn attach(&mut self, link: usize, b: usize, pose: Isometry3<f64>) {
+    /// Adds URDF `link` to body `b` at `pose` (body frame). Each link has
+    /// one parent joint, so the walk from the root visits a link once;
+    /// links it never visits are on a cycle.
+    fn attach(&mut self, link: usize, b: usize, pose: &Isometry3<f64>) {
         self.visited[link] = true;
         if let Some(inertial) = &self.links[link].inertial {
-            self.bodies[b].mass.add(inertial, &pose);
+            self.bodies[b].mass.add(inertial, pose);
         }
         self.frames.push(Frame {
             name: self.links[link].name.to_string(),
             body: b,
-            placement: pose,
+            placement: *pose,
         });
-        // Each link has one parent joint, so the walk from the root visits a
-        // link once; links it never visits are on a cycle.
-        for k in 0..self.children[link].len() {
-            let j = self.children[link][k];
-            let tag = &self.joints[j];
-            let (child_pose, child) = (pose * tag.origin, self.joint_child[j]);
-            if tag.kind == Kind::Fixed {
-                self.attach(child, b, child_pose);
-            } else {
-                self.body(child, Some(b), Some(j), child_pose);
-            }
-        }
     }
 }
 

@@ -323,3 +323,36 @@ fn malformed_descriptions_name_the_element() {
     assert_eq!(error.element, "<link name=\"world\">");
     assert_eq!(error.line, 2, "{error}");
 }
+
+/// A chain of `links` links, every other joint fixed.
+fn chain(links: usize) -> String {
+    let inertial = r#"<inertial><mass value="1"/><inertia ixx="0.01" ixy="0" ixz="0" iyy="0.01" iyz="0" izz="0.01"/></inertial>"#;
+    let mut text = String::from(r#"<robot name="chain">"#);
+    for i in 0..links {
+        text += &format!(r#"<link name="l{i}">{inertial}</link>"#);
+    }
+    for i in 1..links {
+        let kind = if i == 1 { "continuous" } else { "fixed" };
+        text += &format!(
+            r#"<joint name="j{i}" type="{kind}"><parent link="l{}"/><child link="l{i}"/><origin xyz="0 0 0.1"/></joint>"#,
+            i - 1
+        );
+    }
+    text + "</robot>"
+}
+
+/// The walk from the root keeps its own stack: thousands of links fixed
+/// in a chain (which overflowed the call stack at 20 000) merge into one
+/// body; past the stated limit a robot is refused, naming it.
+#[test]
+fn long_chains_are_walked_without_the_call_stack_and_bounded() {
+    let robot = parse(&chain(MAX_LINKS), Base::Fixed).unwrap();
+    assert_eq!(robot.model.links.len(), 2);
+    assert_eq!(robot.frames.len(), MAX_LINKS);
+    assert!((robot.model.links[1].mass - (MAX_LINKS - 1) as f64).abs() < 1e-9);
+    let error = parse(&chain(20_000), Base::Fixed).unwrap_err().to_string();
+    assert!(
+        error.contains("has 20000 links; alnlab takes robots of at most 10000"),
+        "{error}"
+    );
+}
