@@ -314,6 +314,34 @@ fn manifests_that_cannot_run_are_refused_at_check() {
         )
         .exits(2),
     );
+    std::fs::write(
+        dir.path().join("arm.urdf.xacro"),
+        "<robot name=\"arm\" xmlns:xacro=\"http://www.ros.org/wiki/xacro\">\
+         <xacro:include filename=\"arm.macros.xacro\"/><link name=\"base\"/></robot>",
+    )
+    .unwrap();
+    std::fs::write(
+        dir.path().join("xacro.toml"),
+        TINY.replacen(
+            "kind = \"pendulum\"",
+            "kind = \"urdf\"\nfile = \"arm.urdf.xacro\"",
+            1,
+        ),
+    )
+    .unwrap();
+    cases.push(
+        case(
+            "a xacro file",
+            &["check", "xacro.toml"],
+            &[
+                "arm.urdf.xacro",
+                "this is a xacro file",
+                "expand it to URDF first",
+            ],
+            None,
+        )
+        .exits(2),
+    );
     std::fs::write(dir.path().join("empty.toml"), "").unwrap();
     cases.push(case(
         "empty manifest",

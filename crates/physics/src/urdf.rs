@@ -164,6 +164,20 @@ pub fn parse(text: &str, base: Base) -> Result<Robot> {
     if root.tag_name().name() != "robot" {
         return Err(at(&root, "expected a <robot> element at the top".into()));
     }
+    // A xacro file reads as a robot of whatever its macros leave out.
+    let xacro = |n: &roxmltree::Node| {
+        n.tag_name()
+            .namespace()
+            .is_some_and(|ns| ns.contains("xacro"))
+    };
+    if let Some(node) = root.descendants().find(|n| n.is_element() && xacro(n)) {
+        return Err(at(
+            &node,
+            "a xacro element: this is a xacro file, whose links and joints come from macros; \
+             expand it to URDF first (`xacro robot.urdf.xacro > robot.urdf`) and give that"
+                .into(),
+        ));
+    }
     let mut links: Vec<LinkTag> = Vec::new();
     let mut joints: Vec<JointTag> = Vec::new();
     for node in root.children().filter(|n| n.is_element()) {

@@ -356,3 +356,23 @@ fn long_chains_are_walked_without_the_call_stack_and_bounded() {
         "{error}"
     );
 }
+
+/// A xacro file is refused as one, not read as the one link its macros
+/// leave out (whose error then blamed the controller).
+#[test]
+fn a_xacro_file_is_refused_as_one() {
+    let text = r#"<?xml version="1.0"?>
+<robot name="arm" xmlns:xacro="http://www.ros.org/wiki/xacro">
+  <xacro:macro name="segment" params="n parent">
+    <link name="l${n}"/>
+  </xacro:macro>
+  <link name="base"/>
+  <xacro:segment n="1" parent="base"/>
+</robot>"#;
+    let error = parse(text, Base::Fixed).unwrap_err().to_string();
+    assert!(
+        error.contains("line 3, <macro name=\"segment\">: a xacro element: this is a xacro file")
+            && error.contains("expand it to URDF first"),
+        "{error}"
+    );
+}
