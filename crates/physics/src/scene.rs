@@ -648,26 +648,58 @@ impl Scene {
         self.validate_plant()?;
         let dt = self.dt.get();
         let added = self.added_damping();
-        for (i, link) in self.plant_model().links.iter().enumerate().skip(1) {
-            let spec = &robot.specs[i];
-            let damping = spec.damping + added;
-            let inertia = link.axis_inertia();
-            if damping * dt > inertia {
-                let (field, whose) = match self.plant {
-                    Some(_) => ("plant", "the plant's joint"),
-                    None => ("dt", "joint"),
-                };
-                return Err((
-                    field.into(),
+        // Every joint whose damping explicit integration cannot resolve at
+        // this dt, so that one edit of dt settles them all: (joint,
+        // damping, its link's own inertia about the axis — a lower bound of
+        // what the joint moves in every configuration).
+        let limiting: Vec<(&str, f64, f64)> = self
+            .plant_model()
+            .links
+            .iter()
+            .enumerate()
+            .skip(1)
+            .map(|(i, link)| {
+                let damping = robot.specs[i].damping + added;
+                (robot.joints[i].as_str(), damping, link.axis_inertia())
+            })
+            .filter(|&(_, damping, inertia)| damping * dt > inertia)
+            .collect();
+        if !limiting.is_empty() {
+            let (field, whose) = match self.plant {
+                Some(_) => ("plant", "the plant's damping"),
+                None => ("dt", "damping"),
+            };
+            let each: Vec<String> = limiting
+                .iter()
+                .map(|(joint, damping, inertia)| {
                     format!(
-                        "{whose} `{}`: damping {damping} with dt = {dt} is more than explicit \
-                         integration resolves on its link's own inertia about the axis \
-                         ({inertia:.3e}); expected dt ≤ {:.2e}",
-                        robot.joints[i],
-                        inertia / damping
-                    ),
-                ));
-            }
+                        "`{joint}` (damping {damping} on {inertia:.3e} kg m²: dt ≤ {:.2e})",
+                        down_to_3_digits(inertia / damping)
+                    )
+                })
+                .collect();
+            let bound = limiting
+                .iter()
+                .map(|(_, damping, inertia)| inertia / damping)
+                .fold(f64::INFINITY, f64::min);
+            return Err((
+                field.into(),
+                format!(
+                    "{whose} with dt = {dt} is more than explicit integration resolves on {} \
+                     joint{} (each on its link's own inertia about the axis): {}; {}",
+                    limiting.len(),
+                    if limiting.len() == 1 { "" } else { "s" },
+                    each.join(", "),
+                    match down_to_3_digits(bound) {
+                        bound if bound > 0.0 => {
+                            format!("expected dt ≤ {bound:.2e}, which holds for all of them")
+                        }
+                        _ => "no dt resolves a damped joint whose link has no inertia about its \
+                              axis: lower its damping"
+                            .to_string(),
+                    }
+                ),
+            ));
         }
         let dofs: Vec<usize> = robot.model.links[1..]
             .iter()
@@ -871,4 +903,14 @@ pub fn run_seed(seed: u64, scene_index: usize, run: u32) -> u64 {
 /// A generator seeded for one run.
 pub fn run_rng(seed: u64, scene_index: usize, run: u32) -> ChaCha8Rng {
     ChaCha8Rng::seed_from_u64(run_seed(seed, scene_index, run))
+}
+
+/// `x` (positive) rounded down to three significant digits: a bound shown
+/// to a user that, typed back, still holds.
+fn down_to_3_digits(x: f64) -> f64 {
+    if !(x.is_normal() && x > 0.0) {
+        return x;
+    }
+    let scale = 10f64.powi(2 - x.log10().floor() as i32);
+    (x * scale).floor() / scale
 }

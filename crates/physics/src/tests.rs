@@ -953,3 +953,45 @@ fn a_scene_batch_steps_each_state_as_a_runner_does() {
         eprintln!("{}: worst relative difference {worst:e}", scene.name);
     }
 }
+
+/// The damping check names every joint whose damping the step cannot
+/// resolve, and the one dt that resolves them all, rounded down so that
+/// typed back it holds.
+#[test]
+fn the_damping_check_names_every_joint_and_one_dt_for_all() {
+    let link = |name: &str, i: f64| {
+        format!(
+            r#"<link name="{name}"><inertial><mass value="1"/><inertia ixx="{i}" ixy="0" ixz="0" iyy="{i}" iyz="0" izz="{i}"/></inertial></link>"#
+        )
+    };
+    let joint = |name: &str, parent: &str, child: &str, damping: f64| {
+        format!(
+            r#"<joint name="{name}" type="continuous"><parent link="{parent}"/><child link="{child}"/><axis xyz="0 0 1"/><dynamics damping="{damping}"/></joint>"#
+        )
+    };
+    let text = format!(
+        r#"<robot name="r">{}{}{}{}{}{}{}</robot>"#,
+        link("base", 1.0),
+        link("a", 8e-4),
+        link("b", 1.0),
+        link("c", 3.3333e-4),
+        joint("first", "base", "a", 1.0),
+        joint("free", "a", "b", 1.0),
+        joint("last", "b", "c", 2.0),
+    );
+    let (field, message) = robot_scene(&text, |_| {}).unwrap_err();
+    assert_eq!(field, "dt");
+    assert!(
+        message.contains("on 2 joints")
+            && message.contains("`first` (damping 1 on 8.000e-4 kg m²: dt ≤ 8.00e-4)")
+            && message.contains("`last` (damping 2 on 3.333e-4 kg m²: dt ≤ 1.66e-4)")
+            && message.contains("expected dt ≤ 1.66e-4, which holds for all of them")
+            && !message.contains("`free`"),
+        "{message}"
+    );
+    robot_scene(&text, |s| {
+        s.dt = Positive(1.66e-4);
+        s.frame_dt = Positive(1.66e-4 * 60.0);
+    })
+    .unwrap();
+}

@@ -20,9 +20,11 @@
 //! coupling is a constraint this simulator does not impose); a zero axis; a
 //! revolute or prismatic joint without `<limit>`; duplicate names; a joint
 //! whose parent or child is no link; a link with two parents; two roots; a
-//! cycle; a negative mass or an inertia that is not positive semi-definite;
-//! a moving body (after merging) whose mass is not positive or whose inertia
-//! is not positive definite.
+//! cycle; a negative mass; a moving body (after merging the links fixed to
+//! it) whose mass is not positive, whose inertia is not positive
+//! semi-definite up to round-off at the body's scale, or that is the last
+//! of its branch and has no inertia about its joint. A link welded to a
+//! fixed base is not checked: it never moves.
 
 use std::collections::HashMap;
 
@@ -277,12 +279,8 @@ pub fn parse(text: &str, base: Base) -> Result<Robot> {
     };
     let mut model_links = Vec::with_capacity(bodies.len());
     for (b, body) in bodies.iter().enumerate() {
-        let moves = b > 0 || base == Base::Free;
         let (mass, c, inertia_com) = body.mass.about_centre();
-        if moves {
-            check_body(&links[body.head], mass, &c, &inertia_com)?;
-        }
-        model_links.push(Link {
+        let link = Link {
             parent: body.parent,
             joint: body.joint,
             mass,
@@ -290,7 +288,13 @@ pub fn parse(text: &str, base: Base) -> Result<Robot> {
             inertia_com,
             l: body.l,
             tip: None,
-        });
+        };
+        // A fixed base's body never moves: its inertia is never used.
+        if b > 0 || base == Base::Free {
+            let leaf = bodies.iter().all(|other| other.parent != Some(b));
+            check_body(&links[body.head], &link, leaf)?;
+        }
+        model_links.push(link);
     }
     Ok(Robot {
         name: root.attribute("name").unwrap_or("robot").to_string(),
@@ -509,39 +513,50 @@ fn no_spec() -> JointSpec {
 }
 
 /// Checks a moving body's merged mass, centre of mass and inertia.
-fn check_body(head: &LinkTag, mass: f64, c: &Vector3<f64>, inertia: &Matrix3<f64>) -> Result<()> {
-    if !(c.iter().chain(inertia.iter()).all(|x| x.is_finite()) && mass.is_finite()) {
-        return Err(at(
+/// Checks a moving body (`leaf`: one no other body hangs from).
+fn check_body(head: &LinkTag, link: &Link, leaf: bool) -> Result<()> {
+    let (mass, c, inertia) = (link.mass, &link.c, &link.inertia_com);
+    let body = |what: String| {
+        at(
             &head.node,
             format!(
-                "the body headed by link `{}` (with the links fixed to it) has a mass, centre of \
-                 mass or inertia beyond floating point (its numbers are too large); expected a \
-                 real body's",
+                "the body headed by link `{}` (with the links fixed to it) {what}",
                 head.name
             ),
+        )
+    };
+    if !(c.iter().chain(inertia.iter()).all(|x| x.is_finite()) && mass.is_finite()) {
+        return Err(body(
+            "has a mass, centre of mass or inertia beyond floating point (its numbers are too \
+             large); expected a real body's"
+                .into(),
         ));
     }
     if mass <= 0.0 {
-        return Err(at(
-            &head.node,
-            format!(
-                "the body headed by link `{}` (with the links fixed to it) has mass {mass}; a \
-                 moving body needs a positive mass in an <inertial>",
-                head.name
-            ),
-        ));
+        return Err(body(format!(
+            "has mass {mass}; a moving body needs a positive mass in an <inertial>"
+        )));
     }
+    // Round-off is judged by the body's own scale — its largest inertia,
+    // or its mass at its centre's distance from the joint — not by its
+    // inertia alone, which may be all round-off (a point mass).
+    let scale = inertia.abs().max().max(mass * c.norm_squared());
+    let round_off = 1e-12 * scale.max(f64::MIN_POSITIVE);
     let smallest = inertia.symmetric_eigenvalues().min();
-    if smallest <= 0.0 {
-        return Err(at(
-            &head.node,
-            format!(
-                "the body headed by link `{}` (with the links fixed to it) has an inertia about \
-                 its centre of mass that is not positive definite (smallest eigenvalue \
-                 {smallest:e}); expected ixx, iyy, izz > 0 of a real body",
-                head.name
-            ),
-        ));
+    if smallest < -round_off {
+        return Err(body(format!(
+            "has an inertia about its centre of mass that is not positive semi-definite \
+             (smallest eigenvalue {smallest:e}); expected a real body's"
+        )));
+    }
+    // A body others hang from moves their inertia too; a last one that
+    // moves none leaves its joint's acceleration undetermined.
+    if leaf && link.axis_inertia() <= round_off {
+        return Err(body(format!(
+            "has no inertia about its joint ({:e}), and no body hangs from it: its mass sits \
+             on the axis and its inertia is zero; expected a real body's",
+            link.axis_inertia()
+        )));
     }
     Ok(())
 }
@@ -674,18 +689,6 @@ fn link_tag<'a>(node: roxmltree::Node<'a, 'a>) -> Result<LinkTag<'a>> {
                 get("izz")?,
             );
             let inertia = Matrix3::new(xx, xy, xz, xy, yy, yz, xz, yz, zz);
-            let smallest = inertia.symmetric_eigenvalues().min();
-            let scale = inertia.abs().max().max(f64::MIN_POSITIVE);
-            if smallest < -1e-12 * scale {
-                return Err(at(
-                    &node,
-                    format!(
-                        "its inertia is not positive semi-definite (smallest eigenvalue \
-                         {smallest:e}); expected the inertia of a real body about its centre of \
-                         mass"
-                    ),
-                ));
-            }
             let r = pose.rotation.to_rotation_matrix().into_inner();
             Some(Inertial {
                 mass,

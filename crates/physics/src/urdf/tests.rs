@@ -258,7 +258,7 @@ fn malformed_descriptions_name_the_element() {
                 &joint("j", "continuous", "a", "b", ""),
             ),
             "<link name=\"b\">",
-            "not positive definite",
+            "has no inertia about its joint",
         ),
         (
             robot(
@@ -373,6 +373,32 @@ fn a_xacro_file_is_refused_as_one() {
     assert!(
         error.contains("line 3, <macro name=\"segment\">: a xacro element: this is a xacro file")
             && error.contains("expand it to URDF first"),
+        "{error}"
+    );
+}
+
+/// Inertias are judged by the body's scale: a point mass off its axis whose
+/// inertia is round-off (iCub's head: all zero but ixz = 2.4e-35) moves; a
+/// link welded to a fixed base (TIAGo's antennas, whose inertias are not
+/// positive semi-definite) is not checked, as it never moves.
+#[test]
+fn inertias_are_judged_by_the_bodys_scale_and_only_where_they_move() {
+    let text = r#"<robot name="r">
+      <link name="base"/>
+      <link name="antenna"><inertial><mass value="0.000001"/><inertia ixx="0.00000002371" ixy="0.00000006119" ixz="0.00000001179" iyy="0.00000002833" iyz="0.00000000774" izz="0.00000003849"/></inertial></link>
+      <link name="head"><inertial><origin xyz="0.0185 -0.1108 0"/><mass value="1.33687"/><inertia ixx="0" ixy="0" ixz="2.40741e-35" iyy="0" iyz="0" izz="0"/></inertial></link>
+      <joint name="weld" type="fixed"><parent link="base"/><child link="antenna"/></joint>
+      <joint name="neck" type="continuous"><parent link="base"/><child link="head"/><axis xyz="0 0 1"/></joint>
+    </robot>"#;
+    let robot = parse(text, Base::Fixed).unwrap();
+    let head = &robot.model.links[1];
+    assert!(
+        (head.axis_inertia() - 1.33687 * (0.0185f64.powi(2) + 0.1108f64.powi(2))).abs() < 1e-12
+    );
+    // On a free base the antenna moves with the base, and is judged.
+    let error = parse(text, Base::Free).unwrap_err().to_string();
+    assert!(
+        error.contains("link `base`") && error.contains("not positive semi-definite"),
         "{error}"
     );
 }
