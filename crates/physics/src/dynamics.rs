@@ -311,6 +311,39 @@ fn joint_velocity(link: &Link, state: &State, i: usize) -> Vector6<f64> {
     }
 }
 
+/// Each one-DOF joint's effective inertia in `state`'s configuration: what
+/// a torque on that joint alone meets with every other joint, and a free
+/// base, free to move, 1 / (M⁻¹)ᵢᵢ. Where the joint's parent moves too it
+/// is less than its link's own inertia about the axis (a humanoid's waist on
+/// a floating base: 0.03 against 0.38 kg m²); where it carries more links,
+/// more. None for a ball hinge or the root. One articulated-body pass per
+/// joint, with no gravity and no velocity.
+pub fn effective_inertias(model: &Model, state: &State) -> Vec<Option<f64>> {
+    let mut still = model.clone();
+    still.gravity = Vector3::zeros();
+    let at_rest = State {
+        root_v: Vector3::zeros(),
+        rates: vec![Vector3::zeros(); model.len()],
+        qd: vec![0.0; model.len()],
+        ..state.clone()
+    };
+    let mut kin = Kinematics::new(&still);
+    kin.update(&still, &at_rest);
+    let mut workspace = Workspace::new(&still);
+    let mut loads = Loads::zeros(&still);
+    let mut out = Derivative::zeros(&still);
+    (0..model.len())
+        .map(|i| {
+            (i > 0 && model.links[i].joint.dof() == 1).then(|| {
+                loads.clear();
+                loads.effort[i] = 1.0;
+                workspace.forward(&still, &at_rest, &kin, &loads, &mut out);
+                1.0 / out.qd[i]
+            })
+        })
+        .collect()
+}
+
 /// Scratch space of the articulated-body algorithm, allocated once per model
 /// so that stepping allocates nothing.
 #[derive(Clone, Debug)]

@@ -10,8 +10,12 @@
 //!   step cannot resolve a stiffer one.
 //! - Limits: past a bound by d > 0, a spring–damper pushing back,
 //!   max(0, k d + c ḋ), that never pulls; k = I (2π / (20 dt))² (a period of
-//!   20 of the scene's integration steps on the link's own inertia) and
-//!   c = 2 √(k I), critical damping. The laws are the scene's: re-simulating
+//!   20 of the scene's integration steps) and c = 2 √(k I), critical
+//!   damping, with I the smaller of the link's own inertia about the axis
+//!   and the joint's effective inertia with the robot at rest (what a
+//!   torque on it alone meets, the rest free to move: a humanoid's waist on
+//!   its floating base moves 0.03 kg m², not its link's 0.38, and a spring
+//!   sized on the latter threw it apart). The laws are the scene's: re-simulating
 //!   its frames with coarser steps keeps them, and may not resolve them (a
 //!   blow-up the test stage scores as one).
 //! - Effort: the command clamped to ± the URDF's `effort` (when it gives
@@ -29,14 +33,13 @@
 //!   its own inertia shrinks (the UR5 driven hard: by at most 15%, where
 //!   without it the wrist spins at 94 rad/s against 3.2).
 
-use crate::model::Link;
 use crate::urdf::JointSpec;
 
 /// Below this joint speed (rad/s or m/s), friction is viscous.
 pub const FRICTION_SLIP_SPEED: f64 = 0.01;
 
-/// Integration steps per period of a limit's spring on the link's own
-/// inertia.
+/// Integration steps per period of a limit's spring on the joint's
+/// effective inertia.
 pub const LIMIT_PERIOD_STEPS: f64 = 20.0;
 
 /// One joint's limits and passive dynamics, ready to apply.
@@ -62,21 +65,28 @@ pub struct JointLaw {
 }
 
 impl JointLaw {
-    /// The law of `link`'s joint as `spec` states it, with `added_damping`
-    /// and, from a plant, `added_friction`, for integration steps of `dt`;
-    /// with `hold_velocity`, the drive holds the joint within the
-    /// description's velocity limit, if it gives one.
+    /// The law of a joint as `spec` states it, with `added_damping` and,
+    /// from a plant, `added_friction`, for integration steps of `dt`; with
+    /// `hold_velocity`, the drive holds the joint within the description's
+    /// velocity limit, if it gives one. Friction's viscous cap and the
+    /// velocity drive's gain are sized on `own`, the link's own inertia
+    /// about the axis; the limit's spring and damper on the smaller of that
+    /// and `effective`, the joint's effective inertia
+    /// ([`crate::dynamics::effective_inertias`]): sized on its link's own
+    /// alone, they were too stiff for a joint whose parent moves too, and a
+    /// humanoid's waist blew up at its limit.
     pub fn new(
-        link: &Link,
+        (own, effective): (f64, f64),
         spec: &JointSpec,
         added_damping: f64,
         added_friction: Option<f64>,
         hold_velocity: bool,
         dt: f64,
     ) -> JointLaw {
-        let inertia = link.axis_inertia();
+        let inertia = own;
+        let held = own.min(effective);
         let omega = std::f64::consts::TAU / (LIMIT_PERIOD_STEPS * dt);
-        let stiffness = inertia * omega * omega;
+        let stiffness = held * omega * omega;
         let effort = spec.effort.unwrap_or(f64::INFINITY);
         let velocity = spec
             .velocity
@@ -93,7 +103,7 @@ impl JointLaw {
             friction_cap: inertia / (2.0 * dt),
             range: spec.range,
             stiffness,
-            limit_damping: 2.0 * (stiffness * inertia).sqrt(),
+            limit_damping: 2.0 * (stiffness * held).sqrt(),
             effort,
         }
     }
@@ -135,27 +145,12 @@ impl JointLaw {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::model::Joint;
-    use nalgebra::{Matrix3, Vector3};
 
-    /// A 2 kg link turning about z, 0.6 kg m² about its hinge.
-    fn link() -> Link {
-        Link {
-            parent: Some(0),
-            joint: Joint::Revolute {
-                origin: Matrix3::identity(),
-                axis: Vector3::z(),
-            },
-            mass: 2.0,
-            c: Vector3::new(0.5, 0.0, 0.0),
-            inertia_com: Matrix3::identity() * 0.1,
-            l: Vector3::zeros(),
-            tip: None,
-        }
-    }
+    /// The effective inertia of the joints below: a 2 kg link turning
+    /// about z, 0.6 kg m² about its hinge, on a fixed base.
+    const INERTIA: f64 = 0.6;
 
     fn law(range: Option<(f64, f64)>) -> JointLaw {
-        let link = link();
         let spec = JointSpec {
             range,
             effort: Some(10.0),
@@ -163,12 +158,11 @@ mod tests {
             damping: 0.5,
             friction: 0.2,
         };
-        JointLaw::new(&link, &spec, 0.25, None, false, 1e-3)
+        JointLaw::new((INERTIA, INERTIA), &spec, 0.25, None, false, 1e-3)
     }
 
     #[test]
     fn a_drive_holding_its_velocity_limit_gives_no_effort_past_it_and_brakes() {
-        let link = link();
         let spec = JointSpec {
             range: None,
             effort: Some(10.0),
@@ -176,13 +170,13 @@ mod tests {
             damping: 0.0,
             friction: 0.0,
         };
-        let free = JointLaw::new(&link, &spec, 0.0, None, false, 1e-3);
+        let free = JointLaw::new((INERTIA, INERTIA), &spec, 0.0, None, false, 1e-3);
         assert_eq!(
             free.drive(10.0, 5.0),
             10.0,
             "not held: the command as it is"
         );
-        let law = JointLaw::new(&link, &spec, 0.0, None, true, 1e-3);
+        let law = JointLaw::new((INERTIA, INERTIA), &spec, 0.0, None, true, 1e-3);
         // k = min(10 / 0.2, 0.6 / 2e-3) = 50.
         assert_eq!(law.velocity_gain, 50.0);
         assert_eq!(

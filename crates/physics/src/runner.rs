@@ -11,7 +11,7 @@ use nalgebra::{Vector3, Vector6};
 
 use crate::contact::{ContactPoint, Surfaces, contact_points};
 use crate::controller::{Controller, ControllerKind};
-use crate::dynamics::{Kinematics, Loads, State};
+use crate::dynamics::{Kinematics, Loads, State, effective_inertias};
 use crate::integrate::{Evaluation, Forces, Stepper};
 use crate::joints::JointLaw;
 use crate::model::{Model, Root};
@@ -123,14 +123,25 @@ impl Prepared {
                 );
                 let added = scene.added_damping();
                 let friction = scene.plant.as_ref().map(|p| p.coulomb_friction);
-                let laws = model
-                    .links
-                    .iter()
+                // Sized on each joint's effective inertia with the robot at
+                // rest (q = 0): it changes with the pose, which the margin
+                // of joints::LIMIT_PERIOD_STEPS absorbs.
+                let rest = State::rest(&model, Vector3::zeros());
+                let laws = effective_inertias(&model, &rest)
+                    .into_iter()
+                    .zip(&model.links)
                     .zip(&robot.specs)
-                    .enumerate()
-                    .map(|(i, (link, spec))| {
-                        (i > 0 && link.joint.dof() == 1).then(|| {
-                            JointLaw::new(link, spec, added, friction, scene.velocity_limits, dt)
+                    .map(|((effective, link), spec)| {
+                        effective.map(|effective| {
+                            let inertias = (link.axis_inertia(), effective);
+                            JointLaw::new(
+                                inertias,
+                                spec,
+                                added,
+                                friction,
+                                scene.velocity_limits,
+                                dt,
+                            )
                         })
                     })
                     .collect();

@@ -29,7 +29,7 @@ use serde::{Deserialize, Serialize};
 use crate::Integrator;
 use crate::contact::{ContactParams, Surfaces};
 use crate::controller::{Amplitude, ControllerKind, ControllerParams};
-use crate::dynamics::State;
+use crate::dynamics::{State, effective_inertias};
 use crate::model::{Joint, Model, Root, Shape};
 use crate::plant::Plant;
 use crate::urdf::{self, Base, Robot};
@@ -650,17 +650,18 @@ impl Scene {
         let added = self.added_damping();
         // Every joint whose damping explicit integration cannot resolve at
         // this dt, so that one edit of dt settles them all: (joint,
-        // damping, its link's own inertia about the axis — a lower bound of
-        // what the joint moves in every configuration).
-        let limiting: Vec<(&str, f64, f64)> = self
-            .plant_model()
-            .links
+        // damping, the smaller of its link's own inertia about the axis and
+        // its effective inertia with the robot at rest, on which the
+        // simulator sizes its limits too).
+        let model = self.plant_model();
+        let inertias = effective_inertias(&model, &State::rest(&model, Vector3::zeros()));
+        let limiting: Vec<(&str, f64, f64)> = inertias
             .iter()
             .enumerate()
-            .skip(1)
-            .map(|(i, link)| {
+            .filter_map(|(i, effective)| {
                 let damping = robot.specs[i].damping + added;
-                (robot.joints[i].as_str(), damping, link.axis_inertia())
+                let inertia = model.links[i].axis_inertia().min((*effective)?);
+                Some((robot.joints[i].as_str(), damping, inertia))
             })
             .filter(|&(_, damping, inertia)| damping * dt > inertia)
             .collect();
@@ -686,7 +687,9 @@ impl Scene {
                 field.into(),
                 format!(
                     "{whose} with dt = {dt} is more than explicit integration resolves on {} \
-                     joint{} (each on its link's own inertia about the axis): {}; {}",
+                     joint{} (each on the smaller of its link's own inertia about the axis and \
+                     its effective inertia, the rest of the robot free to move, at rest): {}; \
+                     {}",
                     limiting.len(),
                     if limiting.len() == 1 { "" } else { "s" },
                     each.join(", "),
@@ -694,8 +697,8 @@ impl Scene {
                         bound if bound > 0.0 => {
                             format!("expected dt ≤ {bound:.2e}, which holds for all of them")
                         }
-                        _ => "no dt resolves a damped joint whose link has no inertia about its \
-                              axis: lower its damping"
+                        _ => "no dt resolves a damped joint that moves no inertia: lower its \
+                              damping"
                             .to_string(),
                     }
                 ),

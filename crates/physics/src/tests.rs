@@ -981,12 +981,14 @@ fn the_damping_check_names_every_joint_and_one_dt_for_all() {
     );
     let (field, message) = robot_scene(&text, |_| {}).unwrap_err();
     assert_eq!(field, "dt");
+    // `free` turns the heavy b against the light a, which the rest leaves
+    // free: its effective inertia is about a's, not b's own.
     assert!(
-        message.contains("on 2 joints")
+        message.contains("on 3 joints")
             && message.contains("`first` (damping 1 on 8.000e-4 kg m²: dt ≤ 8.00e-4)")
-            && message.contains("`last` (damping 2 on 3.333e-4 kg m²: dt ≤ 1.66e-4)")
-            && message.contains("expected dt ≤ 1.66e-4, which holds for all of them")
-            && !message.contains("`free`"),
+            && message.contains("`free` (damping 1 on 7.994e-4 kg m²: dt ≤ 7.99e-4)")
+            && message.contains("`last` (damping 2 on 3.332e-4 kg m²: dt ≤ 1.66e-4)")
+            && message.contains("expected dt ≤ 1.66e-4, which holds for all of them"),
         "{message}"
     );
     robot_scene(&text, |s| {
@@ -994,4 +996,42 @@ fn the_damping_check_names_every_joint_and_one_dt_for_all() {
         s.frame_dt = Positive(1.66e-4 * 60.0);
     })
     .unwrap();
+}
+
+/// A joint's effective inertia is what a torque on it alone meets: on a
+/// fixed base, a pendulum's inertia about its hinge; between two bodies
+/// turning about one axis in free space, their reduced inertia
+/// I₁I₂/(I₁ + I₂), less than either.
+#[test]
+fn effective_inertias_see_what_else_moves() {
+    use crate::dynamics::effective_inertias;
+    use crate::urdf::{Base, parse};
+    let text = |i1: f64, i2: f64| {
+        format!(
+            r#"<robot name="r">
+              <link name="a"><inertial><mass value="3"/><inertia ixx="1" ixy="0" ixz="0" iyy="1" iyz="0" izz="{i1}"/></inertial></link>
+              <link name="b"><inertial><origin xyz="0.5 0 0"/><mass value="2"/><inertia ixx="1" ixy="0" ixz="0" iyy="1" iyz="0" izz="{i2}"/></inertial></link>
+              <joint name="j" type="continuous"><parent link="a"/><child link="b"/><axis xyz="0 0 1"/></joint>
+            </robot>"#
+        )
+    };
+    let fixed = parse(&text(0.4, 0.1), Base::Fixed).unwrap().model;
+    let rest = State::rest(&fixed, Vector3::zeros());
+    let inertias = effective_inertias(&fixed, &rest);
+    assert_eq!(inertias[0], None, "the root");
+    let about_hinge = 0.1 + 2.0 * 0.25;
+    assert!(
+        (inertias[1].unwrap() - about_hinge).abs() < 1e-12,
+        "{inertias:?}"
+    );
+    // In free space b's centre sits off the axis, so the bodies' mass
+    // couples too; with it on the axis the reduced inertia is exact.
+    let coaxial = text(0.4, 0.1).replace(r#"<origin xyz="0.5 0 0"/>"#, "");
+    let free = parse(&coaxial, Base::Free).unwrap().model;
+    let inertias = effective_inertias(&free, &State::rest(&free, Vector3::zeros()));
+    let reduced = 0.4 * 0.1 / (0.4 + 0.1);
+    assert!(
+        (inertias[1].unwrap() - reduced).abs() < 1e-12,
+        "{inertias:?}"
+    );
 }

@@ -61,8 +61,9 @@ use serde::{Deserialize, Serialize};
 /// angle that wraps scored on the circle, its period in the predictions; 7:
 /// the robust linear fit timed one state at a time too; 8: hybrids, the
 /// nominal predictions an input; 9: the ALN as a hybrid, hybrids' closed
-/// loops; 10: the linear and boosted baselines kept as models).
-pub const FORMAT_VERSION: u32 = 10;
+/// loops; 10: the linear and boosted baselines kept as models; 11: the
+/// simulator's joint limits sized on what the joint moves).
+pub const FORMAT_VERSION: u32 = 11;
 
 /// File name of the predictions table ([`alnlab_tables::predictions`]).
 pub const PREDICTIONS_FILE: &str = alnlab_tables::predictions::FILE;

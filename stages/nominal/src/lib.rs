@@ -24,8 +24,9 @@ use alnlab_physics::replay::{Replayer, SceneReplay};
 use alnlab_tables::pairs::{self, Pairs, Side};
 use arrow_array::Array;
 
-/// Version of what this stage writes (part of every cache key).
-pub const FORMAT_VERSION: u32 = 1;
+/// Version of what this stage writes (part of every cache key; 2: joint
+/// limits sized on what the joint moves).
+pub const FORMAT_VERSION: u32 = 2;
 
 /// File name of the nominal predictions.
 pub const NOMINAL_FILE: &str = "nominal.parquet";
