@@ -259,29 +259,7 @@ fn manifests_that_cannot_run_are_refused_at_check() {
         )
         .exits(2),
     );
-    std::fs::write(
-        dir.path().join("endless-robot.toml"),
-        TINY.replacen(
-            "kind = \"pendulum\"",
-            "kind = \"urdf\"\nfile = \"/dev/zero\"",
-            1,
-        ),
-    )
-    .unwrap();
-    cases.push(
-        case(
-            "an endless robot description",
-            &["check", "endless-robot.toml"],
-            &[
-                "endless-robot.toml",
-                "file",
-                "more than 64 MiB, far more than a robot description holds",
-            ],
-            None,
-        )
-        .exits(2),
-    );
-    // A chain of 20 000 links overflowed the stack (signal 6).
+    // Robot descriptions that cannot be taken, each in a manifest of its own.
     let mut chain = String::from("<robot name=\"chain\">");
     for i in 0..20_000 {
         chain += &format!("<link name=\"l{i}\"/>");
@@ -294,54 +272,40 @@ fn manifests_that_cannot_run_are_refused_at_check() {
     }
     std::fs::write(dir.path().join("chain.urdf"), chain + "</robot>").unwrap();
     std::fs::write(
-        dir.path().join("chain.toml"),
-        TINY.replacen(
-            "kind = \"pendulum\"",
-            "kind = \"urdf\"\nfile = \"chain.urdf\"",
-            1,
-        ),
-    )
-    .unwrap();
-    cases.push(
-        case(
-            "a chain of 20 000 links",
-            &["check", "chain.toml"],
-            &[
-                "chain.urdf",
-                "has 20000 links; alnlab takes robots of at most 10000",
-            ],
-            None,
-        )
-        .exits(2),
-    );
-    std::fs::write(
         dir.path().join("arm.urdf.xacro"),
         "<robot name=\"arm\" xmlns:xacro=\"http://www.ros.org/wiki/xacro\">\
          <xacro:include filename=\"arm.macros.xacro\"/><link name=\"base\"/></robot>",
     )
     .unwrap();
-    std::fs::write(
-        dir.path().join("xacro.toml"),
-        TINY.replacen(
-            "kind = \"pendulum\"",
-            "kind = \"urdf\"\nfile = \"arm.urdf.xacro\"",
-            1,
+    let robots: [(&str, &str, &str, &[&str]); 3] = [
+        (
+            "an endless robot description",
+            "endless-robot.toml",
+            "/dev/zero",
+            &["more than 64 MiB, far more than a robot description holds"],
         ),
-    )
-    .unwrap();
-    cases.push(
-        case(
+        (
+            // It overflowed the stack (signal 6).
+            "a chain of 20 000 links",
+            "chain.toml",
+            "chain.urdf",
+            &["has 20000 links; alnlab takes robots of at most 10000"],
+        ),
+        (
             "a xacro file",
-            &["check", "xacro.toml"],
-            &[
-                "arm.urdf.xacro",
-                "this is a xacro file",
-                "expand it to URDF first",
-            ],
-            None,
-        )
-        .exits(2),
-    );
+            "xacro.toml",
+            "arm.urdf.xacro",
+            &["this is a xacro file", "expand it to URDF first"],
+        ),
+    ];
+    for (name, manifest, description, says) in robots {
+        let scene = format!("kind = \"urdf\"\nfile = \"{description}\"");
+        let text = TINY.replacen("kind = \"pendulum\"", &scene, 1);
+        std::fs::write(dir.path().join(manifest), text).unwrap();
+        let mut mentions = vec![manifest, "file", description];
+        mentions.extend_from_slice(says);
+        cases.push(case(name, &["check", manifest], &mentions, None).exits(2));
+    }
     std::fs::write(dir.path().join("empty.toml"), "").unwrap();
     cases.push(case(
         "empty manifest",
