@@ -289,20 +289,8 @@ impl<'m> Work<'m> {
     fn step(&mut self, model: &Model, ready: &Ready<'m>) {
         let rows = self.rows;
         match &ready.predicts {
-            Predicts::Piecewise(predictor) if rows < PIECEWISE_ONE_ROW_BELOW => {
-                let scratch = self.scratch.as_mut().expect("made for a piecewise model");
-                for r in 0..rows {
-                    for (v, x) in self.row.iter_mut().enumerate() {
-                        *x = self.columns[v * rows + r];
-                    }
-                    predictor.next_values(&self.row, Path::Plain, scratch, &mut self.row_next);
-                    for (write, &x) in model.writes.iter().zip(&self.row_next) {
-                        if let Some(v) = *write {
-                            self.columns[v * rows + r] = x;
-                        }
-                    }
-                }
-            }
+            Predicts::Piecewise(_) if rows < PIECEWISE_ONE_ROW_BELOW => self.each_row(model, ready),
+            Predicts::Boosted(..) => self.each_row(model, ready),
             Predicts::Piecewise(predictor) => {
                 let scratch = self.scratch.as_mut().expect("made for a piecewise model");
                 let columns: Vec<&[f64]> = self.columns.chunks(rows).collect();
@@ -310,23 +298,6 @@ impl<'m> Work<'m> {
                 for (write, next) in model.writes.iter().zip(&self.next) {
                     if let Some(v) = *write {
                         self.columns[v * rows..(v + 1) * rows].copy_from_slice(next);
-                    }
-                }
-            }
-            Predicts::Boosted(kept, learned) => {
-                for r in 0..rows {
-                    for (v, x) in self.features.iter_mut().enumerate() {
-                        *x = self.columns[v * rows + r] as f32;
-                    }
-                    let outputs = kept.boosted.outputs.iter().zip(&kept.variables);
-                    for (next, (trees, &v)) in self.row_next.iter_mut().zip(outputs) {
-                        let change = f64::from(trees.change(&self.features));
-                        *next = advance(learned[v], self.columns[v * rows + r], change);
-                    }
-                    for (write, &x) in model.writes.iter().zip(&self.row_next) {
-                        if let Some(v) = *write {
-                            self.columns[v * rows + r] = x;
-                        }
                     }
                 }
             }
@@ -350,6 +321,41 @@ impl<'m> Work<'m> {
                     for (x, &level) in self.column_mut(v).iter_mut().zip(&next[v]) {
                         *x = q.value(usize::from(level));
                     }
+                }
+            }
+        }
+    }
+
+    /// Advances the state variables one frame, one row at a time: each
+    /// row's learned variables read, its outputs predicted (a
+    /// piecewise-linear model's plain path, or the boosted trees), the
+    /// state variables among them written back.
+    fn each_row(&mut self, model: &Model, ready: &Ready<'m>) {
+        let rows = self.rows;
+        for r in 0..rows {
+            for (v, x) in self.row.iter_mut().enumerate() {
+                *x = self.columns[v * rows + r];
+            }
+            match &ready.predicts {
+                Predicts::Piecewise(predictor) => {
+                    let scratch = self.scratch.as_mut().expect("made for a piecewise model");
+                    predictor.next_values(&self.row, Path::Plain, scratch, &mut self.row_next);
+                }
+                Predicts::Boosted(kept, learned) => {
+                    for (feature, &x) in self.features.iter_mut().zip(&self.row) {
+                        *feature = x as f32;
+                    }
+                    let outputs = kept.boosted.outputs.iter().zip(&kept.variables);
+                    for (next, (trees, &v)) in self.row_next.iter_mut().zip(outputs) {
+                        let change = f64::from(trees.change(&self.features));
+                        *next = advance(learned[v], self.row[v], change);
+                    }
+                }
+                Predicts::Levels(_) => unreachable!("a bit model predicts through its runtime"),
+            }
+            for (write, &x) in model.writes.iter().zip(&self.row_next) {
+                if let Some(v) = *write {
+                    self.columns[v * rows + r] = x;
                 }
             }
         }
