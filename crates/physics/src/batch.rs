@@ -751,7 +751,7 @@ mod tests {
                         state
                     })
                     .collect();
-                let loads = (0..7).map(|_| random_loads(&mut rng, n)).collect();
+                let loads = (0..7).map(|_| random_loads(&mut rng, n, false)).collect();
                 (model, states, loads)
             })
             .collect()

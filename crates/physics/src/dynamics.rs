@@ -101,6 +101,16 @@ pub struct Loads {
     pub effort: Vec<f64>,
     /// External spatial forces, link frame, at the hinge.
     pub f_ext: Vec<Vector6<f64>>,
+    /// How each one-DOF joint's effort falls as its velocity rises and as
+    /// its position rises, −∂effort/∂q̇ and −∂effort/∂q (its viscous
+    /// damping, friction's slope, an engaged limit's damper and spring), for
+    /// an integrator that takes them implicitly.
+    pub effort_damping: Vec<f64>,
+    pub effort_stiffness: Vec<f64>,
+    /// Inertia added to each one-DOF joint's diagonal of the mass matrix:
+    /// the dynamics solve (M + diag(armature)) q̈ = … (an implicit step's
+    /// h b + h² k; zero otherwise).
+    pub armature: Vec<f64>,
 }
 
 impl Loads {
@@ -110,14 +120,20 @@ impl Loads {
             tau: vec![Vector3::zeros(); model.len()],
             effort: vec![0.0; model.len()],
             f_ext: vec![Vector6::zeros(); model.len()],
+            effort_damping: vec![0.0; model.len()],
+            effort_stiffness: vec![0.0; model.len()],
+            armature: vec![0.0; model.len()],
         }
     }
 
-    /// Sets every force to zero.
+    /// Sets every force, and how efforts change, to zero.
     pub fn clear(&mut self) {
         self.tau.fill(Vector3::zeros());
         self.effort.fill(0.0);
         self.f_ext.fill(Vector6::zeros());
+        self.effort_damping.fill(0.0);
+        self.effort_stiffness.fill(0.0);
+        self.armature.fill(0.0);
     }
 }
 
@@ -521,8 +537,10 @@ impl Workspace {
         let ia = self.articulated[i];
         let big_u = ia * s;
         // Positive for any finite state (s ≠ 0 and a positive mass on the
-        // joint's side); NaN otherwise, which the caller reports.
-        let d_inv = 1.0 / s.dot(&big_u);
+        // joint's side); NaN otherwise, which the caller reports. Armature
+        // adds to the mass matrix's diagonal exactly here, as a motor's
+        // rotor inertia does.
+        let d_inv = 1.0 / (s.dot(&big_u) + loads.armature[i]);
         let u = loads.effort[i] - s.dot(&self.bias[i]);
         self.axis_u[i] = big_u;
         self.axis_d_inv[i] = d_inv;
@@ -676,14 +694,23 @@ pub(crate) mod tests {
         (model, state)
     }
 
-    pub(crate) fn random_loads(rng: &mut ChaCha8Rng, n: usize) -> Loads {
-        Loads {
+    /// Random torques, efforts and external forces; with `armature`,
+    /// random armatures up to 0.5 on every one-DOF joint too.
+    pub(crate) fn random_loads(rng: &mut ChaCha8Rng, n: usize, armature: bool) -> Loads {
+        let mut loads = Loads {
             tau: (0..n).map(|_| vec3(rng, 20.0)).collect(),
             effort: (0..n).map(|_| rng.random_range(-20.0..20.0)).collect(),
             f_ext: (0..n)
                 .map(|_| spatial(&vec3(rng, 10.0), &vec3(rng, 50.0)))
                 .collect(),
+            effort_damping: vec![0.0; n],
+            effort_stiffness: vec![0.0; n],
+            armature: vec![0.0; n],
+        };
+        if armature {
+            loads.armature = (0..n).map(|_| rng.random_range(0.0..0.5)).collect();
         }
+        loads
     }
 
     /// The relative error of the articulated-body algorithm's accelerations
@@ -700,7 +727,8 @@ pub(crate) mod tests {
     }
 
     /// The articulated-body algorithm over mixed joints and every kind of
-    /// root against M q̈ = τ − C.
+    /// root against M q̈ = τ − C, every other case with armatures on the
+    /// one-DOF joints, (M + diag(armature)) q̈ = τ − C.
     #[test]
     fn mixed_joints_match_the_dense_formulation() {
         let mut rng = ChaCha8Rng::seed_from_u64(2);
@@ -709,7 +737,7 @@ pub(crate) mod tests {
             let n = 1 + case % 12;
             let root = [Root::Free, Root::Pinned, Root::Fixed][case % 3];
             let (model, state) = random_mixed(&mut rng, n, root);
-            let loads = random_loads(&mut rng, n);
+            let loads = random_loads(&mut rng, n, case % 2 == 1);
             let error = error_against_dense(&model, &state, &loads);
             worst = worst.max(error);
             assert!(
@@ -740,6 +768,7 @@ pub(crate) mod tests {
                 f_ext: (0..n)
                     .map(|_| spatial(&vec3(&mut rng, 10.0), &vec3(&mut rng, 50.0)))
                     .collect(),
+                ..Loads::zeros(&model)
             };
             let error = error_against_dense(&model, &state, &loads);
             worst = worst.max(error);

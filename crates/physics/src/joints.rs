@@ -7,7 +7,8 @@
 //! - Friction: −μ q̇ / max(|q̇|, 0.01), Coulomb above a slip speed of 0.01
 //!   rad/s (or m/s) and viscous below it, its viscous coefficient capped at
 //!   I / (2 dt) (I the link's own inertia about the axis) as an explicit
-//!   step cannot resolve a stiffer one.
+//!   step cannot resolve a stiffer one; uncapped under the implicit
+//!   integrator, which takes its slope implicitly ([`JointLaw::slopes`]).
 //! - Limits: past a bound by d > 0, a spring–damper pushing back,
 //!   max(0, k d + c ḋ), that never pulls; k = I (2π / (20 dt))² (a period of
 //!   20 of the scene's integration steps) and c = 2 √(k I), critical
@@ -74,14 +75,15 @@ impl JointLaw {
     /// and `effective`, the joint's effective inertia
     /// ([`crate::dynamics::effective_inertias`]): sized on its link's own
     /// alone, they were too stiff for a joint whose parent moves too, and a
-    /// humanoid's waist blew up at its limit.
+    /// humanoid's waist blew up at its limit. With `implicit`, steps take
+    /// the passive efforts' slopes implicitly, and friction's is not capped.
     pub fn new(
         (own, effective): (f64, f64),
         spec: &JointSpec,
         added_damping: f64,
         added_friction: Option<f64>,
         hold_velocity: bool,
-        dt: f64,
+        (dt, implicit): (f64, bool),
     ) -> JointLaw {
         let inertia = own;
         let held = own.min(effective);
@@ -100,7 +102,11 @@ impl JointLaw {
                 Some(added) => spec.friction + added,
                 None => spec.friction,
             },
-            friction_cap: inertia / (2.0 * dt),
+            friction_cap: if implicit {
+                f64::INFINITY
+            } else {
+                inertia / (2.0 * dt)
+            },
             range: spec.range,
             stiffness,
             limit_damping: 2.0 * (stiffness * held).sqrt(),
@@ -140,6 +146,32 @@ impl JointLaw {
         }
         effort
     }
+
+    /// How [`JointLaw::passive`] falls as the velocity and as the position
+    /// rise at (`q`, `qd`): (b, k) = (−∂/∂q̇, −∂/∂q), each ≥ 0 — damping,
+    /// friction's viscous slope below its slip speed (or its cap) and an
+    /// engaged limit's damper and spring.
+    pub fn slopes(&self, q: f64, qd: f64) -> (f64, f64) {
+        let coefficient = self.friction / qd.abs().max(FRICTION_SLIP_SPEED);
+        let friction = if coefficient >= self.friction_cap {
+            self.friction_cap
+        } else if qd.abs() < FRICTION_SLIP_SPEED {
+            coefficient
+        } else {
+            0.0
+        };
+        let engaged = match self.range {
+            Some((_, high)) if q > high => {
+                self.stiffness * (q - high) + self.limit_damping * qd > 0.0
+            }
+            Some((low, _)) if q < low => self.stiffness * (low - q) - self.limit_damping * qd > 0.0,
+            _ => false,
+        };
+        match engaged {
+            true => (self.damping + friction + self.limit_damping, self.stiffness),
+            false => (self.damping + friction, 0.0),
+        }
+    }
 }
 
 #[cfg(test)]
@@ -158,7 +190,7 @@ mod tests {
             damping: 0.5,
             friction: 0.2,
         };
-        JointLaw::new((INERTIA, INERTIA), &spec, 0.25, None, false, 1e-3)
+        JointLaw::new((INERTIA, INERTIA), &spec, 0.25, None, false, (1e-3, false))
     }
 
     #[test]
@@ -170,13 +202,13 @@ mod tests {
             damping: 0.0,
             friction: 0.0,
         };
-        let free = JointLaw::new((INERTIA, INERTIA), &spec, 0.0, None, false, 1e-3);
+        let free = JointLaw::new((INERTIA, INERTIA), &spec, 0.0, None, false, (1e-3, false));
         assert_eq!(
             free.drive(10.0, 5.0),
             10.0,
             "not held: the command as it is"
         );
-        let law = JointLaw::new((INERTIA, INERTIA), &spec, 0.0, None, true, 1e-3);
+        let law = JointLaw::new((INERTIA, INERTIA), &spec, 0.0, None, true, (1e-3, false));
         // k = min(10 / 0.2, 0.6 / 2e-3) = 50.
         assert_eq!(law.velocity_gain, 50.0);
         assert_eq!(
@@ -218,6 +250,36 @@ mod tests {
         // Slow: viscous 0.2 / 0.01 below the slip speed.
         assert!((law.passive(0.0, 0.005) - (-(0.75 + 20.0) * 0.005)).abs() < 1e-12);
         assert_eq!(law.passive(0.0, 0.0), 0.0);
+    }
+
+    #[test]
+    fn slopes_are_the_passive_efforts_derivatives() {
+        let law = law(Some((-1.0, 1.0)));
+        // Fast and slow, free and past either bound, pushed and leaving.
+        for (q, qd) in [
+            (0.0, 2.0),
+            (0.0, -0.004),
+            (1.01, 0.3),
+            (1.01, -0.3),
+            (1.001, -5.0),
+            (-1.02, 0.002),
+            (-1.02, 3.0),
+        ] {
+            let (b, k) = law.slopes(q, qd);
+            let e = 1e-7;
+            let by_qd = -(law.passive(q, qd + e) - law.passive(q, qd - e)) / (2.0 * e);
+            let by_q = -(law.passive(q + e, qd) - law.passive(q - e, qd)) / (2.0 * e);
+            let scale = 1.0 + law.stiffness;
+            assert!(
+                (b - by_qd).abs() < 1e-5 * scale,
+                "b at ({q}, {qd}): {b} against {by_qd}"
+            );
+            assert!(
+                (k - by_q).abs() < 1e-5 * scale,
+                "k at ({q}, {qd}): {k} against {by_q}"
+            );
+            assert!(b >= 0.0 && k >= 0.0);
+        }
     }
 
     #[test]

@@ -117,8 +117,8 @@ fn inverse_dynamics(
     tau
 }
 
-/// Generalized accelerations by M q̈ = τ − C, solved densely, in
-/// [`offsets`]' layout.
+/// Generalized accelerations by (M + diag(armature)) q̈ = τ − C, solved
+/// densely, in [`offsets`]' layout.
 pub fn forward_dense(
     model: &Model,
     state: &State,
@@ -153,7 +153,10 @@ pub fn forward_dense(
     for (i, &(start, width)) in at.iter().enumerate() {
         match width {
             3 => applied.rows_mut(start, 3).copy_from(&loads.tau[i]),
-            1 => applied[start] = loads.effort[i],
+            1 => {
+                applied[start] = loads.effort[i];
+                mass[(start, start)] += loads.armature[i];
+            }
             _ => {}
         }
     }

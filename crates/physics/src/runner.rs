@@ -12,7 +12,7 @@ use nalgebra::{Vector3, Vector6};
 use crate::contact::{ContactPoint, Surfaces, contact_points};
 use crate::controller::{Controller, ControllerKind};
 use crate::dynamics::{Kinematics, Loads, State, effective_inertias};
-use crate::integrate::{Evaluation, Forces, Stepper};
+use crate::integrate::{Evaluation, Forces, Integrator, Stepper};
 use crate::joints::JointLaw;
 use crate::model::{Model, Root};
 use crate::plant::{Actuators, Plant};
@@ -140,7 +140,7 @@ impl Prepared {
                                 added,
                                 friction,
                                 scene.velocity_limits,
-                                dt,
+                                (dt, scene.integrator == Integrator::Implicit),
                             )
                         })
                     })
@@ -181,7 +181,9 @@ impl Prepared {
 /// joint (named by `joints`), its position `joint.<joint>.q` and velocity
 /// `joint.<joint>.qd`; last, each one-DOF joint's passive effort
 /// `joint.<joint>.passive` (damping, friction and limits at that instant,
-/// which replay the dynamics; not part of the state) and, where the
+/// as the step from it applies them — under the implicit integrator with
+/// its implicit part —, which replay the dynamics; not part of the state)
+/// and, where the
 /// effort applied differs from the command (`applied`: a plant's actuators,
 /// drives holding velocity limits), each one-DOF joint's applied effort
 /// `joint.<joint>.applied`.
@@ -414,9 +416,13 @@ impl Forces for SceneForces<'_> {
             loads.tau[0] = Vector3::zeros();
         }
         loads.effort.fill(0.0);
+        loads.effort_damping.fill(0.0);
+        loads.effort_stiffness.fill(0.0);
         for (i, law) in self.laws.iter().enumerate() {
             if let Some(law) = law {
                 self.passive[i] = law.passive(state.q[i], state.qd[i]);
+                (loads.effort_damping[i], loads.effort_stiffness[i]) =
+                    law.slopes(state.q[i], state.qd[i]);
                 let commanded = match &self.actuated {
                     Some(actuated) => law.clamp(actuated[i].x),
                     None => self.g[i].x,
@@ -687,11 +693,16 @@ impl<'a> Runner<'a> {
     pub fn observe(&mut self, state: &State, t: f64, frame: &mut StateFrame) {
         let p = self.p;
         self.torques(t);
-        self.eval.run(&p.model, state, &mut self.forces);
+        let implicit = (p.scene.integrator == Integrator::Implicit).then(|| p.scene.dt.get());
+        self.eval
+            .run_for(&p.model, state, &mut self.forces, implicit);
         generalized_state(&p.model, state, &mut frame.state);
+        // The passive effort the step from this frame applies: an implicit
+        // step's includes what taking it implicitly changed.
+        let eval = &self.eval;
         frame
             .state
-            .extend(one_dof(&p.model).map(|i| self.forces.passive[i]));
+            .extend(one_dof(&p.model).map(|i| self.forces.passive[i] + eval.implicit_effort[i]));
         if p.scene.logs_applied() {
             frame
                 .state

@@ -652,7 +652,9 @@ impl Scene {
         // this dt, so that one edit of dt settles them all: (joint,
         // damping, the smaller of its link's own inertia about the axis and
         // its effective inertia with the robot at rest, on which the
-        // simulator sizes its limits too).
+        // simulator sizes its limits too). The implicit integrator resolves
+        // any damping.
+        let explicit = self.integrator != Integrator::Implicit;
         let model = self.plant_model();
         let inertias = effective_inertias(&model, &State::rest(&model, Vector3::zeros()));
         let limiting: Vec<(&str, f64, f64)> = inertias
@@ -663,7 +665,7 @@ impl Scene {
                 let inertia = model.links[i].axis_inertia().min((*effective)?);
                 Some((robot.joints[i].as_str(), damping, inertia))
             })
-            .filter(|&(_, damping, inertia)| damping * dt > inertia)
+            .filter(|&(_, damping, inertia)| explicit && damping * dt > inertia)
             .collect();
         if !limiting.is_empty() {
             let (field, whose) = match self.plant {
@@ -694,11 +696,12 @@ impl Scene {
                     if limiting.len() == 1 { "" } else { "s" },
                     each.join(", "),
                     match down_to_3_digits(bound) {
-                        bound if bound > 0.0 => {
-                            format!("expected dt ≤ {bound:.2e}, which holds for all of them")
-                        }
+                        bound if bound > 0.0 => format!(
+                            "expected dt ≤ {bound:.2e}, which holds for all of them, or \
+                             `integrator = \"implicit\"`, which takes damping implicitly"
+                        ),
                         _ => "no dt resolves a damped joint that moves no inertia: lower its \
-                              damping"
+                              damping, or set `integrator = \"implicit\"`"
                             .to_string(),
                     }
                 ),
