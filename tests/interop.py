@@ -34,8 +34,11 @@ from mcap_ros2.decoder import DecoderFactory
 
 def field_name(name: str) -> str:
     """The /state field of a variable, as alnlab names it: lower case, every
-    character but letters, digits and `_` made `_` (`f_E.1.x` → `f_e_1_x`)."""
-    return re.sub(r"[^a-z0-9_]", "_", name.lower())
+    character but letters and digits made `_`, runs of `_` one and none at
+    either end, `f_` before one that does not start with a letter
+    (`f_E.1.x` → `f_e_1_x`)."""
+    field = re.sub(r"_+", "_", re.sub(r"[^a-z0-9]", "_", name.lower())).strip("_")
+    return field if field[:1].isalpha() else "f_" + field
 
 
 def quantile(xs, q):

@@ -149,17 +149,29 @@ impl StateLayout {
     }
 }
 
-/// The ROS 2 field name of a dotted alnlab name: letters lower case and
-/// every other character outside `[a-z0-9_]` (a dot, or a `-` of a robot's
-/// link name) an underscore, as ROS 2 allows only `[a-z][a-z0-9_]*`; so
-/// `f_E.1.x` is the field `f_e_1_x`.
+/// The ROS 2 field name of a dotted alnlab name: letters lower case, every
+/// other character outside `[a-z0-9]` (a dot, or a `-` of a robot's link
+/// name) an underscore, runs of underscores one and none at either end, as
+/// ROS 2 allows only `[a-z][a-z0-9_]*` without `__` or a final `_` (readers
+/// refuse a schema that breaks it); `f_` before a name that would not start
+/// with a letter. So `f_E.1.x` is the field `f_e_1_x`, and a joint
+/// `arm_2__j1`'s position `joint_arm_2_j1_q`.
 pub fn field_name(name: &str) -> String {
-    name.chars()
-        .map(|c| match c.to_ascii_lowercase() {
-            c @ ('a'..='z' | '0'..='9' | '_') => c,
-            _ => '_',
-        })
-        .collect()
+    let mut field = String::with_capacity(name.len() + 2);
+    for c in name.chars() {
+        match c.to_ascii_lowercase() {
+            c @ ('a'..='z' | '0'..='9') => field.push(c),
+            _ if field.is_empty() || field.ends_with('_') => {}
+            _ => field.push('_'),
+        }
+    }
+    if field.ends_with('_') {
+        field.pop();
+    }
+    if !field.starts_with(|c: char| c.is_ascii_lowercase()) {
+        field.insert_str(0, "f_");
+    }
+    field
 }
 
 /// Writes a trajectory log under a temporary name; [`StateLogWriter::finish`]
@@ -465,6 +477,12 @@ mod tests {
         assert!(text.ends_with("float64 omega_1_x\nfloat64 omega_1_y\n"));
         // ROS 2 field names are lower case.
         assert_eq!(field_name("f_E.3.z"), "f_e_3_z");
+        assert_eq!(
+            field_name("joint.flying_arm_2__j_bl_link1.q"),
+            "joint_flying_arm_2_j_bl_link1_q"
+        );
+        assert_eq!(field_name("v.link_._"), "v_link");
+        assert_eq!(field_name("_1.x"), "f_1_x");
     }
 
     #[test]

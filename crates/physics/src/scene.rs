@@ -711,13 +711,24 @@ impl Scene {
             .iter()
             .map(|l| l.joint.dof())
             .collect();
+        if dofs.is_empty() && self.base != Some(Base::Free) {
+            return Err((
+                "base".into(),
+                format!(
+                    "robot `{}` has no joint that moves (every link is fixed to `{}`) and its \
+                     base is welded: nothing would move and there would be nothing to learn; \
+                     set `base = \"free\"` for a body that flies or falls",
+                    robot.name, robot.links[0]
+                ),
+            ));
+        }
         self.controller
             .as_ref()
             .expect("resolved")
             .validate(&dofs)
             .map_err(|(field, message)| (format!("controller.{field}"), message))?;
-        // The log's fields are the names lower-cased, other characters
-        // made `_`: two names of the robot must not become one.
+        // The log's fields are the names as `field_name` makes them: two
+        // names of the robot must not become one.
         let layout = crate::Prepared::new(self).layout;
         let mut fields = std::collections::BTreeMap::new();
         for name in layout.state.iter().chain(&layout.variables) {
@@ -727,8 +738,8 @@ impl Scene {
                     "file".into(),
                     format!(
                         "`{other}` and `{name}` would both be the log's field `{field}` (names \
-                         are lower-cased and other characters than letters, digits and `_` \
-                         become `_`); rename a link or joint"
+                         are lower-cased, other characters than letters and digits become \
+                         `_`, runs of `_` one and none at either end); rename a link or joint"
                     ),
                 ));
             }

@@ -1311,3 +1311,27 @@ fn an_implicitly_damped_pendulum_loses_energy_every_step_and_creeps_down() {
     );
     assert!(state.q[1] < 1.5 && last < start);
 }
+
+/// Issue 45: a robot with nothing that moves — every link fixed to a
+/// welded base — is refused by the check, saying so, rather than logging
+/// frames with nothing in them; on a free base it is a body that falls.
+#[test]
+fn a_welded_robot_with_no_moving_joint_is_refused() {
+    let text = r#"<robot name="frame">
+      <link name="base"><inertial><mass value="1"/><inertia ixx="1" ixy="0" ixz="0" iyy="1" iyz="0" izz="1"/></inertial></link>
+      <link name="rotor"><inertial><mass value="0.1"/><inertia ixx="0.1" ixy="0" ixz="0" iyy="0.1" iyz="0" izz="0.1"/></inertial></link>
+      <joint name="mount" type="fixed"><parent link="base"/><child link="rotor"/></joint>
+    </robot>"#;
+    let (field, message) = robot_scene(text, |_| {}).unwrap_err();
+    assert_eq!(field, "base");
+    assert!(
+        message.contains("robot `frame` has no joint that moves")
+            && message.contains("base = \"free\""),
+        "{message}"
+    );
+    robot_scene(text, |s| {
+        s.base = Some(crate::urdf::Base::Free);
+        s.controller = Some(ControllerParams::default());
+    })
+    .unwrap();
+}
