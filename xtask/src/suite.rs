@@ -40,8 +40,13 @@ const STEPS: &[Step] = &[
         quickstart_circuit,
     ),
     (
-        "robots from URDF: nine robots' logs against Pinocchio, and bench sim beside it",
+        "robots from URDF: twelve robots' logs against Pinocchio, and bench sim beside it",
         robots_against_pinocchio,
+    ),
+    (
+        "hard cases: every robot of example-robot-data at 1 ms under both integrators, \
+         the implicit runs against Pinocchio",
+        hard_cases,
     ),
     (
         "MLflow: runs exported to a real server and read back",
@@ -209,6 +214,22 @@ fn quickstart_circuit(suite: &Suite) -> Result<(), String> {
             .args(["-q", "bench", "circuit", "--run"])
             .arg(runs(suite).join("quickstart"))
             .args(["--variant", "gray", "--fpga", "ice40-hx8k"]),
+    )
+}
+
+/// Every robot of the installed example-robot-data that Pinocchio loads,
+/// 10 s at 1 ms with no torque and with random torques, under semi-implicit
+/// Euler and the implicit integrator (`tests/hard_cases.py`): each runs or
+/// is refused with its reason, none blows up under the implicit integrator,
+/// and each implicit run agrees with Pinocchio; prints the table.
+fn hard_cases(suite: &Suite) -> Result<(), String> {
+    let dir = suite.work.join("hard-cases");
+    let _ = std::fs::remove_dir_all(&dir);
+    run_in_root(
+        Command::new(&suite.python)
+            .arg("tests/hard_cases.py")
+            .arg(alnlab_bin())
+            .arg(&dir),
     )
 }
 

@@ -1,0 +1,213 @@
+"""Hard cases (issue 45): every robot of the installed example-robot-data
+collection, at a real step.
+
+Usage: python tests/hard_cases.py ALNLAB WORK_DIR [--seconds S] [--json FILE] [--markdown FILE]
+
+For every URDF of PyPI's example-robot-data that Pinocchio (PyPI `pin`)
+loads, on a welded base, at dt = 1 ms for S seconds (10 unless given):
+`ALNLAB simulate` with no torque and with random torques (of the order of
+gravity's, see `amplitude`, held 0.2 s, each joint's clamped to its own
+limit, the drives holding the URDF's velocity limits as a real robot's
+do), by semi-implicit Euler and by the implicit integrator. Each run ends
+one of three ways: it ran, `alnlab` refused it naming why, or it blew up. Every run the implicit integrator completes is
+checked frame by frame against Pinocchio as `robots.py` checks its robots
+(accelerations within 1e-10 — unless the mass matrix is singular to
+rounding, a condition number over 1e12, where only the figure is shown —
+and poses within 1e-12); a run that blows up under the implicit
+integrator, or a check that fails, fails the script.
+Prints a table — per robot, how each run ended and, for a run semi-implicit
+Euler's damping check refused, the largest dt it names — and the count of
+robots that run at 1 ms under each integrator.
+"""
+
+import json
+import math
+import re
+import statistics
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pinocchio as pin
+
+import robots
+
+INTEGRATORS = ("semi-implicit-euler", "implicit")
+TORQUES = ("zero", "random")
+
+
+def collection():
+    """(name, URDF path, Pinocchio model) of every robot Pinocchio loads."""
+    data = robots.installed_robots()
+    found = []
+    for urdf in sorted(data.rglob("*.urdf")):
+        try:
+            model = pin.buildModelFromUrdf(str(urdf))
+        except Exception as error:  # Pinocchio's own refusal: not a case here
+            print(f"skipped {urdf.name}: Pinocchio does not load it ({error})")
+            continue
+        found.append((urdf.stem, urdf, model))
+    # Two packages may name a file alike (anymal_b's and anymal_c's
+    # anymal.urdf): then the package names it.
+    stems = [name for name, _, _ in found]
+    return [(name if stems.count(name) == 1 else f"{urdf.parents[1].name}-{name}", urdf, model)
+            for name, urdf, model in found]
+
+
+def amplitude(model) -> float:
+    """Random torques of the order the robot meets: the largest torque
+    gravity puts on a joint in its neutral pose or bent, or a fifth of the median
+    effort limit if that is less (or if gravity puts none). Effort limits
+    alone will not do: some descriptions state 1000 N m for a leg of
+    100 g (solo, bolt), which no drive gives it."""
+    limits = [float(e) for e in model.effortLimit if 0.0 < e < 1e10]
+    fifth = 0.2 * statistics.median(limits) if limits else 1.0
+    # Gravity in the neutral pose and with every joint turned by half a
+    # radian (within its limits): legs hanging straight feel none.
+    bent = pin.neutral(model)
+    for joint in model.joints[1:]:
+        at = joint.idx_q
+        if joint.nq == 1:
+            low, high = model.lowerPositionLimit[at], model.upperPositionLimit[at]
+            bent[at] = min(max(0.5, low), high)
+        elif joint.nq == 2:
+            bent[at:at + 2] = [math.cos(0.5), math.sin(0.5)]
+    data = model.createData()
+    gravity = max(float(np.max(np.abs(pin.computeGeneralizedGravity(model, data, q)), initial=0.0))
+                  for q in (pin.neutral(model), bent))
+    return round(min(fifth, gravity) if gravity > 1e-3 else fifth, 4)
+
+
+def condition(model) -> float:
+    """The mass matrix's condition number in the neutral pose."""
+    mass = pin.crba(model, model.createData(), pin.neutral(model))
+    mass = np.triu(mass) + np.triu(mass, 1).T
+    eigenvalues = np.linalg.eigvalsh(mass)
+    return float(eigenvalues[-1] / eigenvalues[0]) if eigenvalues[0] > 0 else math.inf
+
+
+# Beyond this condition number a mass matrix is singular to rounding (a
+# joint that moves no inertia): plain aba's accelerations are rounding
+# amplified, and no comparison with them means anything.
+SINGULAR = 1e12
+
+
+def manifest(name: str, urdf: Path, integrator: str, torque: float, seconds: float) -> str:
+    """One run; random torques with drives holding the URDF's velocity
+    limits, as a real robot's drives do."""
+    controller = (f'{{ kind = "random", amplitude = [{torque}], hold = 0.2 }}\nvelocity_limits = true'
+                  if torque > 0 else '{ kind = "none" }')
+    return "\n".join([
+        "[experiment]", f'name = "{re.sub(r"[^A-Za-z0-9_-]", "_", name)}"', "seed = 45", "",
+        "[[simulate.scene]]", f'name = "{re.sub(r"[^A-Za-z0-9_-]", "_", name)}"', 'kind = "urdf"',
+        f'file = "{urdf}"',
+        "runs = 1", f"duration = {seconds}", "dt = 0.001", f'integrator = "{integrator}"',
+        f"controller = {controller}",
+    ]) + "\n"
+
+
+def run_case(alnlab: str, work: Path, name: str, urdf: Path, integrator: str, torque: float,
+             seconds: float) -> dict:
+    case = f"{name}-{integrator}-{'random' if torque > 0 else 'zero'}"
+    path = work / f"{case}.toml"
+    path.write_text(manifest(name, urdf, integrator, torque, seconds))
+    out = work / case
+    run = subprocess.run([alnlab, "-q", "simulate", "--manifest", str(path), "--out", str(out)],
+                         capture_output=True, text=True)
+    message = run.stderr.strip().splitlines()[-1] if run.stderr.strip() else ""
+    if run.returncode == 0:
+        return {"ended": "ran", "log": str(out / "trajectory.mcap")}
+    if "the simulation is unstable" in message:
+        return {"ended": "blew up", "why": message}
+    if run.returncode == 2:
+        bound = re.search(r"expected dt ≤ ([0-9.e+-]+)", message)
+        return {"ended": "refused", "why": message,
+                "dt_bound": float(bound.group(1)) if bound else None}
+    return {"ended": f"exit {run.returncode}", "why": message}
+
+
+def short(result: dict) -> str:
+    if result["ended"] == "refused":
+        if result.get("dt_bound"):
+            return f"refused: dt ≤ {result['dt_bound']:.2e}"
+        if "no dt resolves" in result["why"]:
+            return "refused: a damped joint moves no inertia, no dt resolves it"
+        # The reason, after the file (and line, element) it names.
+        why = re.split(r"(?:\.toml:\d+:\d+|\.urdf): ", result["why"])[-1]
+        return "refused: " + (why[:70] + "…" if len(why) > 70 else why)
+    return result["ended"]
+
+
+def main(alnlab: str, work: str, seconds: float = 10.0, json_out=None, markdown_out=None) -> int:
+    work_dir = Path(work)
+    work_dir.mkdir(parents=True, exist_ok=True)
+    rows, failed = [], []
+    for name, urdf, model in collection():
+        torque = amplitude(model)
+        cond = condition(model) if model.nv else 1.0
+        row = {"robot": name, "file": str(urdf.relative_to(robots.installed_robots())),
+               "nv": model.nv, "amplitude": torque, "condition": cond}
+        for integrator in INTEGRATORS:
+            for kind in TORQUES:
+                result = run_case(alnlab, work_dir, name, urdf, integrator,
+                                  torque if kind == "random" else 0.0, seconds)
+                if integrator == "implicit" and result["ended"] == "ran":
+                    try:
+                        checked = robots.check(name, Path(result["log"]), need_velocities=False)
+                    except Exception as error:  # a check that cannot run is a failure too
+                        failed.append(f"{name} ({kind} torques): the Pinocchio check failed: {error}")
+                        checked = None
+                    if checked:
+                        result["worst_acceleration"] = checked["worst_acceleration"]
+                        result["worst_pose"] = checked["worst_pose"]
+                        if (checked["worst_acceleration"] > robots.ACCELERATION_TOLERANCE
+                                and cond < SINGULAR):
+                            failed.append(f"{name} ({kind} torques): accelerations off by "
+                                          f"{checked['worst_acceleration']:.2e}")
+                        if checked["worst_pose"] > robots.KINEMATICS_TOLERANCE:
+                            failed.append(f"{name} ({kind} torques): poses off by {checked['worst_pose']:.2e}")
+                if integrator == "implicit" and result["ended"] not in ("ran", "refused"):
+                    failed.append(f"{name} ({kind} torques) {result['ended']} under the implicit "
+                                  f"integrator: {result['why']}")
+                result.pop("log", None)
+                row[f"{integrator}/{kind}"] = result
+        rows.append(row)
+        print(f"{name}: " + "; ".join(f"{k} {short(row[k])}" for k in row if "/" in k), flush=True)
+    lines = ["| robot | nv | semi-implicit Euler, no torque | semi-implicit Euler, random | "
+             "implicit, no torque | implicit, random | worst q̈ error (implicit) |",
+             "|---|---:|---|---|---|---|---:|"]
+    for row in rows:
+        errors = [row[f"implicit/{k}"].get("worst_acceleration") for k in TORQUES]
+        errors = [e for e in errors if e is not None]
+        cells = [short(row[f"{i}/{k}"]) for i in INTEGRATORS for k in TORQUES]
+        worst = f"{max(errors):.1e}" if errors else ""
+        if errors and row["condition"] >= SINGULAR:
+            worst += f" (M singular to rounding: cond {row['condition']:.0e})"
+        lines.append(f"| {row['robot']} | {row['nv']} | " + " | ".join(cells) + f" | {worst} |")
+    both = {i: sum(all(row[f"{i}/{k}"]["ended"] == "ran" for k in TORQUES) for row in rows)
+            for i in INTEGRATORS}
+    summary = (f"{len(rows)} robots Pinocchio loads; at dt = 1 ms for {seconds:g} s, with no torque "
+               f"and with random torques, {both['semi-implicit-euler']} run under semi-implicit Euler "
+               f"and {both['implicit']} under the implicit integrator.")
+    print("\n".join(lines))
+    print(summary)
+    if json_out:
+        Path(json_out).write_text(json.dumps({"summary": summary, "robots": rows}, indent=1) + "\n")
+    if markdown_out:
+        Path(markdown_out).write_text("\n".join(lines) + "\n\n" + summary + "\n")
+    for f in failed:
+        print("FAILED", f, file=sys.stderr)
+    return 1 if failed else 0
+
+
+if __name__ == "__main__":
+    args = sys.argv[1:]
+    options = {}
+    for flag, key, kind in (("--json", "json_out", str), ("--markdown", "markdown_out", str),
+                            ("--seconds", "seconds", float)):
+        if flag in args:
+            i = args.index(flag)
+            options[key] = kind(args[i + 1])
+            del args[i:i + 2]
+    sys.exit(main(*args, **options))
