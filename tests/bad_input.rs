@@ -306,6 +306,34 @@ fn manifests_that_cannot_run_are_refused_at_check() {
         mentions.extend_from_slice(says);
         cases.push(case(name, &["check", manifest], &mentions, None).exits(2));
     }
+    // Issue 45: nothing would move, so nothing would be learned; it logged
+    // empty frames and failed late.
+    std::fs::write(
+        dir.path().join("frame.urdf"),
+        "<robot name=\"frame\"><link name=\"base\"><inertial><mass value=\"1\"/>\
+         <inertia ixx=\"1\" ixy=\"0\" ixz=\"0\" iyy=\"1\" iyz=\"0\" izz=\"1\"/></inertial></link></robot>",
+    )
+    .unwrap();
+    let scene = "kind = \"urdf\"\nfile = \"frame.urdf\"";
+    std::fs::write(
+        dir.path().join("still.toml"),
+        TINY.replacen("kind = \"pendulum\"", scene, 1),
+    )
+    .unwrap();
+    cases.push(
+        case(
+            "a welded robot with nothing that moves",
+            &["check", "still.toml"],
+            &[
+                "still.toml",
+                "base",
+                "robot `frame` has no joint that moves",
+                "nothing to learn",
+            ],
+            None,
+        )
+        .exits(2),
+    );
     std::fs::write(dir.path().join("empty.toml"), "").unwrap();
     cases.push(case(
         "empty manifest",
