@@ -22,10 +22,12 @@ robots that run at 1 ms under each integrator.
 
 import json
 import math
+import os
 import re
 import statistics
 import subprocess
 import sys
+from concurrent.futures import ProcessPoolExecutor, ThreadPoolExecutor
 from pathlib import Path
 
 import numpy as np
@@ -127,6 +129,14 @@ def run_case(alnlab: str, work: Path, name: str, urdf: Path, integrator: str, to
     return {"ended": f"exit {run.returncode}", "why": message}
 
 
+def check_quietly(log: Path):
+    """`robots.check` of one implicit run, or why it could not run."""
+    try:
+        return robots.check(log.parent.name, log, need_velocities=False)
+    except Exception as error:
+        return str(error) or type(error).__name__
+
+
 def short(result: dict) -> str:
     if result["ended"] == "refused":
         if result.get("dt_bound"):
@@ -143,35 +153,45 @@ def main(alnlab: str, work: str, seconds: float = 10.0, json_out=None, markdown_
     work_dir = Path(work)
     work_dir.mkdir(parents=True, exist_ok=True)
     rows, failed = [], []
-    for name, urdf, model in collection():
-        torque = amplitude(model)
+    robots_found = collection()
+    # Every run, then every check, on all cores: each run is its own
+    # process, each check Pinocchio's in one of a pool of processes.
+    cases = [(name, urdf, model, integrator, kind) for name, urdf, model in robots_found
+             for integrator in INTEGRATORS for kind in TORQUES]
+    torques = {name: amplitude(model) for name, _, model in robots_found}
+    workers = os.cpu_count() or 2
+    with ThreadPoolExecutor(workers) as pool:
+        ended = list(pool.map(lambda c: run_case(
+            alnlab, work_dir, c[0], c[1], c[3], torques[c[0]] if c[4] == "random" else 0.0, seconds),
+            cases))
+    checked = [(i, Path(r["log"])) for i, (c, r) in enumerate(zip(cases, ended))
+               if c[3] == "implicit" and r["ended"] == "ran"]
+    with ProcessPoolExecutor(workers) as pool:
+        reports = dict(zip((i for i, _ in checked), pool.map(check_quietly, (log for _, log in checked))))
+    for name, urdf, model in robots_found:
         cond = condition(model) if model.nv else 1.0
         row = {"robot": name, "file": str(urdf.relative_to(robots.installed_robots())),
-               "nv": model.nv, "amplitude": torque, "condition": cond}
-        for integrator in INTEGRATORS:
-            for kind in TORQUES:
-                result = run_case(alnlab, work_dir, name, urdf, integrator,
-                                  torque if kind == "random" else 0.0, seconds)
-                if integrator == "implicit" and result["ended"] == "ran":
-                    try:
-                        checked = robots.check(name, Path(result["log"]), need_velocities=False)
-                    except Exception as error:  # a check that cannot run is a failure too
-                        failed.append(f"{name} ({kind} torques): the Pinocchio check failed: {error}")
-                        checked = None
-                    if checked:
-                        result["worst_acceleration"] = checked["worst_acceleration"]
-                        result["worst_pose"] = checked["worst_pose"]
-                        if (checked["worst_acceleration"] > robots.ACCELERATION_TOLERANCE
-                                and cond < SINGULAR):
-                            failed.append(f"{name} ({kind} torques): accelerations off by "
-                                          f"{checked['worst_acceleration']:.2e}")
-                        if checked["worst_pose"] > robots.KINEMATICS_TOLERANCE:
-                            failed.append(f"{name} ({kind} torques): poses off by {checked['worst_pose']:.2e}")
-                if integrator == "implicit" and result["ended"] not in ("ran", "refused"):
-                    failed.append(f"{name} ({kind} torques) {result['ended']} under the implicit "
-                                  f"integrator: {result['why']}")
-                result.pop("log", None)
-                row[f"{integrator}/{kind}"] = result
+               "nv": model.nv, "amplitude": torques[name], "condition": cond}
+        for i, (case, result) in enumerate(zip(cases, ended)):
+            if case[0] != name:
+                continue
+            integrator, kind = case[3], case[4]
+            report = reports.get(i)
+            if isinstance(report, str):  # a check that cannot run is a failure too
+                failed.append(f"{name} ({kind} torques): the Pinocchio check failed: {report}")
+            elif report:
+                result["worst_acceleration"] = report["worst_acceleration"]
+                result["worst_pose"] = report["worst_pose"]
+                if report["worst_acceleration"] > robots.ACCELERATION_TOLERANCE and cond < SINGULAR:
+                    failed.append(f"{name} ({kind} torques): accelerations off by "
+                                  f"{report['worst_acceleration']:.2e}")
+                if report["worst_pose"] > robots.KINEMATICS_TOLERANCE:
+                    failed.append(f"{name} ({kind} torques): poses off by {report['worst_pose']:.2e}")
+            if integrator == "implicit" and result["ended"] not in ("ran", "refused"):
+                failed.append(f"{name} ({kind} torques) {result['ended']} under the implicit "
+                              f"integrator: {result['why']}")
+            result.pop("log", None)
+            row[f"{integrator}/{kind}"] = result
         rows.append(row)
         print(f"{name}: " + "; ".join(f"{k} {short(row[k])}" for k in row if "/" in k), flush=True)
     lines = ["| robot | nv | semi-implicit Euler, no torque | semi-implicit Euler, random | "
