@@ -226,14 +226,21 @@ fn quickstart_circuit(suite: &Suite) -> Result<(), String> {
 /// is refused with its reason, none blows up under the implicit integrator,
 /// and each implicit run agrees with Pinocchio; prints the table.
 fn hard_cases(suite: &Suite) -> Result<(), String> {
-    let dir = suite.work.join("hard-cases");
+    robot_script(suite, "tests/hard_cases.py", "hard-cases").map(|_| ())
+}
+
+/// Runs a robot-checking `script` on the binary the suite built, in a
+/// fresh `work` folder under the suite's, which it returns.
+fn robot_script(suite: &Suite, script: &str, work: &str) -> Result<PathBuf, String> {
+    let dir = suite.work.join(work);
     let _ = std::fs::remove_dir_all(&dir);
     run_in_root(
         Command::new(&suite.python)
-            .arg("tests/hard_cases.py")
+            .arg(script)
             .arg(alnlab_bin())
             .arg(&dir),
-    )
+    )?;
+    Ok(dir)
 }
 
 /// The vendored robots and further robots of the installed
@@ -242,14 +249,7 @@ fn hard_cases(suite: &Suite) -> Result<(), String> {
 /// `alnlab bench sim` run beside it, which must report both robots' figures
 /// (how fast is the benchmark's to say, not a test's).
 fn robots_against_pinocchio(suite: &Suite) -> Result<(), String> {
-    let dir = suite.work.join("robots");
-    let _ = std::fs::remove_dir_all(&dir);
-    run_in_root(
-        Command::new(&suite.python)
-            .arg("tests/robots.py")
-            .arg(alnlab_bin())
-            .arg(&dir),
-    )?;
+    let dir = robot_script(suite, "tests/robots.py", "robots")?;
     let harness = dir.join("pinocchio-aba");
     run_in_root(
         Command::new("bash")

@@ -713,14 +713,20 @@ pub(crate) mod tests {
         loads
     }
 
+    /// The kinematics of `state` and its derivative by the articulated-body
+    /// algorithm under `loads`.
+    fn articulated(model: &Model, state: &State, loads: &Loads) -> (Kinematics, Derivative) {
+        let mut kin = Kinematics::new(model);
+        kin.update(model, state);
+        let mut out = Derivative::zeros(model);
+        Workspace::new(model).forward(model, state, &kin, loads, &mut out);
+        (kin, out)
+    }
+
     /// The relative error of the articulated-body algorithm's accelerations
     /// against the dense formulation's.
     fn error_against_dense(model: &Model, state: &State, loads: &Loads) -> f64 {
-        let mut kin = Kinematics::new(model);
-        kin.update(model, state);
-        let mut ws = Workspace::new(model);
-        let mut out = Derivative::zeros(model);
-        ws.forward(model, state, &kin, loads, &mut out);
+        let (kin, out) = articulated(model, state, loads);
         let dense = forward_dense(model, state, &kin, loads);
         let aba = generalized_acceleration(model, &out);
         (&aba - &dense).norm() / dense.norm().max(1e-12)
@@ -769,18 +775,11 @@ pub(crate) mod tests {
                 f_ext: vec![Vector6::zeros(); n],
                 ..random_loads(&mut rng, n, false)
             };
-            let accelerations = |state: &State| {
-                let mut kin = Kinematics::new(&model);
-                kin.update(&model, state);
-                let mut out = Derivative::zeros(&model);
-                Workspace::new(&model).forward(&model, state, &kin, &loads, &mut out);
-                out
-            };
-            let at_rest = accelerations(&state);
+            let at_rest = articulated(&model, &state, &loads).1;
             let mut falling = state.clone();
             // 100 m/s downwards in the world, in the root's frame.
             falling.root_v += state.orient[0].inverse() * Vector3::new(0.0, 0.0, -100.0);
-            let fast = accelerations(&falling);
+            let fast = articulated(&model, &falling, &loads).1;
             let scale = at_rest
                 .qd
                 .iter()
