@@ -100,10 +100,10 @@ def manifest(name: str, urdf: Path, integrator: str, torque: float, seconds: flo
     limits, as a real robot's drives do."""
     controller = (f'{{ kind = "random", amplitude = [{torque}], hold = 0.2 }}\nvelocity_limits = true'
                   if torque > 0 else '{ kind = "none" }')
+    plain = re.sub(r"[^A-Za-z0-9_-]", "_", name)  # a name the manifest takes
     return "\n".join([
-        "[experiment]", f'name = "{re.sub(r"[^A-Za-z0-9_-]", "_", name)}"', "seed = 45", "",
-        "[[simulate.scene]]", f'name = "{re.sub(r"[^A-Za-z0-9_-]", "_", name)}"', 'kind = "urdf"',
-        f'file = "{urdf}"',
+        "[experiment]", f'name = "{plain}"', "seed = 45", "",
+        "[[simulate.scene]]", f'name = "{plain}"', 'kind = "urdf"', f'file = "{urdf}"',
         "runs = 1", f"duration = {seconds}", "dt = 0.001", f'integrator = "{integrator}"',
         f"controller = {controller}",
     ]) + "\n"

@@ -136,15 +136,25 @@ impl JointLaw {
     /// friction and the limits' springs.
     pub fn passive(&self, q: f64, qd: f64) -> f64 {
         let viscous = (self.friction / qd.abs().max(FRICTION_SLIP_SPEED)).min(self.friction_cap);
-        let mut effort = -(self.damping + viscous) * qd;
-        if let Some((low, high)) = self.range {
-            if q > high {
-                effort -= (self.stiffness * (q - high) + self.limit_damping * qd).max(0.0);
-            } else if q < low {
-                effort += (self.stiffness * (low - q) - self.limit_damping * qd).max(0.0);
-            }
+        let effort = -(self.damping + viscous) * qd;
+        match self.limit_effort(q, qd) {
+            Some(push) => effort + push,
+            None => effort,
         }
-        effort
+    }
+
+    /// Past a bound, what the limit's spring–damper gives at (`q`, `qd`):
+    /// a push back, or zero where it would pull; `None` within the range.
+    fn limit_effort(&self, q: f64, qd: f64) -> Option<f64> {
+        match self.range? {
+            (_, high) if q > high => {
+                Some(-(self.stiffness * (q - high) + self.limit_damping * qd).max(0.0))
+            }
+            (low, _) if q < low => {
+                Some((self.stiffness * (low - q) - self.limit_damping * qd).max(0.0))
+            }
+            _ => None,
+        }
     }
 
     /// How [`JointLaw::passive`] falls as the velocity and as the position
@@ -160,14 +170,8 @@ impl JointLaw {
         } else {
             0.0
         };
-        let engaged = match self.range {
-            Some((_, high)) if q > high => {
-                self.stiffness * (q - high) + self.limit_damping * qd > 0.0
-            }
-            Some((low, _)) if q < low => self.stiffness * (low - q) - self.limit_damping * qd > 0.0,
-            _ => false,
-        };
-        match engaged {
+        // Engaged: past a bound and pushing.
+        match self.limit_effort(q, qd).is_some_and(|push| push != 0.0) {
             true => (self.damping + friction + self.limit_damping, self.stiffness),
             false => (self.damping + friction, 0.0),
         }
