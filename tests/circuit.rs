@@ -6,7 +6,10 @@
 //! placed and routed on an iCE40 by the stage, its critical path from
 //! timing analysis and its mapped netlist equal to the software; `alnlab
 //! export verilog` writing readable modules, and refusing what it cannot
-//! do.
+//! do; a small piecewise-linear model in fixed point, both its circuits
+//! placed and routed and equal to its fixed-point evaluator, in the
+//! report; and a run killed while the tools work, which leaves neither a
+//! tool running nor scratch outside its output.
 
 use std::path::Path;
 
@@ -354,4 +357,204 @@ fn a_small_forest_placed_and_routed_on_an_ice40_equals_the_software_in_nanosecon
         bench["fpga"]["variables"].as_array().unwrap().len(),
         routed.state.variables.len()
     );
+}
+
+/// A small piecewise-linear model for the FPGA flow: one link's learned
+/// variables, each a tree of at most four pieces over two inputs and
+/// itself.
+const PIECEWISE: &str = r#"
+[experiment]
+name = "piecewise"
+seed = 29
+
+[[simulate.scene]]
+name = "pendulum"
+kind = "pendulum"
+links = 1
+runs = 2
+duration = 4.0
+
+[stride]
+n = 3
+test_fraction = 0.5
+
+[quantize]
+levels = 32
+code = "gray"
+
+[train]
+model = "piecewise-linear"
+informative_inputs = 2
+pwl.max_pieces = 4
+
+[circuit]
+synthesize = true
+fpga = "ice40-hx8k"
+"#;
+
+#[test]
+fn a_small_piecewise_linear_model_in_fixed_point_is_placed_routed_and_equals_its_evaluator() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    write_manifest(d, "piecewise.toml", PIECEWISE);
+    let out = alnlab(d, &["-q", "run", "piecewise.toml", "--reports", "reports"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let levels = Levels::read(&artifact_of(d, "piecewise", "levels")).unwrap();
+    let test_rows = levels.test_rows().len() as u64;
+    let fixed = alnlab_circuit::fixed_point::read(&artifact_of(d, "piecewise", "fixed")).unwrap();
+    let routed = alnlab_circuit::routed::read(&artifact_of(d, "piecewise", "fpga"))
+        .unwrap()
+        .expect("placed and routed");
+    // No gates for a model of numbers.
+    let gates = alnlab_circuit::measured::read(&artifact_of(d, "piecewise", "circuit")).unwrap();
+    assert!(gates.is_none());
+    assert!(!fixed.is_empty());
+    for o in &fixed {
+        // Chosen on the training rows: within the tolerance there; on the
+        // test rows a few hundredths at most on this little data.
+        assert!(o.train_difference <= 0.2, "{o:?}");
+        assert!((o.fixed_error - o.float_error).abs() < 0.05, "{o:?}");
+        assert!(
+            o.widths.input_bits >= 2 && o.widths.weight_bits >= 2,
+            "{o:?}"
+        );
+        assert!(o.pieces <= 4 && o.inputs <= 3, "{o:?}");
+    }
+    // Both forms of every variable placed, routed and simulated equal to
+    // the fixed-point evaluator on every test row (the stage fails
+    // otherwise).
+    assert_eq!(routed.rows_equal, test_rows);
+    let pipelined = routed.pipelined.as_ref().expect("the pipelined form");
+    let names: Vec<&str> = fixed.iter().map(|o| o.variable.as_str()).collect();
+    for state in [&routed.state, pipelined] {
+        let placed: Vec<&str> = state
+            .variables
+            .iter()
+            .map(|p| p.variable.as_str())
+            .collect();
+        assert_eq!(placed, names);
+    }
+    for (c, p) in routed.state.variables.iter().zip(&pipelined.variables) {
+        let (ns, clock) = (c.critical_ns.unwrap(), p.critical_ns.unwrap());
+        assert!(ns > 1.0 && ns < 1000.0, "{c:?}");
+        // A pipeline's clock is one adder or comparator: faster than the
+        // whole path, which it spreads over its clocks.
+        assert!(
+            clock < ns && p.latency >= 2 && c.latency == 0,
+            "{c:?} {p:?}"
+        );
+        assert!(c.carries > 0, "adders on carry chains: {c:?}");
+        assert!(p.flip_flops > c.flip_flops, "{c:?} {p:?}");
+    }
+    let report = std::fs::read_to_string(d.join("reports/piecewise/report.md")).unwrap();
+    assert!(
+        report.contains("**In fixed point** (replicate 1"),
+        "{report}"
+    );
+    assert!(
+        report.contains("**In hardware** (§5): `base`'s piecewise-linear model"),
+        "{report}"
+    );
+    let ns = routed.state.critical_ns().unwrap();
+    let row: Vec<&str> = report
+        .lines()
+        .find(|l| l.starts_with("| fixed point, combinational, on the Lattice iCE40 HX8K"))
+        .expect("the combinational row")
+        .split('|')
+        .map(str::trim)
+        .collect();
+    let quoted: f64 = row[4].parse().unwrap();
+    assert!((quoted / ns - 1.0).abs() < 0.005, "{} against {ns}", row[4]);
+    assert!(report.contains("| persistence (no change) |"), "{report}");
+    assert!(
+        report.contains("is confirmed (under a microsecond):** a state in"),
+        "{report}"
+    );
+}
+
+/// Killed while the tools run, alnlab takes them with it and leaves their
+/// files only under the stage's unfinished output, which the next run
+/// removes: nothing in the system's temporary folder, no tool running on.
+#[test]
+fn a_killed_circuit_stage_leaves_no_tool_running_and_no_scratch_behind() {
+    use std::process::{Command, Stdio};
+    use std::time::{Duration, Instant};
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let tmp = d.join("tmp");
+    std::fs::create_dir(&tmp).unwrap();
+    write_manifest(d, "piecewise.toml", PIECEWISE);
+    let run = || {
+        Command::new(env!("CARGO_BIN_EXE_alnlab"))
+            .current_dir(d)
+            .env("TMPDIR", &tmp)
+            .args(["-q", "run", "piecewise.toml"])
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .spawn()
+            .unwrap()
+    };
+    // The tools working for this run: their folder is under `d`.
+    let tools = || -> Vec<(u32, String)> {
+        std::fs::read_dir("/proc")
+            .unwrap()
+            .flatten()
+            .filter_map(|e| {
+                let pid: u32 = e.file_name().to_str()?.parse().ok()?;
+                let cwd = std::fs::read_link(e.path().join("cwd")).ok()?;
+                let name = std::fs::read_to_string(e.path().join("comm")).ok()?;
+                let name = name.trim().to_string();
+                let tool = ["yosys", "nextpnr", "iverilog", "ivl", "vvp"]
+                    .iter()
+                    .any(|t| name.starts_with(t));
+                (tool && cwd.starts_with(d)).then_some((pid, name))
+            })
+            .collect()
+    };
+    let mut child = run();
+    let start = Instant::now();
+    while tools().is_empty() {
+        assert!(
+            child.try_wait().unwrap().is_none(),
+            "the run ended before a tool started"
+        );
+        assert!(
+            start.elapsed() < Duration::from_secs(600),
+            "no tool started"
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    child.kill().unwrap();
+    child.wait().unwrap();
+    let killed = Instant::now();
+    while !tools().is_empty() && killed.elapsed() < Duration::from_secs(2) {
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    assert_eq!(tools(), vec![], "tools ran on after alnlab was killed");
+    let scratch: Vec<_> = std::fs::read_dir(&tmp).unwrap().collect();
+    assert!(
+        scratch.is_empty(),
+        "scratch in the temporary folder: {scratch:?}"
+    );
+    // The next run removes the unfinished output, scratch and all.
+    let status = run().wait().unwrap();
+    assert!(status.success());
+    let cache = d.join("runs/cache/circuit");
+    let left: Vec<String> = std::fs::read_dir(&cache)
+        .unwrap()
+        .flatten()
+        .flat_map(|e| {
+            let name = e.file_name().to_string_lossy().into_owned();
+            let inside: Vec<String> = std::fs::read_dir(e.path())
+                .map(|r| {
+                    r.flatten()
+                        .map(|f| f.file_name().to_string_lossy().into_owned())
+                        .collect()
+                })
+                .unwrap_or_default();
+            std::iter::once(name).chain(inside)
+        })
+        .filter(|n| n.contains("tmp") || n.starts_with("scratch"))
+        .collect();
+    assert!(left.is_empty(), "{left:?}");
 }

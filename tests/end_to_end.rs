@@ -123,6 +123,7 @@ fn cache_reuses_and_reruns_only_what_changed() {
         "codebook",
         "comparisons",
         "episodes",
+        "fixed",
         "fpga",
         "horizons",
         "levels",

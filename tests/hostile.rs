@@ -680,10 +680,10 @@ fn piecewise_linear_models_refuse_what_they_cannot_do() {
             &["pwl.rate", "0 < rate"],
         ),
         (
-            "a circuit of real numbers",
+            "circuit widths given halfway",
             "[test]\n",
-            "[circuit]\nsynthesize = true\n\n[test]\n",
-            &["synthesize", "piecewise-linear"],
+            "[circuit]\nsynthesize = true\ninput_bits = 12\n\n[test]\n",
+            &["input_bits", "weight_bits", "together"],
         ),
     ];
     let mut cases: Vec<_> = edits
@@ -715,6 +715,55 @@ fn piecewise_linear_models_refuse_what_they_cannot_do() {
         .exits(2),
     );
     let (levels, pairs, nominal) = (artifact("levels"), artifact("pairs"), artifact("nominal"));
+    // The circuit stage alone: input words too narrow for the training
+    // rows' levels, and a damaged model; neither leaves a table.
+    let circuit = |name: &str, manifest: &str, model: &str, out: &str, mentions: &[&str]| {
+        let args = [
+            "circuit",
+            "--manifest",
+            manifest,
+            "--model",
+            model,
+            "--codebook",
+            &codebook,
+            "--levels",
+            &levels,
+            "--pairs",
+            &pairs,
+            "--out",
+            out,
+        ];
+        case(name, &args, mentions, Some(Path::new(out)))
+    };
+    let narrow = piecewise.replacen(
+        "[test]\n",
+        "[circuit]\nsynthesize = true\ninput_bits = 3\nweight_bits = 6\n\n[test]\n",
+        1,
+    );
+    std::fs::write(d.join("narrow.toml"), &narrow).unwrap();
+    let mut damaged = std::fs::read(d.join(&model)).unwrap();
+    damaged.truncate(damaged.len() * 2 / 3);
+    std::fs::write(d.join("damaged.aln"), damaged).unwrap();
+    cases.push(
+        circuit(
+            "input words too narrow for the training rows",
+            "narrow.toml",
+            &model,
+            "c1",
+            &["input_bits = 3", "integer bits", "at least"],
+        )
+        .exits(2),
+    );
+    cases.push(
+        circuit(
+            "a damaged model to the circuit stage",
+            "narrow.toml",
+            "damaged.aln",
+            "c2",
+            &["damaged.aln"],
+        )
+        .exits(1),
+    );
     cases.push(
         case(
             "a piecewise-linear model trained in shards",

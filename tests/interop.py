@@ -361,7 +361,7 @@ def main(run_json: str, report_dir: str) -> int:
                 # The circuit stage measures nothing without `synthesize`,
                 # and places nothing without `fpga`. The test stage fits
                 # boosted trees only with `peer`.
-                assert table.num_rows > 0 or role in ("plan", "planning", "transitions", "transitions-nominal", "circuit", "fpga", "boosted"), f"{path}: no rows"
+                assert table.num_rows > 0 or role in ("plan", "planning", "transitions", "transitions-nominal", "circuit", "fpga", "fixed", "boosted"), f"{path}: no rows"
                 assert meta[b"alnlab.stage"], f"{path}: no provenance"
                 assert json.loads(meta[b"alnlab.params"])["seed"] == variant.get("seed", record["seed"]), path
                 checked += 1

@@ -83,6 +83,7 @@ pub fn render(record: &RunRecord, dir: &Path) -> Result<PathBuf> {
                     .any(|k| k.starts_with("simulate.scene.") && k.contains(".plant.")),
                 circuit: v.artifacts.get("circuit").map(|a| PathBuf::from(&a.path)),
                 fpga: v.artifacts.get("fpga").map(|a| PathBuf::from(&a.path)),
+                fixed: v.artifacts.get("fixed").map(|a| PathBuf::from(&a.path)),
                 replicates,
             })
         })

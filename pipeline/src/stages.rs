@@ -521,12 +521,14 @@ pub const STAGES: &[Stage] = &[
     },
     Stage {
         name: "circuit",
-        about: "Run the circuit stage alone: the trained bit-forest as Verilog, synthesized by \
+        about: "Run the circuit stage alone: a trained bit-forest as Verilog, synthesized by \
                 Yosys into two-input gates (gates and depth in gate levels of its trees, votes \
                 and decoders) and simulated by Icarus Verilog on the test rows, equal to the \
-                software's levels on every row ([circuit] synthesize = true); with [circuit] \
-                fpga, every variable also placed and routed on an iCE40 by nextpnr, its \
-                critical path in ns",
+                software's levels on every row ([circuit] synthesize = true); a piecewise-linear \
+                model in fixed point (widths chosen on the training rows, or [circuit] \
+                input_bits and weight_bits), its circuits combinational and pipelined, equal to \
+                the fixed-point evaluator on every held-out row; with [circuit] fpga, every \
+                variable also placed and routed on an iCE40 by nextpnr, its critical path in ns",
         format_version: alnlab_circuit::FORMAT_VERSION,
         inputs: &[
             Input {
@@ -541,21 +543,35 @@ pub const STAGES: &[Stage] = &[
                 role: "levels",
                 from: "quantize",
             },
+            Input {
+                role: "pairs",
+                from: "stride",
+            },
         ],
         outputs: &[
             ("circuit", alnlab_circuit::CIRCUIT_FILE),
             ("fpga", alnlab_circuit::FPGA_FILE),
+            ("fixed", alnlab_circuit::FIXED_FILE),
         ],
         archived: Archived::Never,
         every_replicate: false,
         params: |s| json(&s.circuit),
         validate: |s, _| {
             s.circuit.validate()?;
-            if s.circuit.synthesize && s.train.model == alnlab_aln::ModelKind::PiecewiseLinear {
+            let piecewise = s.train.model == alnlab_aln::ModelKind::PiecewiseLinear;
+            if s.circuit.synthesize && piecewise && s.train.base == alnlab_aln::model::Base::Nominal
+            {
                 return Err((
                     "synthesize".into(),
-                    "a piecewise-linear model computes with real numbers (affine pieces under \
-                     MIN and MAX), not AND/OR gates: synthesize only bit-forests"
+                    "a hybrid advances from the nominal simulator's prediction, which is not \
+                     in a circuit: synthesize a model of the dynamics"
+                        .into(),
+                ));
+            }
+            if s.circuit.widths().is_some() && !piecewise {
+                return Err((
+                    "input_bits".into(),
+                    "widths are a piecewise-linear model's: a bit-forest computes with code bits"
                         .into(),
                 ));
             }
@@ -568,6 +584,7 @@ pub const STAGES: &[Stage] = &[
                 c.input("model"),
                 c.input("codebook"),
                 c.input("levels"),
+                c.input("pairs"),
                 c.provenance,
                 c.out_dir,
                 c.progress,

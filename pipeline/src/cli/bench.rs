@@ -105,11 +105,16 @@ pub enum Bench {
     /// that FPGA between registers (needs nextpnr-ice40), its critical
     /// path read from timing analysis and its mapped netlist simulated on
     /// the same rows: the state's time in ns is the slowest variable's, one
-    /// part per variable.
+    /// part per variable. A piecewise-linear model is measured in fixed
+    /// point: its error and arithmetic at the widths chosen on the training
+    /// rows and at each of --widths, and with --fpga its circuits
+    /// (combinational and pipelined) placed and routed, their mapped
+    /// netlists simulated on the first --rows test rows.
     #[command(after_help = "Examples:
   alnlab bench circuit --run runs/quickstart --variant gray --json
   alnlab bench circuit --run runs/quickstart --variant gray --fpga ice40-hx8k
-  alnlab bench circuit --run runs/paper --rows 500")]
+  alnlab bench circuit --run runs/paper --rows 500
+  alnlab bench circuit --run runs/piecewise --variant piecewise --widths 11x6,13x6,14x8")]
     Circuit {
         /// A run's folder (holding run.json) whose model to measure.
         #[arg(long, default_value = "runs/quickstart")]
@@ -129,6 +134,10 @@ pub enum Bench {
         /// stage uses it).
         #[arg(long)]
         seed: Option<u64>,
+        /// A piecewise-linear model's widths to tabulate beside the chosen
+        /// ones, each INPUTxWEIGHT bits for every output (e.g. 13x6).
+        #[arg(long, value_delimiter = ',', value_parser = parse_widths)]
+        widths: Vec<alnlab_aln::pwl::fixed::Widths>,
         /// Print one JSON object.
         #[arg(long)]
         json: bool,
@@ -253,6 +262,7 @@ pub fn execute(bench: Bench, quiet: bool) -> Result<()> {
             rows,
             fpga,
             seed,
+            widths,
             json,
         } => {
             let seed = match seed {
@@ -263,18 +273,38 @@ pub fn execute(bench: Bench, quiet: bool) -> Result<()> {
                 let device = alnlab_circuit::Device::named(&name).expect("clap checks the name");
                 (device, seed)
             });
-            let (name, [model, codebook, levels, timings]) = run_artifacts(
+            let (name, [model, codebook, levels, timings, pairs]) = run_artifacts(
                 &run_dir,
                 variant.as_deref(),
-                ["model", "codebook", "levels", "timings"],
+                ["model", "codebook", "levels", "timings", "pairs"],
             )?;
             let bar = crate::progress::Bar::new("circuit", quiet);
+            let kind = alnlab_aln::model::RawModel::read(&model)?.header.model;
+            if kind == alnlab_aln::ModelKind::PiecewiseLinear {
+                let figures = alnlab_circuit::bench::piecewise_on_run(
+                    (&model, &codebook, &levels, &pairs),
+                    &widths,
+                    rows.map(|r| r as usize),
+                    fpga,
+                    &run_dir,
+                    &bar,
+                )?;
+                drop(bar);
+                print_figures(&figures, json, |f| print_piecewise(&name, f));
+                return Ok(());
+            }
+            if !widths.is_empty() {
+                return Err(Error::Invalid(format!(
+                    "--widths are a piecewise-linear model's; `{name}` is a bit-forest"
+                )));
+            }
             let circuit = alnlab_circuit::bench::on_run(
                 &model,
                 &codebook,
                 &levels,
                 rows.map(|r| r as usize),
                 fpga,
+                &run_dir,
                 &bar,
             )?;
             drop(bar);
@@ -626,6 +656,64 @@ impl CircuitBench {
 
 /// Prints a benchmark's figures: one JSON object with `--json`, else as
 /// `text` words them.
+/// `INPUTxWEIGHT` bits, as `--widths` takes them.
+fn parse_widths(text: &str) -> std::result::Result<alnlab_aln::pwl::fixed::Widths, String> {
+    let bits = |t: &str| t.trim().parse::<u32>().map_err(|e| format!("`{t}`: {e}"));
+    let (input, weight) = text
+        .split_once('x')
+        .ok_or_else(|| format!("`{text}`: expected INPUTxWEIGHT bits, e.g. 13x6"))?;
+    Ok(alnlab_aln::pwl::fixed::Widths {
+        input_bits: bits(input)?,
+        weight_bits: bits(weight)?,
+    })
+}
+
+/// A piecewise-linear model's bench, as text: the trade table, then the
+/// circuits placed and routed.
+fn print_piecewise(name: &str, f: &alnlab_circuit::bench::PiecewiseBench) {
+    println!(
+        "{name}: fixed point against floating point (means over the outputs; errors in levels on the test rows)"
+    );
+    println!(
+        "{:>16} {:>12} {:>12} {:>12} {:>12} {:>16}",
+        "widths", "train diff", "test diff", "fixed error", "float error", "arithmetic bits"
+    );
+    for t in &f.trade {
+        let widths = t.widths.map_or("chosen".to_string(), |w| {
+            format!("{}x{}", w.input_bits, w.weight_bits)
+        });
+        println!(
+            "{widths:>16} {:>12.4} {:>12.4} {:>12.4} {:>12.4} {:>16}",
+            t.train_difference, t.test_difference, t.fixed_error, t.float_error, t.arithmetic_bits
+        );
+    }
+    if let Some([combinational, pipelined]) = &f.placed {
+        for state in [combinational, pipelined] {
+            let luts: u64 = state.variables.iter().map(|p| p.luts).sum();
+            let fits = state
+                .variables
+                .iter()
+                .filter(|p| p.critical_ns.is_some())
+                .count();
+            println!(
+                "{} on the {}: {fits} of {} variables fit, {luts} lookup tables in all; {}",
+                state.form.name(),
+                state.device.name(),
+                state.variables.len(),
+                state
+                    .critical_ns()
+                    .map_or("no state time: a variable does not fit".into(), |ns| {
+                        format!("{ns:.2} ns a clock ({:.1} MHz)", 1e3 / ns)
+                    })
+            );
+        }
+        println!(
+            "mapped netlists equal to the fixed-point evaluator on the first {} test rows; {:.1} s on {} threads",
+            f.mapped_rows, f.seconds, f.threads
+        );
+    }
+}
+
 fn print_figures<T: serde::Serialize>(figures: &T, json: bool, text: impl FnOnce(&T)) {
     if json {
         println!(

@@ -1,6 +1,8 @@
 //! `alnlab bench circuit`: a run's model measured as a circuit — the
 //! stage's measurement on its test rows, with the totals a reader compares
-//! with the paper's estimate, and how long synthesis and simulation took.
+//! with the paper's estimate, and how long synthesis and simulation took;
+//! for a piecewise-linear model, the trade between its fixed-point widths
+//! and its error and arithmetic, and its circuits placed and routed.
 
 use std::path::Path;
 use std::time::Instant;
@@ -9,7 +11,10 @@ use alnlab_aln::runtime::Trained;
 use alnlab_common::{Progress, Result};
 use serde::Serialize;
 
+use alnlab_aln::pwl::fixed::Widths;
+
 use crate::fpga::{self, Device};
+use crate::piecewise::{self, Trade};
 use crate::synth::{Figures, Part};
 use crate::{Measurement, measure_test_rows};
 
@@ -50,18 +55,29 @@ pub struct Bench {
 
 /// Measures the model at `model` (trained with `codebook`) on the first
 /// `rows` test rows of `levels` (all when none); with `fpga`, also places
-/// and routes every variable on that device with that nextpnr seed.
+/// and routes every variable on that device with that nextpnr seed. The
+/// tools' files go into a folder under `scratch`, removed when done.
 pub fn on_run(
     model: &Path,
     codebook: &Path,
     levels: &Path,
     rows: Option<usize>,
     fpga: Option<(Device, u64)>,
+    scratch: &Path,
     progress: &dyn Progress,
 ) -> Result<Bench> {
     let trained = Trained::read(model, codebook)?;
     let start = Instant::now();
-    let (measurement, rows) = measure_test_rows(&trained, model, levels, rows, fpga, progress)?;
+    let scratch = crate::scratch_in(scratch)?;
+    let (measurement, rows) = measure_test_rows(
+        &trained,
+        model,
+        levels,
+        rows,
+        fpga,
+        scratch.path(),
+        progress,
+    )?;
     let seconds = start.elapsed().as_secs_f64();
     let Measurement { figures, fpga } = measurement;
     let deepest = figures.deepest().expect("a model predicts a variable");
@@ -84,5 +100,77 @@ pub fn on_run(
         figures,
         fpga_ns_per_state: fpga.as_ref().and_then(fpga::State::critical_ns),
         fpga,
+    })
+}
+
+/// The figures of `alnlab bench circuit` for a piecewise-linear model.
+#[derive(Debug, Serialize)]
+pub struct PiecewiseBench {
+    /// The trade between width and error: the chosen widths first, then
+    /// every width asked for at once for every output.
+    pub trade: Vec<Trade>,
+    /// With `fpga`: the chosen fixed-point model's circuits placed and
+    /// routed, per output.
+    pub outputs: Vec<piecewise::OutputFigures>,
+    pub placed: Option<[fpga::State; 2]>,
+    /// Test rows the mapped netlists were simulated equal on.
+    pub mapped_rows: usize,
+    /// The state's time: combinational, the slowest variable's critical
+    /// path; pipelined, the slowest clock (ns).
+    pub ns_per_state: Option<f64>,
+    pub pipelined_clock_ns: Option<f64>,
+    /// Wall time of choosing, tabulating and, with `fpga`, writing,
+    /// mapping, placing, routing and simulating (all threads).
+    pub seconds: f64,
+    pub threads: usize,
+}
+
+/// Measures the piecewise-linear model at `model` (trained with
+/// `codebook`) on the rows of `levels` and `pairs`: its fixed-point trade
+/// at the chosen widths and at each of `widths`; with `fpga`, its circuits
+/// placed and routed, their mapped netlists simulated on the first `rows`
+/// test rows (all when none). The tools' files go into a folder under
+/// `scratch`, removed when done.
+#[allow(clippy::too_many_arguments)]
+pub fn piecewise_on_run(
+    (model, codebook, levels, pairs): (&Path, &Path, &Path, &Path),
+    widths: &[Widths],
+    rows: Option<usize>,
+    fpga: Option<(Device, u64)>,
+    scratch: &Path,
+    progress: &dyn Progress,
+) -> Result<PiecewiseBench> {
+    let trained = Trained::read(model, codebook)?;
+    let start = Instant::now();
+    let all = crate::piecewise_rows(&trained, levels, pairs)?;
+    let trade = piecewise::trade(&trained, &all, widths)?;
+    let measured = match fpga {
+        Some(fpga) => {
+            let scratch = crate::scratch_in(scratch)?;
+            let m = piecewise::measure(
+                &trained,
+                &all,
+                None,
+                Some(fpga),
+                rows,
+                scratch.path(),
+                progress,
+            )?;
+            Some(m)
+        }
+        None => None,
+    };
+    let (outputs, placed, mapped_rows) = measured.map_or((Vec::new(), None, 0), |m| {
+        (m.outputs, m.placed, m.mapped_rows)
+    });
+    Ok(PiecewiseBench {
+        trade,
+        ns_per_state: placed.as_ref().and_then(|[c, _]| c.critical_ns()),
+        pipelined_clock_ns: placed.as_ref().and_then(|[_, p]| p.critical_ns()),
+        outputs,
+        placed,
+        mapped_rows,
+        seconds: start.elapsed().as_secs_f64(),
+        threads: rayon::current_num_threads(),
     })
 }

@@ -54,7 +54,7 @@ pub fn measure(
     let fpga = fpga.map(|(device, seed)| (device, seed % fpga::NEXTPNR_SEEDS));
     let fpga_tools = fpga.map(|_| fpga::tool_versions()).transpose()?;
     let cell_models = fpga
-        .map(|_| tools::yosys_data(ICE40_MODELS))
+        .map(|_| tools::yosys_data(fpga::ICE40_MODELS))
         .transpose()?
         .map(|p| p.display().to_string());
     write_files(circuit, dir)?;
@@ -77,7 +77,7 @@ pub fn measure(
                 netlists.push(("synthesized", vec![synth::netlist_file(c)], &[]));
                 if let Some(models) = &cell_models {
                     let mapped = vec![fpga::mapped_file(circuit, v), models.clone()];
-                    netlists.push(("mapped", mapped, ICE40_DEFINES));
+                    netlists.push(("mapped", mapped, fpga::ICE40_DEFINES));
                 }
                 for (tag, sources, defines) in netlists {
                     let got = simulate::run(circuit, v, &sources, defines, rows, dir, tag)?;
@@ -99,6 +99,7 @@ pub fn measure(
         .zip(fpga_tools)
         .map(|((device, seed), tools)| fpga::State {
             device,
+            form: crate::datapath::Form::Combinational,
             seed,
             tools,
             variables: placed.into_iter().flatten().collect(),
@@ -112,12 +113,6 @@ pub fn measure(
         fpga,
     })
 }
-
-/// Yosys' simulation models of the iCE40's cells, in its data folder.
-const ICE40_MODELS: &str = "ice40/cells_sim.v";
-/// Icarus Verilog reads the models without their ports' default values
-/// (a SystemVerilog form); the mapped netlist connects every port.
-const ICE40_DEFINES: &[&str] = &["NO_ICE40_DEFAULT_ASSIGNMENTS"];
 
 #[cfg(test)]
 mod tests {

@@ -13,12 +13,13 @@
 //! logic placed; nextpnr places and routes it (seeded) and its timing
 //! analysis gives the maximum clock: the critical path is one period. The
 //! clock asked for is 1 MHz, so nextpnr does not push timing and the path
-//! is an upper bound of what the part can do. Adders (a walk code's
-//! popcounts) go into lookup tables too, not the carry chains: with carry
-//! chains nextpnr-ice40 0.4 routed some decoders for over ten minutes
-//! without finishing (a 16-bit walk decoder's 3144 arcs), without them in
-//! two seconds; lookup-table adders are no faster than carry chains, so
-//! this too can only lengthen the path. Each variable takes a part of its
+//! is an upper bound of what the part can do. A bit-forest's adders (a
+//! walk code's popcounts) go into lookup tables too, not the carry chains:
+//! with carry chains nextpnr-ice40 0.4 routed some decoders for over ten
+//! minutes without finishing (a 16-bit walk decoder's 3144 arcs), without
+//! them in two seconds; lookup-table adders are no faster than carry
+//! chains, so this too can only lengthen the path. A piecewise-linear
+//! model's wide adders take the carry chains ([`Design::carry_chains`]). Each variable takes a part of its
 //! own, the variables side by side, so the state's time is the slowest
 //! variable's. A variable whose lookup tables and flip-flops outnumber the
 //! part's logic cells is reported as not fitting, with the cells it needs.
@@ -30,6 +31,7 @@ use std::path::Path;
 use alnlab_common::{Error, Result};
 use serde::{Deserialize, Serialize};
 
+use crate::datapath::Form;
 use crate::tools;
 use crate::verilog::{COMMON_FILE, Circuit};
 
@@ -89,6 +91,10 @@ pub struct Placed {
     pub luts: u64,
     /// The predictor's longest path in lookup tables (Yosys' `ltp`).
     pub lut_levels: u32,
+    /// Carry-chain cells (`SB_CARRY`): adders on the part's carry logic.
+    pub carries: u64,
+    /// Flip-flops (`SB_DFF*`): the wrapper's registers and a pipeline's.
+    pub flip_flops: u64,
     /// Logic cells used after packing; when it does not fit, the lookup
     /// tables and flip-flops it needs (each at most one cell).
     pub logic_cells: u64,
@@ -97,6 +103,9 @@ pub struct Placed {
     /// The critical path, register to register, in ns; none when it does
     /// not fit.
     pub critical_ns: Option<f64>,
+    /// Clocks from the input register's word to the level (0 when
+    /// combinational: one clock period is the whole prediction).
+    pub latency: u32,
 }
 
 /// The top module wrapping variable `v`'s predictor between registers.
@@ -104,15 +113,13 @@ pub fn top_module(circuit: &Circuit, v: usize) -> String {
     format!("fpga_{}", circuit.variables[v].ident)
 }
 
-/// The mapped netlist of variable `v` (its predictor in `SB_LUT4`s, the
-/// wrapper's registers in `SB_DFF`s), as [`place_and_route`] writes it.
+/// The mapped netlist of variable `v` ([`mapped_netlist`]).
 pub fn mapped_file(circuit: &Circuit, v: usize) -> String {
-    format!("{}_mapped.v", top_module(circuit, v))
+    mapped_netlist(&top_module(circuit, v))
 }
 
-/// The Verilog of [`top_module`]: a shift register of every input bit the
-/// predictor reads, fed from `din`; the predictor; its level registered
-/// and folded by XOR to `dout`.
+/// The Verilog of [`top_module`]: variable `v`'s predictor between
+/// registers ([`registered`]).
 pub fn wrapper(circuit: &Circuit, v: usize) -> String {
     let c = &circuit.variables[v];
     // (port, width) of every input, in the module's port order.
@@ -124,16 +131,36 @@ pub fn wrapper(circuit: &Circuit, v: usize) -> String {
     if c.takes_current {
         inputs.push((format!("{}_current", c.ident), c.level_bits as usize));
     }
+    let output = (format!("{}_next", c.ident), c.level_bits as usize);
+    registered(
+        &top_module(circuit, v),
+        &c.module,
+        &c.variable,
+        &inputs,
+        &output,
+        false,
+    )
+}
+
+/// Module `top` (ports `clk`, `din`, `dout`): a shift register of every
+/// input bit of `module` (`inputs`: its ports and widths, in order), fed
+/// from `din`; the module (given the clock too when `clocked`); its output
+/// port (`output`: name and width) registered and folded by XOR to `dout`.
+pub fn registered(
+    top: &str,
+    module: &str,
+    variable: &str,
+    inputs: &[(String, usize)],
+    (output, out): &(String, usize),
+    clocked: bool,
+) -> String {
     let bits: usize = inputs.iter().map(|(_, w)| w).sum();
-    let out = c.level_bits as usize;
     let mut text = String::new();
     let _ = writeln!(
         text,
-        "// `{}` between registers, for place and route.\n\
-         module {} (input wire clk, input wire din, output wire dout);\n  \
+        "// `{variable}` between registers, for place and route.\n\
+         module {top} (input wire clk, input wire din, output wire dout);\n  \
          reg [{}:0] in_q;\n  reg [{}:0] out_q;\n  wire [{}:0] level;",
-        c.variable,
-        top_module(circuit, v),
         bits - 1,
         out - 1,
         out - 1
@@ -150,28 +177,26 @@ pub fn wrapper(circuit: &Circuit, v: usize) -> String {
          assign dout = ^out_q;"
     );
     let mut ports = Vec::new();
+    if clocked {
+        ports.push("    .clk(clk)".to_string());
+    }
     let mut at = 0;
-    for (name, width) in &inputs {
+    for (name, width) in inputs {
         ports.push(format!("    .{name}(in_q[{}:{at}])", at + width - 1));
         at += width;
     }
-    ports.push(format!("    .{}_next(level)", c.ident));
+    ports.push(format!("    .{output}(level)"));
     let _ = writeln!(
         text,
-        "  {} predictor (\n{}\n  );\nendmodule",
-        c.module,
+        "  {module} predictor (\n{}\n  );\nendmodule",
         ports.join(",\n")
     );
     text
 }
 
 /// Maps variable `v` of `circuit` (its files already written in `dir`, as
-/// [`crate::check::write_files`] does) onto `device`, writes the mapped
-/// netlist ([`mapped_file`]: the one placed) and places and routes it with
-/// nextpnr's `seed` (below [`NEXTPNR_SEEDS`]). The predictor stays a module of its own through
-/// mapping (`keep_hierarchy`), so the netlist simulated on the test rows
-/// is the very logic placed; the registers around it keep synthesis from
-/// merging logic across them either way.
+/// [`crate::check::write_files`] does) onto `device` and places and routes
+/// it ([`place_and_route_files`], adders in lookup tables).
 pub fn place_and_route(
     circuit: &Circuit,
     v: usize,
@@ -184,20 +209,74 @@ pub fn place_and_route(
     let wrapper_file = format!("{top}.v");
     let path = dir.join(&wrapper_file);
     std::fs::write(&path, wrapper(circuit, v)).map_err(|e| Error::io(&path, e))?;
+    let sources = [COMMON_FILE.to_string(), c.file.clone(), wrapper_file];
+    let design = Design {
+        top: &top,
+        module: &c.module,
+        variable: &c.variable,
+        sources: &sources,
+        carry_chains: false,
+        latency: 0,
+    };
+    place_and_route_files(&design, device, seed, dir)
+}
+
+/// A predictor between registers, ready to map: its files in the scratch
+/// folder and what to call things.
+pub struct Design<'a> {
+    /// The top module ([`registered`]).
+    pub top: &'a str,
+    /// The predictor's module, kept whole through mapping.
+    pub module: &'a str,
+    /// The learned variable it predicts.
+    pub variable: &'a str,
+    /// The Verilog files, in reading order.
+    pub sources: &'a [String],
+    /// Adders on the part's carry chains (else in lookup tables).
+    pub carry_chains: bool,
+    /// Clocks from inputs to output inside the predictor.
+    pub latency: u32,
+}
+
+/// The mapped netlist of a design's top module (its predictor in the
+/// part's cells, the wrapper's registers in `SB_DFF`s), as
+/// [`place_and_route_files`] writes it.
+pub fn mapped_netlist(top: &str) -> String {
+    format!("{top}_mapped.v")
+}
+
+/// Maps `design` (its files in `dir`) onto `device`, writes the mapped
+/// netlist ([`mapped_netlist`]: the one placed) and places and routes it
+/// with nextpnr's `seed` (below [`NEXTPNR_SEEDS`]). The predictor stays a
+/// module of its own through mapping (`keep_hierarchy`), so the netlist
+/// simulated on the test rows is the very logic placed; the registers
+/// around it keep synthesis from merging logic across them either way.
+pub fn place_and_route_files(
+    design: &Design,
+    device: Device,
+    seed: u64,
+    dir: &Path,
+) -> Result<Placed> {
+    let Design {
+        top,
+        module,
+        variable,
+        ..
+    } = *design;
     let netlist = format!("{top}.json");
     let stat = format!("{top}_stat.json");
     let ltp = format!("{top}_ltp.txt");
     let script = format!(
-        "read_verilog {COMMON_FILE} {file} {wrapper_file}\n\
+        "read_verilog {sources}\n\
          hierarchy -check -top {top}\n\
          setattr -mod -set keep_hierarchy 1 {module}\n\
-         synth_ice40 -nocarry -top {top} -json {netlist}\n\
+         synth_ice40 {carry}-top {top} -json {netlist}\n\
          write_verilog -noattr {mapped}\n\
          tee -q -o {stat} stat -json\n\
          tee -q -o {ltp} ltp -noff {module}\n",
-        file = c.file,
-        module = c.module,
-        mapped = mapped_file(circuit, v),
+        sources = design.sources.join(" "),
+        carry = if design.carry_chains { "" } else { "-nocarry " },
+        mapped = mapped_netlist(top),
     );
     let script_file = format!("{top}.ys");
     let path = dir.join(&script_file);
@@ -214,18 +293,22 @@ pub fn place_and_route(
     };
     let luts = count(|cell| cell == "SB_LUT4");
     let flip_flops = count(|cell| cell.starts_with("SB_DFF"));
+    let carries = count(|cell| cell == "SB_CARRY");
     let ltp = dir.join(&ltp);
     let lut_levels = *crate::synth::read_depths(&ltp)?
-        .get(&c.module)
-        .ok_or_else(|| Error::bad_file(&ltp, format!("no path of module `{}`", c.module)))?;
+        .get(module)
+        .ok_or_else(|| Error::bad_file(&ltp, format!("no path of module `{module}`")))?;
     let available = device.logic_cells();
     let mut placed = Placed {
-        variable: c.variable.clone(),
+        variable: variable.to_string(),
         luts,
         lut_levels,
+        carries,
+        flip_flops,
         logic_cells: luts + flip_flops,
         available,
         critical_ns: None,
+        latency: design.latency,
     };
     // A cell holds a lookup table and a flip-flop, but a shift register's
     // flip-flops have no table of their own to share one with.
@@ -251,12 +334,18 @@ pub fn place_and_route(
     ]);
     let log = format!("{top}_pnr.log");
     tools::run_for("nextpnr-ice40", &args, dir, &log, PLACE_AND_ROUTE_LIMIT)
-        .map_err(|e| e.context(&format!("placing and routing `{}`", c.variable)))?;
+        .map_err(|e| e.context(&format!("placing and routing `{variable}`")))?;
     let (logic_cells, mhz) = read_report(&dir.join(&report))?;
     placed.logic_cells = logic_cells;
     placed.critical_ns = Some(1000.0 / mhz);
     Ok(placed)
 }
+
+/// Yosys' simulation models of the iCE40's cells, in its data folder.
+pub const ICE40_MODELS: &str = "ice40/cells_sim.v";
+/// Icarus Verilog reads the models without their ports' default values
+/// (a SystemVerilog form); the mapped netlist connects every port.
+pub const ICE40_DEFINES: &[&str] = &["NO_ICE40_DEFAULT_ASSIGNMENTS"];
 
 /// nextpnr reads its seed as a C `int`: seeds are taken modulo 2³¹.
 pub const NEXTPNR_SEEDS: u64 = 1 << 31;
@@ -316,6 +405,8 @@ pub fn tool_versions() -> Result<String> {
 pub struct State {
     /// The part, one per variable.
     pub device: Device,
+    /// How the predictors are built.
+    pub form: Form,
     /// nextpnr's seed.
     pub seed: u64,
     /// Yosys' and nextpnr's versions.
@@ -380,10 +471,14 @@ mod tests {
             logic_cells: 1,
             available: 7680,
             lut_levels: 3,
+            carries: 0,
+            flip_flops: 2,
+            latency: 0,
             critical_ns: ns,
         };
         let mut state = State {
             device: Device::Ice40Hx8k,
+            form: Form::Combinational,
             seed: 1,
             tools: String::new(),
             variables: vec![placed("a", Some(4.5)), placed("b", Some(10.8))],

@@ -133,15 +133,29 @@ pub fn run(
     );
     let bench = format!("tb_{tag}_{}.v", c.ident);
     write(&dir.join(&bench), &tb)?;
-    let compiled = format!("tb_{tag}_{}.vvp", c.ident);
+    run_bench(&bench, sources, defines, &out, rows, dir)
+}
+
+/// Compiles the testbench `bench` (module `tb`) with `sources` and
+/// `defines` (Icarus Verilog, in `dir`), runs it and reads the `rows`
+/// levels it writes to `out`, one decimal line a row.
+pub fn run_bench(
+    bench: &str,
+    sources: &[String],
+    defines: &[&str],
+    out: &str,
+    rows: usize,
+    dir: &Path,
+) -> Result<Vec<u16>> {
+    let compiled = format!("{}.vvp", bench.trim_end_matches(".v"));
     let defines: Vec<String> = defines.iter().map(|d| format!("-D{d}")).collect();
     let mut args = vec!["-g2005", "-o", compiled.as_str(), "-s", "tb"];
     args.extend(defines.iter().map(String::as_str));
     args.extend(sources.iter().map(String::as_str));
-    args.push(&bench);
+    args.push(bench);
     tools::run("iverilog", &args, dir)?;
     tools::run("vvp", &["-n", &compiled], dir)?;
-    let path = dir.join(&out);
+    let path = dir.join(out);
     let text = std::fs::read_to_string(&path).map_err(|e| Error::io(&path, e))?;
     let levels: Vec<u16> = text
         .lines()

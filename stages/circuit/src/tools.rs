@@ -1,7 +1,8 @@
 //! The external programs: Yosys (synthesis), Icarus Verilog (`iverilog`,
 //! `vvp`: simulation) and nextpnr-ice40 (place and route). A missing
 //! program is an error that says how to install it; a failing one, an error
-//! with the end of what it printed.
+//! with the end of what it printed. Each is started so that it ends with
+//! alnlab: killed, alnlab leaves no tool running on.
 
 use std::fs::File;
 use std::path::{Path, PathBuf};
@@ -21,12 +22,42 @@ fn install(program: &str) -> &'static str {
     }
 }
 
+/// A command for `program` working in `dir`, its own temporary files
+/// (Yosys' for ABC) there too, that the kernel kills when the thread that
+/// started it ends — alnlab's threads live as long as alnlab, so a killed
+/// alnlab takes its tools with it (Linux; elsewhere a tool runs on to its
+/// end).
+fn command(program: &str, dir: &Path) -> Command {
+    let mut command = Command::new(program);
+    command.current_dir(dir).env("TMPDIR", dir);
+    #[cfg(target_os = "linux")]
+    {
+        use std::os::unix::process::CommandExt;
+        let parent = std::process::id() as libc::pid_t;
+        // SAFETY: between fork and exec the closure calls only prctl,
+        // getppid and _exit, which are async-signal-safe, and allocates
+        // nothing.
+        unsafe {
+            command.pre_exec(move || {
+                if libc::prctl(libc::PR_SET_PDEATHSIG, libc::SIGKILL) != 0 {
+                    return Err(std::io::Error::last_os_error());
+                }
+                // alnlab died before the signal was asked for.
+                if libc::getppid() != parent {
+                    libc::_exit(1);
+                }
+                Ok(())
+            });
+        }
+    }
+    command
+}
+
 /// Runs `program` with `args` in `dir` to its end; a missing program is an
 /// error that says how to install it.
 fn spawn(program: &str, args: &[&str], dir: &Path) -> Result<Output> {
-    Command::new(program)
+    command(program, dir)
         .args(args)
-        .current_dir(dir)
         .output()
         .map_err(|e| not_started(program, e))
 }
@@ -73,9 +104,8 @@ pub fn run_for(program: &str, args: &[&str], dir: &Path, log: &str, limit: Durat
     let path = dir.join(log);
     let file = File::create(&path).map_err(|e| Error::io(&path, e))?;
     let copy = file.try_clone().map_err(|e| Error::io(&path, e))?;
-    let mut child = Command::new(program)
+    let mut child = command(program, dir)
         .args(args)
-        .current_dir(dir)
         .stdin(Stdio::null())
         .stdout(copy)
         .stderr(file)

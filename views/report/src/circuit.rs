@@ -186,7 +186,7 @@ pub(super) fn in_hardware(name: &str, routed: &Routed, gate_levels: u32, estimat
 
 /// The paper's "nanoseconds" for a state's time (none: it does not fit),
 /// read as: under a microsecond.
-fn claim(ns: Option<f64>) -> &'static str {
+pub(super) fn claim(ns: Option<f64>) -> &'static str {
     match ns {
         Some(ns) if ns < 1000.0 => "confirmed (under a microsecond)",
         Some(_) => "refuted (over a microsecond)",
@@ -352,11 +352,14 @@ pub(super) fn fpga_section(md: &mut String, routed: &Routed, gate_levels: u32, c
 }
 
 #[cfg(test)]
-mod tests {
+pub(super) mod tests {
     use super::*;
+    use alnlab_circuit::datapath::Form;
     use alnlab_circuit::fpga::{Device, Placed, State};
 
-    fn routed(ns: &[Option<f64>]) -> Routed {
+    /// A state placed and routed, one variable per critical path (none:
+    /// it does not fit), combinational.
+    pub(in super::super) fn routed(ns: &[Option<f64>]) -> Routed {
         let variables = ns
             .iter()
             .enumerate()
@@ -367,20 +370,25 @@ mod tests {
                 logic_cells: if ns.is_some() { 520 } else { 9000 },
                 available: 7680,
                 critical_ns: ns,
+                carries: 40,
+                flip_flops: 30,
+                latency: 0,
             })
             .collect();
         Routed {
             state: State {
                 device: Device::Ice40Hx8k,
+                form: Form::Combinational,
                 seed: 7,
                 tools: "tools".into(),
                 variables,
             },
+            pipelined: None,
             rows_equal: 300,
         }
     }
 
-    fn cpu() -> Cpu {
+    pub(in super::super) fn cpu() -> Cpu {
         Cpu {
             aln_batched: Some(1550.0),
             aln_single: Some(7870.0),

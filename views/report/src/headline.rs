@@ -369,6 +369,13 @@ pub(super) fn first_screen(
                 )
             );
         }
+        if let (Some(routed), false) = (&v.fpga, v.fixed.is_empty()) {
+            let _ = writeln!(
+                md,
+                "{}\n",
+                super::fixed_point::in_hardware(&v.info.name, &v.fixed, routed)
+            );
+        }
     }
     Ok(())
 }

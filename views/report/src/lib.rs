@@ -16,6 +16,7 @@ mod charts;
 mod circuit;
 mod closed_loop;
 mod findings;
+mod fixed_point;
 pub mod format;
 mod glossary;
 mod headline;
@@ -100,6 +101,9 @@ pub struct VariantInfo {
     pub circuit: Option<PathBuf>,
     /// The circuit stage's place-and-route figures, if the run had them.
     pub fpga: Option<PathBuf>,
+    /// The circuit stage's fixed-point figures of a piecewise-linear
+    /// model, if the run had them.
+    pub fixed: Option<PathBuf>,
     /// Every replicate of the variant (the first is the one above), when
     /// the experiment runs more than one.
     pub replicates: Vec<Replicate>,
@@ -226,6 +230,9 @@ struct Loaded<'a> {
     /// Every variable placed and routed on an FPGA, when the circuit stage
     /// did it.
     fpga: Option<alnlab_circuit::routed::Routed>,
+    /// A piecewise-linear model's outputs in fixed point, when the circuit
+    /// stage measured them (empty otherwise).
+    fixed: Vec<alnlab_circuit::piecewise::OutputFigures>,
     coverage: Coverage,
     /// Bytes the trees take in memory while training: two counters per
     /// internal node, a literal per leaf.
@@ -392,17 +399,14 @@ pub fn render(run: &RunInfo, dir: &Path) -> Result<PathBuf> {
     across::side_by_side(&mut md, &variants, shared);
     replicates::section(&mut md, &variants, dir)?;
     let n = variants.len();
-    let histogram_variable = variant::histogram_variable(&variants);
+    let context = variant::Context {
+        shared,
+        compare_with_paper: run.compare_with_paper,
+        histogram_variable: variant::histogram_variable(&variants),
+        forest: fixed_point::routed_forest(&variants),
+    };
     for (k, v) in variants.iter().enumerate() {
-        variant::section(
-            &mut md,
-            v,
-            (k, n),
-            shared,
-            dir,
-            run.compare_with_paper,
-            histogram_variable,
-        )?;
+        variant::section(&mut md, v, (k, n), &context, dir)?;
         if let Some(rows) = v.planning.first() {
             let replicates = v.planning.len();
             plan::section(
@@ -694,6 +698,10 @@ fn load(info: &VariantInfo) -> Result<Loaded<'_>> {
         fpga: match &info.fpga {
             Some(path) => alnlab_circuit::routed::read(path)?,
             None => None,
+        },
+        fixed: match &info.fixed {
+            Some(path) => alnlab_circuit::fixed_point::read(path)?,
+            None => Vec::new(),
         },
         coverage,
         tree_bytes,

@@ -34,16 +34,32 @@ pub(super) fn file_name(variant: &str, chart: &str) -> String {
     format!("{safe}-{chart}.svg")
 }
 
+/// What every variant's section is written with: whether the baselines
+/// are shared (shown once, beside all variants), whether to compare with
+/// the paper, the variable whose histogram every variant shows, and the
+/// fastest bit-forest placed and routed in the run (its variant and ns
+/// per state), to set a piecewise-linear circuit beside.
+pub(super) struct Context<'a> {
+    pub(super) shared: bool,
+    pub(super) compare_with_paper: bool,
+    pub(super) histogram_variable: Option<&'a str>,
+    pub(super) forest: Option<(&'a str, f64)>,
+}
+
 /// Writes variant `v` (the `k`th of `n`), its charts into `dir`.
 pub(super) fn section(
     md: &mut String,
     v: &Loaded,
     (k, n): (usize, usize),
-    shared: bool,
+    context: &Context,
     dir: &Path,
-    compare_with_paper: bool,
-    histogram_variable: Option<&str>,
 ) -> Result<()> {
+    let Context {
+        shared,
+        compare_with_paper,
+        histogram_variable,
+        forest,
+    } = *context;
     let _ = writeln!(md, "## Variant `{}`\n", v.info.name);
     if !v.info.description.is_empty() {
         let _ = writeln!(md, "{}\n", v.info.description);
@@ -119,7 +135,7 @@ pub(super) fn section(
 
     worse(md, v);
     histogram(md, v, k, histogram_variable, dir)?;
-    hardware(md, v);
+    hardware(md, v, forest);
 
     if !shared && !v.horizons.is_empty() {
         let _ = writeln!(md, "### Closed loop\n");
@@ -418,15 +434,21 @@ fn histogram(
     Ok(())
 }
 
-/// The §5 estimate from the pruned trees.
-fn hardware(md: &mut String, v: &Loaded) {
+/// The §5 estimate from the pruned trees, the measured circuit and, for a
+/// piecewise-linear model, its fixed-point circuit beside `forest`.
+fn hardware(md: &mut String, v: &Loaded, forest: Option<(&str, f64)>) {
     let h = &v.hardware;
     let _ = writeln!(md, "### Hardware estimate (paper §5)\n");
     let _ = match h.kind {
         ModelKind::PiecewiseLinear => writeln!(
             md,
-            "No gate estimate: a piecewise-linear model computes with real numbers — affine \
-             pieces under MIN and MAX — not with AND/OR gates.\n"
+            "No gate estimate: a piecewise-linear model computes with numbers — affine pieces \
+             under MIN and MAX — not with AND/OR gates{}.\n",
+            if v.fixed.is_empty() {
+                ""
+            } else {
+                "; its circuit is fixed-point arithmetic, measured below"
+            }
         ),
         ModelKind::BitForest => writeln!(
             md,
@@ -454,17 +476,20 @@ fn hardware(md: &mut String, v: &Loaded) {
             h.delays()
         ),
     };
+    let cpu = || super::circuit::Cpu {
+        aln_batched: v.ns("aln", "batched"),
+        aln_single: v.aln_single().map(|t| t.ns_per_state),
+        simulator: super::findings::simulator_rival(v)
+            .map(|r| (r.model.to_string(), r.timing.ns_per_state)),
+    };
     match (&v.circuit, h.kind) {
+        (None, ModelKind::PiecewiseLinear) if !v.fixed.is_empty() => {
+            super::fixed_point::section(md, &v.fixed, v.fpga.as_ref(), &cpu(), forest);
+        }
         (Some(measured), _) => {
             super::circuit::section(md, measured, (h.pruned_gates, h.max_depth), h.delays());
             if let Some(routed) = &v.fpga {
-                let cpu = super::circuit::Cpu {
-                    aln_batched: v.ns("aln", "batched"),
-                    aln_single: v.aln_single().map(|t| t.ns_per_state),
-                    simulator: super::findings::simulator_rival(v)
-                        .map(|r| (r.model.to_string(), r.timing.ns_per_state)),
-                };
-                super::circuit::fpga_section(md, routed, measured.depth, &cpu);
+                super::circuit::fpga_section(md, routed, measured.depth, &cpu());
             }
         }
         (None, ModelKind::Threshold) if v.info.circuit.is_some() => {

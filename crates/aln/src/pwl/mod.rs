@@ -21,6 +21,7 @@
 //! only skip pieces whose values cannot be the answer.
 
 pub mod dtree;
+pub mod fixed;
 pub mod lazy;
 pub mod predict;
 
