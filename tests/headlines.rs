@@ -3,8 +3,10 @@
 //! from persistence, with their intervals across replicates) agrees, to the
 //! digits shown, with the same figure in the report's `replicates.csv` —
 //! the file the interop check recomputes from the stages' tables with
-//! numpy and scipy; the abstract quotes the table; and `reports/README.md`
-//! quotes no number its report's first screen does not.
+//! numpy and scipy; the abstract quotes the table; `reports/README.md`
+//! quotes no number its report's first screen does not; and every "In
+//! hardware" sentence — a bit-forest's or a piecewise-linear model's in
+//! fixed point — quotes its hardware table and judges by it.
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -387,4 +389,98 @@ fn the_synthesis_chart_is_drawn_from_the_reports() {
         std::fs::read(reports_root().join("synthesis.svg")).unwrap(),
         "reports/synthesis.svg is not what `alnlab synthesis reports` draws: run it again"
     );
+}
+
+/// The number after `before` in `text`, up to the next space or bracket.
+fn number_after(text: &str, before: &str) -> Option<f64> {
+    let rest = &text[text.find(before)? + before.len()..];
+    let end = rest
+        .find(|c: char| !(c.is_ascii_digit() || c == '.'))
+        .unwrap_or(rest.len());
+    rest[..end].parse().ok()
+}
+
+/// The cells of the appendix table row that starts with `start`.
+fn row<'a>(report: &'a str, start: &str) -> Option<Vec<&'a str>> {
+    report
+        .lines()
+        .find(|l| l.starts_with(start))
+        .map(|l| l.split('|').map(str::trim).collect())
+}
+
+/// A report's "In hardware" sentences agree with its hardware tables: the
+/// ns per state (and, for a piecewise-linear model, the pipeline's states
+/// per second, the fixed-point error and persistence's) are the table's,
+/// and the verdicts follow from them — "nanoseconds" confirmed under a
+/// microsecond, "beats persistence" when its error is below
+/// persistence's. How many sentences it checked.
+fn check_hardware(name: &str, report: &str) -> usize {
+    let screen = first_screen(report);
+    let mut checked = 0;
+    for line in screen
+        .lines()
+        .filter(|l| l.starts_with("**In hardware** (§5)"))
+    {
+        let ns = number_after(line, "predicts a state in ").expect("a state's ns");
+        if line.contains("piecewise-linear model in fixed point") {
+            let combinational = row(report, "| fixed point, combinational, on the ")
+                .unwrap_or_else(|| panic!("{name}: no combinational row"));
+            let pipelined = row(report, "| fixed point, pipelined (")
+                .unwrap_or_else(|| panic!("{name}: no pipelined row"));
+            let persistence = row(report, "| persistence (no change) |").unwrap();
+            assert_eq!(
+                combinational[4].parse::<f64>().unwrap(),
+                ns,
+                "{name}: {line}"
+            );
+            let rate = number_after(line, "clocks) ").expect("states a second");
+            let table_rate: f64 = pipelined[5].trim_end_matches(" million").parse().unwrap();
+            assert_eq!(table_rate, rate, "{name}");
+            let error = number_after(line, "in fixed point it errs ").unwrap();
+            let persists = number_after(line, "and persistence's ").unwrap();
+            assert_eq!(combinational[2].parse::<f64>().unwrap(), error, "{name}");
+            assert_eq!(persistence[2].parse::<f64>().unwrap(), persists, "{name}");
+            let beats = line.contains("for a model that beats persistence");
+            assert_eq!(beats, error < persists, "{name}: {line}");
+        } else {
+            let forest = row(report, "| this forest on the ")
+                .unwrap_or_else(|| panic!("{name}: no FPGA row"));
+            assert_eq!(forest[4].parse::<f64>().unwrap(), ns, "{name}: {line}");
+        }
+        assert_eq!(
+            line.contains("confirmed (under a microsecond)"),
+            ns < 1000.0,
+            "{name}: {line}"
+        );
+        checked += 1;
+    }
+    checked
+}
+
+#[test]
+fn every_hardware_sentence_agrees_with_its_table() {
+    let mut checked = 0;
+    for dir in committed_reports() {
+        let name = dir.file_name().unwrap().to_string_lossy().to_string();
+        let report = std::fs::read_to_string(dir.join("report.md")).unwrap();
+        checked += check_hardware(&name, &report);
+    }
+    assert!(
+        checked >= 1,
+        "no committed report measures its model in hardware"
+    );
+    // A piecewise-linear model's sentence, and a wrong one caught.
+    let report = "**In hardware** (§5): `p`'s piecewise-linear model in fixed point (replicate \
+                  1), each of its 2 variables placed and routed on a Lattice iCE40 HX8K of its \
+                  own, predicts a state in 110 ns between registers, and pipelined (20 clocks) \
+                  167 million states a second; in fixed point it errs 0.750 levels against the \
+                  floating-point model's 0.750 and persistence's 1.20, …: the paper's \
+                  \"nanoseconds\", for a model that beats persistence on these rows, confirmed \
+                  (under a microsecond).\n\n## Appendix\n\n\
+                  | fixed point, combinational, on the Lattice iCE40 HX8K | 0.750 | 501 | 110 | 9.09 million |\n\
+                  | fixed point, pipelined (20 clocks; ns: its latency) | 0.750 | 501 | 120 | 167 million |\n\
+                  | persistence (no change) | 1.20 | — | — | — |\n";
+    assert_eq!(check_hardware("synthetic", report), 1);
+    let wrong = report.replace("| 110 | 9.09", "| 111 | 9.01");
+    assert!(std::panic::catch_unwind(|| check_hardware("wrong", &wrong)).is_err());
 }
