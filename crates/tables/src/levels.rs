@@ -16,7 +16,7 @@ use alnlab_common::table::{self, Table};
 use alnlab_common::{Error, Provenance, Result};
 use arrow_array::{Array, UInt16Array};
 
-use crate::pairs::{Key, Side, key_columns, read_keys};
+use crate::pairs::{Key, Pairs, Side, key_columns, read_keys};
 
 /// The file's name in the quantize stage's artifact.
 pub const FILE: &str = "levels.parquet";
@@ -79,6 +79,23 @@ impl Levels {
     /// The file read.
     pub fn path(&self) -> &Path {
         self.table.path()
+    }
+
+    /// Checks that `pairs` are the pairs these levels were made from (the
+    /// same keys, row for row): an error names the pairs' file.
+    pub fn check_made_from(&self, pairs: &Pairs) -> Result<()> {
+        if pairs.keys() == self.keys() {
+            return Ok(());
+        }
+        Err(Error::bad_file(
+            pairs.path(),
+            format!(
+                "does not hold the pairs {} was made from ({} rows against {})",
+                self.path().display(),
+                pairs.len(),
+                self.len()
+            ),
+        ))
     }
 
     /// The rows trained on (split `train` or `both`).

@@ -260,17 +260,7 @@ pub fn piecewise_rows(
 ) -> Result<piecewise::Rows> {
     let levels = Levels::read(levels_path)?;
     let pairs = Pairs::read(pairs_path)?;
-    if pairs.keys() != levels.keys() {
-        return Err(Error::bad_file(
-            pairs_path,
-            format!(
-                "does not hold the pairs {} was made from ({} rows against {})",
-                levels_path.display(),
-                pairs.len(),
-                levels.len()
-            ),
-        ));
-    }
+    levels.check_made_from(&pairs)?;
     let learned: Vec<&Entry> = trained.codebook.learned().collect();
     let values = pairs.values(Side::Current, &learned)?;
     let keys = levels.keys();

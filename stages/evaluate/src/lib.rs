@@ -245,17 +245,7 @@ pub fn run(
     params.validate().map_err(|e| params::invalid("test", e))?;
     let data = Data::read(model_path, codebook_path, levels_path)?;
     let pairs = Pairs::read(pairs_path)?;
-    if pairs.keys() != data.levels.keys() {
-        return Err(Error::bad_file(
-            pairs_path,
-            format!(
-                "does not hold the pairs {} was made from ({} rows against {})",
-                levels_path.display(),
-                pairs.len(),
-                data.levels.len()
-            ),
-        ));
-    }
+    data.levels.check_made_from(&pairs)?;
     let codecs = &data.codecs;
     let learned = data.learned();
     let test = data.test_rows()?;

@@ -194,6 +194,18 @@ pub(super) fn claim(ns: Option<f64>) -> &'static str {
     }
 }
 
+/// A sentence for each variable of `state` that does not fit its part.
+pub(super) fn not_fitting(md: &mut String, state: &alnlab_circuit::fpga::State) {
+    for p in state.variables.iter().filter(|p| p.critical_ns.is_none()) {
+        let _ = write!(
+            md,
+            "`{}` does not fit: it needs up to {} logic cells (its lookup tables and flip-flops), \
+             the part has {}. ",
+            p.variable, p.logic_cells, p.available
+        );
+    }
+}
+
 /// A variant's CPU figures beside the FPGA's: ns per state on one thread.
 pub(super) struct Cpu {
     /// The software ALN in batches…
@@ -312,14 +324,7 @@ pub(super) fn fpga_section(md: &mut String, routed: &Routed, gate_levels: u32, c
             sig3(median),
         );
     }
-    for p in state.variables.iter().filter(|p| p.critical_ns.is_none()) {
-        let _ = write!(
-            md,
-            "`{}` does not fit: it needs up to {} logic cells (its lookup tables and flip-flops), \
-             the part has {}. ",
-            p.variable, p.logic_cells, p.available
-        );
-    }
+    not_fitting(md, state);
     let software = match (cpu.aln_batched, cpu.aln_single) {
         (Some(batched), Some(single)) => format!(
             ", where the software ALN on one CPU thread takes {} ns per state with every test \

@@ -13,7 +13,7 @@ use alnlab_circuit::piecewise::{OutputFigures, TOLERANCE};
 use alnlab_circuit::routed::Routed;
 
 use super::Loaded;
-use super::circuit::{Cpu, claim};
+use super::circuit::{Cpu, claim, not_fitting};
 use super::format::{MdTable, sig3};
 
 /// The fastest bit-forest of `variants` placed and routed whole: its
@@ -272,14 +272,7 @@ pub(super) fn section(
         dash(),
     ]);
     table.write(md);
-    for p in state.variables.iter().filter(|p| p.critical_ns.is_none()) {
-        let _ = write!(
-            md,
-            "`{}` does not fit: it needs up to {} logic cells (its lookup tables and flip-flops), \
-             the part has {}. ",
-            p.variable, p.logic_cells, p.available
-        );
-    }
+    not_fitting(md, state);
     let verdict = match (ns, state.slowest()) {
         (Some(ns), Some(slowest)) => format!(
             "**The paper's \"nanoseconds\", for {}, is {}:** a state in {} ns on this part (the \
