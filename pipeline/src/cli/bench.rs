@@ -358,10 +358,17 @@ pub fn execute(bench: Bench, quiet: bool) -> Result<()> {
                         state.lut_levels()
                     );
                     for p in state.variables.iter().filter(|p| p.critical_ns.is_none()) {
-                        println!(
-                            "  `{}` does not fit: {} logic cells needed, {} available",
-                            p.variable, p.logic_cells, p.available
-                        );
+                        if p.fits() {
+                            println!(
+                                "  `{}` fits ({} of {} logic cells) but was not routed in time",
+                                p.variable, p.logic_cells, p.available
+                            );
+                        } else {
+                            println!(
+                                "  `{}` does not fit: {} logic cells needed, {} available",
+                                p.variable, p.logic_cells, p.available
+                            );
+                        }
                     }
                     match (state.critical_ns(), state.slowest()) {
                         (Some(ns), Some(slowest)) => println!(
@@ -372,7 +379,9 @@ pub fn execute(bench: Bench, quiet: bool) -> Result<()> {
                             slowest.lut_levels,
                             state.tools
                         ),
-                        _ => println!("no time for the state: a variable does not fit"),
+                        _ => {
+                            println!("no time for the state: a variable was not placed and routed")
+                        }
                     }
                 }
                 figures.print_table();

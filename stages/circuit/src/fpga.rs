@@ -101,7 +101,8 @@ pub struct Placed {
     /// Of the part.
     pub available: u64,
     /// The critical path, register to register, in ns; none when it does
-    /// not fit.
+    /// not fit, or nextpnr did not route it within
+    /// [`PLACE_AND_ROUTE_LIMIT`].
     pub critical_ns: Option<f64>,
     /// Clocks from the input register's word to the level (0 when
     /// combinational: one clock period is the whole prediction).
@@ -333,8 +334,13 @@ pub fn place_and_route_files(
         "--quiet",
     ]);
     let log = format!("{top}_pnr.log");
-    tools::run_for("nextpnr-ice40", &args, dir, &log, PLACE_AND_ROUTE_LIMIT)
+    let ended = tools::run_for("nextpnr-ice40", &args, dir, &log, PLACE_AND_ROUTE_LIMIT)
         .map_err(|e| e.context(&format!("placing and routing `{variable}`")))?;
+    // Routing that does not converge in the time allowed: it fits, but has
+    // no critical path.
+    if ended == tools::Ended::Stopped {
+        return Ok(placed);
+    }
     let (logic_cells, mhz) = read_report(&dir.join(&report))?;
     placed.logic_cells = logic_cells;
     placed.critical_ns = Some(1000.0 / mhz);
@@ -352,8 +358,10 @@ pub const NEXTPNR_SEEDS: u64 = 1 << 31;
 
 /// How long one variable may take to place and route: a walk decoder's
 /// carry chains once kept nextpnr routing for over ten minutes; mapped
-/// without them the largest forests here take seconds.
-const PLACE_AND_ROUTE_LIMIT: std::time::Duration = std::time::Duration::from_secs(900);
+/// without them the largest forests here take seconds. A piecewise-linear
+/// model's largest outputs fill most of the part and their routing may
+/// not converge: past the limit the variable is reported unrouted.
+pub const PLACE_AND_ROUTE_LIMIT: std::time::Duration = std::time::Duration::from_secs(900);
 
 /// Logic cells used and the achieved clock (MHz) from nextpnr's
 /// `--report` JSON.
@@ -413,6 +421,14 @@ pub struct State {
     pub tools: String,
     /// Every learned variable, in the codebook's order.
     pub variables: Vec<Placed>,
+}
+
+impl Placed {
+    /// Whether its lookup tables and flip-flops fit the part (a variable
+    /// that fits but has no critical path was not routed in time).
+    pub fn fits(&self) -> bool {
+        self.logic_cells <= self.available
+    }
 }
 
 impl State {

@@ -163,13 +163,7 @@ pub(super) fn in_hardware(name: &str, routed: &Routed, gate_levels: u32, estimat
     let state = &routed.state;
     let n = state.variables.len();
     let time = state.critical_ns().map_or_else(
-        || {
-            let missing = state.variables.iter().filter(|p| p.critical_ns.is_none());
-            format!(
-                "does not fit: {} of its variables are too large",
-                missing.count()
-            )
-        },
+        || format!("has no time for a state: {}", unmeasured(state)),
         |ns| format!("predicts a state in {} ns", sig3(ns)),
     );
     format!(
@@ -194,16 +188,51 @@ pub(super) fn claim(ns: Option<f64>) -> &'static str {
     }
 }
 
-/// A sentence for each variable of `state` that does not fit its part.
+/// A sentence for each variable of `state` without a critical path: it
+/// does not fit its part, or nextpnr did not route it in time.
 pub(super) fn not_fitting(md: &mut String, state: &alnlab_circuit::fpga::State) {
     for p in state.variables.iter().filter(|p| p.critical_ns.is_none()) {
-        let _ = write!(
-            md,
-            "`{}` does not fit: it needs up to {} logic cells (its lookup tables and flip-flops), \
-             the part has {}. ",
-            p.variable, p.logic_cells, p.available
-        );
+        let _ = if p.fits() {
+            write!(
+                md,
+                "`{}` fits ({} of the part's {} logic cells) but nextpnr did not finish routing \
+                 it within {} minutes. ",
+                p.variable,
+                p.logic_cells,
+                p.available,
+                alnlab_circuit::fpga::PLACE_AND_ROUTE_LIMIT.as_secs() / 60
+            )
+        } else {
+            write!(
+                md,
+                "`{}` does not fit: it needs up to {} logic cells (its lookup tables and \
+                 flip-flops), the part has {}. ",
+                p.variable, p.logic_cells, p.available
+            )
+        };
     }
+}
+
+/// How many variables of `state` have no critical path, and why: "3 of
+/// its variables are too large for the part", "1 of its variables was not
+/// routed in time", or both.
+pub(super) fn unmeasured(state: &alnlab_circuit::fpga::State) -> String {
+    let missing = || state.variables.iter().filter(|p| p.critical_ns.is_none());
+    let large = missing().filter(|p| !p.fits()).count();
+    let unrouted = missing().filter(|p| p.fits()).count();
+    let mut parts = Vec::new();
+    if large > 0 {
+        parts.push(format!(
+            "{large} of its variables are too large for the part"
+        ));
+    }
+    if unrouted > 0 {
+        parts.push(format!(
+            "{unrouted} of its variables were not routed within {} minutes",
+            alnlab_circuit::fpga::PLACE_AND_ROUTE_LIMIT.as_secs() / 60
+        ));
+    }
+    parts.join(" and ")
 }
 
 /// A variant's CPU figures beside the FPGA's: ns per state on one thread.
@@ -344,13 +373,9 @@ pub(super) fn fpga_section(md: &mut String, routed: &Routed, gate_levels: u32, c
             slowest.lut_levels
         ),
         _ => format!(
-            "**The paper's \"nanoseconds\" is {}:** {} of {n} variables do not fit it.",
+            "**The paper's \"nanoseconds\" is {}:** {}.",
             claim(None),
-            state
-                .variables
-                .iter()
-                .filter(|p| p.critical_ns.is_none())
-                .count()
+            unmeasured(state)
         ),
     };
     let _ = writeln!(md, "{verdict}\n");
@@ -444,7 +469,10 @@ pub(super) mod tests {
             "{line}"
         );
         let line = in_hardware("gray", &routed(&[Some(8.5), None]), 21, 29);
-        assert!(line.contains("does not fit: 1 of its variables"), "{line}");
+        assert!(
+            line.contains("has no time for a state: 1 of its variables are too large"),
+            "{line}"
+        );
         assert!(line.contains("not measured on this part"), "{line}");
     }
 
@@ -457,7 +485,23 @@ pub(super) mod tests {
              flip-flops), the part has 7680"
         ));
         assert!(
-            md.contains("not measured on this part:** 1 of 2 variables do not fit"),
+            md.contains("not measured on this part:** 1 of its variables are too large"),
+            "{md}"
+        );
+        // One that fits but was not routed in time is told apart.
+        let mut unrouted = routed(&[Some(8.5), None]);
+        unrouted.state.variables[1].logic_cells = 7000;
+        let mut md = String::new();
+        fpga_section(&mut md, &unrouted, 14, &cpu());
+        assert!(
+            md.contains(
+                "`v.1.x` fits (7000 of the part's 7680 logic cells) but nextpnr did not finish \
+                 routing it within 15 minutes"
+            ),
+            "{md}"
+        );
+        assert!(
+            md.contains("1 of its variables were not routed within 15 minutes"),
             "{md}"
         );
     }

@@ -13,7 +13,7 @@ use alnlab_circuit::piecewise::{OutputFigures, TOLERANCE};
 use alnlab_circuit::routed::Routed;
 
 use super::Loaded;
-use super::circuit::{Cpu, claim, not_fitting};
+use super::circuit::{Cpu, claim, not_fitting, unmeasured};
 use super::format::{MdTable, sig3};
 
 /// The fastest bit-forest of `variants` placed and routed whole: its
@@ -96,14 +96,7 @@ pub(super) fn in_hardware(name: &str, fixed: &[OutputFigures], routed: &Routed) 
             sig3(1e3 / period)
         ),
         (Some(ns), None) => format!("predicts a state in {} ns between registers", sig3(ns)),
-        (None, _) => format!(
-            "does not fit: {} of its variables are too large for the part",
-            state
-                .variables
-                .iter()
-                .filter(|p| p.critical_ns.is_none())
-                .count()
-        ),
+        (None, _) => format!("has no time for a state: {}", unmeasured(state)),
     };
     format!(
         "**In hardware** (§5): `{name}`'s piecewise-linear model in fixed point (replicate 1), \
@@ -287,15 +280,10 @@ pub(super) fn section(
             slowest.lut_levels
         ),
         _ => format!(
-            "**The paper's \"nanoseconds\", for {}, is {}:** {} of {n} variables do not fit the \
-             part.",
+            "**The paper's \"nanoseconds\", for {}, is {}:** {}.",
             against_persistence(&e),
             claim(None),
-            state
-                .variables
-                .iter()
-                .filter(|p| p.critical_ns.is_none())
-                .count()
+            unmeasured(state)
         ),
     };
     let _ = writeln!(md, "{verdict}\n");
@@ -406,10 +394,10 @@ mod tests {
             md.contains("`v.1.x` does not fit: it needs up to 9000 logic cells"),
             "{md}"
         );
-        assert!(md.contains("for a model that does not beat persistence on these rows, is not measured on this part:** 1 of 2 variables do not fit"), "{md}");
+        assert!(md.contains("for a model that does not beat persistence on these rows, is not measured on this part:** 1 of its variables are too large for the part"), "{md}");
         let line = in_hardware("pw", &fixed, &routed);
         assert!(
-            line.contains("does not fit: 1 of its variables are too large"),
+            line.contains("has no time for a state: 1 of its variables are too large"),
             "{line}"
         );
     }
