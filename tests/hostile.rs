@@ -666,7 +666,7 @@ fn piecewise_linear_models_refuse_what_they_cannot_do() {
             .unwrap()
             .to_string()
     };
-    let edits: [(&str, &str, &str, &[&str]); 3] = [
+    let edits: [(&str, &str, &str, &[&str]); 4] = [
         (
             "controls given to a bit-forest",
             "model = \"piecewise-linear\"\n",
@@ -684,6 +684,12 @@ fn piecewise_linear_models_refuse_what_they_cannot_do() {
             "[test]\n",
             "[circuit]\nsynthesize = true\ninput_bits = 12\n\n[test]\n",
             &["input_bits", "weight_bits", "together"],
+        ),
+        (
+            "a weight of one bit",
+            "[test]\n",
+            "[circuit]\nsynthesize = true\ninput_bits = 12\nweight_bits = 1\n\n[test]\n",
+            &["weight_bits", "from 2 to 32 bits"],
         ),
     ];
     let mut cases: Vec<_> = edits
