@@ -68,12 +68,14 @@ fn rows_simulated(mapped: u64, all: u64) -> String {
     }
 }
 
-/// "beats" or "does not beat" persistence, on these rows.
+/// Whether the fixed-point model errs less than persistence on these rows
+/// — the mean errors of one replicate, not a verdict: the floating-point
+/// model's, with its interval across replicates, is the summary's.
 fn against_persistence(e: &Errors) -> &'static str {
     if e.fixed < e.persistence {
-        "a model that beats persistence on these rows"
+        "a model that errs less than persistence on these rows"
     } else {
-        "a model that does not beat persistence on these rows"
+        "a model that errs no less than persistence on these rows"
     }
 }
 
@@ -376,7 +378,7 @@ mod tests {
             md.contains("on the first 300 of the 8000 test rows"),
             "{md}"
         );
-        assert!(md.contains("for a model that beats persistence on these rows, is confirmed (under a microsecond):** a state in 110 ns"), "{md}");
+        assert!(md.contains("for a model that errs less than persistence on these rows, is confirmed (under a microsecond):** a state in 110 ns"), "{md}");
         let line = in_hardware("pw", &fixed, &both());
         assert!(line.contains("predicts a state in 110 ns between registers, and pipelined (20 clocks) 167 million states a second"), "{line}");
     }
@@ -394,7 +396,7 @@ mod tests {
             md.contains("`v.1.x` does not fit: it needs up to 9000 logic cells"),
             "{md}"
         );
-        assert!(md.contains("for a model that does not beat persistence on these rows, is not measured on this part:** 1 of its variables are too large for the part"), "{md}");
+        assert!(md.contains("for a model that errs no less than persistence on these rows, is not measured on this part:** 1 of its variables are too large for the part"), "{md}");
         let line = in_hardware("pw", &fixed, &routed);
         assert!(
             line.contains("has no time for a state: 1 of its variables are too large"),
