@@ -470,6 +470,32 @@ fn a_small_piecewise_linear_model_in_fixed_point_is_placed_routed_and_equals_its
         report.contains("is confirmed (under a microsecond):** a state in"),
         "{report}"
     );
+
+    // The bench's trade: the chosen widths' error is the stage's, and
+    // wider words cost more arithmetic.
+    let out = alnlab(
+        d,
+        &[
+            "-q",
+            "bench",
+            "circuit",
+            "--run",
+            "runs/piecewise",
+            "--widths",
+            "8x3,14x8",
+            "--json",
+        ],
+    );
+    assert!(out.status.success(), "{}", stderr(&out));
+    let bench: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let trade = bench["trade"].as_array().unwrap();
+    assert_eq!(trade.len(), 3, "{bench}");
+    assert!(trade[0]["widths"].is_null());
+    let mean = fixed.iter().map(|o| o.fixed_error).sum::<f64>() / fixed.len() as f64;
+    let chosen = trade[0]["fixed_error"].as_f64().unwrap();
+    assert!((chosen - mean).abs() < 1e-12, "{chosen} against {mean}");
+    let bits = |k: usize| trade[k]["arithmetic_bits"].as_u64().unwrap();
+    assert!(bits(1) < bits(2), "{bench}");
 }
 
 /// Killed while the tools run, alnlab takes them with it and leaves their
