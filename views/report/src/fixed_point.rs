@@ -91,10 +91,11 @@ pub(super) fn in_hardware(name: &str, fixed: &[OutputFigures], routed: &Routed) 
         state.critical_ns(),
         routed.pipelined.as_ref().and_then(pipelined),
     ) {
-        (Some(ns), Some((period, clocks, _))) => format!(
-            "predicts a state in {} ns between registers, and pipelined ({clocks} clocks) {} \
-             million states a second",
+        (Some(ns), Some((period, clocks, latency))) => format!(
+            "predicts a state in {} ns between registers, and pipelined (at most {clocks} \
+             clocks, a state in {} ns) {} million states a second",
             sig3(ns),
+            sig3(latency),
             sig3(1e3 / period)
         ),
         (Some(ns), None) => format!("predicts a state in {} ns between registers", sig3(ns)),
@@ -163,6 +164,7 @@ pub(super) fn section(
     };
     let state = &routed.state;
     let available = state.variables.first().map_or(0, |p| p.available);
+    let n = state.variables.len();
     let _ = writeln!(
         md,
         "**On an FPGA** ({}, {available} logic cells, no multipliers; {}; nextpnr seed {}). Each \
@@ -173,18 +175,22 @@ pub(super) fn section(
          output register (its latency the critical path from nextpnr's timing analysis at a 1 \
          MHz target, an upper bound for one seed), and pipelined, a register after every adder \
          and comparator (one state a clock). Each variable takes a part of its own, so a state \
-         waits for the slowest. Both mapped netlists — the ones placed, without delays — \
+         waits for the slowest: combinational, the slowest variable's path; pipelined, each \
+         variable at its own clock, the rate the slowest clock's and the latency the longest \
+         variable's (its clocks times its period). {} lookup tables over all {n} variables \
+         combinational. Both mapped netlists — the ones placed, without delays — \
          simulated by Icarus Verilog put out the fixed-point evaluator's level on {} for every \
          variable.\n",
         state.device.description(),
         state.tools,
         state.seed,
+        state.variables.iter().map(|p| p.luts).sum::<u64>(),
         rows_simulated(routed.rows_equal, fixed.first().map_or(0, |o| o.rows)),
     );
     let mut table = MdTable::new(&["predictor"]).numbers(&[
         "error (levels)",
         "lookup tables (largest variable)",
-        "ns per state",
+        "ns per state (latency)",
         "states per second",
     ]);
     let dash = || "—".to_string();
@@ -212,7 +218,7 @@ pub(super) fn section(
         let figures = pipelined(p);
         table.row(vec![
             format!(
-                "fixed point, pipelined ({} clocks; ns: its latency)",
+                "fixed point, pipelined (at most {} clocks)",
                 figures.map_or(0, |f| f.1)
             ),
             sig3(e.fixed),
@@ -363,7 +369,12 @@ mod tests {
         assert!(md.contains("| fixed point, combinational, on the Lattice iCE40 HX8K | 0.750 | 501 | 110 | 9.09 million |"), "{md}");
         // Pipelined: the slowest clock (6 ns) sets the rate; the latency is
         // the longest, 20 clocks of 6 ns.
-        assert!(md.contains("| fixed point, pipelined (20 clocks; ns: its latency) | 0.750 | 501 | 120 | 167 million |"), "{md}");
+        assert!(
+            md.contains(
+                "| fixed point, pipelined (at most 20 clocks) | 0.750 | 501 | 120 | 167 million |"
+            ),
+            "{md}"
+        );
         assert!(
             md.contains(
                 "| `strongest`'s bit-forest on the same part | — | — | 13.6 | 73.5 million |"
@@ -380,7 +391,7 @@ mod tests {
         );
         assert!(md.contains("for a model that errs less than persistence on these rows, is confirmed (under a microsecond):** a state in 110 ns"), "{md}");
         let line = in_hardware("pw", &fixed, &both());
-        assert!(line.contains("predicts a state in 110 ns between registers, and pipelined (20 clocks) 167 million states a second"), "{line}");
+        assert!(line.contains("predicts a state in 110 ns between registers, and pipelined (at most 20 clocks, a state in 120 ns) 167 million states a second"), "{line}");
     }
 
     #[test]
