@@ -107,6 +107,9 @@ pub struct Placed {
     /// Clocks from the input register's word to the level (0 when
     /// combinational: one clock period is the whole prediction).
     pub latency: u32,
+    /// The nextpnr seed of the placement routed (the first tried when
+    /// none was).
+    pub seed: u64,
 }
 
 /// The top module wrapping variable `v`'s predictor between registers.
@@ -310,42 +313,58 @@ pub fn place_and_route_files(
         available,
         critical_ns: None,
         latency: design.latency,
+        seed,
     };
     // A cell holds a lookup table and a flip-flop, but a shift register's
     // flip-flops have no table of their own to share one with.
     if luts + flip_flops > available {
         return Ok(placed);
     }
-    let report = format!("{top}_pnr.json");
-    let seed = seed.to_string();
-    let mut args: Vec<&str> = device.nextpnr_args().to_vec();
-    args.extend([
-        "--json",
-        &netlist,
-        "--seed",
-        &seed,
-        // A clock every design meets: the figure is what it achieves (and
-        // one that does not, over 1 µs, is still reported, not failed).
-        "--freq",
-        "1",
-        "--timing-allow-fail",
-        "--report",
-        &report,
-        "--quiet",
-    ]);
-    let log = format!("{top}_pnr.log");
-    let ended = tools::run_for("nextpnr-ice40", &args, dir, &log, PLACE_AND_ROUTE_LIMIT)
-        .map_err(|e| e.context(&format!("placing and routing `{variable}`")))?;
-    // Routing that does not converge in the time allowed: it fits, but has
-    // no critical path.
-    if ended == tools::Ended::Stopped {
-        return Ok(placed);
+    // nextpnr-ice40 0.4's router can stall on one placement and finish on
+    // another (omega_dot.2.z's pipelined form, 9 % of the part: 673 arcs
+    // ripped up and rerouted for over a million iterations with one seed,
+    // routed in seconds with the next): each attempt is limited, and the
+    // next one places with the next seed.
+    for attempt in 0..ROUTING_ATTEMPTS {
+        let seed = (seed + attempt) % NEXTPNR_SEEDS;
+        let report = format!("{top}_pnr.json");
+        let seed_text = seed.to_string();
+        let mut args: Vec<&str> = device.nextpnr_args().to_vec();
+        args.extend([
+            "--json",
+            &netlist,
+            "--seed",
+            &seed_text,
+            // A clock every design meets: the figure is what it achieves
+            // (and one that does not, over 1 µs, is still reported, not
+            // failed).
+            "--freq",
+            "1",
+            "--timing-allow-fail",
+            "--report",
+            &report,
+            "--quiet",
+        ]);
+        let log = format!("{top}_pnr.log");
+        let ended = tools::run_for("nextpnr-ice40", &args, dir, &log, ATTEMPT_LIMIT)
+            .map_err(|e| e.context(&format!("placing and routing `{variable}`")))?;
+        if ended == tools::Ended::Finished {
+            let (logic_cells, mhz) = read_report(&dir.join(&report))?;
+            placed.logic_cells = logic_cells;
+            placed.critical_ns = Some(1000.0 / mhz);
+            placed.seed = seed;
+            return Ok(placed);
+        }
     }
-    let (logic_cells, mhz) = read_report(&dir.join(&report))?;
-    placed.logic_cells = logic_cells;
-    placed.critical_ns = Some(1000.0 / mhz);
+    // Routing that converged with no seed in the time allowed: it fits,
+    // but has no critical path.
     Ok(placed)
 }
+
+/// Placements tried before a variable is reported unrouted.
+pub const ROUTING_ATTEMPTS: u64 = 3;
+/// How long one placement may take to route.
+const ATTEMPT_LIMIT: std::time::Duration = std::time::Duration::from_secs(300);
 
 /// Yosys' simulation models of the iCE40's cells, in its data folder.
 pub const ICE40_MODELS: &str = "ice40/cells_sim.v";
@@ -356,12 +375,12 @@ pub const ICE40_DEFINES: &[&str] = &["NO_ICE40_DEFAULT_ASSIGNMENTS"];
 /// nextpnr reads its seed as a C `int`: seeds are taken modulo 2³¹.
 pub const NEXTPNR_SEEDS: u64 = 1 << 31;
 
-/// How long one variable may take to place and route: a walk decoder's
-/// carry chains once kept nextpnr routing for over ten minutes; mapped
-/// without them the largest forests here take seconds. A piecewise-linear
-/// model's largest outputs fill most of the part and their routing may
-/// not converge: past the limit the variable is reported unrouted.
-pub const PLACE_AND_ROUTE_LIMIT: std::time::Duration = std::time::Duration::from_secs(900);
+/// How long one variable may take to place and route, over all its
+/// attempts: a walk decoder's carry chains once kept nextpnr routing for
+/// over ten minutes; mapped without them the largest forests here take
+/// seconds. Past it the variable is reported unrouted.
+pub const PLACE_AND_ROUTE_LIMIT: std::time::Duration =
+    std::time::Duration::from_secs(ATTEMPT_LIMIT.as_secs() * ROUTING_ATTEMPTS);
 
 /// Logic cells used and the achieved clock (MHz) from nextpnr's
 /// `--report` JSON.
@@ -415,7 +434,8 @@ pub struct State {
     pub device: Device,
     /// How the predictors are built.
     pub form: Form,
-    /// nextpnr's seed.
+    /// nextpnr's first seed (a variable whose placement did not route
+    /// takes the next: [`Placed::seed`]).
     pub seed: u64,
     /// Yosys' and nextpnr's versions.
     pub tools: String,
@@ -490,6 +510,7 @@ mod tests {
             carries: 0,
             flip_flops: 2,
             latency: 0,
+            seed: 1,
             critical_ns: ns,
         };
         let mut state = State {

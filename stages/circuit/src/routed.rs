@@ -5,8 +5,8 @@
 //! flip-flops, logic cells used (or needed) and available, the critical
 //! path in ns (none when the variable does not fit), the clocks from
 //! inputs to level (0 when combinational), the test rows on which the
-//! mapped netlist equalled the software, the device, nextpnr's seed and
-//! the tools; no rows when the stage placed nothing (`[circuit] fpga`
+//! mapped netlist equalled the software, the device, the nextpnr seed of
+//! the placement routed and the tools; no rows when the stage placed nothing (`[circuit] fpga`
 //! unset).
 
 use std::path::Path;
@@ -144,6 +144,7 @@ pub fn read(path: &Path) -> Result<Option<Routed>> {
             states.push(State {
                 device,
                 form,
+                // The first variable's seed is the first tried.
                 seed: seeds[r],
                 tools: tools.clone(),
                 variables: Vec::new(),
@@ -159,6 +160,7 @@ pub fn read(path: &Path) -> Result<Option<Routed>> {
             available: available[r],
             critical_ns: critical.is_valid(r).then(|| critical.value(r)),
             latency: latency[r],
+            seed: seeds[r],
         });
     }
     let mut states = states.into_iter();
@@ -192,6 +194,7 @@ mod tests {
             carries: 40,
             flip_flops: 60,
             latency: 0,
+            seed: 1991,
         };
         let state = State {
             device: Device::Ice40Hx8k,

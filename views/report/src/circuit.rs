@@ -256,7 +256,7 @@ pub(super) fn fpga_section(md: &mut String, routed: &Routed, gate_levels: u32, c
     let available = state.variables.first().map_or(0, |p| p.available);
     let _ = writeln!(
         md,
-        "**On an FPGA** ({}, {available} logic cells; {}; nextpnr seed {}). Each variable's \
+        "**On an FPGA** ({}, {available} logic cells; {}; nextpnr seed {}, the next of at most {} when a placement's routing stalls for {} minutes). Each variable's \
          predictor — its trees, votes and decoder — sits between an input register (filled bit \
          by bit from one pin: a state's code bits outnumber the part's pins) and an output \
          register, on a part of its own: {n} parts side by side, so a state takes the slowest \
@@ -273,6 +273,10 @@ pub(super) fn fpga_section(md: &mut String, routed: &Routed, gate_levels: u32, c
         state.device.description(),
         state.tools,
         state.seed,
+        alnlab_circuit::fpga::ROUTING_ATTEMPTS,
+        alnlab_circuit::fpga::PLACE_AND_ROUTE_LIMIT.as_secs()
+            / 60
+            / alnlab_circuit::fpga::ROUTING_ATTEMPTS,
         routed.rows_equal
     );
     let mut table = MdTable::new(&["predictor"]).numbers(&[
@@ -403,6 +407,7 @@ pub(super) mod tests {
                 carries: 40,
                 flip_flops: 30,
                 latency: 0,
+                seed: 7,
             })
             .collect();
         Routed {

@@ -167,7 +167,7 @@ pub(super) fn section(
     let n = state.variables.len();
     let _ = writeln!(
         md,
-        "**On an FPGA** ({}, {available} logic cells, no multipliers; {}; nextpnr seed {}). Each \
+        "**On an FPGA** ({}, {available} logic cells, no multipliers; {}; nextpnr seed {}, the next of at most {} when a placement's routing stalls for {} minutes). Each \
          variable's predictor is its pieces as shifts and adds of its input words (a weight's \
          signed digits, summed by a balanced tree of adders on the part's carry chains), its \
          MIN/MAX tree as comparators and multiplexers, and the answer added to the current word, \
@@ -184,6 +184,10 @@ pub(super) fn section(
         state.device.description(),
         state.tools,
         state.seed,
+        alnlab_circuit::fpga::ROUTING_ATTEMPTS,
+        alnlab_circuit::fpga::PLACE_AND_ROUTE_LIMIT.as_secs()
+            / 60
+            / alnlab_circuit::fpga::ROUTING_ATTEMPTS,
         state.variables.iter().map(|p| p.luts).sum::<u64>(),
         rows_simulated(routed.rows_equal, fixed.first().map_or(0, |o| o.rows)),
     );
