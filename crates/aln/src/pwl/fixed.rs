@@ -84,7 +84,7 @@ pub struct FixedOutput {
     /// The tree's nodes (root first), pieces indexing `coefficients`.
     pub nodes: Vec<Node>,
     /// The codebook's levels of the variable.
-    pub levels: u16,
+    pub levels: u32,
     /// For an angle that wraps, a turn at the sum's scale.
     pub turn: Option<i64>,
     /// Bits of every piece's value (signed), from the words' ranges.
@@ -102,13 +102,39 @@ pub struct FixedOutput {
 
 /// `v` rounded to an integer of at most `bits` significant signed bits:
 /// a mantissa of `bits` bits, shifted.
+/// `v` must be below 2^62 in magnitude ([`FixedOutput::new`] checks).
 fn significant(v: f64, bits: u32) -> i64 {
     let top = ((1i64 << (bits - 1)) - 1) as f64;
     let mut shift = 0;
-    while (v / (1u64 << shift) as f64).round().abs() > top {
+    while shift < 62 && (v / (1u64 << shift) as f64).round().abs() > top {
         shift += 1;
     }
     ((v / (1u64 << shift) as f64).round() as i64) << shift
+}
+
+/// The least and greatest of [`product`]`(w, x, dropped)` over words `x`
+/// in [lo, hi]: each signed digit's shifted copy is monotone in `x`, their
+/// sum need not be (floored copies can move against the weight's sign),
+/// so each digit is bounded at the word's ends apart.
+fn product_bounds(w: i64, (lo, hi): (i64, i64), dropped: u32) -> (i128, i128) {
+    signed_digits(w)
+        .into_iter()
+        .fold((0, 0), |(least, most), (k, negative)| {
+            let by = k as i32 - dropped as i32;
+            let term = |x: i64| -> i128 {
+                if by >= 0 {
+                    i128::from(x) << by
+                } else {
+                    i128::from(x >> (-by).min(63))
+                }
+            };
+            let (a, b) = (term(lo), term(hi));
+            if negative {
+                (least - b, most - a)
+            } else {
+                (least + a, most + b)
+            }
+        })
 }
 
 /// Signed digits of `w` (least significant first: the bit and whether it
@@ -273,6 +299,18 @@ impl FixedOutput {
             weight_frac += 1;
         }
         let weight_frac = (weight_frac + GUARD_BITS).min(MAX_WEIGHT_FRAC);
+        // A weight so large that its products with a word leave 64-bit
+        // integers is no circuit.
+        let reach = largest * 2f64.powi((input_bits + SUM_GUARD_BITS) as i32);
+        let bias_reach = pieces.iter().map(|(b, _)| b.abs()).fold(0.0, f64::max)
+            * 2f64.powi((input_bits + SUM_GUARD_BITS) as i32);
+        if !(reach < 2f64.powi(60) && bias_reach < 2f64.powi(60)) {
+            return Err(format!(
+                "a weight or bias of `{}` (up to {largest:.3e} level spacings per input level) is \
+                 too large for {input_bits}-bit words in 62-bit sums",
+                learned[reads.variable].variable
+            ));
+        }
         // Products keep SUM_GUARD fractional bits below the inputs' own:
         // finer ones are dropped term by term (each shifted term floored).
         let dropped = weight_frac.saturating_sub(SUM_GUARD_BITS);
@@ -293,9 +331,11 @@ impl FixedOutput {
         for piece in coefficients.chunks_exact(reads.inputs.len() + 1) {
             let (mut p_lo, mut p_hi) = (piece[0] as i128, piece[0] as i128);
             for &w in &piece[1..] {
-                let (a, b) = (product(w, word.0, dropped), product(w, word.1, dropped));
-                p_lo += i128::from(a.min(b));
-                p_hi += i128::from(a.max(b));
+                // Sums wrap in the circuit's width: only the piece's value
+                // must fit, not every partial sum.
+                let (a, b) = product_bounds(w, word, dropped);
+                p_lo += a;
+                p_hi += b;
             }
             lo = lo.min(p_lo);
             hi = hi.max(p_hi);
@@ -334,7 +374,7 @@ impl FixedOutput {
             dropped,
             coefficients,
             nodes: tree.nodes().to_vec(),
-            levels: learned[reads.variable].quantizer.levels as u16,
+            levels: learned[reads.variable].quantizer.levels as u32,
             turn,
             piece_bits,
             sum_bits,
@@ -626,6 +666,27 @@ mod tests {
     }
 
     #[test]
+    fn product_bounds_hold_every_word_though_a_product_is_not_monotone() {
+        // The reviewer's case: −43 with twelve bits dropped on 8-bit words
+        // is −1 at both ends and −2 at −64.
+        assert_eq!(product(-43, -128, 12), -1);
+        assert_eq!(product(-43, 127, 12), -1);
+        assert_eq!(product(-43, -64, 12), -2);
+        for w in [-300i64, -43, -7, 5, 43, 1000] {
+            for dropped in [0, 3, 7, 12] {
+                let (lo, hi) = product_bounds(w, (-128, 127), dropped);
+                for x in -128..=127 {
+                    let p = i128::from(product(w, x, dropped));
+                    assert!(
+                        lo <= p && p <= hi,
+                        "{w}·{x} >> {dropped}: {p} not in [{lo}, {hi}]"
+                    );
+                }
+            }
+        }
+    }
+
+    #[test]
     fn bits_and_words() {
         assert_eq!(significant(300.7, 8), 300);
         assert_eq!(significant(-1000.0, 4), -1024);
@@ -780,6 +841,21 @@ mod tests {
         })
         .unwrap_err();
         assert!(e.contains("weight_bits = 1"), "{e}");
+        // A weight so large its products leave 64-bit integers is refused,
+        // not wrapped.
+        let huge = [Tree::affine(0.0, &[1e30, 0.0]), trees[1].clone()];
+        let e = FixedModel::new(
+            &huge,
+            &reads,
+            &learned,
+            &cols,
+            &[Widths {
+                input_bits: 12,
+                weight_bits: 8,
+            }; 2],
+        )
+        .unwrap_err();
+        assert!(e.contains("too large for 12-bit words"), "{e}");
         // A steep weight beside a shallow one: each keeps 8 significant bits.
         let steep = [
             Tree::affine(0.0, &[300.7 / 0.08, 0.5123 / 0.08]),
