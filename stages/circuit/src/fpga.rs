@@ -364,7 +364,7 @@ pub fn place_and_route_files(
 /// Placements tried before a variable is reported unrouted.
 pub const ROUTING_ATTEMPTS: u64 = 3;
 /// How long one placement may take to route.
-const ATTEMPT_LIMIT: std::time::Duration = std::time::Duration::from_secs(300);
+pub const ATTEMPT_LIMIT: std::time::Duration = std::time::Duration::from_secs(300);
 
 /// Yosys' simulation models of the iCE40's cells, in its data folder.
 pub const ICE40_MODELS: &str = "ice40/cells_sim.v";

@@ -274,9 +274,7 @@ pub(super) fn fpga_section(md: &mut String, routed: &Routed, gate_levels: u32, c
         state.tools,
         state.seed,
         alnlab_circuit::fpga::ROUTING_ATTEMPTS,
-        alnlab_circuit::fpga::PLACE_AND_ROUTE_LIMIT.as_secs()
-            / 60
-            / alnlab_circuit::fpga::ROUTING_ATTEMPTS,
+        alnlab_circuit::fpga::ATTEMPT_LIMIT.as_secs() / 60,
         routed.rows_equal
     );
     let mut table = MdTable::new(&["predictor"]).numbers(&[

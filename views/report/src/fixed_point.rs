@@ -185,9 +185,7 @@ pub(super) fn section(
         state.tools,
         state.seed,
         alnlab_circuit::fpga::ROUTING_ATTEMPTS,
-        alnlab_circuit::fpga::PLACE_AND_ROUTE_LIMIT.as_secs()
-            / 60
-            / alnlab_circuit::fpga::ROUTING_ATTEMPTS,
+        alnlab_circuit::fpga::ATTEMPT_LIMIT.as_secs() / 60,
         state.variables.iter().map(|p| p.luts).sum::<u64>(),
         rows_simulated(routed.rows_equal, fixed.first().map_or(0, |o| o.rows)),
     );
