@@ -1,12 +1,14 @@
 //! The external programs: Yosys (synthesis), Icarus Verilog (`iverilog`,
-//! `vvp`: simulation) and nextpnr-ice40 (place and route). A missing
-//! program is an error that says how to install it; a failing one, an error
-//! with the end of what it printed. Each is started so that it ends with
-//! alnlab: killed, alnlab leaves no tool running on.
+//! `vvp`: simulation), Verilator (fast simulation of mapped netlists, which
+//! runs make and a C++ compiler) and nextpnr-ice40 (place and route). A
+//! missing program is an error that says how to install it; a failing one,
+//! an error with the end of what it printed. Each is started so that it
+//! ends with alnlab, the programs it starts with it: killed, alnlab leaves
+//! nothing running on.
 
 use std::fs::File;
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output, Stdio};
+use std::process::{Child, Command, Output, Stdio};
 use std::time::{Duration, Instant};
 
 use alnlab_common::{Error, Result};
@@ -16,30 +18,42 @@ fn install(program: &str) -> &'static str {
     if program.starts_with("nextpnr") {
         "place and route needs nextpnr-ice40 on PATH (Debian, Ubuntu: `apt-get install \
          nextpnr-ice40`)"
+    } else if program == "verilator" {
+        "simulating a mapped netlist needs Verilator, make and a C++ compiler on PATH (Debian, \
+         Ubuntu: `apt-get install verilator make g++`)"
     } else {
         "the circuit check needs Yosys and Icarus Verilog on PATH (Debian, Ubuntu: `apt-get \
          install yosys iverilog`)"
     }
 }
 
+/// The exit status coreutils' `timeout` gives when it could not start its
+/// command: not found.
+#[cfg(target_os = "linux")]
+const NOT_FOUND: i32 = 127;
+
 /// A command for `program` working in `dir`, its own temporary files
-/// (Yosys' for ABC) there too, that the kernel kills when the thread that
-/// started it ends — alnlab's threads live as long as alnlab, so a killed
-/// alnlab takes its tools with it (Linux; elsewhere a tool runs on to its
-/// end).
+/// (Yosys' for ABC) there too, that ends with alnlab (Linux; elsewhere a
+/// tool runs on to its end). Some programs start others — Yosys runs ABC,
+/// Verilator make and the compiler — which a signal to the program alone
+/// would orphan; so the program runs under coreutils' `timeout` (with no
+/// limit), which puts it in a process group of its own and passes a
+/// termination on to the whole group, killing what is left a second
+/// later. The kernel sends `timeout` that termination when the thread that
+/// started it ends — alnlab's threads live as long as alnlab.
 fn command(program: &str, dir: &Path) -> Command {
-    let mut command = Command::new(program);
-    command.current_dir(dir).env("TMPDIR", dir);
     #[cfg(target_os = "linux")]
-    {
+    let mut command = {
         use std::os::unix::process::CommandExt;
+        let mut command = Command::new("timeout");
+        command.args(["--kill-after=1", "0", program]);
         let parent = std::process::id() as libc::pid_t;
         // SAFETY: between fork and exec the closure calls only prctl,
         // getppid and _exit, which are async-signal-safe, and allocates
         // nothing.
         unsafe {
             command.pre_exec(move || {
-                if libc::prctl(libc::PR_SET_PDEATHSIG, libc::SIGKILL) != 0 {
+                if libc::prctl(libc::PR_SET_PDEATHSIG, libc::SIGTERM) != 0 {
                     return Err(std::io::Error::last_os_error());
                 }
                 // alnlab died before the signal was asked for.
@@ -49,25 +63,61 @@ fn command(program: &str, dir: &Path) -> Command {
                 Ok(())
             });
         }
-    }
+        command
+    };
+    #[cfg(not(target_os = "linux"))]
+    let mut command = Command::new(program);
+    command.current_dir(dir).env("TMPDIR", dir);
     command
+}
+
+/// Stops `child` (a [`command`]) and everything it started, and reaps it.
+fn stop(child: &mut Child) {
+    #[cfg(target_os = "linux")]
+    {
+        // `timeout` leads its own process group: its id is the group's.
+        // SAFETY: killpg only sends a signal.
+        unsafe {
+            libc::killpg(child.id() as libc::pid_t, libc::SIGKILL);
+        }
+    }
+    let _ = child.kill();
+    let _ = child.wait();
+}
+
+/// Whether `status` says `program` (run by [`command`]) was not found.
+fn not_found(status: std::process::ExitStatus) -> bool {
+    #[cfg(target_os = "linux")]
+    return status.code() == Some(NOT_FOUND);
+    #[cfg(not(target_os = "linux"))]
+    {
+        let _ = status;
+        false
+    }
+}
+
+/// The error for a `program` that was not found: how to install it.
+fn missing(program: &str) -> Error {
+    Error::Invalid(format!("`{program}` was not found: {}", install(program)))
 }
 
 /// Runs `program` with `args` in `dir` to its end; a missing program is an
 /// error that says how to install it.
 fn spawn(program: &str, args: &[&str], dir: &Path) -> Result<Output> {
-    command(program, dir)
+    let output = command(program, dir)
         .args(args)
         .output()
-        .map_err(|e| not_started(program, e))
+        .map_err(|e| not_started(program, e))?;
+    if not_found(output.status) {
+        return Err(missing(program));
+    }
+    Ok(output)
 }
 
 /// Why `program` did not start: missing (and how to install it), or else.
 fn not_started(program: &str, e: std::io::Error) -> Error {
     match e.kind() {
-        std::io::ErrorKind::NotFound => {
-            Error::Invalid(format!("`{program}` was not found: {}", install(program)))
-        }
+        std::io::ErrorKind::NotFound => missing(program),
         _ => Error::io(Path::new(program), e),
     }
 }
@@ -139,9 +189,9 @@ pub fn run_for(
     let said = || std::fs::read_to_string(&path).unwrap_or_default();
     match waited {
         Ok(Some(status)) if status.success() => Ok(Ended::Finished),
+        Ok(Some(status)) if not_found(status) => Err(missing(program)),
         Ok(None) => {
-            let _ = child.kill();
-            let _ = child.wait();
+            stop(&mut child);
             Ok(Ended::Stopped)
         }
         Ok(Some(status)) => Err(failed(
@@ -154,8 +204,7 @@ pub fn run_for(
         Err(why) => {
             // Stopped and reaped whatever it was doing (an error here means
             // it has ended already).
-            let _ = child.kill();
-            let _ = child.wait();
+            stop(&mut child);
             Err(failed(program, args, dir, &why, &said()))
         }
     }
@@ -259,5 +308,36 @@ mod tests {
         .unwrap_err()
         .to_string();
         assert!(error.contains("`no-such-tool` was not found"), "{error}");
+        let error = run("no-such-tool", &[], dir.path())
+            .unwrap_err()
+            .to_string();
+        assert!(error.contains("`no-such-tool` was not found"), "{error}");
+    }
+
+    #[cfg(target_os = "linux")]
+    #[test]
+    fn a_program_stopped_at_its_limit_takes_what_it_started_with_it() {
+        let dir = tempfile::tempdir().unwrap();
+        let ended = run_for(
+            "sh",
+            &["-c", "sleep 30 & echo $! > started; sleep 30"],
+            dir.path(),
+            "s.log",
+            Duration::from_millis(300),
+        )
+        .unwrap();
+        assert_eq!(ended, Ended::Stopped);
+        let started = std::fs::read_to_string(dir.path().join("started")).unwrap();
+        let proc = Path::new("/proc").join(started.trim());
+        let start = Instant::now();
+        // Gone, or a zombie until init reaps it.
+        let alive = || {
+            std::fs::read_to_string(proc.join("stat"))
+                .is_ok_and(|stat| !stat.split(") ").nth(1).unwrap_or("").starts_with('Z'))
+        };
+        while alive() && start.elapsed() < Duration::from_secs(5) {
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        assert!(!alive(), "the program's own child ran on");
     }
 }
