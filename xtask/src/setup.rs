@@ -39,6 +39,16 @@ const PROGRAMS: &[Program] = &[
         needed_by: "for placing and routing circuits on an FPGA",
     },
     Program {
+        command: "verilator",
+        package: "verilator",
+        needed_by: "for simulating mapped netlists of piecewise-linear circuits",
+    },
+    Program {
+        command: "make",
+        package: "make",
+        needed_by: "for Verilator's builds",
+    },
+    Program {
         command: "chromium",
         package: "chromium",
         needed_by: "for the reports test, a headless browser",

@@ -676,9 +676,16 @@ mod tests {
                 let out = format!("out_{module}.txt");
                 let tb = datapath.testbench(&module, form, rows.len(), &inputs, &out);
                 std::fs::write(dir.path().join(&bench), tb).unwrap();
-                let got =
-                    crate::simulate::run_bench(&bench, &[file], &[], &out, rows.len(), dir.path())
-                        .unwrap();
+                let got = crate::simulate::run_bench(
+                    crate::simulate::Simulator::Icarus,
+                    &bench,
+                    &[file],
+                    &[],
+                    &out,
+                    rows.len(),
+                    dir.path(),
+                )
+                .unwrap();
                 assert_eq!(got, expected, "case {case}, {form:?}");
             }
             if case == 1 {

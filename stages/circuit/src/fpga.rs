@@ -437,7 +437,8 @@ pub struct State {
     /// nextpnr's first seed (a variable whose placement did not route
     /// takes the next: [`Placed::seed`]).
     pub seed: u64,
-    /// Yosys' and nextpnr's versions.
+    /// Yosys' and nextpnr's versions (and Verilator's, which simulated a
+    /// piecewise-linear model's mapped netlists).
     pub tools: String,
     /// Every learned variable, in the codebook's order.
     pub variables: Vec<Placed>,

@@ -10,7 +10,9 @@
 //! - [`synth`]: synthesis by Yosys to two-input gates and inverters; cell
 //!   counts and the longest path in gate levels, split into trees, votes and
 //!   decoding.
-//! - [`simulate`]: the circuit run by Icarus Verilog on rows of levels.
+//! - [`simulate`]: the circuit run on rows of levels by Icarus Verilog, or
+//!   by Verilator (a mapped piecewise-linear netlist, thousands of lookup
+//!   tables).
 //! - [`fpga`]: each variable's predictor mapped onto an iCE40 FPGA's lookup
 //!   tables, placed and routed between registers, its critical path in ns
 //!   from timing analysis.
@@ -30,9 +32,9 @@
 //! `fpga.parquet` when `[circuit] fpga` names a device; scratch files go
 //! into a folder under the stage's output folder, removed when it ends
 //! (a killed run's is removed with the unfinished output by the next); Yosys, Icarus
-//! Verilog and nextpnr-ice40 are external programs (Debian: `apt-get
-//! install yosys iverilog nextpnr-ice40`), which [`tools`] finds and names
-//! when they are missing.
+//! Verilog, nextpnr-ice40 and Verilator are external programs (Debian:
+//! `apt-get install yosys iverilog nextpnr-ice40 verilator`), which
+//! [`tools`] finds and names when they are missing.
 
 pub mod bench;
 pub mod check;
@@ -84,8 +86,8 @@ pub struct Params {
     /// The test rows to simulate, the first ones (default: all). A
     /// piecewise-linear model's circuits as written are simulated on every
     /// test row regardless; this bounds the gate-level simulation of their
-    /// mapped netlists, which Icarus Verilog takes a tenth of a second a
-    /// row for on a few thousand lookup tables.
+    /// mapped netlists (by Verilator, a second or two for 8000 rows once
+    /// compiled).
     pub rows: Option<Count>,
     /// Also map every variable onto this FPGA (`"ice40-hx8k"`), place and
     /// route it between registers (nextpnr-ice40, seeded by the experiment

@@ -15,7 +15,7 @@ use rayon::prelude::*;
 
 use crate::datapath::{Datapath, Form, module_name};
 use crate::fpga::{self, Design, Device, Placed};
-use crate::simulate::run_bench;
+use crate::simulate::{Simulator, run_bench};
 use crate::tools;
 
 /// The rows a piecewise-linear circuit is measured on: the learned
@@ -139,8 +139,8 @@ pub fn fixed_model<'t>(
 /// folder) — each must put out the evaluator's level on every test row —
 /// and, with `fpga` (a device and nextpnr's seed), places and routes each
 /// and holds its mapped netlist to the first `mapped_rows` test rows (all
-/// when none: a gate-level simulation of thousands of lookup tables takes
-/// Icarus Verilog a tenth of a second a row).
+/// when none), simulated by Verilator: Icarus Verilog takes a tenth of a
+/// second a row on thousands of lookup tables.
 pub fn measure(
     trained: &Trained,
     rows: &Rows,
@@ -152,6 +152,16 @@ pub fn measure(
 ) -> Result<Measured> {
     let (model, predictor) = fixed_model(trained, rows, widths, TOLERANCE)?;
     tools::versions()?;
+    // Found (or their absence told) before hours of work.
+    let tool_versions = fpga
+        .map(|_| -> Result<String> {
+            Ok(format!(
+                "{}; {}",
+                fpga::tool_versions()?,
+                tools::version("verilator")?
+            ))
+        })
+        .transpose()?;
     let fpga = fpga.map(|(device, seed)| (device, seed % fpga::NEXTPNR_SEEDS));
     let cell_models = fpga
         .map(|_| tools::yosys_data(fpga::ICE40_MODELS))
@@ -211,7 +221,6 @@ pub fn measure(
             Ok((figures, placed))
         })
         .collect::<Result<_>>()?;
-    let tool_versions = fpga.map(|_| fpga::tool_versions()).transpose()?;
     let (outputs, placed): (Vec<_>, Vec<_>) = measured.into_iter().unzip();
     let placed = fpga.zip(tool_versions).map(|((device, seed), tools)| {
         let mut by_form = [Vec::new(), Vec::new()];
@@ -281,7 +290,14 @@ fn circuits(
         };
         let file = format!("{module}.v");
         write(dir, &file, &datapath.verilog(&module, variable, form))?;
-        let mut netlists = vec![("rtl", vec![file.clone()], &[][..], rows, &inputs)];
+        let mut netlists = vec![(
+            "rtl",
+            Simulator::Icarus,
+            vec![file.clone()],
+            &[][..],
+            rows,
+            &inputs,
+        )];
         if let Some((device, seed, models, _)) = fpga {
             let top = format!("fpga_{module}");
             let mut ports: Vec<(String, usize)> = (0..out.inputs.len())
@@ -316,13 +332,14 @@ fn circuits(
             placed.push(fpga::place_and_route_files(&design, device, seed, dir)?);
             netlists.push((
                 "mapped",
+                Simulator::Verilator,
                 vec![fpga::mapped_netlist(&top), models.to_string()],
                 fpga::ICE40_DEFINES,
                 mapped_rows,
                 &mapped_inputs,
             ));
         }
-        for (tag, sources, defines, rows, inputs) in netlists {
+        for (tag, simulator, sources, defines, rows, inputs) in netlists {
             if rows == 0 {
                 continue;
             }
@@ -333,7 +350,7 @@ fn circuits(
                 &bench,
                 &datapath.testbench(&module, form, rows, inputs, &output),
             )?;
-            let got = run_bench(&bench, &sources, defines, &output, rows, dir)?;
+            let got = run_bench(simulator, &bench, &sources, defines, &output, rows, dir)?;
             if let Some(r) = (0..rows).find(|&r| got[r] != expected[r]) {
                 return Err(Error::Corrupt(format!(
                     "the {tag} {} circuit of `{variable}` puts out level {} on test row {r}, the \

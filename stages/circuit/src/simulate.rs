@@ -133,13 +133,25 @@ pub fn run(
     );
     let bench = format!("tb_{tag}_{}.v", c.ident);
     write(&dir.join(&bench), &tb)?;
-    run_bench(&bench, sources, defines, &out, rows, dir)
+    run_bench(Simulator::Icarus, &bench, sources, defines, &out, rows, dir)
+}
+
+/// What simulates a testbench.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Simulator {
+    /// Icarus Verilog: event-driven, compiles in a blink; a gate-level
+    /// netlist of thousands of lookup tables runs a dozen rows a second.
+    Icarus,
+    /// Verilator: compiled to C++ first (seconds, tens of them for a large
+    /// netlist), then thousands of rows a second at any size.
+    Verilator,
 }
 
 /// Compiles the testbench `bench` (module `tb`) with `sources` and
-/// `defines` (Icarus Verilog, in `dir`), runs it and reads the `rows`
+/// `defines` (by `simulator`, in `dir`), runs it and reads the `rows`
 /// levels it writes to `out`, one decimal line a row.
 pub fn run_bench(
+    simulator: Simulator,
     bench: &str,
     sources: &[String],
     defines: &[&str],
@@ -147,14 +159,46 @@ pub fn run_bench(
     rows: usize,
     dir: &Path,
 ) -> Result<Vec<u16>> {
-    let compiled = format!("{}.vvp", bench.trim_end_matches(".v"));
+    let stem = bench.trim_end_matches(".v");
     let defines: Vec<String> = defines.iter().map(|d| format!("-D{d}")).collect();
-    let mut args = vec!["-g2005", "-o", compiled.as_str(), "-s", "tb"];
-    args.extend(defines.iter().map(String::as_str));
-    args.extend(sources.iter().map(String::as_str));
-    args.push(bench);
-    tools::run("iverilog", &args, dir)?;
-    tools::run("vvp", &["-n", &compiled], dir)?;
+    match simulator {
+        Simulator::Icarus => {
+            let compiled = format!("{stem}.vvp");
+            let mut args = vec!["-g2005", "-o", compiled.as_str(), "-s", "tb"];
+            args.extend(defines.iter().map(String::as_str));
+            args.extend(sources.iter().map(String::as_str));
+            args.push(bench);
+            tools::run("iverilog", &args, dir)?;
+            tools::run("vvp", &["-n", &compiled], dir)?;
+        }
+        Simulator::Verilator => {
+            let build = format!("obj_{stem}");
+            // One compiler at a time (the stage runs variables side by
+            // side), unoptimised: the compile is most of the time.
+            let mut args = vec![
+                "--binary",
+                "-j",
+                "1",
+                "-Wno-fatal",
+                "-Wno-lint",
+                "-Wno-style",
+                "-MAKEFLAGS",
+                "OPT_FAST=-O0 OPT_SLOW=-O0 OPT_GLOBAL=-O0",
+                "--top-module",
+                "tb",
+                "--Mdir",
+                build.as_str(),
+                "-o",
+                "tb",
+            ];
+            args.extend(defines.iter().map(String::as_str));
+            args.extend(sources.iter().map(String::as_str));
+            args.push(bench);
+            tools::run("verilator", &args, dir)?;
+            let binary = dir.join(&build).join("tb");
+            tools::run(&binary.to_string_lossy(), &[], dir)?;
+        }
+    }
     let path = dir.join(out);
     let text = std::fs::read_to_string(&path).map_err(|e| Error::io(&path, e))?;
     let levels: Vec<u16> = text

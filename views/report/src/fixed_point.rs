@@ -179,7 +179,7 @@ pub(super) fn section(
          variable at its own clock, the rate the slowest clock's and the latency the longest \
          variable's (its clocks times its period). {} lookup tables over all {n} variables \
          combinational. Both mapped netlists — the ones placed, without delays — \
-         simulated by Icarus Verilog put out the fixed-point evaluator's level on {} for every \
+         simulated by Verilator put out the fixed-point evaluator's level on {} for every \
          variable.\n",
         state.device.description(),
         state.tools,
