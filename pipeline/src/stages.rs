@@ -528,7 +528,8 @@ pub const STAGES: &[Stage] = &[
                 model in fixed point (widths chosen on the training rows, or [circuit] \
                 input_bits and weight_bits), its circuits combinational and pipelined, equal to \
                 the fixed-point evaluator on every held-out row; with [circuit] fpga, every \
-                variable also placed and routed on an iCE40 by nextpnr, its critical path in ns",
+                variable also placed and routed on an iCE40 by nextpnr, its critical path in ns \
+                (a piecewise-linear model's mapped netlists simulated by Verilator)",
         format_version: alnlab_circuit::FORMAT_VERSION,
         inputs: &[
             Input {

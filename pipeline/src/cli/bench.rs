@@ -109,7 +109,8 @@ pub enum Bench {
     /// point: its error and arithmetic at the widths chosen on the training
     /// rows and at each of --widths, and with --fpga its circuits
     /// (combinational and pipelined) placed and routed, their mapped
-    /// netlists simulated on the first --rows test rows.
+    /// netlists simulated by Verilator (needs verilator, make and g++) on
+    /// the first --rows test rows.
     #[command(after_help = "Examples:
   alnlab bench circuit --run runs/quickstart --variant gray --json
   alnlab bench circuit --run runs/quickstart --variant gray --fpga ice40-hx8k
