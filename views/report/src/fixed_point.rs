@@ -98,7 +98,14 @@ pub(super) fn in_hardware(name: &str, fixed: &[OutputFigures], routed: &Routed) 
             sig3(latency),
             sig3(1e3 / period)
         ),
-        (Some(ns), None) => format!("predicts a state in {} ns between registers", sig3(ns)),
+        (Some(ns), None) => match &routed.pipelined {
+            Some(p) => format!(
+                "predicts a state in {} ns between registers (pipelined, {}, so it has no rate)",
+                sig3(ns),
+                unmeasured(p)
+            ),
+            None => format!("predicts a state in {} ns between registers", sig3(ns)),
+        },
         (None, _) => format!("has no time for a state: {}", unmeasured(state)),
     };
     format!(
@@ -221,7 +228,7 @@ pub(super) fn section(
         table.row(vec![
             format!(
                 "fixed point, pipelined (at most {} clocks)",
-                figures.map_or(0, |f| f.1)
+                p.variables.iter().map(|v| v.latency).max().unwrap_or(0)
             ),
             sig3(e.fixed),
             largest(p),
@@ -276,6 +283,14 @@ pub(super) fn section(
     ]);
     table.write(md);
     not_fitting(md, state);
+    if let Some(p) = routed
+        .pipelined
+        .as_ref()
+        .filter(|p| p.critical_ns().is_none())
+    {
+        md.push_str("Pipelined, a register after every operation: ");
+        not_fitting(md, p);
+    }
     let verdict = match (ns, state.slowest()) {
         (Some(ns), Some(slowest)) => format!(
             "**The paper's \"nanoseconds\", for {}, is {}:** a state in {} ns on this part (the \
@@ -413,6 +428,44 @@ mod tests {
         let line = in_hardware("pw", &fixed, &routed);
         assert!(
             line.contains("has no time for a state: 1 of its variables are too large"),
+            "{line}"
+        );
+    }
+
+    #[test]
+    fn a_pipelined_variable_that_does_not_fit_is_named_and_leaves_no_rate() {
+        let fixed = [
+            output("v.0.x", 0.80, 0.79, 1.1),
+            output("v.1.x", 0.70, 0.71, 1.3),
+        ];
+        let mut routed = both();
+        let pipelined = routed.pipelined.as_mut().unwrap();
+        pipelined.variables[1].critical_ns = None;
+        pipelined.variables[1].logic_cells = 9000;
+        let mut md = String::new();
+        section(&mut md, &fixed, Some(&routed), &cpu(), None);
+        assert!(
+            md.contains("| fixed point, pipelined (at most 20 clocks) | 0.750 | 501 | — | — |"),
+            "{md}"
+        );
+        assert!(
+            md.contains(
+                "Pipelined, a register after every operation: `v.1.x` does not fit: it needs up \
+                 to 9000 logic cells"
+            ),
+            "{md}"
+        );
+        // The combinational state is measured: the verdict stands on it.
+        assert!(
+            md.contains("is confirmed (under a microsecond):** a state in 110 ns"),
+            "{md}"
+        );
+        let line = in_hardware("pw", &fixed, &routed);
+        assert!(
+            line.contains(
+                "predicts a state in 110 ns between registers (pipelined, 1 of its variables are \
+                 too large for the part, so it has no rate)"
+            ),
             "{line}"
         );
     }
