@@ -368,8 +368,9 @@ pub const ATTEMPT_LIMIT: std::time::Duration = std::time::Duration::from_secs(30
 
 /// Yosys' simulation models of the iCE40's cells, in its data folder.
 pub const ICE40_MODELS: &str = "ice40/cells_sim.v";
-/// Icarus Verilog reads the models without their ports' default values
-/// (a SystemVerilog form); the mapped netlist connects every port.
+/// The simulators read the models without their ports' default values
+/// (a SystemVerilog form Icarus Verilog lacks); the mapped netlist
+/// connects every port.
 pub const ICE40_DEFINES: &[&str] = &["NO_ICE40_DEFAULT_ASSIGNMENTS"];
 
 /// nextpnr reads its seed as a C `int`: seeds are taken modulo 2³¹.

@@ -195,8 +195,10 @@ pub fn run_bench(
             args.extend(sources.iter().map(String::as_str));
             args.push(bench);
             tools::run("verilator", &args, dir)?;
-            let binary = dir.join(&build).join("tb");
-            tools::run(&binary.to_string_lossy(), &[], dir)?;
+            let build = dir.join(&build);
+            tools::run(&build.join("tb").to_string_lossy(), &[], dir)?;
+            // Megabytes of C++ and objects a design: gone once run.
+            std::fs::remove_dir_all(&build).map_err(|e| Error::io(&build, e))?;
         }
     }
     let path = dir.join(out);
