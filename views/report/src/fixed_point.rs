@@ -68,6 +68,21 @@ fn rows_simulated(mapped: u64, all: u64) -> String {
     }
 }
 
+/// Whether `state`'s variables, side by side, would fit one part: their
+/// logic cells against the part's.
+fn one_part(state: &State) -> String {
+    let cells: u64 = state.variables.iter().map(|p| p.logic_cells).sum();
+    let available = state.variables.first().map_or(0, |p| p.available).max(1);
+    if cells <= available {
+        format!("the whole state, {cells} logic cells, fits one part")
+    } else {
+        format!(
+            "the whole state, {cells} logic cells, would take at least {} parts like this one",
+            cells.div_ceil(available)
+        )
+    }
+}
+
 /// Whether the fixed-point model errs less than persistence on these rows
 /// — the mean errors of one replicate, not a verdict: the floating-point
 /// model's, with its interval across replicates, is the summary's.
@@ -185,7 +200,7 @@ pub(super) fn section(
          waits for the slowest: combinational, the slowest variable's path; pipelined, each \
          variable at its own clock, the rate the slowest clock's and the latency the longest \
          variable's (its clocks times its period). {} lookup tables over all {n} variables \
-         combinational. Both mapped netlists — the ones placed, without delays — \
+         combinational: {}. Both mapped netlists — the ones placed, without delays — \
          simulated by Verilator put out the fixed-point evaluator's level on {} for every \
          variable.\n",
         state.device.description(),
@@ -194,6 +209,7 @@ pub(super) fn section(
         alnlab_circuit::fpga::ROUTING_ATTEMPTS,
         alnlab_circuit::fpga::ATTEMPT_LIMIT.as_secs() / 60,
         state.variables.iter().map(|p| p.luts).sum::<u64>(),
+        one_part(state),
         rows_simulated(routed.rows_equal, fixed.first().map_or(0, |o| o.rows)),
     );
     let mut table = MdTable::new(&["predictor"]).numbers(&[
@@ -406,6 +422,10 @@ mod tests {
             md.contains("on the first 300 of the 8000 test rows"),
             "{md}"
         );
+        assert!(
+            md.contains("1001 lookup tables over all 2 variables combinational: the whole state, 1040 logic cells, fits one part"),
+            "{md}"
+        );
         assert!(md.contains("for a model that errs less than persistence on these rows, is confirmed (under a microsecond):** a state in 110 ns"), "{md}");
         let line = in_hardware("pw", &fixed, &both());
         assert!(line.contains("predicts a state in 110 ns between registers, and pipelined (at most 20 clocks, a state in 120 ns) 167 million states a second"), "{line}");
@@ -422,6 +442,12 @@ mod tests {
         section(&mut md, &fixed, Some(&routed), &cpu(), None);
         assert!(
             md.contains("`v.1.x` does not fit: it needs up to 9000 logic cells"),
+            "{md}"
+        );
+        assert!(
+            md.contains(
+                "the whole state, 9520 logic cells, would take at least 2 parts like this one"
+            ),
             "{md}"
         );
         assert!(md.contains("for a model that errs no less than persistence on these rows, is not measured on this part:** 1 of its variables are too large for the part"), "{md}");
