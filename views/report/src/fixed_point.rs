@@ -45,12 +45,17 @@ fn errors(fixed: &[OutputFigures]) -> Errors {
     }
 }
 
+/// The most clocks from inputs to level over `state`'s variables.
+fn clocks(state: &State) -> u32 {
+    state.variables.iter().map(|p| p.latency).max().unwrap_or(0)
+}
+
 /// The pipelined state's figures: the slowest clock (ns), the most clocks
 /// from inputs to level, and the longest latency (ns) — each variable on
 /// a part of its own, at its own clock.
 fn pipelined(state: &State) -> Option<(f64, u32, f64)> {
     let period = state.critical_ns()?;
-    let clocks = state.variables.iter().map(|p| p.latency).max().unwrap_or(0);
+    let clocks = clocks(state);
     let latency = state
         .variables
         .iter()
@@ -242,10 +247,7 @@ pub(super) fn section(
     if let Some(p) = &routed.pipelined {
         let figures = pipelined(p);
         table.row(vec![
-            format!(
-                "fixed point, pipelined (at most {} clocks)",
-                p.variables.iter().map(|v| v.latency).max().unwrap_or(0)
-            ),
+            format!("fixed point, pipelined (at most {} clocks)", clocks(p)),
             sig3(e.fixed),
             largest(p),
             figures.map_or_else(dash, |f| sig3(f.2)),
