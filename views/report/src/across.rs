@@ -14,7 +14,7 @@ use super::{
     Loaded, Spread, Timing, baseline_models, closed_loop, normalized, overall,
     worse_than_persistence,
 };
-use crate::charts::{self, Axis, Plot, Point, Series, style_of};
+use crate::charts::{self, Axis, Marker, Plot, Point, Series, Style, style_of};
 use alnlab_summarize::paired::Interval;
 
 /// The chart files this section writes.
@@ -108,6 +108,7 @@ pub(super) fn charts(md: &mut String, variants: &[Loaded], shared: bool, dir: &P
         }
     };
     let mut series = Vec::new();
+    let mut pwl_paths = false;
     for (k, v) in variants.iter().enumerate() {
         let Some((y, y_range)) = y_of(v, "aln") else {
             continue;
@@ -124,9 +125,18 @@ pub(super) fn charts(md: &mut String, variants: &[Loaded], shared: bool, dir: &P
                 None if single => "one at a time".into(),
                 None => "all at once".into(),
             };
+            // The one-row paths of one variant share its colour; each
+            // path beyond the plain one has a marker no variant takes.
+            let style = style_of("aln", k);
+            let marker = match t.path.as_str() {
+                "pwl-lazy" => Marker::Plus,
+                "pwl-compiled" => Marker::Cross,
+                _ => style.marker,
+            };
+            pwl_paths |= marker != style.marker;
             series.push(Series {
                 name: format!("{}, {how}", aln_name(v, n)),
-                style: style_of("aln", k),
+                style: Style { marker, ..style },
                 points: vec![Point {
                     x_range: Some((t.ns_min / 1000.0, t.ns_max / 1000.0)),
                     y_range,
@@ -200,11 +210,18 @@ pub(super) fn charts(md: &mut String, variants: &[Loaded], shared: bool, dir: &P
              data, so their errors are not set side by side, no front is drawn across them, and \
              the baselines are in each variant's section."
         };
+        let paths = if pwl_paths {
+            " A piecewise-linear ALN one state at a time is timed three ways, in its colour: \
+             plain (every piece, its variant's marker), lazy (MIN/MAX with cut-offs, +) and \
+             compiled (the pieces of the input's box, ×)."
+        } else {
+            ""
+        };
         let _ = writeln!(
             md,
             "![µs per predicted state against error]({SPEED})\n\nTime per predicted state on one \
              thread (median of the timed runs; horizontal bars their range; the simulator per \
-             re-simulated frame) against {whose}{bars}\n"
+             re-simulated frame) against {whose}{paths}{bars}\n"
         );
     }
 
