@@ -188,28 +188,62 @@ pub(super) fn claim(ns: Option<f64>) -> &'static str {
     }
 }
 
-/// A sentence for each variable of `state` without a critical path: it
-/// does not fit its part, or nextpnr did not route it in time.
+/// The variables of `state` without a critical path, in at most two
+/// sentences: those that do not fit their part, and those that fit but
+/// nextpnr did not route in time.
 pub(super) fn not_fitting(md: &mut String, state: &alnlab_circuit::fpga::State) {
-    for p in state.variables.iter().filter(|p| p.critical_ns.is_none()) {
-        let _ = if p.fits() {
-            write!(
-                md,
-                "`{}` fits ({} of the part's {} logic cells) but nextpnr did not finish routing \
-                 it within {} minutes. ",
-                p.variable,
-                p.logic_cells,
-                p.available,
-                alnlab_circuit::fpga::PLACE_AND_ROUTE_LIMIT.as_secs() / 60
-            )
-        } else {
-            write!(
-                md,
-                "`{}` does not fit: it needs up to {} logic cells (its lookup tables and \
-                 flip-flops), the part has {}. ",
-                p.variable, p.logic_cells, p.available
-            )
-        };
+    let missing = || state.variables.iter().filter(|p| p.critical_ns.is_none());
+    let large: Vec<_> = missing().filter(|p| !p.fits()).collect();
+    let unrouted: Vec<_> = missing().filter(|p| p.fits()).collect();
+    let _ = match large.as_slice() {
+        [] => Ok(()),
+        [p] => write!(
+            md,
+            "`{}` does not fit: it needs up to {} logic cells (its lookup tables and \
+             flip-flops), the part has {}. ",
+            p.variable, p.logic_cells, p.available
+        ),
+        many => write!(
+            md,
+            "{} do not fit: each needs more than the part's {} (its lookup tables and \
+             flip-flops, at most). ",
+            cells_listed(many),
+            many[0].available
+        ),
+    };
+    let minutes = alnlab_circuit::fpga::PLACE_AND_ROUTE_LIMIT.as_secs() / 60;
+    let _ = match unrouted.as_slice() {
+        [] => Ok(()),
+        [p] => write!(
+            md,
+            "`{}` fits ({} of the part's {} logic cells) but nextpnr did not finish routing \
+             it within {minutes} minutes. ",
+            p.variable, p.logic_cells, p.available
+        ),
+        many => write!(
+            md,
+            "{} fit the part's {} but nextpnr did not finish routing them within {minutes} \
+             minutes each. ",
+            cells_listed(many),
+            many[0].available
+        ),
+    };
+}
+
+/// Variables with their logic cells: "`a` (900 logic cells), `b` (800)
+/// and `c` (700)".
+fn cells_listed(placed: &[&alnlab_circuit::fpga::Placed]) -> String {
+    let names: Vec<String> = placed
+        .iter()
+        .enumerate()
+        .map(|(i, p)| {
+            let unit = if i == 0 { " logic cells" } else { "" };
+            format!("`{}` ({}{unit})", p.variable, p.logic_cells)
+        })
+        .collect();
+    match names.split_last() {
+        Some((last, rest)) if !rest.is_empty() => format!("{} and {last}", rest.join(", ")),
+        _ => names.concat(),
     }
 }
 
@@ -506,6 +540,22 @@ pub(super) mod tests {
         assert!(
             md.contains("1 of its variables were not routed within 15 minutes"),
             "{md}"
+        );
+    }
+
+    #[test]
+    fn several_variables_without_a_path_are_listed_in_one_sentence_per_reason() {
+        let mut state = routed(&[Some(8.5), None, None, None, None]).state;
+        state.variables[3].logic_cells = 7000;
+        state.variables[4].logic_cells = 6100;
+        let mut md = String::new();
+        not_fitting(&mut md, &state);
+        assert_eq!(
+            md,
+            "`v.1.x` (9000 logic cells) and `v.2.x` (9000) do not fit: each needs more than \
+             the part's 7680 (its lookup tables and flip-flops, at most). `v.3.x` (7000 logic \
+             cells) and `v.4.x` (6100) fit the part's 7680 but nextpnr did not finish routing \
+             them within 15 minutes each. "
         );
     }
 }
