@@ -107,30 +107,38 @@ pub(super) fn in_hardware(name: &str, fixed: &[OutputFigures], routed: &Routed) 
     let e = errors(fixed);
     let state = &routed.state;
     let n = state.variables.len();
+    let combinational = |ns: f64| {
+        format!(
+            "predicts a state in {} ns as a combinational circuit between registers (nextpnr's \
+             timing analysis)",
+            sig3(ns)
+        )
+    };
     let time = match (
         state.critical_ns(),
         routed.pipelined.as_ref().and_then(pipelined),
     ) {
         (Some(ns), Some((period, clocks, latency))) => format!(
-            "predicts a state in {} ns between registers, and pipelined (at most {clocks} \
-             clocks, a state in {} ns) {} million states a second",
-            sig3(ns),
+            "{}, and pipelined (at most {clocks} clocks, a state in {} ns) {} million states a \
+             second",
+            combinational(ns),
             sig3(latency),
             sig3(1e3 / period)
         ),
         (Some(ns), None) => match &routed.pipelined {
             Some(p) => format!(
-                "predicts a state in {} ns between registers (pipelined, {}, so it has no rate)",
-                sig3(ns),
+                "{}; pipelined, {}, so it has no rate",
+                combinational(ns),
                 unmeasured(p)
             ),
-            None => format!("predicts a state in {} ns between registers", sig3(ns)),
+            None => combinational(ns),
         },
         (None, _) => format!("has no time for a state: {}", unmeasured(state)),
     };
     format!(
         "**In hardware** (§5): `{name}`'s piecewise-linear model in fixed point (replicate 1), \
-         each of its {n} variables placed and routed on a {} of its own, {time}; in fixed point \
+         each of its {n} variables placed and routed on a {} of its own ({n} parts), {time}; \
+         in fixed point \
          it errs {} levels against the floating-point model's {} and persistence's {}, and its \
          mapped netlists equal its fixed-point evaluator on {}: the paper's \"nanoseconds\", \
          for {}, {}. The hardware table is in the appendix, under `{name}`.",
@@ -265,7 +273,7 @@ pub(super) fn section(
     }
     for (name, figure) in [
         (
-            "floating point, one CPU thread, every test state at once",
+            "floating point, one CPU thread, every test state at once (ns: the batch's time over its states)",
             cpu.aln_batched,
         ),
         (
@@ -430,7 +438,7 @@ mod tests {
         );
         assert!(md.contains("for a model that errs less than persistence on these rows, is confirmed (under a microsecond):** a state in 110 ns"), "{md}");
         let line = in_hardware("pw", &fixed, &both());
-        assert!(line.contains("predicts a state in 110 ns between registers, and pipelined (at most 20 clocks, a state in 120 ns) 167 million states a second"), "{line}");
+        assert!(line.contains("predicts a state in 110 ns as a combinational circuit between registers (nextpnr's timing analysis), and pipelined (at most 20 clocks, a state in 120 ns) 167 million states a second"), "{line}");
     }
 
     #[test]
@@ -491,8 +499,9 @@ mod tests {
         let line = in_hardware("pw", &fixed, &routed);
         assert!(
             line.contains(
-                "predicts a state in 110 ns between registers (pipelined, 1 of its variables are \
-                 too large for the part, so it has no rate)"
+                "predicts a state in 110 ns as a combinational circuit between registers \
+                 (nextpnr's timing analysis); pipelined, 1 of its variables are \
+                 too large for the part, so it has no rate;"
             ),
             "{line}"
         );
