@@ -16,6 +16,7 @@ SVG the report shows as XML. Exits non-zero on any mismatch.
 """
 
 import csv
+import functools
 import json
 import math
 import os
@@ -26,12 +27,14 @@ from collections import defaultdict
 from pathlib import Path
 
 import numpy as np
+import pyarrow.compute as pc
 import pyarrow.parquet as pq
 from scipy import stats
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 
 
+@functools.lru_cache(maxsize=None)
 def field_name(name: str) -> str:
     """The /state field of a variable, as alnlab names it: lower case, every
     character but letters and digits made `_`, runs of `_` one and none at
@@ -49,16 +52,26 @@ def quantile(xs, q):
     return xs[lo] + (xs[hi] - xs[lo]) * (pos - lo)
 
 
+@functools.lru_cache(maxsize=1)
+def prediction_columns(path: str) -> dict:
+    """predictions.parquet's columns as Python lists, read once: the summary,
+    the comparisons and the rollout are all recomputed from them."""
+    columns = ["model", "variable", "row", "held_out", "true_level", "error"]
+    table = pq.read_table(path, columns=columns)
+    return {c: table.column(c).to_pylist() for c in columns}
+
+
 def check_summary(predictions_path, summary_path):
     """Every statistic of summary.parquet, recomputed from the predictions,
     over all test rows and over the held-out ones."""
     errors = defaultdict(list)
     truth = defaultdict(list)
+    cols = prediction_columns(predictions_path)
     columns = ["model", "variable", "held_out", "true_level", "error"]
-    for row in pq.read_table(predictions_path, columns=columns).to_pylist():
-        for rows in ["all"] + (["held-out"] if row["held_out"] else []):
-            errors[(rows, row["model"], row["variable"])].append(row["error"])
-            truth[(rows, row["model"], row["variable"])].append(row["true_level"])
+    for model, variable, held_out, true_level, error in zip(*(cols[c] for c in columns)):
+        for rows in ["all"] + (["held-out"] if held_out else []):
+            errors[(rows, model, variable)].append(error)
+            truth[(rows, model, variable)].append(true_level)
     summary = pq.read_table(summary_path).to_pylist()
     assert len(summary) == len(errors), (len(summary), len(errors))
     for row in summary:
@@ -89,8 +102,7 @@ def check_comparisons(predictions_path, comparisons_path):
     errors minus the other model's on the same rows, per variable and
     averaged over the variables per row; mean, sample standard deviation
     and the 95% t-interval agree to 1e-9."""
-    table = pq.read_table(predictions_path, columns=["model", "variable", "row", "held_out", "error"])
-    cols = {name: table.column(name).to_pylist() for name in table.column_names}
+    cols = prediction_columns(predictions_path)
     errors = defaultdict(list)
     held = {}
     for m, v, r, h, e in zip(cols["model"], cols["variable"], cols["row"], cols["held_out"], cols["error"]):
@@ -137,13 +149,13 @@ def check_rollout(predictions_path, rollout_path):
     """One step of the closed loop is the open-loop prediction: the rollout's
     first-step errors equal the predictions' for the same rows, for every
     model (the true levels come from the trajectory log, quantized anew)."""
-    key = lambda r, row: (r["model"], r["variable"], row)
-    one_step = {key(r, r["row"]): r["error"]
-                for r in pq.read_table(predictions_path, columns=["model", "variable", "row", "error"]).to_pylist()}
-    first = [r for r in pq.read_table(rollout_path).to_pylist() if r["horizon"] == 1]
+    cols = prediction_columns(predictions_path)
+    one_step = dict(zip(zip(cols["model"], cols["variable"], cols["row"]), cols["error"]))
+    rollout = pq.read_table(rollout_path)
+    first = rollout.filter(pc.equal(rollout.column("horizon"), 1)).to_pylist()
     assert first, "no rollout"
     for r in first:
-        assert one_step[key(r, r["start"])] == r["error"], r
+        assert one_step[(r["model"], r["variable"], r["start"])] == r["error"], r
     return len(first)
 
 
@@ -347,6 +359,42 @@ def check_fpga(artifacts: dict, report_dir: str) -> int:
     return len(rows)
 
 
+@functools.lru_cache(maxsize=None)
+def decode_trajectory(path: str) -> dict:
+    """Every /state message of the MCAP log at `path`, decoded with the
+    schema stored in the file, by (scene, run, frame); checks the log's
+    profile, Foxglove schema names, models and /tf on the way. Once a log:
+    the variants of a replicate share theirs."""
+    frames = {}
+    with open(path, "rb") as f:
+        reader = make_reader(f, decoder_factories=[DecoderFactory()])
+        assert reader.get_header().profile == "ros2"
+        summary = reader.get_summary()
+        schemas = {c.topic: summary.schemas[c.schema_id].name for c in summary.channels.values()}
+        assert schemas["/tf"] == "foxglove.FrameTransforms", schemas
+        assert schemas["/scene"] == "foxglove.SceneUpdate", schemas
+        models = [m for m in reader.iter_metadata() if m.name == "alnlab.model"]
+        scenes = {c.metadata["scene"] for c in summary.channels.values() if c.topic == "/state"}
+        assert {m.metadata["scene"] for m in models} == scenes, (models, scenes)
+        for m in models:
+            model = json.loads(m.metadata["json"])
+            assert model["links"][0]["parent"] == -1 and model["conventions"]["units"] == "SI"
+        tf = 0
+        for _, channel, message in reader.iter_messages(topics=["/tf"]):
+            transforms = json.loads(message.data)["transforms"]
+            assert all(t["parent_frame_id"] == "world" for t in transforms)
+            tf += 1
+        assert tf > 0, "no /tf messages"
+        for schema, channel, message, decoded in reader.iter_decoded_messages(topics=["/state"]):
+            assert schema.encoding == "ros2msg" and channel.message_encoding == "cdr"
+            names = channel.metadata["variables"].split(",")
+            values = {n: getattr(decoded, field_name(n)) for n in names}
+            assert all(math.isfinite(v) for v in values.values())
+            frames[(channel.metadata["scene"], decoded.run, decoded.frame)] = values
+    assert frames, "no /state messages"
+    return frames
+
+
 def main(run_json: str, report_dir: str) -> int:
     record = json.load(open(run_json))
     checked = 0
@@ -366,34 +414,7 @@ def main(run_json: str, report_dir: str) -> int:
                 assert json.loads(meta[b"alnlab.params"])["seed"] == variant.get("seed", record["seed"]), path
                 checked += 1
 
-        # Decode every /state message with the schema stored in the file.
-        frames = {}
-        with open(artifacts["trajectory"]["path"], "rb") as f:
-            reader = make_reader(f, decoder_factories=[DecoderFactory()])
-            assert reader.get_header().profile == "ros2"
-            summary = reader.get_summary()
-            schemas = {c.topic: summary.schemas[c.schema_id].name for c in summary.channels.values()}
-            assert schemas["/tf"] == "foxglove.FrameTransforms", schemas
-            assert schemas["/scene"] == "foxglove.SceneUpdate", schemas
-            models = [m for m in reader.iter_metadata() if m.name == "alnlab.model"]
-            scenes = {c.metadata["scene"] for c in summary.channels.values() if c.topic == "/state"}
-            assert {m.metadata["scene"] for m in models} == scenes, (models, scenes)
-            for m in models:
-                model = json.loads(m.metadata["json"])
-                assert model["links"][0]["parent"] == -1 and model["conventions"]["units"] == "SI"
-            tf = 0
-            for _, channel, message in reader.iter_messages(topics=["/tf"]):
-                transforms = json.loads(message.data)["transforms"]
-                assert all(t["parent_frame_id"] == "world" for t in transforms)
-                tf += 1
-            assert tf > 0, "no /tf messages"
-            for schema, channel, message, decoded in reader.iter_decoded_messages(topics=["/state"]):
-                assert schema.encoding == "ros2msg" and channel.message_encoding == "cdr"
-                names = channel.metadata["variables"].split(",")
-                values = {n: getattr(decoded, field_name(n)) for n in names}
-                assert all(math.isfinite(v) for v in values.values())
-                frames[(channel.metadata["scene"], decoded.run, decoded.frame)] = values
-        assert frames, "no /state messages"
+        frames = decode_trajectory(artifacts["trajectory"]["path"])
 
         # Every pair row equals the decoded frames it was taken from.
         pairs = pq.read_table(artifacts["pairs"]["path"]).to_pylist()
