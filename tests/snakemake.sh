@@ -6,7 +6,11 @@
 # equal `alnlab run`'s on the same manifest; so must a small experiment's
 # with rounds of the planner's own data.
 #
-# Usage: tests/snakemake.sh ALNLAB SNAKEMAKE PYTHON WORK_DIR
+# Usage: tests/snakemake.sh ALNLAB SNAKEMAKE PYTHON WORK_DIR [DIRECT_RUNS DIRECT_REPORTS]
+#
+# The direct runs go to DIRECT_RUNS and DIRECT_REPORTS when given (the
+# suite passes the folders its quickstart already ran in, so that run comes
+# from the cache), else under WORK_DIR.
 set -euo pipefail
 alnlab=$(realpath "$1")
 snakemake=$2
@@ -16,8 +20,10 @@ mkdir -p "$4"
 # Absolute: the workflow runs in its own folder, and targets must name the
 # rules' (absolute) outputs.
 work=$(realpath "$4")
+direct=${5:-$work/direct}
+direct_reports=${6:-$work/direct-reports}
 
-"$alnlab" -q run experiments/quickstart.toml --out "$work/direct" --reports "$work/direct-reports" >/dev/null
+"$alnlab" -q run experiments/quickstart.toml --out "$direct" --reports "$direct_reports" >/dev/null
 "$alnlab" export snakemake experiments/quickstart.toml --shards 4 -o "$work/wf" \
   --out "$work/runs" --reports "$work/reports" --alnlab "$alnlab" >/dev/null
 smk() { "$snakemake" --snakefile "$work/wf/Snakefile" --directory "$work/wf" --cores 2 "$@"; }
@@ -48,19 +54,19 @@ rm "${keydir}3-of-4" "${keydir}4-of-4"
 smk >"$work/resumed.log" 2>&1 || { cat "$work/resumed.log"; exit 1; }
 [ "$before" = "$(stamps)" ] || { echo "snakemake: finished shards were run again"; exit 1; }
 
-"$python" tests/snakemake_check.py "$work/direct/quickstart/run.json" "$work/runs/quickstart/run.json" \
-  "$work/direct-reports/quickstart/report.md" "$work/reports/quickstart/report.md"
+"$python" tests/snakemake_check.py "$direct/quickstart/run.json" "$work/runs/quickstart/run.json" \
+  "$direct_reports/quickstart/report.md" "$work/reports/quickstart/report.md"
 
 # Rounds of the planner's own data run in the workflow too, to the same
 # artifacts.
 rounds=tests/data/planned-rounds.toml
-"$alnlab" -q run "$rounds" --out "$work/direct" --reports "$work/direct-reports" >/dev/null
+"$alnlab" -q run "$rounds" --out "$direct" --reports "$direct_reports" >/dev/null
 "$alnlab" export snakemake "$rounds" -o "$work/wf-rounds" \
   --out "$work/runs" --reports "$work/reports" --alnlab "$alnlab" >/dev/null
 "$snakemake" --snakefile "$work/wf-rounds/Snakefile" --directory "$work/wf-rounds" --cores 2 \
   >"$work/rounds.log" 2>&1 || { cat "$work/rounds.log"; exit 1; }
 grep -q "planning@2" "$work/runs/planned-rounds/run.json" || {
   echo "snakemake: the workflow's run record lacks round 2"; exit 1; }
-"$python" tests/snakemake_check.py "$work/direct/planned-rounds/run.json" \
-  "$work/runs/planned-rounds/run.json" "$work/direct-reports/planned-rounds/report.md" \
+"$python" tests/snakemake_check.py "$direct/planned-rounds/run.json" \
+  "$work/runs/planned-rounds/run.json" "$direct_reports/planned-rounds/report.md" \
   "$work/reports/planned-rounds/report.md"

@@ -438,7 +438,11 @@ fn snakemake(suite: &Suite) -> Result<(), String> {
             .arg(alnlab_bin())
             .arg(bin.join("snakemake"))
             .arg(&suite.python)
-            .arg(suite.work.join("snakemake")),
+            .arg(suite.work.join("snakemake"))
+            // The direct runs beside the interop step's quickstart: that
+            // one comes from the cache.
+            .arg(runs(suite))
+            .arg(reports(suite)),
     )
 }
 
