@@ -771,6 +771,14 @@ fn cut_down(text: &str) -> String {
         }
     }
     let mut document: toml::Table = text.parse().unwrap();
+    // A manifest that leaves the trees' size to its default (8192 leaves)
+    // gets the cap too: piecewise.toml's bit-forest took a minute here.
+    let train = document
+        .entry("train")
+        .or_insert_with(|| toml::Value::Table(toml::Table::new()));
+    if let Some(train) = train.as_table_mut() {
+        train.entry("leaves").or_insert(toml::Value::Integer(64));
+    }
     shrink(&mut document);
     // Dotted variant overrides (`train.leaves = …`) are keys of their own.
     if let Some(toml::Value::Array(variants)) = document.get_mut("variant") {
