@@ -192,9 +192,7 @@ pub(super) fn claim(ns: Option<f64>) -> &'static str {
 /// sentences: those that do not fit their part, and those that fit but
 /// nextpnr did not route in time.
 pub(super) fn not_fitting(md: &mut String, state: &alnlab_circuit::fpga::State) {
-    let missing = || state.variables.iter().filter(|p| p.critical_ns.is_none());
-    let large: Vec<_> = missing().filter(|p| !p.fits()).collect();
-    let unrouted: Vec<_> = missing().filter(|p| p.fits()).collect();
+    let (large, unrouted) = without_path(state);
     let _ = match large.as_slice() {
         [] => Ok(()),
         [p] => write!(
@@ -230,6 +228,22 @@ pub(super) fn not_fitting(md: &mut String, state: &alnlab_circuit::fpga::State) 
     };
 }
 
+/// The variables of `state` without a critical path: those too large for
+/// the part, and those that fit but were not routed in time.
+fn without_path(
+    state: &alnlab_circuit::fpga::State,
+) -> (
+    Vec<&alnlab_circuit::fpga::Placed>,
+    Vec<&alnlab_circuit::fpga::Placed>,
+) {
+    let (unrouted, large) = state
+        .variables
+        .iter()
+        .filter(|p| p.critical_ns.is_none())
+        .partition(|p| p.fits());
+    (large, unrouted)
+}
+
 /// Variables with their logic cells: "`a` (900 logic cells), `b` (800)
 /// and `c` (700)".
 fn cells_listed(placed: &[&alnlab_circuit::fpga::Placed]) -> String {
@@ -251,9 +265,8 @@ fn cells_listed(placed: &[&alnlab_circuit::fpga::Placed]) -> String {
 /// its variables are too large for the part", "1 of its variables was not
 /// routed in time", or both.
 pub(super) fn unmeasured(state: &alnlab_circuit::fpga::State) -> String {
-    let missing = || state.variables.iter().filter(|p| p.critical_ns.is_none());
-    let large = missing().filter(|p| !p.fits()).count();
-    let unrouted = missing().filter(|p| p.fits()).count();
+    let (large, unrouted) = without_path(state);
+    let (large, unrouted) = (large.len(), unrouted.len());
     let mut parts = Vec::new();
     if large > 0 {
         parts.push(format!(
