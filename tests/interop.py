@@ -1,4 +1,4 @@
-"""Standard readers must read what alnlab writes (DESIGN.md §2).
+"""Standard readers must read what alnlab writes (docs/design.md §2).
 
 Usage: python tests/interop.py RUN_JSON REPORT_DIR
 

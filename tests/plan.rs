@@ -5,7 +5,6 @@
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
-use alnlab_common::state_log::StateLog;
 use alnlab_common::table::Table;
 use arrow_array::{Array, Float64Array, ListArray, UInt32Array};
 
@@ -150,7 +149,7 @@ fn the_plan_stage_plans_every_task_model_planner_and_budget_reproducibly() {
 
     // The first episode of every policy as a run of the trajectory log, its
     // frames those of the table.
-    let log = StateLog::read(&view).unwrap();
+    let log = alnlab_common::state_log::read(&view).unwrap();
     assert_eq!(log.scenes.len(), 1);
     let scene = &log.scenes[0];
     let per_task = 2 + 2 * 3 * 2;

@@ -170,7 +170,7 @@ fn a_recording_is_ingested_where_the_simulation_would_be() {
     assert_eq!(made("stride").len(), 1);
     // 100 messages over 0.99 s: 100 frames, 98 logged (each needs one on
     // either side for its acceleration).
-    let log = alnlab_common::state_log::StateLog::read(&ingested.join("trajectory.mcap")).unwrap();
+    let log = alnlab_common::state_log::read(&ingested.join("trajectory.mcap")).unwrap();
     assert_eq!(log.scenes[0].frames.len(), 98);
     assert!(ingested.join("stats.parquet").is_file());
 }

@@ -4,7 +4,7 @@
 use libfuzzer_sys::fuzz_target;
 
 fuzz_target!(|bytes: &[u8]| {
-    let _ = alnlab_common::state_log::StateLog::from_bytes(
+    let _ = alnlab_common::state_log::from_bytes(
         std::path::Path::new("trajectory.mcap"),
         bytes,
     );

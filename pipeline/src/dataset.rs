@@ -1,4 +1,4 @@
-//! The dataset archive (DESIGN.md §1, "dataset archiving"): a run's
+//! The dataset archive (docs/design.md §2): a run's
 //! simulate and stride outputs (the trajectory log, its statistics and the
 //! pairs table; optionally the quantize outputs too) kept for reuse.
 //!

@@ -13,6 +13,7 @@
 
 use std::path::{Path, PathBuf};
 
+use alnlab_aln::ModelKind;
 use alnlab_common::{Error, Result, atomic};
 
 use crate::manifest::Manifest;
@@ -47,7 +48,10 @@ pub fn snakemake(export: &Export, dir: &Path) -> Result<()> {
     let unsharded: Vec<&str> = manifest
         .variants
         .iter()
-        .filter(|v| v.stages.train.model == alnlab_aln::ModelKind::PiecewiseLinear)
+        .filter(|v| match v.stages.train.model {
+            ModelKind::PiecewiseLinear => true,
+            ModelKind::BitForest | ModelKind::Threshold => false,
+        })
         .map(|v| v.name.as_str())
         .collect();
     // A hint, generous: the trees of the paper's forest (8192 leaves, one

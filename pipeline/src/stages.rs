@@ -10,6 +10,7 @@
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
+use alnlab_aln::ModelKind;
 use alnlab_aln::shard::Shard;
 use alnlab_common::params::ParamError;
 use alnlab_common::{Progress, Provenance, Result};
@@ -559,7 +560,10 @@ pub const STAGES: &[Stage] = &[
         params: |s| json(&s.circuit),
         validate: |s, _| {
             s.circuit.validate()?;
-            let piecewise = s.train.model == alnlab_aln::ModelKind::PiecewiseLinear;
+            let piecewise = match s.train.model {
+                ModelKind::PiecewiseLinear => true,
+                ModelKind::BitForest | ModelKind::Threshold => false,
+            };
             if s.circuit.synthesize && piecewise && s.train.base == alnlab_aln::model::Base::Nominal
             {
                 return Err((

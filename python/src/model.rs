@@ -465,8 +465,13 @@ impl Model {
             .iter()
             .map(|&v| (!controls.contains(&v)).then_some(v))
             .collect::<Vec<_>>();
-        let bits =
-            matches!(&files, Files::Aln(t) if t.model.header.model != ModelKind::PiecewiseLinear);
+        let bits = match &files {
+            Files::Aln(t) => match t.model.header.model {
+                ModelKind::BitForest | ModelKind::Threshold => true,
+                ModelKind::PiecewiseLinear => false,
+            },
+            Files::Boosted(_) => false,
+        };
         if !bits && let Some(&v) = state.iter().find(|v| !writes.contains(&Some(**v))) {
             return Err(raise(Error::bad_file(
                 &model_path,
@@ -478,13 +483,20 @@ impl Model {
         }
         let loaded = Loaded::new(files, |files| Ready {
             predicts: match files {
-                Files::Aln(t) if t.model.header.model == ModelKind::PiecewiseLinear => {
-                    let learned: Vec<_> = t.codebook.learned().collect();
-                    // The compiled boxes speed only the compiled one-row
-                    // path, which this package does not take: no points.
-                    Predicts::Piecewise(Predictor::new(&t.model.pieces, &t.reads, &learned, &[]))
-                }
-                Files::Aln(t) => Predicts::Levels(t.runtime()),
+                Files::Aln(t) => match t.model.header.model {
+                    ModelKind::PiecewiseLinear => {
+                        let learned: Vec<_> = t.codebook.learned().collect();
+                        // The compiled boxes speed only the compiled one-row
+                        // path, which this package does not take: no points.
+                        Predicts::Piecewise(Predictor::new(
+                            &t.model.pieces,
+                            &t.reads,
+                            &learned,
+                            &[],
+                        ))
+                    }
+                    ModelKind::BitForest | ModelKind::Threshold => Predicts::Levels(t.runtime()),
+                },
                 Files::Boosted(k) => Predicts::Boosted(k, k.codebook.learned().collect()),
             },
             spare: Mutex::new(Vec::new()),

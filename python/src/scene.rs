@@ -7,7 +7,7 @@
 use std::path::PathBuf;
 
 use alnlab_common::Error;
-use alnlab_common::state_log::{StateFrame, StateLog};
+use alnlab_common::state_log::StateFrame;
 use alnlab_physics::replay::SceneReplay;
 use alnlab_physics::runner::Control;
 use alnlab_physics::{Prepared, Runner, state_from_generalized};
@@ -82,7 +82,7 @@ impl Scene {
             g[c.hinge][c.axis] = t;
         }
         runner.drive(Some(&g));
-        let dt = p.scene.frame_dt.get() / steps as f64;
+        let dt = p.scene.step_dt(steps);
         let mut first = 0;
         for _ in 0..frames {
             if runner.advance(&mut state, first, steps, dt).is_err() {
@@ -109,7 +109,7 @@ impl Scene {
     #[pyo3(signature = (trajectory_path, scene = None, *, plant = false))]
     fn new(trajectory_path: PathBuf, scene: Option<&str>, plant: bool) -> PyResult<Scene> {
         let path = &trajectory_path;
-        let log = StateLog::read(path).map_err(raise)?;
+        let log = alnlab_common::state_log::read(path).map_err(raise)?;
         let mut replays =
             SceneReplay::from_log(&log).map_err(|m| raise(Error::bad_file(path, m)))?;
         let names: Vec<String> = replays.keys().cloned().collect();
@@ -203,7 +203,7 @@ impl Scene {
     /// Integration steps per frame as the scene was simulated.
     #[getter]
     fn steps_per_frame(&self) -> u64 {
-        (self.prepared.scene.frame_dt.get() / self.prepared.scene.dt.get()).round() as u64
+        self.prepared.scene.steps_per_frame()
     }
 
     fn __repr__(&self) -> String {

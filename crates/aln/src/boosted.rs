@@ -304,7 +304,7 @@ impl Kept {
                 ),
             ));
         }
-        let codebook = Codebook::read(codebook_path)?;
+        let codebook = alnlab_tables::codebook::read(codebook_path)?;
         let learned: Vec<_> = codebook.learned().collect();
         let misfit = |m: String| {
             Error::bad_file(

@@ -1,5 +1,5 @@
-//! Adaptive logic networks as trained models (paper §3, §5, §6; DESIGN.md
-//! §5): the library every stage that reads or evaluates a model uses. The
+//! Adaptive logic networks as trained models (paper §3, §5, §6;
+//! docs/design.md §5): the library every stage that reads or evaluates a model uses. The
 //! train stage makes models; the test and summarize stages read them with
 //! this crate alone, never with the trainer.
 //!

@@ -1,4 +1,4 @@
-//! Linear baselines (DESIGN.md §6). [`Linear`]: least squares from all
+//! Linear baselines (docs/design.md §6). [`Linear`]: least squares from all
 //! current levels to each next level, fitted on the training rows, then
 //! rounded and clamped to the levels — the first form, kept labelled. And
 //! [`least_absolute`], the fit of the strongest fair form: a variable's

@@ -33,7 +33,7 @@ use crate::output::{Output, Target};
 use crate::shard::Shard;
 use crate::tree::{Function, Tree};
 
-/// Which model the trees make up (DESIGN.md §5).
+/// Which model the trees make up (docs/design.md §5).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum ModelKind {
@@ -160,8 +160,11 @@ impl Header {
     /// that code's thermometer, levels − 1 (a threshold model's candidate).
     /// On a mismatch, what differs.
     pub fn outputs_for(&self, learned: &[&Entry]) -> std::result::Result<Vec<Output>, String> {
-        if self.model == ModelKind::PiecewiseLinear {
-            return Err("a piecewise-linear model has no bit outputs".into());
+        match self.model {
+            ModelKind::BitForest | ModelKind::Threshold => {}
+            ModelKind::PiecewiseLinear => {
+                return Err("a piecewise-linear model has no bit outputs".into());
+            }
         }
         let names: Vec<&str> = learned.iter().map(|e| e.variable.as_str()).collect();
         let outputs: Vec<&str> = self.outputs.iter().map(|(n, _)| n.as_str()).collect();
@@ -409,7 +412,11 @@ impl RawModel {
                     bytes.len()
                 ))
             })?;
-        if header.model == ModelKind::PiecewiseLinear {
+        let piecewise = match header.model {
+            ModelKind::PiecewiseLinear => true,
+            ModelKind::BitForest | ModelKind::Threshold => false,
+        };
+        if piecewise {
             let mut records = Vec::with_capacity(header.outputs.len());
             for o in 0..header.outputs.len() {
                 let what = format!("the tree of output {o}");
@@ -576,7 +583,11 @@ impl Model {
     pub fn from_bytes(path: &Path, bytes: &[u8]) -> Result<Model> {
         let (raw, tree_inputs) = RawModel::parse_checked(path, bytes)?;
         let bad = |what: String| Error::bad_file(path, what);
-        if raw.header.model == ModelKind::PiecewiseLinear {
+        let piecewise = match raw.header.model {
+            ModelKind::PiecewiseLinear => true,
+            ModelKind::BitForest | ModelKind::Threshold => false,
+        };
+        if piecewise {
             let pieces = raw
                 .records
                 .iter()

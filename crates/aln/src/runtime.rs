@@ -51,7 +51,7 @@ impl Trained {
                 ),
             ));
         }
-        let codebook = Codebook::read(codebook_path)?;
+        let codebook = alnlab_tables::codebook::read(codebook_path)?;
         let codecs = codebook.learned_codecs(codebook_path)?;
         let learned: Vec<_> = codebook.learned().collect();
         let misfit = |m: String| {
@@ -60,7 +60,11 @@ impl Trained {
                 format!("does not fit the codebook {}: {m}", codebook_path.display()),
             )
         };
-        let (outputs, reads) = if model.header.model == ModelKind::PiecewiseLinear {
+        let piecewise = match model.header.model {
+            ModelKind::PiecewiseLinear => true,
+            ModelKind::BitForest | ModelKind::Threshold => false,
+        };
+        let (outputs, reads) = if piecewise {
             let reads = model.header.piecewise_for(&learned).map_err(misfit)?;
             for (o, (r, tree)) in reads.iter().zip(&model.pieces).enumerate() {
                 if r.inputs.len() != tree.inputs() {

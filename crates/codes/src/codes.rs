@@ -1,4 +1,4 @@
-//! The four codes of a quantization level (DESIGN.md §4), each with its
+//! The four codes of a quantization level (docs/design.md §4), each with its
 //! encoder and its decoder, which is defined for every bit pattern, codeword
 //! or not:
 //!

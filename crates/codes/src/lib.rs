@@ -1,4 +1,4 @@
-//! The codes of quantization levels (paper §4.2, §4.4, §6; DESIGN.md §4) and
+//! The codes of quantization levels (paper §4.2, §4.4, §6; docs/design.md §4) and
 //! the codebook that names each variable's code: a library the quantize,
 //! train and test stages share, so that no stage reads another stage's code.
 //!

@@ -1,4 +1,4 @@
-//! The random-walk code of the original ALN software (DESIGN.md §4): W-bit
+//! The random-walk code of the original ALN software (docs/design.md §4): W-bit
 //! codes where each level's code differs from the previous one in exactly
 //! `step` bits. The guarantee given, for all levels i, j with m = |i − j|:
 //!

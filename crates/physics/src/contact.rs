@@ -12,7 +12,7 @@
 //! touching link's mass): an explicit step cannot resolve stiffer friction,
 //! which would chatter and pump energy into the links during hard impacts.
 
-use alnlab_common::params::Positive;
+use alnlab_core::params::Positive;
 use nalgebra::{Vector3, Vector6};
 use serde::{Deserialize, Serialize};
 

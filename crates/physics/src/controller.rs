@@ -6,7 +6,7 @@
 //! parent on the child, positive along the joint's axis. It is clamped to
 //! the joint's own effort limit (its URDF's), not to the torque limit.
 
-use alnlab_common::params::Positive;
+use alnlab_core::params::Positive;
 use nalgebra::Vector3;
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;

@@ -6,8 +6,6 @@
 //! arena wall and the links in their frames, so the motion can be watched in
 //! Foxglove.
 
-use alnlab_common::Result;
-use alnlab_common::state_log::StateLogWriter;
 use nalgebra::{Matrix3, Rotation3, UnitQuaternion, Vector3};
 use serde_json::{Value, json};
 
@@ -185,11 +183,13 @@ fn robot_bones(p: &Prepared, robot: &Robot, run: u32, log_time_ns: u64) -> Vec<V
     entities
 }
 
-/// Adds the `/tf` and `/scene` channels to a trajectory log; their ids.
-pub fn add_channels(log: &mut StateLogWriter) -> Result<(u16, u16)> {
-    let tf = log.add_json_channel(TF_TOPIC, TF_SCHEMA, &tf_schema())?;
-    let scene = log.add_json_channel(SCENE_TOPIC, SCENE_SCHEMA, &scene_schema())?;
-    Ok((tf, scene))
+/// The `/tf` and `/scene` channels of a trajectory log, each as (topic,
+/// schema name, JSON schema), for the log writer's `add_json_channels`.
+pub fn channels() -> [(&'static str, &'static str, String); 2] {
+    [
+        (TF_TOPIC, TF_SCHEMA, tf_schema()),
+        (SCENE_TOPIC, SCENE_SCHEMA, scene_schema()),
+    ]
 }
 
 /// JSON schema of `foxglove.FrameTransforms` (the fields alnlab writes).

@@ -1,4 +1,4 @@
-//! Articulated rigid bodies (paper §2; DESIGN.md §3): the dynamics, the
+//! Articulated rigid bodies (paper §2; docs/design.md §3): the dynamics, the
 //! scenes a manifest describes, their controllers and contacts, the paper's
 //! variables, and re-simulation of logged frames. A library: the simulate
 //! stage runs scenes with it to write trajectories; the test stage

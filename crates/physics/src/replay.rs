@@ -13,8 +13,8 @@
 
 use std::collections::BTreeMap;
 
-use alnlab_common::state_log::{StateFrame, StateLog};
-use alnlab_common::{Error, Result};
+use alnlab_core::state::{StateFrame, StateLog};
+use alnlab_core::{Error, Result};
 
 use crate::controller::ControllerKind;
 use crate::model::{Joint, Root};
@@ -183,7 +183,7 @@ impl SceneReplay {
                 .map_err(|e| format!("an {SCENE_RECORD} record does not hold a scene ({e})"))?;
             if let Some(expected) = &scene.file_sha256 {
                 let text = field("urdf")?;
-                let found = alnlab_common::hash::sha256_hex(text.as_bytes());
+                let found = alnlab_core::hash::sha256_hex(text.as_bytes());
                 if &found != expected {
                     return Err(format!(
                         "scene `{}`: the robot description in its {SCENE_RECORD} record has \
@@ -318,7 +318,7 @@ impl Replayer<'_> {
             }
             runner.drive(Some(&g));
         }
-        let dt = p.scene.frame_dt.get() / steps as f64;
+        let dt = p.scene.step_dt(steps);
         let first = u64::from(from.frame) * steps;
         runner.advance(&mut state, first, steps, dt).map_err(|_| {
             Error::Diverged(format!(

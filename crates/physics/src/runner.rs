@@ -4,9 +4,9 @@
 //! simulate stage logs and what the test stage re-simulates both come from
 //! here.
 
-use alnlab_common::Error;
-use alnlab_common::Result;
-use alnlab_common::state_log::{StateFrame, StateLayout};
+use alnlab_core::Error;
+use alnlab_core::Result;
+use alnlab_core::state::{StateFrame, StateLayout};
 use nalgebra::{Vector3, Vector6};
 
 use crate::contact::{ContactPoint, Surfaces, contact_points};

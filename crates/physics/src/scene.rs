@@ -19,8 +19,8 @@
 
 use std::sync::Arc;
 
-use alnlab_common::bounded;
-use alnlab_common::params::{Count, Positive};
+use alnlab_core::bounded;
+use alnlab_core::params::{Count, Positive};
 use nalgebra::{UnitQuaternion, Vector3};
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -348,7 +348,7 @@ impl Scene {
     pub fn set_description(&mut self, text: &str) -> Result<(), urdf::UrdfError> {
         let robot = urdf::parse(text, self.base.unwrap_or(Base::Fixed))?;
         self.links = Some(Count(robot.model.len() as u64));
-        self.file_sha256 = Some(alnlab_common::hash::sha256_hex(text.as_bytes()));
+        self.file_sha256 = Some(alnlab_core::hash::sha256_hex(text.as_bytes()));
         self.description = Some(text.into());
         Ok(())
     }
@@ -732,7 +732,7 @@ impl Scene {
         let layout = crate::Prepared::new(self).layout;
         let mut fields = std::collections::BTreeMap::new();
         for name in layout.state.iter().chain(&layout.variables) {
-            let field = alnlab_common::state_log::field_name(name);
+            let field = alnlab_core::state::field_name(name);
             if let Some(other) = fields.insert(field.clone(), name) {
                 return Err((
                     "file".into(),
@@ -757,6 +757,13 @@ impl Scene {
     pub fn nominal_steps_per_frame(&self) -> u64 {
         self.nominal_steps
             .map_or_else(|| self.steps_per_frame(), |k| k.0)
+    }
+
+    /// The integration step (s) of `steps` steps a frame: the one place a
+    /// stepper at another rate than the scene's (the nominal model, the
+    /// planner's simulator@k) derives its `dt`.
+    pub fn step_dt(&self, steps: u64) -> f64 {
+        self.frame_dt.get() / steps as f64
     }
 
     /// Logged frames per run (the initial state included).
@@ -914,7 +921,7 @@ impl Scene {
 /// The seed of one run, mixed from the experiment seed, scene and run so that
 /// runs are independent and reproducible.
 pub fn run_seed(seed: u64, scene_index: usize, run: u32) -> u64 {
-    alnlab_common::hash::mix_seed(seed, ((scene_index as u64) << 32) | u64::from(run))
+    alnlab_core::hash::mix_seed(seed, ((scene_index as u64) << 32) | u64::from(run))
 }
 
 /// A generator seeded for one run.

@@ -2,7 +2,7 @@
 //! the simulate issue (pitch through ±90°, impacts, long horizons, thin
 //! chains).
 
-use alnlab_common::params::{Count, Positive};
+use alnlab_core::params::{Count, Positive};
 use nalgebra::{UnitQuaternion, Vector3};
 
 use crate::controller::{Amplitude, ControllerKind, ControllerParams};
@@ -533,7 +533,7 @@ fn a_robot_joint_effort_is_clamped_to_its_limit() {
     let p = Prepared::new(&scene);
     let mut runner = Runner::new(&p, 1, 0, 0);
     let state = scene.initial_state(&p.model, &mut crate::scene::run_rng(1, 0, 0));
-    let mut frame = alnlab_common::state_log::StateFrame::default();
+    let mut frame = alnlab_core::state::StateFrame::default();
     runner.observe(&state, 0.0, &mut frame);
     let efforts: Vec<f64> = runner.hinge_torques().iter().map(|t| t.x).collect();
     // Shoulder and elbow allow 150 N m, the wrists 28.
@@ -870,7 +870,7 @@ fn drives_holding_velocity_limits_keep_a_robot_moving_as_a_real_one_could() {
 #[test]
 fn a_scene_batch_steps_each_state_as_a_runner_does() {
     use crate::batch_scene::SceneBatch;
-    use alnlab_common::state_log::StateFrame;
+    use alnlab_core::state::StateFrame;
     use rand::{RngExt, SeedableRng};
 
     let mut arm = ur5(1.0);

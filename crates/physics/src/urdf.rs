@@ -28,7 +28,7 @@
 
 use std::collections::HashMap;
 
-use alnlab_common::bounded;
+use alnlab_core::bounded;
 use nalgebra::{Isometry3, Matrix3, Rotation3, Translation3, UnitQuaternion, Vector3};
 
 use crate::model::{Joint, Link, Model, Root};

@@ -55,7 +55,7 @@ pub enum Quantity {
 }
 
 impl Quantity {
-    /// The name prefix, which is also the variable group (DESIGN.md §6).
+    /// The name prefix, which is also the variable group (docs/design.md §3).
     pub fn name(self) -> &'static str {
         match self {
             Quantity::V => "v",

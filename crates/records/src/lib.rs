@@ -14,8 +14,8 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::time::SystemTime;
 
-use alnlab_common::hash::sha256_hex;
-use alnlab_common::{Error, Result, atomic};
+use alnlab_core::hash::sha256_hex;
+use alnlab_core::{Error, Result, atomic};
 use serde::{Deserialize, Serialize};
 
 /// The format of the records this alnlab writes.
@@ -236,7 +236,7 @@ pub fn from_bytes(path: &Path, bytes: &[u8]) -> Result<RunRecord> {
             format!(
                 "run record format {format} is newer than this alnlab ({}) reads (up to \
                  {FORMAT}); use a newer alnlab",
-                alnlab_common::ALNLAB_VERSION
+                alnlab_core::ALNLAB_VERSION
             ),
         ));
     }

@@ -1,5 +1,6 @@
 //! The tables one stage writes and another stage (or the report) reads:
 //! `stats` (simulate → quantize), `pairs` (stride → quantize, train, test),
+//! `codebook` (quantize → every stage after it and the report),
 //! `levels` (quantize → train, test, plan, circuit), `predictions` and
 //! `rollout` (test → summarize).
 //! Stages never depend on each other, so such a table's contract cannot
@@ -10,6 +11,7 @@
 //! A table written and read by its own stage alone (`training.parquet`,
 //! `timings.parquet`, …) stays with that stage.
 
+pub mod codebook;
 mod dictionary;
 pub mod levels;
 pub mod pairs;

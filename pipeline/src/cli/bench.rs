@@ -4,6 +4,7 @@
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
+use alnlab_aln::ModelKind;
 use alnlab_common::{Error, Result};
 use clap::Subcommand;
 
@@ -281,7 +282,11 @@ pub fn execute(bench: Bench, quiet: bool) -> Result<()> {
             )?;
             let bar = crate::progress::Bar::new("circuit", quiet);
             let kind = alnlab_aln::model::RawModel::read(&model)?.header.model;
-            if kind == alnlab_aln::ModelKind::PiecewiseLinear {
+            let piecewise = match kind {
+                ModelKind::PiecewiseLinear => true,
+                ModelKind::BitForest | ModelKind::Threshold => false,
+            };
+            if piecewise {
                 let figures = alnlab_circuit::bench::piecewise_on_run(
                     (&model, &codebook, &levels, &pairs),
                     &widths,

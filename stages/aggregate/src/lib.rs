@@ -16,7 +16,6 @@
 use std::collections::BTreeMap;
 use std::path::Path;
 
-use alnlab_codes::Codebook;
 use alnlab_common::{Error, Progress, Provenance, Result};
 use alnlab_tables::levels;
 use alnlab_tables::pairs::{self, Key, Pairs, Side};
@@ -53,7 +52,7 @@ pub fn run(
 ) -> Result<()> {
     let pairs = Pairs::read(inputs.pairs)?;
     let nominal = Pairs::read(inputs.nominal)?;
-    let codebook = Codebook::read(inputs.codebook)?;
+    let codebook = alnlab_tables::codebook::read(inputs.codebook)?;
     let levels = levels::Levels::read(inputs.levels)?;
     let planned = Pairs::read(inputs.transitions)?;
     let planned_nominal = Pairs::read(inputs.transitions_nominal)?;
@@ -263,9 +262,12 @@ mod tests {
         let codebook = Codebook {
             entries: vec![entry],
         };
-        codebook
-            .write(&path("codebook.parquet"), &Provenance::default())
-            .unwrap();
+        alnlab_tables::codebook::write(
+            &codebook,
+            &path("codebook.parquet"),
+            &Provenance::default(),
+        )
+        .unwrap();
         levels::write(
             &path("levels.parquet"),
             &old,

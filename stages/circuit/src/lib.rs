@@ -190,13 +190,17 @@ pub fn run(
         return nothing();
     }
     let trained = Trained::read(model_path, codebook_path)?;
-    if trained.model.header.model == ModelKind::Threshold {
-        return nothing();
-    }
+    // A threshold model finds its level by a binary search over repeated
+    // evaluations, a sequential circuit this stage does not build.
+    let piecewise = match trained.model.header.model {
+        ModelKind::Threshold => return nothing(),
+        ModelKind::PiecewiseLinear => true,
+        ModelKind::BitForest => false,
+    };
     let fpga = params.fpga.map(|device| (device, seed));
     let rows = params.rows.map(Count::get);
     let scratch = scratch_in(out_dir)?;
-    if trained.model.header.model == ModelKind::PiecewiseLinear {
+    if piecewise {
         let all = piecewise_rows(&trained, levels_path, pairs_path)?;
         let measured = piecewise::measure(
             &trained,

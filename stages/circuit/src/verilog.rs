@@ -112,20 +112,23 @@ impl Circuit {
         codecs: &[Codec],
         outputs: &[Output],
     ) -> Result<Circuit, String> {
-        if model.header.model == ModelKind::Threshold {
-            return Err(
-                "a threshold model finds its level by a binary search over repeated \
-                        evaluations of its trees, a sequential circuit; only bit-forests are \
-                        exported"
-                    .into(),
-            );
-        }
-        if model.header.model == ModelKind::PiecewiseLinear {
-            return Err(
-                "a piecewise-linear model computes with real numbers (affine pieces under MIN and \
-                 MAX), not AND/OR gates; only bit-forests are exported"
-                    .into(),
-            );
+        match model.header.model {
+            ModelKind::BitForest => {}
+            ModelKind::Threshold => {
+                return Err(
+                    "a threshold model finds its level by a binary search over repeated \
+                     evaluations of its trees, a sequential circuit; only bit-forests are \
+                     exported"
+                        .into(),
+                );
+            }
+            ModelKind::PiecewiseLinear => {
+                return Err(
+                    "a piecewise-linear model computes with real numbers (affine pieces under \
+                     MIN and MAX), not AND/OR gates; only bit-forests are exported"
+                        .into(),
+                );
+            }
         }
         let idents: Vec<String> = names.iter().map(|n| ident(n)).collect();
         let mut seen = BTreeSet::new();

@@ -77,7 +77,11 @@ pub fn on_data(
     let states = test.rows.len();
     let one_thread = one_thread();
     let simulator_one_step_one_thread_ns = simulator(&data, &test, trajectory_path, repeat)?;
-    if data.model.header.model == ModelKind::PiecewiseLinear {
+    let piecewise = match data.model.header.model {
+        ModelKind::PiecewiseLinear => true,
+        ModelKind::BitForest | ModelKind::Threshold => false,
+    };
+    if piecewise {
         let learned = data.learned();
         let x = Pairs::read(pairs_path)?.values(Side::Current, &learned)?;
         let train = data.levels.train_rows();
@@ -207,7 +211,7 @@ fn simulator(
     trajectory_path: &Path,
     repeat: usize,
 ) -> Result<Spread> {
-    let log = alnlab_common::state_log::StateLog::read(trajectory_path)?;
+    let log = alnlab_common::state_log::read(trajectory_path)?;
     let learned = data.learned();
     let frames = rollout::LoggedFrames::new(&log, &learned);
     let replays = alnlab_physics::replay::SceneReplay::from_log(&log)

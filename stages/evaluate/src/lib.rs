@@ -1,4 +1,4 @@
-//! The test stage (paper §4.5, §4.7; DESIGN.md §6–7): loads the model,
+//! The test stage (paper §4.5, §4.7; docs/design.md §6–7): loads the model,
 //! predicts the next level of every variable it predicts (every learned
 //! variable, or — a piecewise-linear model given the controls — all but
 //! the controls) for every test row of `levels.parquet`, and scores it
@@ -48,7 +48,6 @@ use alnlab_aln::{ModelKind, Output, Target};
 use alnlab_codes::codes::Codec;
 use alnlab_codes::{Codebook, Entry};
 use alnlab_common::params::{self, Count, Fraction, ParamError};
-use alnlab_common::state_log::StateLog;
 use alnlab_common::{Error, Progress, Provenance, Result};
 use alnlab_tables::levels::Levels;
 use alnlab_tables::pairs::{Pairs, Side, Split};
@@ -258,7 +257,10 @@ pub fn run(
     let test_columns = pick_rows(&real_x, &test.rows);
     let test_columns: Vec<&[f64]> = test_columns.iter().map(Vec::as_slice).collect();
     let train_states = states(&real_x, &train_rows);
-    let piecewise = data.model.header.model == ModelKind::PiecewiseLinear;
+    let piecewise = match data.model.header.model {
+        ModelKind::PiecewiseLinear => true,
+        ModelKind::BitForest | ModelKind::Threshold => false,
+    };
     let width = learned.len();
     // The nominal simulator's predictions (read and checked either way: an
     // input given is an input verified).
@@ -395,7 +397,7 @@ pub fn run(
     progress.advance(1);
 
     // The simulator re-stepping each test row's logged frame.
-    let log = StateLog::read(trajectory_path)?;
+    let log = alnlab_common::state_log::read(trajectory_path)?;
     let starts = data.starts(&test);
     let frames = rollout::LoggedFrames::new(&log, &learned);
     let replays = alnlab_physics::replay::SceneReplay::from_log(&log)

@@ -1,4 +1,4 @@
-//! The simulator as a baseline (DESIGN.md §7): each test row's frame is
+//! The simulator as a baseline (docs/design.md §7): each test row's frame is
 //! stepped forward again from its logged state with `steps` integration
 //! steps per frame — the logged step reproduces the log; coarser ones are
 //! faster and less accurate, until they blow up — then quantized by the

@@ -8,7 +8,7 @@ use std::path::{Path, PathBuf};
 
 use alnlab_common::Provenance;
 use alnlab_common::params::{Count, Positive};
-use alnlab_common::state_log::{StateFrame, StateLog};
+use alnlab_common::state_log::StateFrame;
 use alnlab_physics::replay::SceneReplay;
 use alnlab_physics::{Prepared, Scene, SceneKind, simulate_run};
 use mcap::records::MessageHeader;
@@ -119,7 +119,7 @@ fn a_recorded_simulation_is_ingested_as_its_own_log_and_replays() {
     };
     ingest(&source, &grid, &Provenance::default(), dir.path()).unwrap();
 
-    let log = StateLog::read(&dir.path().join(log::TRAJECTORY_FILE)).unwrap();
+    let log = alnlab_common::state_log::read(&dir.path().join(log::TRAJECTORY_FILE)).unwrap();
     let ingested = &log.scenes[0];
     assert_eq!(ingested.layout, p.layout);
     assert_eq!(ingested.frames.len(), simulated.len() - 2);

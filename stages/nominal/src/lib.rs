@@ -18,7 +18,7 @@
 use std::collections::{BTreeMap, HashMap};
 use std::path::Path;
 
-use alnlab_common::state_log::{StateFrame, StateLog};
+use alnlab_common::state_log::StateFrame;
 use alnlab_common::{Error, Progress, Provenance, Result};
 use alnlab_physics::replay::{Replayer, SceneReplay};
 use alnlab_tables::pairs::{self, Pairs, Side};
@@ -39,7 +39,7 @@ pub fn run(
     out_dir: &Path,
     progress: &dyn Progress,
 ) -> Result<()> {
-    let log = StateLog::read(trajectory)?;
+    let log = alnlab_common::state_log::read(trajectory)?;
     let pairs = Pairs::read(pairs_path)?;
     let replays = SceneReplay::from_log(&log).map_err(|m| Error::bad_file(trajectory, m))?;
     let variables: Vec<&str> = pairs.variables().iter().map(String::as_str).collect();

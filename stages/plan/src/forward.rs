@@ -104,7 +104,7 @@ impl Simulator<'_> {
             return false;
         };
         let d = self.controls.dims();
-        let dt = self.p.scene.frame_dt.get() / self.steps as f64;
+        let dt = self.p.scene.step_dt(self.steps);
         lanes.start(&self.start, costs.len());
         costs.fill(0.0);
         for h in 0..horizon {
@@ -138,7 +138,7 @@ impl Simulator<'_> {
     fn frame(&mut self, action: &[f64]) -> bool {
         self.controls.set(action, &mut self.torques);
         self.runner.drive(Some(&self.torques));
-        let dt = self.p.scene.frame_dt.get() / self.steps as f64;
+        let dt = self.p.scene.step_dt(self.steps);
         if self
             .runner
             .advance(&mut self.state, 0, self.steps, dt)
@@ -739,7 +739,7 @@ impl<'a> Hybrid<'a> {
         let (len, width) = (actions.len() / n, self.start.len());
         let d = len / horizon;
         let sim = &mut self.nominal;
-        let dt = sim.p.scene.frame_dt.get() / sim.steps as f64;
+        let dt = sim.p.scene.step_dt(sim.steps);
         let columns = &mut self.columns;
         columns.reset(&self.start, 2 * width, self.predicted.len(), n);
         lanes.start(&sim.start, n);

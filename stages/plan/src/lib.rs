@@ -54,7 +54,7 @@ use alnlab_aln::pwl::predict::Predictor;
 use alnlab_aln::runtime::Trained;
 use alnlab_common::hash::mix_seed;
 use alnlab_common::params::{self, Count, Fraction, ParamError};
-use alnlab_common::state_log::{StateFrame, StateLayout, StateLog, StateLogWriter};
+use alnlab_common::state_log::{StateFrame, StateLayout, StateLogWriter};
 use alnlab_common::table;
 use alnlab_common::{Error, Progress, Provenance, Result};
 use alnlab_physics::dynamics::{Kinematics, State};
@@ -296,7 +296,7 @@ struct View {
 impl View {
     fn create(path: &Path, layouts: &[StateLayout]) -> Result<View> {
         let mut log = StateLogWriter::create(path, layouts)?;
-        let (tf, scene) = foxglove::add_channels(&mut log)?;
+        let [tf, scene] = log.add_json_channels(foxglove::channels())?;
         Ok(View {
             log,
             tf,
@@ -374,7 +374,7 @@ pub fn run(
         };
         out.write(out_dir, provenance)
     } else {
-        let log = StateLog::read(trajectory_path)?;
+        let log = alnlab_common::state_log::read(trajectory_path)?;
         let replays =
             SceneReplay::from_log(&log).map_err(|m| Error::bad_file(trajectory_path, m))?;
         let scene_name = match &params.scene {
@@ -432,7 +432,11 @@ pub fn run(
         // state: the state's values stand in for them in the cuts.
         let hybrid = trained.model.header.base == Base::Nominal;
         let inputs = trained.model.header.base.inputs(&learned);
-        let piecewise = (trained.model.header.model == ModelKind::PiecewiseLinear).then(|| {
+        let piecewise = match trained.model.header.model {
+            ModelKind::PiecewiseLinear => true,
+            ModelKind::BitForest | ModelKind::Threshold => false,
+        };
+        let piecewise = piecewise.then(|| {
             let points: Vec<f64> = (0..train_rows.len())
                 .flat_map(|r| {
                     inputs

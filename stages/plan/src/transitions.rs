@@ -100,7 +100,7 @@ impl<'a> Transitions<'a> {
         self.runner.restart();
         self.runner.drive(Some(&self.torques));
         let steps = p.scene.nominal_steps_per_frame();
-        let dt = p.scene.frame_dt.get() / steps as f64;
+        let dt = p.scene.step_dt(steps);
         if self.runner.advance(&mut state, 0, steps, dt).is_err() {
             return Ok(());
         }

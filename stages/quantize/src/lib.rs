@@ -1,4 +1,4 @@
-//! The quantize stage (paper §4.2, §4.4, §6; DESIGN.md §4): reads
+//! The quantize stage (paper §4.2, §4.4, §6; docs/design.md §4): reads
 //! `pairs.parquet` and `stats.parquet`, clamps each variable to its range,
 //! quantizes it to L levels and writes
 //! - `codebook.parquet`: per variable its range, L, code, width, walk seed,
@@ -29,7 +29,7 @@ use alnlab_codes::{Codebook, Entry, GROUPS, Quantizer, group_of};
 /// Version of what this stage writes (part of every cache key).
 pub const FORMAT_VERSION: u32 = 3;
 /// File name of the codebook.
-pub const CODEBOOK_FILE: &str = "codebook.parquet";
+pub const CODEBOOK_FILE: &str = alnlab_tables::codebook::FILE;
 
 /// Where variable ranges come from.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
@@ -304,7 +304,11 @@ pub fn run(
         &y_levels,
         provenance,
     )?;
-    Codebook { entries }.write(&out_dir.join(CODEBOOK_FILE), provenance)
+    alnlab_tables::codebook::write(
+        &Codebook { entries },
+        &out_dir.join(CODEBOOK_FILE),
+        provenance,
+    )
 }
 
 /// A variable whose spread is at most this fraction of its group's scale
@@ -403,7 +407,7 @@ mod tests {
             ..Params::default()
         };
         quantize(&params, dir.path()).unwrap();
-        let codebook = Codebook::read(&dir.path().join(CODEBOOK_FILE)).unwrap();
+        let codebook = alnlab_tables::codebook::read(&dir.path().join(CODEBOOK_FILE)).unwrap();
         let levels = Table::read(&dir.path().join(levels::FILE)).unwrap();
         let pairs = Table::read(&dir.path().join(pairs::FILE)).unwrap();
         assert_eq!(levels.num_rows(), pairs.num_rows());
@@ -437,7 +441,7 @@ mod tests {
             ..Params::default()
         };
         quantize(&params, dir.path()).unwrap();
-        let codebook = Codebook::read(&dir.path().join(CODEBOOK_FILE)).unwrap();
+        let codebook = alnlab_tables::codebook::read(&dir.path().join(CODEBOOK_FILE)).unwrap();
         let find = |v: &str| codebook.entries.iter().find(|e| e.variable == v).unwrap();
         assert_eq!(
             (find("a.1.x").quantizer.min, find("a.1.x").quantizer.max),
@@ -481,7 +485,7 @@ mod tests {
             3,
         );
         quantize(&Params::default(), dir.path()).unwrap();
-        let codebook = Codebook::read(&dir.path().join(CODEBOOK_FILE)).unwrap();
+        let codebook = alnlab_tables::codebook::read(&dir.path().join(CODEBOOK_FILE)).unwrap();
         let missing: Vec<&Entry> = codebook
             .entries
             .iter()
@@ -509,7 +513,7 @@ mod tests {
             1,
         );
         quantize(&Params::default(), dir.path()).unwrap();
-        let codebook = Codebook::read(&dir.path().join(CODEBOOK_FILE)).unwrap();
+        let codebook = alnlab_tables::codebook::read(&dir.path().join(CODEBOOK_FILE)).unwrap();
         assert_eq!(codebook.learned().count(), 0);
         assert!(
             codebook
@@ -562,7 +566,7 @@ mod tests {
             3,
         );
         quantize(&Params::default(), dir.path()).unwrap();
-        let codebook = Codebook::read(&dir.path().join(CODEBOOK_FILE)).unwrap();
+        let codebook = alnlab_tables::codebook::read(&dir.path().join(CODEBOOK_FILE)).unwrap();
         let stats =
             alnlab_tables::stats::read(&dir.path().join(alnlab_simulate::STATS_FILE)).unwrap();
         let observed = observed_ranges(&stats);

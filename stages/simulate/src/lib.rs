@@ -1,4 +1,4 @@
-//! The simulate stage (paper §2, §4.1–4.2; DESIGN.md §3): runs the scenes of
+//! The simulate stage (paper §2, §4.1–4.2; docs/design.md §3): runs the scenes of
 //! a manifest and writes
 //! - `trajectory.mcap`: one `/state` message per logged frame (see
 //!   [`alnlab_common::state_log`]) holding the generalized state and the
@@ -156,7 +156,7 @@ pub fn run(
     progress.start("simulate", total_steps, "steps");
 
     let mut log = StateLogWriter::create(&out_dir.join(TRAJECTORY_FILE), &layouts)?;
-    let (tf, scene_channel) = foxglove::add_channels(&mut log)?;
+    let [tf, scene_channel] = log.add_json_channels(foxglove::channels())?;
     let mut stats = alnlab_tables::stats::VariableStats::default();
     let mut log_time_ns = 0u64;
     for (scene_index, p) in prepared.iter().enumerate() {

@@ -2,7 +2,6 @@
 //! leaves nothing, and the log replaying through `alnlab_physics::replay`.
 
 use alnlab_common::params::{Count, Positive};
-use alnlab_common::state_log::StateLog;
 use alnlab_common::table::Table;
 use alnlab_common::{Provenance, Silent};
 use alnlab_physics::contact::ContactParams;
@@ -62,7 +61,7 @@ fn writes_log_and_stats_that_read_back() {
         ..Params::default()
     };
     run(&params, 7, &Provenance::default(), dir.path(), &Silent).unwrap();
-    let log = StateLog::read(&dir.path().join(TRAJECTORY_FILE)).unwrap();
+    let log = alnlab_common::state_log::read(&dir.path().join(TRAJECTORY_FILE)).unwrap();
     let frames = &log.scenes[0].frames;
     assert_eq!(frames.len(), 2 * 201);
     assert_eq!((frames[201].run, frames[201].frame), (1, 0));
@@ -148,7 +147,7 @@ fn at_the_logged_step_a_replayed_frame_is_the_next_logged_frame() {
         inputs: Default::default(),
     };
     run(&params, 7, &provenance, dir.path(), &Silent).unwrap();
-    let log = StateLog::read(&dir.path().join(TRAJECTORY_FILE)).unwrap();
+    let log = alnlab_common::state_log::read(&dir.path().join(TRAJECTORY_FILE)).unwrap();
     let replays = SceneReplay::from_log(&log).unwrap();
     let worm = &replays["worm"];
     let mut replayer = worm.replayer();

@@ -12,7 +12,7 @@ use std::path::Path;
 
 use alnlab_common::hash::{fnv1a, mix_seed};
 use alnlab_common::params::{self, Count, Fraction, ParamError};
-use alnlab_common::state_log::{StateFrame, StateLog};
+use alnlab_common::state_log::StateFrame;
 use alnlab_common::{Error, Progress, Provenance, Result};
 // A pair's split is its role here: `Split` is the parameter that assigns them.
 use alnlab_tables::pairs::{self, Key, Side, Split as Role};
@@ -116,7 +116,7 @@ pub fn run(
     params
         .validate()
         .map_err(|e| params::invalid("stride", e))?;
-    let log = StateLog::read(trajectory)?;
+    let log = alnlab_common::state_log::read(trajectory)?;
     let mut variables: Vec<&str> = Vec::new();
     for scene in &log.scenes {
         for v in &scene.layout.variables {
@@ -303,7 +303,7 @@ mod tests {
         )
         .unwrap();
 
-        let log = StateLog::read(&trajectory).unwrap();
+        let log = alnlab_common::state_log::read(&trajectory).unwrap();
         let frames = &log.scenes[0].frames;
         let pairs = Table::read(&dir.path().join(pairs::FILE)).unwrap();
         // 1001 frames per run: frames 4, 13, …, 994 have successors.

@@ -1,4 +1,4 @@
-//! The summarize stage (paper §4.5–4.6; DESIGN.md §6–7): reads
+//! The summarize stage (paper §4.5–4.6; docs/design.md §6): reads
 //! `predictions.parquet` and `rollout.parquet` and writes
 //! - `summary.parquet` — per set of rows (all test rows, and the held-out
 //!   ones alone: with the paper's split the test rows include training

@@ -1,4 +1,4 @@
-//! Error statistics (paper §4.5–4.6; DESIGN.md §6) of absolute errors in
+//! Error statistics (paper §4.5–4.6; docs/design.md §6) of absolute errors in
 //! quantization levels.
 //!
 //! Errors are small whole numbers, so everything is computed from their

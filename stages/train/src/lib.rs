@@ -1,4 +1,4 @@
-//! The train stage (paper §3, §4.3, §4.7; DESIGN.md §5): reads the codebook
+//! The train stage (paper §3, §4.3, §4.7; docs/design.md §5): reads the codebook
 //! and `levels.parquet`, trains one ALN tree per output bit of every learned
 //! variable (`vote` trees per bit) on the training rows, and writes the model
 //! file and `training.parquet` (per tree per epoch: errors, counter updates,
@@ -21,7 +21,6 @@ mod threshold;
 
 use std::path::Path;
 
-use alnlab_codes::Codebook;
 use alnlab_codes::bits::encode;
 use alnlab_codes::codes::{Code, Codec};
 use alnlab_codes::residual::{DeltaSpec, change};
@@ -160,7 +159,11 @@ impl Params {
                 format!("expected at most 127, found {}", self.counter_bound.0),
             ));
         }
-        if self.controls == Controls::Given && self.model != ModelKind::PiecewiseLinear {
+        let piecewise = match self.model {
+            ModelKind::PiecewiseLinear => true,
+            ModelKind::BitForest | ModelKind::Threshold => false,
+        };
+        if self.controls == Controls::Given && !piecewise {
             return Err((
                 "controls".into(),
                 format!(
@@ -170,7 +173,7 @@ impl Params {
                 ),
             ));
         }
-        if self.base == Base::Nominal && self.model != ModelKind::PiecewiseLinear {
+        if self.base == Base::Nominal && !piecewise {
             return Err((
                 "base".into(),
                 format!(
@@ -221,7 +224,7 @@ pub fn run(
     progress: &dyn Progress,
 ) -> Result<()> {
     params.validate().map_err(|e| params::invalid("train", e))?;
-    let codebook = Codebook::read(codebook_path)?;
+    let codebook = alnlab_tables::codebook::read(codebook_path)?;
     let levels = Levels::read(levels_path)?;
     let learned: Vec<_> = codebook.learned().collect();
     if learned.is_empty() {
@@ -235,7 +238,11 @@ pub fn run(
     if rows.is_empty() {
         return Err(Error::bad_file(levels_path, "has no training rows"));
     }
-    if params.model == ModelKind::PiecewiseLinear {
+    let piecewise = match params.model {
+        ModelKind::PiecewiseLinear => true,
+        ModelKind::BitForest | ModelKind::Threshold => false,
+    };
+    if piecewise {
         if shard.is_part() {
             return Err(Error::Invalid(
                 "a piecewise-linear model trains in one process: its trees are few; run \

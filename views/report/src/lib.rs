@@ -32,7 +32,7 @@ use std::path::{Path, PathBuf};
 
 use alnlab_aln::model::{Base, Header, Model};
 use alnlab_aln::{ModelKind, Target};
-use alnlab_codes::{Codebook, unit_of};
+use alnlab_codes::unit_of;
 use alnlab_common::{Result, atomic};
 
 use alnlab_evaluate::timings::Row as Timing;
@@ -577,7 +577,7 @@ fn load(info: &VariantInfo) -> Result<Loaded<'_>> {
         // A thermometer of w bits has w + 1 levels: ⌈log₂(w + 1)⌉ steps.
         levels_steps: (max_width + 1).next_power_of_two().trailing_zeros(),
     };
-    let codebook = Codebook::read(&info.codebook)?;
+    let codebook = alnlab_tables::codebook::read(&info.codebook)?;
     let width_of = |name: &str| {
         codebook
             .entries
