@@ -5,25 +5,23 @@
 //! Python package (`python/`) uses only libraries. A dev-dependency may
 //! build a stage's test input with an upstream stage; nothing of it reaches
 //! the stage's library.
+//!
+//! Beside the layering, two rules read from the sources: a model kind is
+//! matched, never compared; and every test the fast tier leaves out says
+//! that the full suite runs it.
 
 use std::collections::BTreeMap;
 use std::path::Path;
 use std::process::Command;
 
-/// Every package of the workspace: name → (folder relative to the root,
-/// its normal and build dependencies on workspace packages).
-fn workspace() -> BTreeMap<String, (String, Vec<String>)> {
-    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+/// `cargo metadata --format-version 1 --offline` with `more` arguments, of
+/// the workspace.
+fn cargo_metadata(more: &[&str]) -> serde_json::Value {
     let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
     let output = Command::new(cargo)
-        .args([
-            "metadata",
-            "--format-version",
-            "1",
-            "--no-deps",
-            "--offline",
-        ])
-        .current_dir(root)
+        .args(["metadata", "--format-version", "1", "--offline"])
+        .args(more)
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
         .output()
         .expect("cargo metadata runs");
     assert!(
@@ -31,7 +29,14 @@ fn workspace() -> BTreeMap<String, (String, Vec<String>)> {
         "{}",
         String::from_utf8_lossy(&output.stderr)
     );
-    let metadata: serde_json::Value = serde_json::from_slice(&output.stdout).unwrap();
+    serde_json::from_slice(&output.stdout).unwrap()
+}
+
+/// Every package of the workspace: name → (folder relative to the root,
+/// its normal and build dependencies on workspace packages).
+fn workspace() -> BTreeMap<String, (String, Vec<String>)> {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let metadata = cargo_metadata(&["--no-deps"]);
     let names: Vec<&str> = metadata["packages"]
         .as_array()
         .unwrap()
@@ -190,4 +195,158 @@ fn the_python_package_uses_only_libraries() {
             "the Python package depends on {dep} in {dep_folder}"
         );
     }
+}
+
+/// The libraries a contributor tests alone after a one-line change build
+/// without the file formats: neither they nor anything they (or their
+/// tests) build on links Arrow, Parquet or MCAP, so a cold `cargo test -p`
+/// of one of them takes about a minute, not the twenty of Arrow. Read from
+/// `Cargo.lock` (every platform's packages, by name: stricter than one
+/// build needs, and readable offline).
+#[test]
+fn light_libraries_link_no_file_format() {
+    let lock = std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("Cargo.lock"))
+        .expect("Cargo.lock is committed");
+    let lock: toml::Table = toml::from_str(&lock).unwrap();
+    // Each package's dependencies by name (an entry is "name", "name
+    // version" or "name version (source)").
+    let mut deps: BTreeMap<&str, Vec<&str>> = BTreeMap::new();
+    for package in lock["package"].as_array().unwrap() {
+        let name = package["name"].as_str().unwrap();
+        let entry = deps.entry(name).or_default();
+        if let Some(list) = package.get("dependencies") {
+            for dep in list.as_array().unwrap() {
+                entry.push(dep.as_str().unwrap().split(' ').next().unwrap());
+            }
+        }
+    }
+    let heavy = |name: &str| name == "parquet" || name == "mcap" || name.starts_with("arrow");
+    for light in [
+        "alnlab-core",
+        "alnlab-codes",
+        "alnlab-physics",
+        "alnlab-records",
+    ] {
+        let mut todo = vec![vec![light]];
+        let mut seen = std::collections::BTreeSet::new();
+        while let Some(path) = todo.pop() {
+            let last = *path.last().unwrap();
+            assert!(
+                !heavy(last),
+                "{light} links a file format: {}",
+                path.join(" → ")
+            );
+            if seen.insert(last) {
+                for dep in deps.get(last).into_iter().flatten() {
+                    let mut longer = path.clone();
+                    longer.push(dep);
+                    todo.push(longer);
+                }
+            }
+        }
+        assert!(seen.len() > 5, "{light} reaches {} packages", seen.len());
+    }
+}
+
+/// The workspace's own Rust sources (not `target/`, not the fuzz crate's
+/// build), as (path relative to the root, text).
+fn rust_sources() -> Vec<(String, String)> {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let mut found = Vec::new();
+    let mut todo: Vec<std::path::PathBuf> = ["crates", "stages", "views", "pipeline", "python"]
+        .into_iter()
+        .chain(["xtask", "tests", "fuzz/fuzz_targets"])
+        .map(|d| root.join(d))
+        .collect();
+    while let Some(dir) = todo.pop() {
+        for entry in std::fs::read_dir(&dir).unwrap() {
+            let path = entry.unwrap().path();
+            if path.is_dir() {
+                if path.file_name().is_some_and(|n| n != "target") {
+                    todo.push(path);
+                }
+            } else if path.extension().is_some_and(|e| e == "rs") {
+                let relative = path.strip_prefix(root).unwrap().display().to_string();
+                found.push((relative, std::fs::read_to_string(&path).unwrap()));
+            }
+        }
+    }
+    assert!(found.len() > 100, "{} Rust files", found.len());
+    found
+}
+
+/// Whether `line` compares a model kind with `==` or `!=`.
+fn compares_a_model_kind(line: &str) -> bool {
+    let kind = concat!("Model", "Kind::");
+    line.match_indices(kind).any(|(at, _)| {
+        let path = |c: char| c.is_alphanumeric() || c == '_' || c == ':';
+        let before = line[..at].trim_end_matches(path).trim_end();
+        let after = line[at + kind.len()..]
+            .trim_start_matches(path)
+            .trim_start();
+        ["==", "!="]
+            .iter()
+            .any(|op| before.ends_with(op) || after.starts_with(op))
+    })
+}
+
+/// A model kind is decided by an exhaustive `match`, so that a new kind
+/// makes the compiler name every place that must decide something about
+/// it; a comparison with `==` or `!=` would quietly treat it as "not that
+/// kind". (Assertions in tests compare freely.)
+#[test]
+fn model_kinds_are_matched_not_compared() {
+    let compared: Vec<String> = rust_sources()
+        .iter()
+        .flat_map(|(path, text)| {
+            text.lines()
+                .enumerate()
+                .filter(|(_, line)| compares_a_model_kind(line))
+                .map(move |(n, line)| format!("{path}:{}: {}", n + 1, line.trim()))
+        })
+        .collect();
+    assert!(compared.is_empty(), "{}", compared.join("\n"));
+}
+
+#[test]
+fn the_check_sees_a_model_kind_compared() {
+    let kind = concat!("Model", "Kind");
+    for line in [
+        format!("if m.header.model == {kind}::Threshold {{"),
+        format!("let p = kind != alnlab_aln::{kind}::PiecewiseLinear;"),
+        format!("if alnlab_aln::model::{kind}::BitForest == k {{"),
+    ] {
+        assert!(compares_a_model_kind(&line), "{line}");
+    }
+    for line in [
+        format!("{kind}::Threshold => return nothing(),"),
+        format!("assert_eq!(model.header.model, {kind}::PiecewiseLinear);"),
+        format!("if self.base == Base::Nominal && {kind}::name(k) != \"x\""),
+    ] {
+        assert!(!compares_a_model_kind(&line), "{line}");
+    }
+}
+
+/// The fast tier (`cargo test --workspace`) leaves out only what the full
+/// suite (`cargo xtask test`, `--include-ignored`) runs, each with its
+/// reason: no test is switched off for good.
+#[test]
+fn every_ignored_test_says_it_belongs_to_the_full_suite() {
+    let ignore = concat!("#[", "ignore");
+    let mut silent = Vec::new();
+    let mut full = 0;
+    for (path, text) in rust_sources() {
+        for (n, line) in text.lines().enumerate() {
+            let line = line.trim();
+            if line.starts_with(ignore) {
+                if line.starts_with(concat!("#[", "ignore = \"full suite: ")) {
+                    full += 1;
+                } else {
+                    silent.push(format!("{path}:{}: {line}", n + 1));
+                }
+            }
+        }
+    }
+    assert!(silent.is_empty(), "{}", silent.join("\n"));
+    assert!(full >= 5, "{full} full-suite tests");
 }

@@ -4,7 +4,8 @@
 //! - `cargo xtask test` — the README's test command: installs what the
 //!   suite needs and the machine lacks ([`setup`]: Debian packages, a Python
 //!   environment of its own), then runs the whole suite ([`suite`]): `cargo
-//!   test --workspace`, the interop check with standard readers, the
+//!   test --workspace -- --include-ignored` (the fast tier and the tests it
+//!   leaves out), the interop check with standard readers, the
 //!   quickstart's Gray forest as a circuit placed and routed on an iCE40,
 //!   the MLflow round trip against a real server on loopback and the
 //!   Snakemake workflow.
