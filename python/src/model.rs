@@ -495,7 +495,10 @@ impl Model {
                             &[],
                         ))
                     }
-                    ModelKind::BitForest | ModelKind::Threshold => Predicts::Levels(t.runtime()),
+                    ModelKind::BitForest | ModelKind::Threshold => Predicts::Levels(
+                        t.runtime()
+                            .expect("a bit-forest or threshold model has a level runtime"),
+                    ),
                 },
                 Files::Boosted(k) => Predicts::Boosted(k, k.codebook.learned().collect()),
             },

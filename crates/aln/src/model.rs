@@ -832,6 +832,14 @@ mod tests {
         let path = dir.path().join("model.aln");
         m.write(&path).unwrap();
         assert_eq!(Model::read(&path).unwrap(), m);
+        // It has no level runtime, and says so rather than panicking.
+        let refused = crate::runtime::Runtime::new(&m, &[], &[]).err();
+        assert!(
+            refused
+                .as_deref()
+                .is_some_and(|m| m.contains("real values")),
+            "{refused:?}"
+        );
         // The first tree's MAX names node 7 of 3, under a valid checksum.
         let mut bytes = std::fs::read(&path).unwrap();
         let header = serde_json::to_vec(&m.header).unwrap().len();

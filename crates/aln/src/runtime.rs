@@ -95,8 +95,8 @@ impl Trained {
     }
 
     /// The runtime that predicts with a bit-forest or threshold model
-    /// (see [`Runtime::new`]).
-    pub fn runtime(&self) -> Runtime<'_> {
+    /// (see [`Runtime::new`]); a piecewise-linear model is refused.
+    pub fn runtime(&self) -> std::result::Result<Runtime<'_>, String> {
         Runtime::new(&self.model, &self.codecs, &self.outputs)
     }
 }
@@ -122,12 +122,14 @@ enum Compiled<'a> {
 
 impl<'a> Runtime<'a> {
     /// Prepares `model`, whose inputs are coded by `codecs` and whose
-    /// trees' bits `outputs` decode.
-    ///
-    /// # Panics
-    /// On a piecewise-linear model, which predicts from real values with
-    /// [`crate::pwl::predict::Predictor`]: callers dispatch on the kind.
-    pub fn new(model: &'a Model, codecs: &'a [Codec], outputs: &'a [Output]) -> Runtime<'a> {
+    /// trees' bits `outputs` decode. A piecewise-linear model, which
+    /// predicts from real values with [`crate::pwl::predict::Predictor`],
+    /// is an error saying so.
+    pub fn new(
+        model: &'a Model,
+        codecs: &'a [Codec],
+        outputs: &'a [Output],
+    ) -> std::result::Result<Runtime<'a>, String> {
         let compiled = match model.header.model {
             ModelKind::BitForest => {
                 let widths: Vec<usize> = model.header.outputs.iter().map(|(_, w)| *w).collect();
@@ -151,14 +153,18 @@ impl<'a> Runtime<'a> {
                 }
             }
             ModelKind::PiecewiseLinear => {
-                panic!("a piecewise-linear model predicts with pwl::predict::Predictor")
+                return Err(
+                    "a piecewise-linear model predicts from real values, not levels: \
+                            it has no level runtime"
+                        .into(),
+                );
             }
         };
-        Runtime {
+        Ok(Runtime {
             codecs,
             outputs,
             compiled,
-        }
+        })
     }
 
     /// The predicted levels `[variable][row]` for the current levels `x`

@@ -197,7 +197,9 @@ mod tests {
                     .collect()
             })
             .collect();
-        let expected = Runtime::new(model, codecs, outputs).levels(&x, None);
+        let expected = Runtime::new(model, codecs, outputs)
+            .unwrap()
+            .levels(&x, None);
         let names: Vec<String> = names.iter().map(|n| n.to_string()).collect();
         let circuit = Circuit::new(model, &names, codecs, outputs).unwrap();
         let dir = tempfile::tempdir().unwrap();

@@ -312,7 +312,10 @@ pub fn measure_test_rows(
     }
     let learned: Vec<&Entry> = trained.codebook.learned().collect();
     let x = levels.select(Side::Current, &learned, &test)?;
-    let expected = trained.runtime().levels(&x, None);
+    let expected = trained
+        .runtime()
+        .map_err(|m| Error::bad_file(model_path, m))?
+        .levels(&x, None);
     let measurement = check::measure(
         &circuit,
         &trained.codecs,

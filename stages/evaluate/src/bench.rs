@@ -151,7 +151,8 @@ pub fn on_data(
                 / aln_batched_one_thread_ns.median,
         });
     }
-    let aln = Runtime::new(&data.model, &data.codecs, &data.outputs);
+    let aln = Runtime::new(&data.model, &data.codecs, &data.outputs)
+        .map_err(|m| Error::bad_file(model_path, m))?;
     let predict = || {
         std::hint::black_box(aln.levels(&test.x, None));
     };

@@ -306,7 +306,10 @@ pub fn run(
             &states(aln_x, &train_rows),
         ))
     } else {
-        Aln::Bits(Runtime::new(&data.model, codecs, &data.outputs))
+        Aln::Bits(
+            Runtime::new(&data.model, codecs, &data.outputs)
+                .map_err(|m| Error::bad_file(model_path, m))?,
+        )
     };
     let (aln, aln_paths) = match &aln_model {
         // Timed below with the nominal simulator's step, as the hybrids are.

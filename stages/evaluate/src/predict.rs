@@ -150,7 +150,7 @@ mod tests {
         // (The two paths' levels are compared inside.)
         let codecs = std::slice::from_ref(&codec);
         let outputs = [Output::Level(codec.clone())];
-        let aln = Runtime::new(&model, codecs, &outputs);
+        let aln = Runtime::new(&model, codecs, &outputs).unwrap();
         let pool = crate::timing::one_thread();
         let (levels, paths) = super::paths(&aln, &x, None, &pool);
         let timings = crate::timing::in_rounds(paths, 2);

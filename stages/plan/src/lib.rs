@@ -510,7 +510,9 @@ pub fn run(
                                 ),
                                 None => Box::new(
                                     Learned::new(
-                                        trained.runtime(),
+                                        trained.runtime().map_err(|m| {
+                                            Error::Invalid(format!("[plan] aln: {m}"))
+                                        })?,
                                         learned.clone(),
                                         nominal,
                                         &controls,
