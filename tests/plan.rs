@@ -206,6 +206,9 @@ fn the_plan_stage_plans_every_task_model_planner_and_budget_reproducibly() {
         report.contains("### Planning with the predictor"),
         "{report}"
     );
+    // Each task says what it was asked, read back from the record's typed
+    // parameters.
+    assert_eq!(report.matches("The task: ").count(), 2, "{report}");
     for task in ["bend", "spin"] {
         assert!(report.contains(&format!("#### Task `{task}`")));
         let chart = dir

@@ -167,7 +167,16 @@ fn first_format_records_still_list_and_newer_ones_are_refused() {
     ok(dir.path(), &["-q", "run", manifest.to_str().unwrap()]);
     let latest = dir.path().join("runs/tiny/run.json");
     let mut record: Value = serde_json::from_slice(&std::fs::read(&latest).unwrap()).unwrap();
-    assert_eq!(record["format"], 2);
+    assert_eq!(record["format"], 3);
+    assert_eq!(
+        record["variants"][0]["resolved"]["train"]["leaves"],
+        record["variants"][0]["parameters"]["train.leaves"]
+            .as_str()
+            .unwrap()
+            .parse::<u64>()
+            .unwrap(),
+        "the typed parameters and the dotted ones agree"
+    );
     let metrics = record["variants"][0]["metrics"]["values"]["error/aln"].clone();
 
     // A record as alnlab wrote it before format 2: no format, id, parameters
@@ -178,6 +187,7 @@ fn first_format_records_still_list_and_newer_ones_are_refused() {
     for v in map["variants"].as_array_mut().unwrap() {
         let v = v.as_object_mut().unwrap();
         v.remove("parameters");
+        v.remove("resolved");
         v.remove("metrics");
     }
     std::fs::remove_dir_all(dir.path().join("runs/tiny/records")).unwrap();
@@ -198,6 +208,17 @@ fn first_format_records_still_list_and_newer_ones_are_refused() {
     assert!(
         shown.contains("parameters: not recorded (a format-1 record)"),
         "{shown}"
+    );
+    // Its report needs the typed parameters of format 3: it says how to
+    // get them, and re-running writes a record that has them.
+    let run_dir = dir.path().join("runs/tiny");
+    let out = alnlab(dir.path(), &["report", run_dir.to_str().unwrap()]);
+    assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
+    assert!(
+        stderr(&out).contains("before format 3")
+            && stderr(&out).contains("run the experiment again"),
+        "{}",
+        stderr(&out)
     );
 
     // A newer format is refused by name, and skipped with a warning in lists.

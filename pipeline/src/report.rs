@@ -1,16 +1,15 @@
 //! Rendering a run's report from its record: the record names every
 //! artifact, the report crate draws the tables and charts.
 
-use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 use alnlab_common::{Error, Result};
-use alnlab_plan::task::Task;
 use alnlab_report::{
     self as report, PlanSetup, PlanTask, Replicate, RunInfo, StageTime, VariantInfo,
 };
 
 use crate::records::{RunRecord, VariantRecord};
+use crate::stages::Stages;
 
 /// Renders the report of `record` into `dir`; returns the path of
 /// `report.md`.
@@ -53,6 +52,7 @@ pub fn render(record: &RunRecord, dir: &Path) -> Result<PathBuf> {
                 })
                 .collect::<Result<_>>()?;
             let artifact = |role: &str| artifact(v, role);
+            let stages = resolved(v)?;
             Ok(VariantInfo {
                 name: v.name.clone(),
                 description: v.description.clone(),
@@ -74,13 +74,13 @@ pub fn render(record: &RunRecord, dir: &Path) -> Result<PathBuf> {
                 model: artifact("model")?,
                 codebook: artifact("codebook")?,
                 planning: v.artifacts.get("planning").map(|a| PathBuf::from(&a.path)),
-                plan_setup: plan_setup(&v.parameters),
-                // A plant of nominal values resolves to none, so a key of
-                // a scene's plant table means one that departs.
-                plant: v
-                    .parameters
-                    .keys()
-                    .any(|k| k.starts_with("simulate.scene.") && k.contains(".plant.")),
+                plan_setup: plan_setup(&stages.plan),
+                // A plant of nominal values resolves to none, so a scene's
+                // plant is one that departs; a dataset or a recording
+                // stands for the simulated scenes.
+                plant: record.dataset.is_none()
+                    && record.recording.is_none()
+                    && stages.simulate.scene.iter().any(|s| s.plant.is_some()),
                 circuit: v.artifacts.get("circuit").map(|a| PathBuf::from(&a.path)),
                 fpga: v.artifacts.get("fpga").map(|a| PathBuf::from(&a.path)),
                 fixed: v.artifacts.get("fixed").map(|a| PathBuf::from(&a.path)),
@@ -114,63 +114,46 @@ pub fn render(record: &RunRecord, dir: &Path) -> Result<PathBuf> {
     report::render(&run, dir)
 }
 
-/// What the plan stage was asked, from a variant's recorded parameters
-/// (the manifest's `[plan]` as dotted keys); `None` when it planned nothing
-/// or the record predates the keys.
-fn plan_setup(parameters: &BTreeMap<String, String>) -> Option<PlanSetup> {
-    let get = |key: &str| parameters.get(key);
-    let count = |key: &str| get(key)?.parse::<u32>().ok();
-    let mut tasks = Vec::new();
-    for k in 0.. {
-        let key = |field: &str| format!("plan.task.{k}.{field}");
-        let Some(kind) = get(&key("kind")) else {
-            break;
-        };
-        let name = get(&key("name"))?.clone();
-        let task = match kind.as_str() {
-            "hold-angles" => {
-                let prefix = key("targets.");
-                let targets = parameters
-                    .range(prefix.clone()..)
-                    .take_while(|(k, _)| k.starts_with(&prefix))
-                    .map(|(k, v)| Some((k[prefix.len()..].to_string(), v.parse().ok()?)))
-                    .collect::<Option<_>>()?;
-                Task::HoldAngles { name, targets }
-            }
-            "spin" => Task::Spin {
-                name,
-                variable: get(&key("variable"))?.clone(),
-                rate: get(&key("rate"))?.parse().ok()?,
-            },
-            "reach-point" => {
-                // An array is recorded as its TOML text, `[0.3, 0.0, 0.5]`.
-                let text = get(&key("target"))?;
-                let point: Vec<f64> = text
-                    .trim_matches(['[', ']'])
-                    .split(',')
-                    .map(|x| x.trim().parse().ok())
-                    .collect::<Option<_>>()?;
-                Task::ReachPoint {
-                    name,
-                    frame: get(&key("frame"))?.clone(),
-                    target: point.try_into().ok()?,
-                }
-            }
-            _ => return None,
-        };
-        tasks.push(PlanTask {
+/// A variant's resolved stage tables, read back as their types from its
+/// record. A record before format 3 kept them only as text: re-running its
+/// experiment (every artifact comes from the cache) writes one that has
+/// them.
+fn resolved(v: &VariantRecord) -> Result<Stages> {
+    let value = v.resolved.as_ref().ok_or_else(|| {
+        Error::Invalid(format!(
+            "variant `{}` of the run record keeps its parameters only as text (a record before \
+             format 3): run the experiment again with this alnlab (its artifacts come from the \
+             cache) to render its report",
+            v.name
+        ))
+    })?;
+    serde_json::from_value(value.clone()).map_err(|e| {
+        Error::Corrupt(format!(
+            "variant `{}` of the run record: its resolved parameters are not this alnlab's \
+             stage tables ({e})",
+            v.name
+        ))
+    })
+}
+
+/// What the plan stage was asked; `None` when it plans no task.
+fn plan_setup(plan: &alnlab_plan::Params) -> Option<PlanSetup> {
+    if plan.task.is_empty() {
+        return None;
+    }
+    let tasks = plan
+        .task
+        .iter()
+        .map(|task| PlanTask {
             name: task.name().to_string(),
             definition: task.describe(),
             unit: task.cost_unit().to_string(),
-        });
-    }
-    if tasks.is_empty() {
-        return None;
-    }
+        })
+        .collect();
     Some(PlanSetup {
         tasks,
-        horizon: count("plan.horizon")?,
-        frames: count("plan.frames")?,
-        episodes: count("plan.episodes")?,
+        horizon: u32::try_from(plan.horizon.0).ok()?,
+        frames: u32::try_from(plan.frames.0).ok()?,
+        episodes: u32::try_from(plan.episodes.0).ok()?,
     })
 }

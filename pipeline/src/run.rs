@@ -170,6 +170,10 @@ pub fn run(manifest: &Manifest, options: &RunOptions) -> Result<RunRecord> {
                     artifacts: BTreeMap::new(),
                     stages: Vec::new(),
                     parameters: manifest.parameters(variant),
+                    resolved: Some(
+                        serde_json::to_value(&variant.stages)
+                            .expect("resolved parameters serialize to JSON"),
+                    ),
                     metrics: None,
                 },
                 round: 0,

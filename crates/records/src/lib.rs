@@ -18,8 +18,10 @@ use alnlab_core::hash::sha256_hex;
 use alnlab_core::{Error, Result, atomic};
 use serde::{Deserialize, Serialize};
 
-/// The format of the records this alnlab writes.
-pub const FORMAT: u32 = 2;
+/// The format of the records this alnlab writes (3: each variant's
+/// resolved stage parameters kept as the stages' own types,
+/// [`VariantRecord::resolved`]).
+pub const FORMAT: u32 = 3;
 
 /// The latest record of an experiment, in its folder.
 pub const LATEST_FILE: &str = "run.json";
@@ -113,6 +115,12 @@ pub struct VariantRecord {
     /// record.
     #[serde(default)]
     pub parameters: BTreeMap<String, String>,
+    /// The same parameters as the pipeline's typed stage tables, serialized
+    /// (`simulate`, `train`, `plan`, …, each its stage's own `Params`), for
+    /// readers that read them back as those types rather than parse the
+    /// dotted keys (the report); `None` in records before format 3.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub resolved: Option<serde_json::Value>,
     /// Its headline figures, read from its artifacts when the run ended
     /// (`None` in a format-1 record).
     #[serde(default, skip_serializing_if = "Option::is_none")]
