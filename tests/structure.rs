@@ -350,3 +350,39 @@ fn every_ignored_test_says_it_belongs_to_the_full_suite() {
     assert!(silent.is_empty(), "{}", silent.join("\n"));
     assert!(full >= 5, "{full} full-suite tests");
 }
+
+/// Every model a committed report's tables name is a `ModelId`: the type
+/// covers the vocabulary the tool has written, so reading a table's
+/// `model` column back as the type loses nothing.
+#[test]
+fn every_model_a_committed_table_names_is_a_model_id() {
+    let reports = Path::new(env!("CARGO_MANIFEST_DIR")).join("reports");
+    let mut named = std::collections::BTreeSet::new();
+    for report in std::fs::read_dir(&reports).unwrap() {
+        let report = report.unwrap().path();
+        if !report.is_dir() {
+            continue;
+        }
+        for file in std::fs::read_dir(&report).unwrap() {
+            let file = file.unwrap().path();
+            if file.extension().is_none_or(|e| e != "csv") {
+                continue;
+            }
+            let mut reader = csv::Reader::from_path(&file).unwrap();
+            let headers = reader.headers().unwrap().clone();
+            let Some(column) = headers.iter().position(|h| h == "model") else {
+                continue;
+            };
+            for row in reader.records() {
+                let row = row.unwrap();
+                let model = &row[column];
+                let id: alnlab_common::ModelId = model
+                    .parse()
+                    .unwrap_or_else(|e| panic!("{}: {e}", file.display()));
+                assert_eq!(id.to_string(), model, "{}", file.display());
+                named.insert(id);
+            }
+        }
+    }
+    assert!(named.len() >= 7, "{named:?}");
+}

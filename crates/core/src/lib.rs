@@ -10,12 +10,14 @@ pub mod atomic;
 pub mod bounded;
 pub mod error;
 pub mod hash;
+pub mod model_id;
 pub mod params;
 pub mod progress;
 pub mod provenance;
 pub mod state;
 
 pub use error::{Error, Result};
+pub use model_id::ModelId;
 pub use progress::{Progress, Silent};
 pub use provenance::Provenance;
 

@@ -28,7 +28,7 @@ use std::path::Path;
 
 use alnlab_codes::Entry;
 use alnlab_common::state_log::StateFrame;
-use alnlab_common::{Error, Result};
+use alnlab_common::{Error, ModelId, Result};
 use alnlab_physics::replay::{Replayer, SceneReplay};
 use alnlab_tables::pairs::{Pairs, Side};
 
@@ -40,11 +40,6 @@ use crate::peer::Peer;
 use crate::piecewise;
 use crate::rollout::{LoggedFrames, Start};
 use crate::timing;
-
-/// The robust linear hybrid's model name.
-pub const LINEAR: &str = "linear+nominal";
-/// The boosted trees' hybrid's model name.
-pub const PEER: &str = "boosted+nominal";
 
 /// The nominal simulator's next values `[variable][row]` of the `learned`
 /// variables, read from `path` (`nominal.parquet`), which must hold the
@@ -151,7 +146,7 @@ pub fn with_own_nominal(linear: &[Reads], width: usize) -> Vec<Reads> {
 /// by side (`inputs`, as [`Hybrids::x`]'s columns), one state at a time on
 /// one thread.
 pub fn path<'a>(
-    model: &str,
+    model: ModelId,
     frames: &'a LoggedFrames<'a>,
     replays: &'a BTreeMap<String, SceneReplay>,
     rows: &'a [Start<'a>],
@@ -170,7 +165,7 @@ pub fn path<'a>(
     let mut order: Vec<usize> = (0..rows.len()).collect();
     order.sort_by_key(|&k| (rows[k].scene, rows[k].run, rows[k].frame));
     timing::Path {
-        model: model.into(),
+        model,
         path: "single",
         threads: 1,
         states: rows.len(),

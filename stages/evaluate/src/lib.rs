@@ -48,7 +48,7 @@ use alnlab_aln::{ModelKind, Output, Target};
 use alnlab_codes::codes::Codec;
 use alnlab_codes::{Codebook, Entry};
 use alnlab_common::params::{self, Count, Fraction, ParamError};
-use alnlab_common::{Error, Progress, Provenance, Result};
+use alnlab_common::{Error, ModelId, Progress, Provenance, Result};
 use alnlab_tables::levels::Levels;
 use alnlab_tables::pairs::{Pairs, Side, Split};
 use alnlab_tables::predictions::{self, Predictions};
@@ -102,9 +102,6 @@ pub struct Params {
     /// trees (`boosted+nominal`).
     pub hybrids: bool,
 }
-
-/// The learned peer's model name.
-pub const PEER: &str = "boosted";
 
 impl Default for Params {
     fn default() -> Self {
@@ -315,7 +312,7 @@ pub fn run(
         // Timed below with the nominal simulator's step, as the hybrids are.
         Aln::Piecewise(predictor) if aln_hybrid => (
             piecewise::checked_levels(
-                "aln",
+                ModelId::Aln,
                 predictor,
                 (&aln_test_columns, &aln_test_states),
                 (&nominal_test_columns, &nominal_test.1),
@@ -323,7 +320,7 @@ pub fn run(
             Vec::new(),
         ),
         Aln::Piecewise(predictor) => {
-            piecewise::paths("aln", predictor, &test_columns, &test_states, &pool)
+            piecewise::paths(ModelId::Aln, predictor, &test_columns, &test_states, &pool)
         }
         Aln::Bits(runtime) => predict::paths(runtime, &test.x, windows.as_deref(), &pool),
     };
@@ -343,7 +340,7 @@ pub fn run(
         .write(&out_dir.join(LINEAR_FILE))?;
     let linear = Predictor::new(&linear_trees, &linear_reads, &learned, &train_states);
     let (linear_levels, linear_paths) =
-        piecewise::paths("linear", &linear, &test_columns, &test_states, &pool);
+        piecewise::paths(ModelId::Linear, &linear, &test_columns, &test_states, &pool);
     let peer = params
         .peer
         .then(|| peer::Peer::fit(&learned, &scored, &real_x, &real_x, &real_y, &train_rows));
@@ -418,7 +415,7 @@ pub fn run(
         if let (Aln::Piecewise(predictor), true) = (&aln_model, aln_hybrid) {
             let correct = hybrid::correction(predictor);
             timed.push(hybrid::path(
-                "aln",
+                ModelId::Aln,
                 &frames,
                 &replays,
                 &starts,
@@ -437,7 +434,7 @@ pub fn run(
         if let Some(peer) = &peer {
             let (learned, x, rows, pool) = (&learned, &real_x, &test.rows, &pool);
             timed.push(timing::Path {
-                model: PEER.into(),
+                model: ModelId::Boosted,
                 path: "batched",
                 threads: 1,
                 states: rows.len(),
@@ -455,7 +452,7 @@ pub fn run(
         if let Some(predictor) = &hybrid_linear {
             let correct = hybrid::correction(predictor);
             timed.push(hybrid::path(
-                hybrid::LINEAR,
+                ModelId::LinearNominal,
                 &frames,
                 &replays,
                 &starts,
@@ -467,7 +464,7 @@ pub fn run(
         if let Some(peer) = hybrids.as_ref().and_then(|h| h.peer.as_ref()) {
             let correct = hybrid::peer_correction(peer, &learned);
             timed.push(hybrid::path(
-                hybrid::PEER,
+                ModelId::BoostedNominal,
                 &frames,
                 &replays,
                 &starts,
@@ -538,32 +535,32 @@ pub fn run(
             runtime.levels(x, windows.as_deref())
         }))),
     };
-    let mut rolled: Vec<(String, Vec<Vec<Vec<u16>>>)> = aln_rolled
-        .map(|levels| ("aln".to_string(), levels))
+    let mut rolled: Vec<(ModelId, Vec<Vec<Vec<u16>>>)> = aln_rolled
+        .map(|levels| (ModelId::Aln, levels))
         .into_iter()
         .collect();
     rolled.extend([
         (
-            "persistence".to_string(),
+            ModelId::Persistence,
             each(rollout::roll(from, horizon, |x| x.to_vec())),
         ),
         (
-            "linear".to_string(),
+            ModelId::Linear,
             roll_real(&scored, &mut piecewise::step_of(&linear)),
         ),
     ]);
     if let Some(peer) = &peer {
         let every: Vec<usize> = (0..start_rows.len()).collect();
         let mut step = |state: &[Vec<f64>]| peer.next_values(&learned, state, state, &every);
-        rolled.push((PEER.to_string(), roll_real(&scored, &mut step)));
+        rolled.push((ModelId::Boosted, roll_real(&scored, &mut step)));
     }
     if let Some(predictor) = &hybrid_linear {
         let levels = roll_hybrid(&mut hybrid::correction(predictor))?;
-        rolled.extend(levels.map(|levels| (hybrid::LINEAR.to_string(), levels)));
+        rolled.extend(levels.map(|levels| (ModelId::LinearNominal, levels)));
     }
     if let Some(peer) = hybrids.as_ref().and_then(|h| h.peer.as_ref()) {
         let levels = roll_hybrid(&mut hybrid::peer_correction(peer, &learned))?;
-        rolled.extend(levels.map(|levels| (hybrid::PEER.to_string(), levels)));
+        rolled.extend(levels.map(|levels| (ModelId::BoostedNominal, levels)));
     }
     for (steps, r) in params.resimulate_steps.iter().zip(&resimulated) {
         let levels = resimulate::rollout(
@@ -574,7 +571,7 @@ pub fn run(
             &truth.levels,
             steps.0,
         )?;
-        rolled.push((r.name.clone(), each(levels)));
+        rolled.push((r.model, each(levels)));
     }
     progress.advance(1);
 
@@ -582,25 +579,25 @@ pub fn run(
         .iter()
         .map(|r| pick(&r.levels, &scored))
         .collect();
-    let mut models: Vec<(&str, &Vec<Vec<u16>>)> = vec![
-        ("aln", &aln),
-        ("persistence", &persistence),
-        ("linear", &linear_levels),
+    let mut models: Vec<(ModelId, &Vec<Vec<u16>>)> = vec![
+        (ModelId::Aln, &aln),
+        (ModelId::Persistence, &persistence),
+        (ModelId::Linear, &linear_levels),
     ];
     if let Some(levels) = &peer_levels {
-        models.push((PEER, levels));
+        models.push((ModelId::Boosted, levels));
     }
     if let Some(levels) = &hybrid_linear_levels {
-        models.push((hybrid::LINEAR, levels));
+        models.push((ModelId::LinearNominal, levels));
     }
     if let Some(levels) = &hybrid_peer_levels {
-        models.push((hybrid::PEER, levels));
+        models.push((ModelId::BoostedNominal, levels));
     }
     models.extend(
         resimulated
             .iter()
             .zip(&resimulated_levels)
-            .map(|(r, levels)| (r.name.as_str(), levels)),
+            .map(|(r, levels)| (r.model, levels)),
     );
     let test_rows: Vec<u32> = test.rows.iter().map(|&r| r as u32).collect();
     let mut predictions = Predictions::new(
@@ -610,15 +607,15 @@ pub fn run(
         &test.held_out,
         &pick(&test.y, &scored),
     );
-    for (name, levels) in &models {
-        predictions.push_model(name, levels);
+    for (model, levels) in &models {
+        predictions.push_model(&model.to_string(), levels);
     }
     predictions.write(&out_dir.join(PREDICTIONS_FILE), provenance)?;
     let start_rows: Vec<u32> = truth.starts.iter().map(|&k| test_rows[k]).collect();
     let true_levels = each(truth.levels);
     // `validate` bounds the horizon to a u16.
     let mut rollout = Rollout::new(&names, &start_rows, horizon as u16);
-    for (name, levels) in &rolled {
+    for (model, levels) in &rolled {
         let errors: Vec<Vec<Vec<u16>>> = levels
             .iter()
             .zip(&true_levels)
@@ -636,7 +633,7 @@ pub fn run(
                     .collect()
             })
             .collect();
-        rollout.push_model(name, &errors);
+        rollout.push_model(&model.to_string(), &errors);
     }
     rollout.write(&out_dir.join(ROLLOUT_FILE), provenance)?;
     let rows: Vec<timings::Row> = timings.iter().map(timings::Row::measured).collect();

@@ -16,6 +16,7 @@ use alnlab_aln::model::Reads;
 use alnlab_aln::pwl::Tree;
 use alnlab_aln::pwl::predict::{self, Path as Evaluation, Predictor};
 use alnlab_codes::Entry;
+use alnlab_common::ModelId;
 
 use crate::rollout::{LoggedFrames, Start};
 use crate::timing::Path;
@@ -28,7 +29,7 @@ use crate::timing::Path;
 /// equal on every evaluation path: tree by tree over blocks of rows, and
 /// one row at a time by each evaluation.
 pub fn checked_levels(
-    model: &str,
+    model: ModelId,
     predictor: &Predictor,
     (columns, states): (&[&[f64]], &[f64]),
     (base_columns, base_states): (&[&[f64]], &[f64]),
@@ -61,7 +62,7 @@ pub fn checked_levels(
 /// under `model`'s name: tree by tree over blocks of rows (`batched`) and
 /// one row at a time by each evaluation.
 pub fn paths<'s, 'm: 's>(
-    model: &str,
+    model: ModelId,
     predictor: &'s Predictor<'m>,
     columns: &'s [&'s [f64]],
     states: &'s [f64],
@@ -84,7 +85,7 @@ pub fn paths<'s, 'm: 's>(
     let batched = move || predictor.levels(columns, &mut predictor.scratch());
     let levels = checked_levels(model, predictor, (columns, states), (columns, states));
     let path = |path, run: Box<dyn FnMut() + 's>| Path {
-        model: model.into(),
+        model,
         path,
         threads: 1,
         states: rows,

@@ -9,6 +9,7 @@
 //! on, as `decode_near` around the current level).
 
 use alnlab_aln::runtime::Runtime;
+use alnlab_common::ModelId;
 
 use crate::timing::Path;
 
@@ -35,7 +36,7 @@ pub fn paths<'s>(
         "batches on one and on all threads disagree"
     );
     let path = |path, threads, run: Box<dyn FnMut() + 's>| Path {
-        model: "aln".into(),
+        model: ModelId::Aln,
         path,
         threads,
         states: rows,

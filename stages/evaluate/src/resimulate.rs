@@ -10,7 +10,7 @@ use std::collections::{BTreeMap, HashMap};
 
 use alnlab_codes::Entry;
 use alnlab_common::state_log::StateFrame;
-use alnlab_common::{Error, Result};
+use alnlab_common::{Error, ModelId, Result};
 use alnlab_physics::replay::{Replayer, SceneReplay};
 
 use crate::rollout::{LoggedFrames, Start};
@@ -18,8 +18,8 @@ use crate::timing::Path;
 
 /// One re-simulation baseline's predictions.
 pub struct Resimulated {
-    /// The model's name: `simulator@<steps>/frame`.
-    pub name: String,
+    /// The model: the simulator at `steps` steps a frame.
+    pub model: ModelId,
     /// Predicted levels `[variable][test row]`.
     pub levels: Vec<Vec<u16>>,
     /// Integration steps per frame.
@@ -40,7 +40,7 @@ pub fn baseline(
 ) -> Result<Resimulated> {
     let (levels, failed) = one_frame(frames, replays, learned, rows, y, steps)?;
     Ok(Resimulated {
-        name: format!("simulator@{steps}/frame"),
+        model: ModelId::Simulator { steps },
         levels,
         steps,
         failed,
@@ -59,7 +59,7 @@ pub fn path<'a>(
 ) -> Path<'a> {
     let steps = baseline.steps;
     Path {
-        model: baseline.name.clone(),
+        model: baseline.model,
         path: "single",
         threads: 1,
         states: rows.len(),

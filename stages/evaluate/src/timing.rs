@@ -10,6 +10,7 @@
 
 use std::time::Instant;
 
+use alnlab_common::ModelId;
 use serde::Serialize;
 
 /// How many timed runs every evaluation path gets.
@@ -43,7 +44,7 @@ impl Spread {
 /// One measured evaluation path.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Timing {
-    pub model: String,
+    pub model: ModelId,
     /// `batched`, `single` or `threshold-search`.
     pub path: &'static str,
     /// ns per state of each run, in round order.
@@ -64,7 +65,7 @@ impl Timing {
 
 /// An evaluation path to time: what [`Timing`] will say of it, and a run.
 pub struct Path<'a> {
-    pub model: String,
+    pub model: ModelId,
     pub path: &'static str,
     pub threads: usize,
     pub states: usize,
@@ -141,7 +142,10 @@ mod tests {
     fn rounds_interleave_every_path_and_spreads_are_ordered() {
         let order = std::cell::RefCell::new(Vec::new());
         let path = |name: &'static str| Path {
-            model: name.into(),
+            model: match name {
+                "a" => ModelId::Aln,
+                _ => ModelId::Linear,
+            },
             path: "single",
             threads: 1,
             states: 10,

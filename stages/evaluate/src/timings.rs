@@ -43,7 +43,7 @@ impl Row {
     pub fn measured(timing: &Timing) -> Row {
         let spread = timing.spread();
         Row {
-            model: timing.model.clone(),
+            model: timing.model.to_string(),
             path: timing.path.to_string(),
             ns_per_state: spread.median,
             ns_min: spread.min,
@@ -137,12 +137,14 @@ fn cpu_model() -> String {
 
 #[cfg(test)]
 mod tests {
+    use alnlab_common::ModelId;
+
     use super::*;
 
     #[test]
     fn a_row_reads_back_as_written() {
         let timing = Timing {
-            model: "aln".into(),
+            model: ModelId::Aln,
             path: "batched",
             runs: vec![3.0, 1.0, 2.0],
             states: 9000,

@@ -9,6 +9,7 @@
 
 use std::ops::Range;
 
+use alnlab_common::ModelId;
 use plotters::coord::ranged1d::{DefaultFormatting, KeyPointHint, Ranged};
 use plotters::element::DashedPathElement;
 use plotters::prelude::*;
@@ -125,41 +126,45 @@ pub fn style_of(model: &str, variant: usize) -> Style {
     if model.starts_with("plant@") {
         return dashed(PLANT, Marker::Circle);
     }
+    let variant_style = Style {
+        colour: VARIANT_COLOURS[variant % VARIANT_COLOURS.len()],
+        marker: VARIANT_MARKERS[(variant / VARIANT_COLOURS.len()) % VARIANT_MARKERS.len()],
+        dashed: false,
+    };
+    // The planning report's controllers, which no prediction table names.
     match model {
         // Doing nothing looks the same whether it predicts or controls.
-        "persistence" | "zero torques" => dashed(PERSISTENCE, Marker::Square),
-        "random torques" => dashed(RANDOM_TORQUES, Marker::Cross),
-        "linear" => dashed(LINEAR, Marker::Triangle),
-        "boosted" => dashed(BOOSTED, Marker::Circle),
-        "linear+nominal" => dashed(LINEAR_NOMINAL, Marker::Triangle),
-        "boosted+nominal" => dashed(BOOSTED_NOMINAL, Marker::Square),
-        _ => match simulator_steps(model) {
-            Some(steps) => {
-                let (k, marker) = match steps {
-                    1 => (0, Marker::Diamond),
-                    2..=3 => (1, Marker::Cross),
-                    4..=6 => (2, Marker::Plus),
-                    7..=12 => (3, Marker::Square),
-                    _ => (4, Marker::Circle),
-                };
-                dashed(SIMULATOR[k], marker)
-            }
-            None => Style {
-                colour: VARIANT_COLOURS[variant % VARIANT_COLOURS.len()],
-                marker: VARIANT_MARKERS[(variant / VARIANT_COLOURS.len()) % VARIANT_MARKERS.len()],
-                dashed: false,
-            },
-        },
+        "zero torques" => return dashed(PERSISTENCE, Marker::Square),
+        "random torques" => return dashed(RANDOM_TORQUES, Marker::Cross),
+        _ => {}
+    }
+    match model.parse::<ModelId>() {
+        Ok(ModelId::Persistence) => dashed(PERSISTENCE, Marker::Square),
+        Ok(ModelId::Linear) => dashed(LINEAR, Marker::Triangle),
+        Ok(ModelId::Boosted) => dashed(BOOSTED, Marker::Circle),
+        Ok(ModelId::LinearNominal) => dashed(LINEAR_NOMINAL, Marker::Triangle),
+        Ok(ModelId::BoostedNominal) => dashed(BOOSTED_NOMINAL, Marker::Square),
+        Ok(ModelId::Simulator { steps }) => {
+            let (k, marker) = match steps {
+                1 => (0, Marker::Diamond),
+                2..=3 => (1, Marker::Cross),
+                4..=6 => (2, Marker::Plus),
+                7..=12 => (3, Marker::Square),
+                _ => (4, Marker::Circle),
+            };
+            dashed(SIMULATOR[k], marker)
+        }
+        // The ALN, and the planner's other forward models, by variant.
+        Ok(ModelId::Aln) | Err(_) => variant_style,
     }
 }
 
 /// k of `simulator@k/frame`.
 pub(crate) fn simulator_steps(model: &str) -> Option<u32> {
-    model
-        .strip_prefix("simulator@")?
-        .strip_suffix("/frame")?
-        .parse()
-        .ok()
+    match model.parse::<ModelId>() {
+        Ok(ModelId::Simulator { steps }) => u32::try_from(steps).ok(),
+        _ => None,
+    }
 }
 
 /// An axis of a [`Plot`].
