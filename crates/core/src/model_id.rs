@@ -34,18 +34,15 @@ pub enum ModelId {
 }
 
 impl ModelId {
-    /// Whether the model re-steps the simulator (any number of steps).
-    pub fn is_simulator(self) -> bool {
-        match self {
-            ModelId::Simulator { .. } => true,
-            ModelId::Aln
-            | ModelId::Persistence
-            | ModelId::Linear
-            | ModelId::Boosted
-            | ModelId::LinearNominal
-            | ModelId::BoostedNominal => false,
-        }
-    }
+    /// Every model whose name takes no number.
+    pub const FIXED: [ModelId; 6] = [
+        ModelId::Aln,
+        ModelId::Persistence,
+        ModelId::Linear,
+        ModelId::Boosted,
+        ModelId::LinearNominal,
+        ModelId::BoostedNominal,
+    ];
 }
 
 impl fmt::Display for ModelId {
@@ -68,15 +65,7 @@ impl FromStr for ModelId {
     /// The model a `model` column names; anything else is an error naming
     /// what it may be.
     fn from_str(s: &str) -> Result<ModelId, String> {
-        let fixed = [
-            ModelId::Aln,
-            ModelId::Persistence,
-            ModelId::Linear,
-            ModelId::Boosted,
-            ModelId::LinearNominal,
-            ModelId::BoostedNominal,
-        ];
-        if let Some(id) = fixed.into_iter().find(|id| id.to_string() == s) {
+        if let Some(id) = ModelId::FIXED.into_iter().find(|id| id.to_string() == s) {
             return Ok(id);
         }
         s.strip_prefix("simulator@")
@@ -88,7 +77,7 @@ impl FromStr for ModelId {
                 format!(
                     "`{s}` names no compared model; expected one of {}, or simulator@<k>/frame \
                      with k ≥ 1",
-                    fixed.map(|id| format!("`{id}`")).join(", ")
+                    ModelId::FIXED.map(|id| format!("`{id}`")).join(", ")
                 )
             })
     }
@@ -113,17 +102,8 @@ mod tests {
 
     #[test]
     fn every_model_reads_back_from_its_name() {
-        let all = [
-            ModelId::Aln,
-            ModelId::Persistence,
-            ModelId::Linear,
-            ModelId::Boosted,
-            ModelId::LinearNominal,
-            ModelId::BoostedNominal,
-            ModelId::Simulator { steps: 1 },
-            ModelId::Simulator { steps: 10 },
-        ];
-        for id in all {
+        let simulators = [1, 10].map(|steps| ModelId::Simulator { steps });
+        for id in ModelId::FIXED.into_iter().chain(simulators) {
             assert_eq!(id.to_string().parse::<ModelId>(), Ok(id));
             let json = serde_json::to_string(&id).unwrap();
             assert_eq!(json, format!("\"{id}\""));
