@@ -6,22 +6,30 @@
 //! build a stage's test input with an upstream stage; nothing of it reaches
 //! the stage's library.
 //!
-//! Beside the layering, two rules read from the sources: a model kind is
-//! matched, never compared; and every test the fast tier leaves out says
-//! that the full suite runs it.
+//! Beside the layering: the light libraries link no file format (read from
+//! `Cargo.lock`); two rules read from the sources — a model kind is matched,
+//! never compared, and every test the fast tier leaves out says that the
+//! full suite runs it; and every model a committed report's tables name is
+//! a `ModelId`.
 
 use std::collections::BTreeMap;
 use std::path::Path;
 use std::process::Command;
 
-/// `cargo metadata --format-version 1 --offline` with `more` arguments, of
-/// the workspace.
-fn cargo_metadata(more: &[&str]) -> serde_json::Value {
+/// Every package of the workspace: name → (folder relative to the root,
+/// its normal and build dependencies on workspace packages).
+fn workspace() -> BTreeMap<String, (String, Vec<String>)> {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
     let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
     let output = Command::new(cargo)
-        .args(["metadata", "--format-version", "1", "--offline"])
-        .args(more)
-        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .args([
+            "metadata",
+            "--format-version",
+            "1",
+            "--no-deps",
+            "--offline",
+        ])
+        .current_dir(root)
         .output()
         .expect("cargo metadata runs");
     assert!(
@@ -29,14 +37,7 @@ fn cargo_metadata(more: &[&str]) -> serde_json::Value {
         "{}",
         String::from_utf8_lossy(&output.stderr)
     );
-    serde_json::from_slice(&output.stdout).unwrap()
-}
-
-/// Every package of the workspace: name → (folder relative to the root,
-/// its normal and build dependencies on workspace packages).
-fn workspace() -> BTreeMap<String, (String, Vec<String>)> {
-    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
-    let metadata = cargo_metadata(&["--no-deps"]);
+    let metadata: serde_json::Value = serde_json::from_slice(&output.stdout).unwrap();
     let names: Vec<&str> = metadata["packages"]
         .as_array()
         .unwrap()

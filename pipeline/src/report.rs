@@ -7,6 +7,7 @@ use alnlab_common::{Error, Result};
 use alnlab_report::{
     self as report, PlanSetup, PlanTask, Replicate, RunInfo, StageTime, VariantInfo,
 };
+use serde::Deserialize;
 
 use crate::records::{RunRecord, VariantRecord};
 use crate::stages::Stages;
@@ -127,7 +128,7 @@ fn resolved(v: &VariantRecord) -> Result<Stages> {
             v.name
         ))
     })?;
-    serde_json::from_value(value.clone()).map_err(|e| {
+    Stages::deserialize(value).map_err(|e| {
         Error::Corrupt(format!(
             "variant `{}` of the run record: its resolved parameters are not this alnlab's \
              stage tables ({e})",

@@ -117,12 +117,7 @@ impl StateLogWriter {
 
     /// Adds a channel of JSON messages with a JSON-schema (e.g. one of
     /// Foxglove's well-known schemas); returns its id for [`Self::write_json`].
-    pub fn add_json_channel(
-        &mut self,
-        topic: &str,
-        schema_name: &str,
-        schema: &str,
-    ) -> Result<u16> {
+    fn add_json_channel(&mut self, topic: &str, schema_name: &str, schema: &str) -> Result<u16> {
         let writer = self.writer.as_mut().expect("writer present until finish");
         let schema_id = writer
             .add_schema(schema_name, "jsonschema", schema.as_bytes())
@@ -145,7 +140,7 @@ impl StateLogWriter {
         Ok(ids)
     }
 
-    /// Writes one JSON message to a channel made by [`Self::add_json_channel`].
+    /// Writes one JSON message to a channel made by [`Self::add_json_channels`].
     pub fn write_json(&mut self, channel_id: u16, log_time_ns: u64, json: &[u8]) -> Result<()> {
         self.write_message(channel_id, log_time_ns, json)
     }

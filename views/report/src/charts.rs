@@ -126,11 +126,6 @@ pub fn style_of(model: &str, variant: usize) -> Style {
     if model.starts_with("plant@") {
         return dashed(PLANT, Marker::Circle);
     }
-    let variant_style = Style {
-        colour: VARIANT_COLOURS[variant % VARIANT_COLOURS.len()],
-        marker: VARIANT_MARKERS[(variant / VARIANT_COLOURS.len()) % VARIANT_MARKERS.len()],
-        dashed: false,
-    };
     // The planning report's controllers, which no prediction table names.
     match model {
         // Doing nothing looks the same whether it predicts or controls.
@@ -155,7 +150,11 @@ pub fn style_of(model: &str, variant: usize) -> Style {
             dashed(SIMULATOR[k], marker)
         }
         // The ALN, and the planner's other forward models, by variant.
-        Ok(ModelId::Aln) | Err(_) => variant_style,
+        Ok(ModelId::Aln) | Err(_) => Style {
+            colour: VARIANT_COLOURS[variant % VARIANT_COLOURS.len()],
+            marker: VARIANT_MARKERS[(variant / VARIANT_COLOURS.len()) % VARIANT_MARKERS.len()],
+            dashed: false,
+        },
     }
 }
 
