@@ -294,7 +294,7 @@ fn an_aln_hybrid_corrects_an_arms_nominal_simulator_one_step_and_closed_loop() {
         let models = predictions.models();
         models
             .iter()
-            .position(|m| m == name)
+            .position(|m| m.to_string() == name)
             .unwrap_or_else(|| panic!("{name} in {models:?}"))
     };
     let held_out_mean = |name: &str| {
@@ -334,7 +334,7 @@ fn an_aln_hybrid_corrects_an_arms_nominal_simulator_one_step_and_closed_loop() {
         let r = rollout
             .models()
             .iter()
-            .position(|m| m == name)
+            .position(|m| m.to_string() == name)
             .unwrap_or_else(|| panic!("{name}'s closed loop in {:?}", rollout.models()));
         let m = model_index(name);
         for v in 0..rollout.variables().len() {

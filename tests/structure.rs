@@ -387,3 +387,119 @@ fn every_model_a_committed_table_names_is_a_model_id() {
     }
     assert!(named.len() >= 7, "{named:?}");
 }
+
+/// The string literals of `line` that name a compared model: a
+/// [`alnlab_common::ModelId`]'s fixed name, or one that starts as a
+/// simulator's or the plant's (`simulator@`, `plant@`).
+fn model_names_in(line: &str) -> Vec<String> {
+    let fixed: Vec<String> = alnlab_common::ModelId::FIXED
+        .iter()
+        .map(ToString::to_string)
+        .collect();
+    string_literals(line)
+        .into_iter()
+        .filter(|literal| {
+            fixed.contains(literal)
+                || ["simulator@", "plant@"]
+                    .iter()
+                    .any(|p| literal.starts_with(p))
+        })
+        .collect()
+}
+
+/// The string literals of one line of code, up to a comment: each between
+/// unescaped quotes (a raw string's text or a literal spanning lines is
+/// not seen; none names a model).
+fn string_literals(line: &str) -> Vec<String> {
+    let (mut found, mut literal) = (Vec::new(), None::<String>);
+    let mut chars = line.chars().peekable();
+    while let Some(c) = chars.next() {
+        match (&mut literal, c) {
+            (Some(text), '\\') => {
+                text.push(c);
+                text.extend(chars.next());
+            }
+            (Some(_), '"') => found.extend(literal.take()),
+            (Some(text), _) => text.push(c),
+            (None, '"') => literal = Some(String::new()),
+            (None, '/') if chars.peek() == Some(&'/') => break,
+            // A char literal's quote: `'"'`.
+            (None, '\'') if chars.peek() == Some(&'"') => {
+                chars.next();
+            }
+            (None, _) => {}
+        }
+    }
+    found
+}
+
+/// Literals that spell a model's name and mean something else, with why.
+const NOT_MODEL_NAMES: &[(&str, &str)] = &[
+    // The test stage's artifacts `linear.aln` and `boosted.parquet`, by
+    // role in the run record.
+    (
+        "pipeline/src/stages.rs",
+        "(\"linear\", alnlab_evaluate::LINEAR_FILE)",
+    ),
+    (
+        "pipeline/src/stages.rs",
+        "(\"boosted\", alnlab_evaluate::BOOSTED_FILE)",
+    ),
+    // The Python `Model.kind` of a boosted-trees file: a kind of model
+    // file, as `ModelKind::name` gives an ALN's, not a compared model.
+    ("python/src/model.rs", "Files::Boosted(_) => \"boosted\","),
+];
+
+/// No code outside `alnlab_core::model_id` names a compared model by its
+/// text: tables are written and read through `ModelId` and `PolicyId`, so a
+/// new model is a new variant the compiler follows, not a string to find.
+/// (Tests — `tests/` and each file's `#[cfg(test)]` module — assert the
+/// tables' text freely.)
+#[test]
+fn no_code_names_a_compared_model_by_its_text() {
+    let mut named = Vec::new();
+    for (path, text) in rust_sources() {
+        if path.starts_with("tests/") || path == "crates/core/src/model_id.rs" {
+            continue;
+        }
+        let code = text.split("#[cfg(test)]").next().unwrap_or_default();
+        for (n, line) in code.lines().enumerate() {
+            let allowed = NOT_MODEL_NAMES
+                .iter()
+                .any(|(file, what)| *file == path && line.contains(what));
+            let trimmed = line.trim_start();
+            if allowed || trimmed.starts_with("//") {
+                continue;
+            }
+            for name in model_names_in(line) {
+                named.push(format!("{path}:{}: \"{name}\": {}", n + 1, line.trim()));
+            }
+        }
+    }
+    assert!(named.is_empty(), "{}", named.join("\n"));
+}
+
+#[test]
+fn the_check_sees_a_model_named_by_its_text() {
+    let q = '"';
+    for (line, name) in [
+        (format!("if r.model == {q}aln{q} {{"), "aln"),
+        (format!("let m = {q}linear+nominal{q};"), "linear+nominal"),
+        (
+            format!("t.model.starts_with({q}simulator@{q})"),
+            "simulator@",
+        ),
+        (format!("format!({q}plant@{{}}{q}, k)"), "plant@{}"),
+    ] {
+        assert_eq!(model_names_in(&line), [name], "{line}");
+    }
+    for line in [
+        format!("format!({q}aln · {{}}{q}, name)"),
+        format!("Axis::linear({q}steps{q})"),
+        format!("let aln = {q}x{q}; // {q}aln{q} in a comment"),
+        format!("let q = '{q}'; let s = {q}a \\{q}aln\\{q} b{q};"),
+        format!("let url = {q}https://aln{q}; ModelId::Aln"),
+    ] {
+        assert!(model_names_in(&line).is_empty(), "{line}");
+    }
+}

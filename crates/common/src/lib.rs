@@ -11,6 +11,6 @@ pub mod state_log;
 pub mod table;
 
 pub use alnlab_core::{
-    ALNLAB_VERSION, Error, ModelId, Progress, Provenance, Result, Silent, atomic, bounded, error,
-    hash, model_id, params, progress, provenance,
+    ALNLAB_VERSION, Error, ModelId, PolicyId, Progress, Provenance, Result, Silent, atomic,
+    bounded, error, hash, model_id, params, progress, provenance,
 };

@@ -298,6 +298,25 @@ impl Table {
             .collect())
     }
 
+    /// The string column `name`, each value parsed as a `T` (a model's
+    /// name as a [`crate::ModelId`]): a value that does not parse is an
+    /// error naming its row and column.
+    pub fn parsed<T: std::str::FromStr>(&self, name: &str) -> Result<Vec<T>>
+    where
+        T::Err: std::fmt::Display,
+    {
+        let column = self.column::<StringArray>(name)?;
+        column
+            .iter()
+            .enumerate()
+            .map(|(row, v)| {
+                v.unwrap_or_default()
+                    .parse()
+                    .map_err(|e| Error::bad_file(&self.path, format!("row {row}: `{name}`: {e}")))
+            })
+            .collect()
+    }
+
     /// The f64 column `name`.
     pub fn f64_column(&self, name: &str) -> Result<&Float64Array> {
         self.column::<Float64Array>(name)

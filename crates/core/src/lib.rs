@@ -17,7 +17,7 @@ pub mod provenance;
 pub mod state;
 
 pub use error::{Error, Result};
-pub use model_id::ModelId;
+pub use model_id::{ModelId, PolicyId};
 pub use progress::{Progress, Silent};
 pub use provenance::Provenance;
 

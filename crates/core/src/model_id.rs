@@ -1,7 +1,9 @@
 //! The compared models' names: one type for the `model` column of the test
 //! stage's tables (`predictions`, `rollout`, `timings`) and of summarize's,
-//! which the report reads back. Its text is the column's value, so tables
-//! written before the type existed read as the same models.
+//! which the report reads back ([`ModelId`]), and one for the plan stage's
+//! (`planning`: [`PolicyId`]). Their text is the column's value, so tables
+//! written before the types existed read as the same models. No other
+//! module names a compared model by its text (`tests/structure.rs` checks).
 
 use std::fmt;
 use std::str::FromStr;
@@ -43,6 +45,38 @@ impl ModelId {
         ModelId::LinearNominal,
         ModelId::BoostedNominal,
     ];
+
+    /// The integration steps a frame of the simulator re-stepping each
+    /// frame; `None` for a learned model or persistence.
+    pub fn simulator_steps(self) -> Option<u64> {
+        match self {
+            ModelId::Simulator { steps } => Some(steps),
+            ModelId::Aln
+            | ModelId::Persistence
+            | ModelId::Linear
+            | ModelId::Boosted
+            | ModelId::LinearNominal
+            | ModelId::BoostedNominal => None,
+        }
+    }
+
+    /// Whether it is the simulator re-stepping each frame.
+    pub fn is_simulator(self) -> bool {
+        self.simulator_steps().is_some()
+    }
+
+    /// Whether it is a hybrid baseline: the nominal simulator plus a
+    /// learned correction (an ALN trained as one is still `aln`).
+    pub fn is_hybrid(self) -> bool {
+        match self {
+            ModelId::LinearNominal | ModelId::BoostedNominal => true,
+            ModelId::Aln
+            | ModelId::Persistence
+            | ModelId::Linear
+            | ModelId::Boosted
+            | ModelId::Simulator { .. } => false,
+        }
+    }
 }
 
 impl fmt::Display for ModelId {
@@ -96,6 +130,118 @@ impl<'de> Deserialize<'de> for ModelId {
     }
 }
 
+/// A policy of the plan stage: a forward model a planner plans with, or a
+/// reference that plans nothing.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
+pub enum PolicyId {
+    /// The variant's trained ALN: `aln`.
+    Aln,
+    /// The robust linear fit: `linear`.
+    Linear,
+    /// The nominal simulator (the scene as written, without its plant),
+    /// `steps` integration steps a frame: `simulator@<steps>`.
+    Simulator {
+        /// Integration steps a frame.
+        steps: u64,
+    },
+    /// The plant's own simulator — its actuators, delay and noise — which
+    /// no user has: `plant@<steps>`.
+    Plant {
+        /// Integration steps a frame.
+        steps: u64,
+    },
+    /// Zero torques: `zero`.
+    Zero,
+    /// The scene's random controller: `random`.
+    Random,
+}
+
+impl PolicyId {
+    /// Every policy whose name takes no number.
+    pub const FIXED: [PolicyId; 4] = [
+        PolicyId::Aln,
+        PolicyId::Linear,
+        PolicyId::Zero,
+        PolicyId::Random,
+    ];
+
+    /// Whether it plans nothing (zero torques, the random controller).
+    pub fn is_reference(self) -> bool {
+        match self {
+            PolicyId::Zero | PolicyId::Random => true,
+            PolicyId::Aln
+            | PolicyId::Linear
+            | PolicyId::Simulator { .. }
+            | PolicyId::Plant { .. } => false,
+        }
+    }
+
+    /// The policy that plans with the test stage's `model`, where the
+    /// plan stage has one.
+    pub fn planning_with(model: ModelId) -> Option<PolicyId> {
+        match model {
+            ModelId::Aln => Some(PolicyId::Aln),
+            ModelId::Linear => Some(PolicyId::Linear),
+            ModelId::Simulator { steps } => Some(PolicyId::Simulator { steps }),
+            ModelId::Persistence
+            | ModelId::Boosted
+            | ModelId::LinearNominal
+            | ModelId::BoostedNominal => None,
+        }
+    }
+}
+
+impl fmt::Display for PolicyId {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            PolicyId::Aln => f.write_str("aln"),
+            PolicyId::Linear => f.write_str("linear"),
+            PolicyId::Simulator { steps } => write!(f, "simulator@{steps}"),
+            PolicyId::Plant { steps } => write!(f, "plant@{steps}"),
+            PolicyId::Zero => f.write_str("zero"),
+            PolicyId::Random => f.write_str("random"),
+        }
+    }
+}
+
+impl FromStr for PolicyId {
+    type Err = String;
+
+    /// The policy a planning table's `model` column names; anything else
+    /// is an error naming what it may be.
+    fn from_str(s: &str) -> Result<PolicyId, String> {
+        if let Some(id) = PolicyId::FIXED.into_iter().find(|id| id.to_string() == s) {
+            return Ok(id);
+        }
+        let steps = |prefix: &str| -> Option<u64> {
+            s.strip_prefix(prefix)?.parse().ok().filter(|&k| k > 0)
+        };
+        if let Some(steps) = steps("simulator@") {
+            return Ok(PolicyId::Simulator { steps });
+        }
+        if let Some(steps) = steps("plant@") {
+            return Ok(PolicyId::Plant { steps });
+        }
+        Err(format!(
+            "`{s}` names no policy; expected one of {}, simulator@<k> or plant@<k> with k ≥ 1",
+            PolicyId::FIXED.map(|id| format!("`{id}`")).join(", ")
+        ))
+    }
+}
+
+impl Serialize for PolicyId {
+    fn serialize<S: Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
+        serializer.collect_str(self)
+    }
+}
+
+impl<'de> Deserialize<'de> for PolicyId {
+    fn deserialize<D: Deserializer<'de>>(deserializer: D) -> Result<PolicyId, D::Error> {
+        let text = String::deserialize(deserializer)?;
+        text.parse().map_err(serde::de::Error::custom)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -113,6 +259,30 @@ mod tests {
             ModelId::Simulator { steps: 2 }.to_string(),
             "simulator@2/frame"
         );
+    }
+
+    #[test]
+    fn every_policy_reads_back_from_its_name() {
+        let numbered = [1, 10].map(|steps| PolicyId::Simulator { steps });
+        let plants = [2].map(|steps| PolicyId::Plant { steps });
+        for id in PolicyId::FIXED.into_iter().chain(numbered).chain(plants) {
+            assert_eq!(id.to_string().parse::<PolicyId>(), Ok(id));
+            let json = serde_json::to_string(&id).unwrap();
+            assert_eq!(serde_json::from_str::<PolicyId>(&json).unwrap(), id);
+        }
+        assert_eq!(PolicyId::Plant { steps: 4 }.to_string(), "plant@4");
+        assert_eq!(
+            PolicyId::planning_with(ModelId::Simulator { steps: 2 }),
+            Some(PolicyId::Simulator { steps: 2 })
+        );
+        assert_eq!(PolicyId::planning_with(ModelId::Persistence), None);
+        for bad in ["", "simulator@0", "simulator@2/frame", "plant@", "zeros"] {
+            let error = bad.parse::<PolicyId>().unwrap_err();
+            assert!(
+                error.contains(&format!("`{bad}`")) && error.contains("plant@<k>"),
+                "{error}"
+            );
+        }
     }
 
     #[test]

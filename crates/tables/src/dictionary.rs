@@ -5,17 +5,33 @@ use std::path::Path;
 use std::sync::Arc;
 
 use alnlab_common::table::Table;
-use alnlab_common::{Error, Result};
+use alnlab_common::{Error, ModelId, Result};
 use arrow_array::cast::AsArray;
 use arrow_array::types::UInt16Type;
 use arrow_array::{Array, DictionaryArray, StringArray, UInt16Array};
 
 /// A column of `keys` into `names`.
-pub(crate) fn column(keys: Vec<u16>, names: &[String]) -> DictionaryArray<UInt16Type> {
+pub(crate) fn column<T: ToString>(keys: Vec<u16>, names: &[T]) -> DictionaryArray<UInt16Type> {
     DictionaryArray::new(
         UInt16Array::from(keys),
-        Arc::new(StringArray::from_iter_values(names)),
+        Arc::new(StringArray::from_iter_values(
+            names.iter().map(T::to_string),
+        )),
     )
+}
+
+/// The `model` column of `table`: the models it names ([`ModelId`]; a
+/// name no model has is damage, named), and each row's key.
+pub(crate) fn models(table: &Table) -> Result<(Vec<ModelId>, &[u16])> {
+    let (names, keys) = read(table, "model")?;
+    let models = names
+        .iter()
+        .map(|name| {
+            name.parse()
+                .map_err(|e| Error::bad_file(table.path(), format!("column `model`: {e}")))
+        })
+        .collect::<Result<_>>()?;
+    Ok((models, keys))
 }
 
 /// The dictionary column `name` of `table`: its names, and each row's key

@@ -15,7 +15,7 @@ use std::sync::Arc;
 
 use alnlab_codes::residual::change;
 use alnlab_common::table::{self, Table};
-use alnlab_common::{Error, Provenance, Result};
+use alnlab_common::{Error, ModelId, Provenance, Result};
 use arrow_array::{Array, BooleanArray, UInt16Array, UInt32Array};
 
 use crate::dictionary;
@@ -29,7 +29,7 @@ const MAX_PERIOD: u32 = 1 << 16;
 /// Every model's predictions on the same test rows.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Predictions {
-    models: Vec<String>,
+    models: Vec<ModelId>,
     variables: Vec<String>,
     /// Per variable, the circle in levels for an angle that wraps.
     periods: Vec<Option<u32>>,
@@ -80,20 +80,20 @@ impl Predictions {
     ///
     /// # Panics
     /// When the shape is not that of the true levels.
-    pub fn push_model(&mut self, name: &str, levels: &[Vec<u16>]) {
+    pub fn push_model(&mut self, model: ModelId, levels: &[Vec<u16>]) {
         assert_eq!(levels.len(), self.variables.len(), "levels per variable");
         assert!(
             levels.iter().all(|l| l.len() == self.rows.len()),
             "a level per test row"
         );
-        self.models.push(name.to_string());
+        self.models.push(model);
         for l in levels {
             self.predicted.extend_from_slice(l);
         }
     }
 
     /// The models, in the order they were added.
-    pub fn models(&self) -> &[String] {
+    pub fn models(&self) -> &[ModelId] {
         &self.models
     }
 
@@ -187,7 +187,7 @@ impl Predictions {
     pub fn read(path: &Path) -> Result<Predictions> {
         let table = Table::read(path)?;
         table.require_no_nulls()?;
-        let (models, model_keys) = dictionary::read(&table, "model")?;
+        let (models, model_keys) = dictionary::models(&table)?;
         let (variables, variable_keys) = dictionary::read(&table, "variable")?;
         let row_ids = table.column::<UInt32Array>("row")?.values();
         let held = table.column::<BooleanArray>("held_out")?;
@@ -326,8 +326,8 @@ mod tests {
             &[true, false, true],
             &[vec![1, 2, 3], vec![10, 20, 30]],
         );
-        p.push_model("aln", &[vec![1, 5, 3], vec![12, 20, 29]]);
-        p.push_model("persistence", &[vec![0, 2, 3], vec![10, 10, 10]]);
+        p.push_model(ModelId::Aln, &[vec![1, 5, 3], vec![12, 20, 29]]);
+        p.push_model(ModelId::Persistence, &[vec![0, 2, 3], vec![10, 10, 10]]);
         p
     }
 
@@ -355,7 +355,7 @@ mod tests {
         let read = Predictions::read(&path).unwrap();
         // Names come in the order the rows first give them, and each block's
         // rows in file order: here all reversed.
-        assert_eq!(read.models(), ["persistence", "aln"]);
+        assert_eq!(read.models(), [ModelId::Persistence, ModelId::Aln]);
         assert_eq!(read.variables(), ["b.y", "a.x"]);
         assert_eq!(read.rows(), [11, 9, 4]);
         assert_eq!(read.predicted(1, 1), [3, 5, 1]);
@@ -436,7 +436,7 @@ mod tests {
             &[true, true],
             &[vec![1, 212], vec![1, 212]],
         );
-        p.push_model("aln", &[vec![211, 2], vec![211, 2]]);
+        p.push_model(ModelId::Aln, &[vec![211, 2], vec![211, 2]]);
         p.write(&path, &provenance()).unwrap();
         let read = Predictions::read(&path).unwrap();
         assert_eq!(read, p);

@@ -12,7 +12,7 @@ use std::path::Path;
 use std::sync::Arc;
 
 use alnlab_common::table::{self, Table};
-use alnlab_common::{Error, Provenance, Result};
+use alnlab_common::{Error, ModelId, Provenance, Result};
 use arrow_array::{Array, UInt16Array, UInt32Array};
 
 use crate::dictionary;
@@ -23,7 +23,7 @@ pub const FILE: &str = "rollout.parquet";
 /// Every model's closed-loop errors from the same starts.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Rollout {
-    models: Vec<String>,
+    models: Vec<ModelId>,
     variables: Vec<String>,
     starts: Vec<u32>,
     horizons: u16,
@@ -50,7 +50,7 @@ impl Rollout {
     ///
     /// # Panics
     /// When the shape is not horizons × variables × starts.
-    pub fn push_model(&mut self, name: &str, errors: &[Vec<Vec<u16>>]) {
+    pub fn push_model(&mut self, model: ModelId, errors: &[Vec<Vec<u16>>]) {
         assert_eq!(
             errors.len(),
             usize::from(self.horizons),
@@ -61,7 +61,7 @@ impl Rollout {
                 && per_variable.iter().all(|e| e.len() == self.starts.len())
         });
         assert!(shaped, "an error per variable and start at every horizon");
-        self.models.push(name.to_string());
+        self.models.push(model);
         for v in 0..self.variables.len() {
             for per_variable in errors {
                 self.errors.extend_from_slice(&per_variable[v]);
@@ -70,7 +70,7 @@ impl Rollout {
     }
 
     /// The models, in the order they were added.
-    pub fn models(&self) -> &[String] {
+    pub fn models(&self) -> &[ModelId] {
         &self.models
     }
 
@@ -140,7 +140,7 @@ impl Rollout {
     pub fn read(path: &Path) -> Result<Rollout> {
         let table = Table::read(path)?;
         table.require_no_nulls()?;
-        let (models, model_keys) = dictionary::read(&table, "model")?;
+        let (models, model_keys) = dictionary::models(&table)?;
         let (variables, variable_keys) = dictionary::read(&table, "variable")?;
         let horizon = table.column::<UInt16Array>("horizon")?.values();
         let start = table.column::<UInt32Array>("start")?.values();
@@ -209,7 +209,7 @@ mod tests {
     /// a different number, 100 m + 10 v + h, plus the start.
     fn rolled() -> Rollout {
         let mut r = Rollout::new(&["a", "b"], &[3, 8], 3);
-        for (m, name) in ["aln", "linear"].into_iter().enumerate() {
+        for (m, model) in [ModelId::Aln, ModelId::Linear].into_iter().enumerate() {
             let errors: Vec<Vec<Vec<u16>>> = (1..=3u16)
                 .map(|h| {
                     (0..2u16)
@@ -217,7 +217,7 @@ mod tests {
                         .collect()
                 })
                 .collect();
-            r.push_model(name, &errors);
+            r.push_model(model, &errors);
         }
         r
     }

@@ -5,7 +5,7 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use alnlab_aln::ModelKind;
-use alnlab_common::{Error, Result};
+use alnlab_common::{Error, ModelId, Result};
 use clap::Subcommand;
 
 use crate::manifest::Manifest;
@@ -445,7 +445,8 @@ pub fn execute(bench: Bench, quiet: bool) -> Result<()> {
                     );
                 }
                 println!(
-                    "simulator@1/frame, 1 thread:  {}",
+                    "{}, 1 thread:  {}",
+                    ModelId::Simulator { steps: 1 },
                     spread(&f.simulator_one_step_one_thread_ns)
                 );
                 let ratio = f.aln_speedup_one_thread;
@@ -603,16 +604,16 @@ struct CpuFigures {
 
 impl CpuFigures {
     fn of(timings: &[alnlab_evaluate::timings::Row]) -> CpuFigures {
-        let ns = |model: &str, paths: &[&str]| {
+        let ns = |model: ModelId, paths: &[&str]| {
             timings
                 .iter()
                 .find(|t| t.model == model && paths.contains(&t.path.as_str()) && t.threads == 1)
                 .map(|t| t.ns_per_state)
         };
         CpuFigures {
-            aln_batched: ns("aln", &["batched"]),
-            aln_single: ns("aln", &["single", "threshold-search"]),
-            simulator_1_per_frame: ns("simulator@1/frame", &["single"]),
+            aln_batched: ns(ModelId::Aln, &["batched"]),
+            aln_single: ns(ModelId::Aln, &["single", "threshold-search"]),
+            simulator_1_per_frame: ns(ModelId::Simulator { steps: 1 }, &["single"]),
         }
     }
 }
@@ -661,7 +662,7 @@ impl CircuitBench {
             cpu.aln_single,
         );
         row(
-            "simulator@1/frame, one thread",
+            &format!("{}, one thread", ModelId::Simulator { steps: 1 }),
             "—".into(),
             "—".into(),
             cpu.simulator_1_per_frame,

@@ -65,11 +65,6 @@ pub struct Hybrids<'e> {
     /// The entries of the inputs a correction reads: the learned
     /// variables, then the same again for their nominal predictions.
     pub inputs: Vec<&'e Entry>,
-    /// Every pair's inputs `[input][row]`: the current real values, then
-    /// the nominal predictions.
-    pub x: Vec<Vec<f64>>,
-    /// The nominal predictions `[variable][row]` each hybrid advances from.
-    pub nominal: Vec<Vec<f64>>,
     /// The robust linear correction's reads (indices among `inputs`): the
     /// linear baseline's and the variable's own nominal prediction, or an
     /// ALN hybrid's.
@@ -81,9 +76,10 @@ pub struct Hybrids<'e> {
 }
 
 impl<'e> Hybrids<'e> {
-    /// Fits the corrections on the training `rows`: the learned variables'
-    /// current and next real values `x`, `y` and nominal predictions
-    /// `nominal` (`[variable][row]`); `reads`, what the robust linear
+    /// Fits the corrections on the training `rows`: a hybrid's inputs `x`
+    /// ([`columns`]: the current real values, then the nominal
+    /// predictions, `[input][row]`), the nominal predictions `nominal` and
+    /// the next real values `y` (`[variable][row]`); `reads`, what the robust linear
     /// correction reads ([`with_own_nominal`] of the linear baseline's, or
     /// an ALN hybrid's); the boosted trees (for the `scored` variables)
     /// with `peer`.
@@ -93,19 +89,16 @@ impl<'e> Hybrids<'e> {
         reads: Vec<Reads>,
         scored: &[usize],
         x: &[Vec<f64>],
-        nominal: Vec<Vec<f64>>,
+        nominal: &[Vec<f64>],
         y: &[Vec<f64>],
         rows: &[usize],
         peer: bool,
     ) -> Hybrids<'e> {
         let inputs = alnlab_aln::model::Base::Nominal.inputs(learned);
-        let x = columns(x, &nominal);
-        let linear = piecewise::robust_linear(&inputs, &reads, &x, &nominal, y, rows);
-        let peer = peer.then(|| Peer::fit(learned, scored, &x, &nominal, y, rows));
+        let linear = piecewise::robust_linear(&inputs, &reads, x, nominal, y, rows);
+        let peer = peer.then(|| Peer::fit(learned, scored, x, nominal, y, rows));
         Hybrids {
             inputs,
-            x,
-            nominal,
             reads,
             linear,
             peer,

@@ -28,6 +28,7 @@
 //!   models, loadable like the ALN (the Python package's `load`).
 
 pub mod bench;
+mod compared;
 mod hybrid;
 mod peer;
 mod piecewise;
@@ -42,7 +43,7 @@ use std::path::Path;
 use alnlab_aln::boosted::Boosted;
 use alnlab_aln::model::{Base, Header, Model, Reads};
 use alnlab_aln::pwl::Tree;
-use alnlab_aln::pwl::predict::{Predictor, states};
+use alnlab_aln::pwl::predict::{Path as Evaluation, Predictor, states};
 use alnlab_aln::runtime::{Runtime, Trained};
 use alnlab_aln::{ModelKind, Output, Target};
 use alnlab_codes::codes::Codec;
@@ -54,6 +55,11 @@ use alnlab_tables::pairs::{Pairs, Side, Split};
 use alnlab_tables::predictions::{self, Predictions};
 use alnlab_tables::rollout::Rollout;
 use serde::{Deserialize, Serialize};
+
+use crate::compared::{
+    BitAln, ClosedLoop, Compared, Dynamics, Hybrid, Learned, LevelColumns, Persistence, Simulator,
+    TestSet,
+};
 
 /// Version of what this stage writes (part of every cache key; 5: the
 /// robust linear baseline of the change, piecewise-linear models; 6: an
@@ -250,40 +256,24 @@ pub fn run(
         pairs.values(Side::Current, &learned)?,
         pairs.values(Side::Next, &learned)?,
     );
-    let test_states = states(&real_x, &test.rows);
-    let test_columns = pick_rows(&real_x, &test.rows);
-    let test_columns: Vec<&[f64]> = test_columns.iter().map(Vec::as_slice).collect();
-    let train_states = states(&real_x, &train_rows);
     let piecewise = match data.model.header.model {
         ModelKind::PiecewiseLinear => true,
         ModelKind::BitForest | ModelKind::Threshold => false,
     };
     let width = learned.len();
     // The nominal simulator's predictions (read and checked either way: an
-    // input given is an input verified).
+    // input given is an input verified), and a hybrid's inputs: the state,
+    // then its nominal prediction.
     let nominal = hybrid::base(nominal_path, &pairs, &learned)?;
+    let hybrid_x = hybrid::columns(&real_x, &nominal);
     // An ALN hybrid reads the state, then its nominal prediction, and
     // advances from that prediction.
     let aln_hybrid = piecewise && data.model.header.base == Base::Nominal;
-    let aln_entries = match aln_hybrid {
-        true => Base::Nominal.inputs(&learned),
-        false => learned.clone(),
-    };
-    let aln_x = aln_hybrid.then(|| hybrid::columns(&real_x, &nominal));
-    let aln_x = aln_x.as_deref().unwrap_or(&real_x);
-    let aln_test_states = states(aln_x, &test.rows);
-    let aln_test_columns = pick_rows(aln_x, &test.rows);
-    let aln_test_columns: Vec<&[f64]> = aln_test_columns.iter().map(Vec::as_slice).collect();
-    let nominal_test = (
-        pick_rows(&nominal, &test.rows),
-        states(&nominal, &test.rows),
-    );
-    let nominal_test_columns: Vec<&[f64]> = nominal_test.0.iter().map(Vec::as_slice).collect();
     // Every model is scored on the variables the model predicts.
     let scored: Vec<usize> = if piecewise {
         data.reads.iter().map(|r| r.variable).collect()
     } else {
-        (0..learned.len()).collect()
+        (0..width).collect()
     };
     let names: Vec<&str> = scored
         .iter()
@@ -293,40 +283,41 @@ pub fn run(
     let periods: Vec<Option<u32>> = scored.iter().map(|&v| learned[v].period()).collect();
 
     progress.start("test", 4, "steps");
-    let windows = params.windows(codecs);
+    let log = alnlab_common::state_log::read(trajectory_path)?;
+    let frames = rollout::LoggedFrames::new(&log, &learned);
+    let replays = alnlab_physics::replay::SceneReplay::from_log(&log)
+        .map_err(|m| Error::bad_file(trajectory_path, m))?;
+    let starts = data.starts(&test);
+    let on_test = |all: &[Vec<f64>]| (pick_rows(all, &test.rows), states(all, &test.rows));
+    let (test_columns, test_states) = on_test(&real_x);
+    let (nominal_columns, nominal_states) = on_test(&nominal);
+    let (hybrid_columns, hybrid_states) = on_test(&hybrid_x);
+    let (test_columns, nominal_columns, hybrid_columns) = (
+        as_slices(&test_columns),
+        as_slices(&nominal_columns),
+        as_slices(&hybrid_columns),
+    );
     let pool = timing::one_thread();
-    let aln_model = if piecewise {
-        Aln::Piecewise(Predictor::new(
-            &data.model.pieces,
-            &data.reads,
-            &aln_entries,
-            &states(aln_x, &train_rows),
-        ))
-    } else {
-        Aln::Bits(
-            Runtime::new(&data.model, codecs, &data.outputs)
-                .map_err(|m| Error::bad_file(model_path, m))?,
-        )
+    let set = TestSet {
+        learned: &learned,
+        scored: &scored,
+        test: &test,
+        x: &real_x,
+        columns: &test_columns,
+        states: &test_states,
+        nominal: &nominal,
+        hybrid_x: &hybrid_x,
+        nominal_columns: &nominal_columns,
+        nominal_states: &nominal_states,
+        hybrid_columns: &hybrid_columns,
+        hybrid_states: &hybrid_states,
+        frames: &frames,
+        replays: &replays,
+        starts: &starts,
+        pool: &pool,
     };
-    let (aln, aln_paths) = match &aln_model {
-        // Timed below with the nominal simulator's step, as the hybrids are.
-        Aln::Piecewise(predictor) if aln_hybrid => (
-            piecewise::checked_levels(
-                ModelId::Aln,
-                predictor,
-                (&aln_test_columns, &aln_test_states),
-                (&nominal_test_columns, &nominal_test.1),
-            ),
-            Vec::new(),
-        ),
-        Aln::Piecewise(predictor) => {
-            piecewise::paths(ModelId::Aln, predictor, &test_columns, &test_states, &pool)
-        }
-        Aln::Bits(runtime) => predict::paths(runtime, &test.x, windows.as_deref(), &pool),
-    };
-    progress.advance(1);
-    let persistence = pick(&test.x, &scored);
-    progress.advance(1);
+
+    // The baselines, fitted on the training rows and kept as models.
     let linear_reads = linear_inputs(&data, &learned, &scored)?;
     let linear_trees = piecewise::robust_linear(
         &learned,
@@ -338,21 +329,16 @@ pub fn run(
     );
     linear_model(&data, &learned, &linear_reads, &linear_trees)
         .write(&out_dir.join(LINEAR_FILE))?;
-    let linear = Predictor::new(&linear_trees, &linear_reads, &learned, &train_states);
-    let (linear_levels, linear_paths) =
-        piecewise::paths(ModelId::Linear, &linear, &test_columns, &test_states, &pool);
     let peer = params
         .peer
         .then(|| peer::Peer::fit(&learned, &scored, &real_x, &real_x, &real_y, &train_rows));
-    let peer_levels = peer
-        .as_ref()
-        .map(|p| p.levels(&learned, &real_x, &real_x, &test.rows));
     let none = Boosted {
         outputs: Vec::new(),
         features: width,
     };
-    let boosted = peer.as_ref().map_or(&none, |p| &p.boosted);
-    boosted.write(&out_dir.join(BOOSTED_FILE), provenance)?;
+    peer.as_ref()
+        .map_or(&none, |p| &p.boosted)
+        .write(&out_dir.join(BOOSTED_FILE), provenance)?;
     // The hybrids: the nominal simulator's prediction, corrected. Beside an
     // ALN hybrid the linear correction reads what the ALN's trees read, so
     // that it is the ALN's one-piece form, as `linear` is beside a model of
@@ -365,119 +351,100 @@ pub fn run(
                 false => hybrid::with_own_nominal(&linear_reads, width),
             },
             &scored,
-            &real_x,
-            nominal.clone(),
+            &hybrid_x,
+            &nominal,
             &real_y,
             &train_rows,
             params.peer,
         )
     });
-    let hybrid_linear = hybrids
-        .as_ref()
-        .map(|h| Predictor::new(&h.linear, &h.reads, &h.inputs, &states(&h.x, &train_rows)));
-    let hybrid_columns = hybrids.as_ref().map(|h| {
-        (
-            pick_rows(&h.x, &test.rows),
-            pick_rows(&h.nominal, &test.rows),
-        )
+
+    // Every model compared, in the tables' order.
+    let mut models: Vec<Box<dyn Compared + '_>> = Vec::new();
+    let aln_entries = Base::Nominal.inputs(&learned);
+    let fitted_on = |x: &[Vec<f64>]| states(x, &train_rows);
+    models.push(match piecewise {
+        true if aln_hybrid => Box::new(Hybrid {
+            id: ModelId::Aln,
+            learned: Learned::Piecewise(Predictor::new(
+                &data.model.pieces,
+                &data.reads,
+                &aln_entries,
+                &fitted_on(&hybrid_x),
+            )),
+        }),
+        true => Box::new(Dynamics {
+            id: ModelId::Aln,
+            learned: Learned::Piecewise(Predictor::new(
+                &data.model.pieces,
+                &data.reads,
+                &learned,
+                &fitted_on(&real_x),
+            )),
+            evaluations: &Evaluation::ALL,
+        }),
+        false => Box::new(BitAln {
+            runtime: Runtime::new(&data.model, codecs, &data.outputs)
+                .map_err(|m| Error::bad_file(model_path, m))?,
+            windows: params.windows(codecs),
+        }),
     });
-    let hybrid_linear_levels =
-        hybrid_linear
-            .as_ref()
-            .zip(hybrid_columns.as_ref())
-            .map(|(predictor, (columns, base))| {
-                let columns: Vec<&[f64]> = columns.iter().map(Vec::as_slice).collect();
-                let base: Vec<&[f64]> = base.iter().map(Vec::as_slice).collect();
-                predictor.levels_from(&columns, &base, &mut predictor.scratch())
-            });
-    let hybrid_peer_levels = hybrids.as_ref().and_then(|h| {
-        let peer = h.peer.as_ref()?;
-        Some(peer.levels(&learned, &h.x, &h.nominal, &test.rows))
-    });
+    models.push(Box::new(Persistence));
+    models.push(Box::new(Dynamics {
+        id: ModelId::Linear,
+        learned: Learned::Piecewise(Predictor::new(
+            &linear_trees,
+            &linear_reads,
+            &learned,
+            &fitted_on(&real_x),
+        )),
+        evaluations: &[Evaluation::Plain],
+    }));
+    if let Some(peer) = &peer {
+        models.push(Box::new(Dynamics {
+            id: ModelId::Boosted,
+            learned: Learned::Boosted(peer),
+            evaluations: &[],
+        }));
+    }
+    if let Some(h) = &hybrids {
+        models.push(Box::new(Hybrid {
+            id: ModelId::LinearNominal,
+            learned: Learned::Piecewise(Predictor::new(
+                &h.linear,
+                &h.reads,
+                &h.inputs,
+                &fitted_on(&hybrid_x),
+            )),
+        }));
+        if let Some(peer) = &h.peer {
+            models.push(Box::new(Hybrid {
+                id: ModelId::BoostedNominal,
+                learned: Learned::Boosted(peer),
+            }));
+        }
+    }
+    for steps in &params.resimulate_steps {
+        models.push(Box::new(Simulator::new(&set, steps.0)?));
+    }
     progress.advance(1);
 
-    // The simulator re-stepping each test row's logged frame.
-    let log = alnlab_common::state_log::read(trajectory_path)?;
-    let starts = data.starts(&test);
-    let frames = rollout::LoggedFrames::new(&log, &learned);
-    let replays = alnlab_physics::replay::SceneReplay::from_log(&log)
-        .map_err(|m| Error::bad_file(trajectory_path, m))?;
-    let resimulated: Vec<resimulate::Resimulated> = params
-        .resimulate_steps
+    let one_step: Vec<(ModelId, LevelColumns)> = models
         .iter()
-        .map(|steps| {
-            resimulate::baseline(&frames, &replays, &learned, &starts, &test.y, steps.0)
-                .map_err(|e| e.context(&format!("re-simulating with {} steps per frame", steps.0)))
-        })
+        .map(|m| Ok((m.id(), m.one_step(&set)?)))
         .collect::<Result<_>>()?;
-    let timings = {
-        let mut timed = aln_paths;
-        if let (Aln::Piecewise(predictor), true) = (&aln_model, aln_hybrid) {
-            let correct = hybrid::correction(predictor);
-            timed.push(hybrid::path(
-                ModelId::Aln,
-                &frames,
-                &replays,
-                &starts,
-                &test_states,
-                width,
-                correct,
-            ));
-        }
-        // The robust linear fit all at once and one state at a time (its
-        // plain path, the quickest), as a practitioner would run it.
-        timed.extend(
-            linear_paths
-                .into_iter()
-                .filter(|p| p.path == "batched" || p.path == "pwl-plain"),
-        );
-        if let Some(peer) = &peer {
-            let (learned, x, rows, pool) = (&learned, &real_x, &test.rows, &pool);
-            timed.push(timing::Path {
-                model: ModelId::Boosted,
-                path: "batched",
-                threads: 1,
-                states: rows.len(),
-                failed: 0,
-                run: Box::new(move || {
-                    std::hint::black_box(pool.install(|| peer.levels(learned, x, x, rows)));
-                }),
-            });
-        }
-        timed.extend(
-            resimulated
-                .iter()
-                .map(|r| resimulate::path(r, &frames, &replays, &learned, &starts, &test.y)),
-        );
-        if let Some(predictor) = &hybrid_linear {
-            let correct = hybrid::correction(predictor);
-            timed.push(hybrid::path(
-                ModelId::LinearNominal,
-                &frames,
-                &replays,
-                &starts,
-                &test_states,
-                width,
-                correct,
-            ));
-        }
-        if let Some(peer) = hybrids.as_ref().and_then(|h| h.peer.as_ref()) {
-            let correct = hybrid::peer_correction(peer, &learned);
-            timed.push(hybrid::path(
-                ModelId::BoostedNominal,
-                &frames,
-                &replays,
-                &starts,
-                &test_states,
-                width,
-                correct,
-            ));
-        }
-        timing::in_rounds(timed, timing::REPEATS)
-    };
+    progress.advance(1);
+    let timings = timing::in_rounds(
+        models.iter().flat_map(|m| m.paths(&set)).collect(),
+        timing::REPEATS,
+    );
+    progress.advance(1);
 
     // Closed loop, from the true levels (real values) of spread-out test
-    // rows.
+    // rows. A hybrid's closed loop steps the nominal simulator from the
+    // state it predicted, where every scene's state is made of predicted
+    // variables (a robot's; not the worm's, whose hybrids have no closed
+    // loop).
     let horizon = params.horizon.get();
     let truth = rollout::truth(
         &frames,
@@ -486,119 +453,33 @@ pub fn run(
         horizon,
         params.rollout_starts.get(),
     );
-    let from: Vec<Vec<u16>> = test
-        .x
-        .iter()
-        .map(|x| truth.starts.iter().map(|&k| x[k]).collect())
-        .collect();
-    let start_rows: Vec<rollout::Start> = truth.starts.iter().map(|&k| starts[k]).collect();
-    let start_states = pick_rows(
-        &real_x,
-        &truth
-            .starts
+    let mut closed = ClosedLoop {
+        horizon,
+        starts: truth.starts.iter().map(|&k| starts[k]).collect(),
+        states: pick_rows(
+            &real_x,
+            &truth
+                .starts
+                .iter()
+                .map(|&k| test.rows[k])
+                .collect::<Vec<_>>(),
+        ),
+        levels: test
+            .x
             .iter()
-            .map(|&k| test.rows[k])
-            .collect::<Vec<_>>(),
-    );
-    let roll_real = |variables: &[usize], step: &mut piecewise::Step| {
-        piecewise::roll(
-            variables,
-            &frames,
-            &learned,
-            &start_rows,
-            start_states.clone(),
-            horizon,
-            step,
-        )
+            .map(|x| truth.starts.iter().map(|&k| x[k]).collect())
+            .collect(),
+        truth: truth.levels,
+        restep: hybrid::Restep::new(&frames, &replays, &learned, &scored).ok(),
     };
-    let each = |levels: Vec<Vec<Vec<u16>>>| -> Vec<Vec<Vec<u16>>> {
-        levels.iter().map(|h| pick(h, &scored)).collect()
-    };
-    // A hybrid's closed loop steps the nominal simulator from the state it
-    // predicted, where every scene's state is made of predicted variables
-    // (a robot's; not the worm's, whose hybrids have no closed loop).
-    let mut restep = hybrid::Restep::new(&frames, &replays, &learned, &scored).ok();
-    let mut roll_hybrid = |correct: &mut hybrid::Correct| {
-        let Some(restep) = restep.as_mut() else {
-            return Ok(None);
-        };
-        let (rows, states, truth) = (&start_rows, &start_states, &truth.levels);
-        hybrid::roll(
-            restep, &learned, &scored, rows, states, truth, horizon, correct,
-        )
-        .map(Some)
-    };
-    let aln_rolled = match &aln_model {
-        Aln::Piecewise(predictor) if aln_hybrid => roll_hybrid(&mut hybrid::correction(predictor))?,
-        Aln::Piecewise(predictor) => Some(roll_real(&scored, &mut piecewise::step_of(predictor))),
-        Aln::Bits(runtime) => Some(each(rollout::roll(from.clone(), horizon, |x| {
-            runtime.levels(x, windows.as_deref())
-        }))),
-    };
-    let mut rolled: Vec<(ModelId, Vec<Vec<Vec<u16>>>)> = aln_rolled
-        .map(|levels| (ModelId::Aln, levels))
-        .into_iter()
-        .collect();
-    rolled.extend([
-        (
-            ModelId::Persistence,
-            each(rollout::roll(from, horizon, |x| x.to_vec())),
-        ),
-        (
-            ModelId::Linear,
-            roll_real(&scored, &mut piecewise::step_of(&linear)),
-        ),
-    ]);
-    if let Some(peer) = &peer {
-        let every: Vec<usize> = (0..start_rows.len()).collect();
-        let mut step = |state: &[Vec<f64>]| peer.next_values(&learned, state, state, &every);
-        rolled.push((ModelId::Boosted, roll_real(&scored, &mut step)));
-    }
-    if let Some(predictor) = &hybrid_linear {
-        let levels = roll_hybrid(&mut hybrid::correction(predictor))?;
-        rolled.extend(levels.map(|levels| (ModelId::LinearNominal, levels)));
-    }
-    if let Some(peer) = hybrids.as_ref().and_then(|h| h.peer.as_ref()) {
-        let levels = roll_hybrid(&mut hybrid::peer_correction(peer, &learned))?;
-        rolled.extend(levels.map(|levels| (ModelId::BoostedNominal, levels)));
-    }
-    for (steps, r) in params.resimulate_steps.iter().zip(&resimulated) {
-        let levels = resimulate::rollout(
-            &frames,
-            &replays,
-            &learned,
-            &start_rows,
-            &truth.levels,
-            steps.0,
-        )?;
-        rolled.push((r.model, each(levels)));
+    let mut rolled: Vec<(ModelId, Vec<LevelColumns>)> = Vec::new();
+    for model in &models {
+        if let Some(levels) = model.closed_loop(&set, &mut closed)? {
+            rolled.push((model.id(), levels));
+        }
     }
     progress.advance(1);
 
-    let resimulated_levels: Vec<Vec<Vec<u16>>> = resimulated
-        .iter()
-        .map(|r| pick(&r.levels, &scored))
-        .collect();
-    let mut models: Vec<(ModelId, &Vec<Vec<u16>>)> = vec![
-        (ModelId::Aln, &aln),
-        (ModelId::Persistence, &persistence),
-        (ModelId::Linear, &linear_levels),
-    ];
-    if let Some(levels) = &peer_levels {
-        models.push((ModelId::Boosted, levels));
-    }
-    if let Some(levels) = &hybrid_linear_levels {
-        models.push((ModelId::LinearNominal, levels));
-    }
-    if let Some(levels) = &hybrid_peer_levels {
-        models.push((ModelId::BoostedNominal, levels));
-    }
-    models.extend(
-        resimulated
-            .iter()
-            .zip(&resimulated_levels)
-            .map(|(r, levels)| (r.model, levels)),
-    );
     let test_rows: Vec<u32> = test.rows.iter().map(|&r| r as u32).collect();
     let mut predictions = Predictions::new(
         &names,
@@ -607,12 +488,12 @@ pub fn run(
         &test.held_out,
         &pick(&test.y, &scored),
     );
-    for (model, levels) in &models {
-        predictions.push_model(&model.to_string(), levels);
+    for (model, levels) in &one_step {
+        predictions.push_model(*model, levels);
     }
     predictions.write(&out_dir.join(PREDICTIONS_FILE), provenance)?;
     let start_rows: Vec<u32> = truth.starts.iter().map(|&k| test_rows[k]).collect();
-    let true_levels = each(truth.levels);
+    let true_levels = set.scored_of(closed.truth);
     // `validate` bounds the horizon to a u16.
     let mut rollout = Rollout::new(&names, &start_rows, horizon as u16);
     for (model, levels) in &rolled {
@@ -633,7 +514,7 @@ pub fn run(
                     .collect()
             })
             .collect();
-        rollout.push_model(&model.to_string(), &errors);
+        rollout.push_model(*model, &errors);
     }
     rollout.write(&out_dir.join(ROLLOUT_FILE), provenance)?;
     let rows: Vec<timings::Row> = timings.iter().map(timings::Row::measured).collect();
@@ -669,11 +550,9 @@ fn linear_model(data: &Data, learned: &[&Entry], reads: &[Reads], trees: &[Tree]
     }
 }
 
-/// The model, made ready: a bit model's runtime, or a piecewise-linear
-/// model's predictor.
-enum Aln<'m> {
-    Bits(Runtime<'m>),
-    Piecewise(Predictor<'m>),
+/// Every column of `columns` as a slice.
+fn as_slices(columns: &[Vec<f64>]) -> Vec<&[f64]> {
+    columns.iter().map(Vec::as_slice).collect()
 }
 
 /// The rows `rows` of every column of `all`.

@@ -58,16 +58,18 @@ pub fn checked_levels(
     levels
 }
 
-/// [`checked_levels`] of a model of the dynamics, and the paths to time
-/// under `model`'s name: tree by tree over blocks of rows (`batched`) and
-/// one row at a time by each evaluation.
+/// The paths to time of a model of the dynamics under `model`'s name: tree
+/// by tree over blocks of rows (`batched`) and one row at a time by each
+/// of `evaluations` (the levels were checked equal on every path by
+/// [`checked_levels`]).
 pub fn paths<'s, 'm: 's>(
     model: ModelId,
     predictor: &'s Predictor<'m>,
+    evaluations: &[Evaluation],
     columns: &'s [&'s [f64]],
     states: &'s [f64],
     pool: &'s rayon::ThreadPool,
-) -> (Vec<Vec<u16>>, Vec<Path<'s>>) {
+) -> Vec<Path<'s>> {
     let rows = states.len() / predictor.width().max(1);
     let outputs = predictor.variables().count();
     let one_row = move |evaluation: Evaluation| {
@@ -83,7 +85,6 @@ pub fn paths<'s, 'm: 's>(
         levels
     };
     let batched = move || predictor.levels(columns, &mut predictor.scratch());
-    let levels = checked_levels(model, predictor, (columns, states), (columns, states));
     let path = |path, run: Box<dyn FnMut() + 's>| Path {
         model,
         path,
@@ -98,7 +99,7 @@ pub fn paths<'s, 'm: 's>(
             std::hint::black_box(pool.install(batched));
         }),
     )];
-    for evaluation in Evaluation::ALL {
+    for &evaluation in evaluations {
         timed.push(path(
             evaluation.name(),
             Box::new(move || {
@@ -106,7 +107,7 @@ pub fn paths<'s, 'm: 's>(
             }),
         ));
     }
-    (levels, timed)
+    timed
 }
 
 /// The robust linear baseline of the variables `reads` names: per output
@@ -139,10 +140,6 @@ pub fn robust_linear(
         })
         .collect()
 }
-
-/// A closed loop's step: the current states (`[variable][start]`) to the
-/// predicted variables' next values (`[output][start]`).
-pub type Step<'a> = dyn FnMut(&[Vec<f64>]) -> Vec<Vec<f64>> + 'a;
 
 /// Closed loop from the real states `start` (`[variable][s]`, the learned
 /// variables) of the rollout's `starts`: each step `step` maps the current

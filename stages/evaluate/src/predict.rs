@@ -13,28 +13,42 @@ use alnlab_common::ModelId;
 
 use crate::timing::Path;
 
-/// A one-row evaluation path: the levels of every row, one row at a time.
-type OneRow<'s> = dyn Fn() -> Vec<Vec<u16>> + 's;
-
-/// The same levels, and every evaluation path to time: the batched
-/// path on one thread (in `pool`) and, labelled, on all threads when
-/// there are more; the one-row path. Every path must give the same
-/// levels (a bit-forest's bit-sliced and parsimonious evaluation, a
+/// The levels of every row, checked equal on every evaluation path: the
+/// batched path on one thread (in `pool`) and on all, and the one-row
+/// path (a bit-forest's bit-sliced and parsimonious evaluation, a
 /// threshold model's batched and one-row searches).
-pub fn paths<'s>(
-    runtime: &'s Runtime,
-    x: &'s [Vec<u16>],
-    windows: Option<&'s [usize]>,
-    pool: &'s rayon::ThreadPool,
-) -> (Vec<Vec<u16>>, Vec<Path<'s>>) {
-    let inputs = runtime.encode(x);
-    let rows = inputs.rows();
+pub fn levels(
+    runtime: &Runtime,
+    x: &[Vec<u16>],
+    windows: Option<&[usize]>,
+    pool: &rayon::ThreadPool,
+) -> Vec<Vec<u16>> {
     let levels = runtime.levels(x, windows);
     assert_eq!(
         pool.install(|| runtime.levels(x, windows)),
         levels,
         "batches on one and on all threads disagree"
     );
+    let inputs = runtime.encode(x);
+    assert_eq!(
+        runtime.one_row(x, &inputs, windows),
+        levels,
+        "the one-row and batched paths disagree"
+    );
+    levels
+}
+
+/// Every evaluation path to time: the batched path on one thread (in
+/// `pool`) and, labelled, on all threads when there are more; the one-row
+/// path.
+pub fn paths<'s>(
+    runtime: &'s Runtime,
+    x: &'s [Vec<u16>],
+    windows: Option<&'s [usize]>,
+    pool: &'s rayon::ThreadPool,
+) -> Vec<Path<'s>> {
+    let inputs = runtime.encode(x);
+    let rows = inputs.rows();
     let path = |path, threads, run: Box<dyn FnMut() + 's>| Path {
         model: ModelId::Aln,
         path,
@@ -60,17 +74,14 @@ pub fn paths<'s>(
             }),
         ));
     }
-    let name = runtime.one_row_path();
-    let single: Box<OneRow<'s>> = Box::new(move || runtime.one_row(x, &inputs, windows));
-    assert_eq!(single(), levels, "the one-row and batched paths disagree");
     paths.push(path(
-        name,
+        runtime.one_row_path(),
         1,
         Box::new(move || {
-            std::hint::black_box(single());
+            std::hint::black_box(runtime.one_row(x, &inputs, windows));
         }),
     ));
-    (levels, paths)
+    paths
 }
 
 #[cfg(test)]
@@ -153,7 +164,8 @@ mod tests {
         let outputs = [Output::Level(codec.clone())];
         let aln = Runtime::new(&model, codecs, &outputs).unwrap();
         let pool = crate::timing::one_thread();
-        let (levels, paths) = super::paths(&aln, &x, None, &pool);
+        let levels = super::levels(&aln, &x, None, &pool);
+        let paths = super::paths(&aln, &x, None, &pool);
         let timings = crate::timing::in_rounds(paths, 2);
         let error: usize = levels[0]
             .iter()
@@ -181,7 +193,7 @@ mod tests {
         );
 
         // Rate limited to 0 levels: nothing moves.
-        let (still, _) = super::paths(&aln, &x, Some(&[0]), &pool);
+        let still = super::levels(&aln, &x, Some(&[0]), &pool);
         assert_eq!(
             aln.levels(&x, None),
             levels,

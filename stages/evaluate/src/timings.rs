@@ -8,7 +8,7 @@ use std::path::Path;
 use std::sync::Arc;
 
 use alnlab_common::table::{self, Table};
-use alnlab_common::{Provenance, Result};
+use alnlab_common::{ModelId, Provenance, Result};
 use arrow_array::cast::AsArray;
 use arrow_array::types::Float64Type;
 use arrow_array::{Array, Float64Array, ListArray, StringArray, UInt32Array};
@@ -18,7 +18,7 @@ use crate::timing::Timing;
 /// One row of `timings.parquet`.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Row {
-    pub model: String,
+    pub model: ModelId,
     /// `batched`, `single`, `threshold-search` or a piecewise-linear path.
     pub path: String,
     /// ns per state: the median of the timed runs, and their range.
@@ -43,7 +43,7 @@ impl Row {
     pub fn measured(timing: &Timing) -> Row {
         let spread = timing.spread();
         Row {
-            model: timing.model.to_string(),
+            model: timing.model,
             path: timing.path.to_string(),
             ns_per_state: spread.median,
             ns_min: spread.min,
@@ -70,7 +70,12 @@ pub fn write(path: &Path, rows: &[Row], provenance: &Provenance) -> Result<()> {
         Arc::new(StringArray::from_iter_values(rows.iter().map(f)))
     };
     let batch = table::batch(vec![
-        ("model", text(|r| &r.model)),
+        (
+            "model",
+            Arc::new(StringArray::from_iter_values(
+                rows.iter().map(|r| r.model.to_string()),
+            )),
+        ),
         ("path", text(|r| &r.path)),
         ("ns_per_state", ns(|r| r.ns_per_state)),
         ("ns_min", ns(|r| r.ns_min)),
@@ -95,7 +100,8 @@ pub fn write(path: &Path, rows: &[Row], provenance: &Provenance) -> Result<()> {
 pub fn read(path: &Path) -> Result<Vec<Row>> {
     let table = Table::read(path)?;
     let text = |name: &str| table.strings(name);
-    let (models, paths, cpu) = (text("model")?, text("path")?, text("cpu")?);
+    let models: Vec<ModelId> = table.parsed("model")?;
+    let (paths, cpu) = (text("path")?, text("cpu")?);
     let float = |name: &str| table.column::<Float64Array>(name).map(|c| c.values());
     let (ns, ns_min, ns_max) = (float("ns_per_state")?, float("ns_min")?, float("ns_max")?);
     let count = |name: &str| table.column::<UInt32Array>(name).map(|c| c.values());
@@ -104,7 +110,7 @@ pub fn read(path: &Path) -> Result<Vec<Row>> {
     let runs = table.column::<ListArray>("ns_runs")?;
     Ok((0..table.num_rows())
         .map(|i| Row {
-            model: models[i].clone(),
+            model: models[i],
             path: paths[i].clone(),
             ns_per_state: ns[i],
             ns_min: ns_min[i],
@@ -137,8 +143,6 @@ fn cpu_model() -> String {
 
 #[cfg(test)]
 mod tests {
-    use alnlab_common::ModelId;
-
     use super::*;
 
     #[test]

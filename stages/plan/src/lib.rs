@@ -56,7 +56,7 @@ use alnlab_common::hash::mix_seed;
 use alnlab_common::params::{self, Count, Fraction, ParamError};
 use alnlab_common::state_log::{StateFrame, StateLayout, StateLogWriter};
 use alnlab_common::table;
-use alnlab_common::{Error, Progress, Provenance, Result};
+use alnlab_common::{Error, PolicyId, Progress, Provenance, Result};
 use alnlab_physics::dynamics::{Kinematics, State};
 use alnlab_physics::replay::SceneReplay;
 use alnlab_physics::{Prepared, Runner, Scene, foxglove, state_from_generalized};
@@ -259,7 +259,7 @@ impl Params {
 #[derive(Default)]
 struct FrameRows {
     task: Vec<String>,
-    model: Vec<String>,
+    model: Vec<PolicyId>,
     planner: Vec<&'static str>,
     budget: Vec<u32>,
     episode: Vec<u32>,
@@ -481,12 +481,12 @@ pub fn run(
                         .collect(),
                     cost: &cost,
                 };
-                task_run.reference("zero", &mut Policy::Zero, &mut out)?;
-                task_run.reference("random", &mut Policy::Random, &mut out)?;
+                task_run.reference(PolicyId::Zero, &mut Policy::Zero, &mut out)?;
+                task_run.reference(PolicyId::Random, &mut Policy::Random, &mut out)?;
                 for &kind in &params.models {
-                    let (name, model): (&str, Box<dyn Model>) = match kind {
+                    let (name, model): (PolicyId, Box<dyn Model>) = match kind {
                         LearnedKind::Aln => (
-                            "aln",
+                            PolicyId::Aln,
                             match &piecewise {
                                 Some(predictor) if hybrid => Box::new(
                                     Hybrid::new(
@@ -523,7 +523,7 @@ pub fn run(
                             },
                         ),
                         LearnedKind::Linear => (
-                            "linear",
+                            PolicyId::Linear,
                             Box::new(
                                 Learned::new(
                                     LinearStep {
@@ -542,16 +542,16 @@ pub fn run(
                     task_run.planned(name, model, &bounds, &mut out)?;
                 }
                 for steps in &params.simulator_steps {
-                    let name = format!("simulator@{}", steps.get());
                     let steps = steps.get() as u64;
+                    let name = PolicyId::Simulator { steps };
                     let model = Box::new(Simulator::new(nominal, &controls, steps, cost.clone()));
-                    task_run.planned(&name, model, &bounds, &mut out)?;
+                    task_run.planned(name, model, &bounds, &mut out)?;
                 }
                 for steps in &params.plant_steps {
-                    let name = format!("plant@{}", steps.get());
                     let steps = steps.get() as u64;
+                    let name = PolicyId::Plant { steps };
                     let model = Box::new(Simulator::new(p, &controls, steps, cost.clone()));
-                    task_run.planned(&name, model, &bounds, &mut out)?;
+                    task_run.planned(name, model, &bounds, &mut out)?;
                 }
             }
             Ok(())
@@ -596,7 +596,7 @@ struct TaskRun<'a> {
 
 impl TaskRun<'_> {
     /// Every episode under a reference policy.
-    fn reference(&self, name: &str, policy: &mut Policy, out: &mut Outputs) -> Result<()> {
+    fn reference(&self, name: PolicyId, policy: &mut Policy, out: &mut Outputs) -> Result<()> {
         for e in 0..self.context.starts.len() {
             self.episode(name, "", 0, e, policy, out)?;
         }
@@ -606,7 +606,7 @@ impl TaskRun<'_> {
     /// Every episode with `model`, for every planner and budget.
     fn planned(
         &self,
-        name: &str,
+        name: PolicyId,
         mut model: Box<dyn Model + '_>,
         bounds: &Bounds,
         out: &mut Outputs,
@@ -646,7 +646,7 @@ impl TaskRun<'_> {
     /// One episode from start state `e`, recorded.
     fn episode(
         &self,
-        model: &str,
+        model: PolicyId,
         planner: &'static str,
         budget: u32,
         e: usize,
@@ -672,7 +672,7 @@ impl TaskRun<'_> {
         // frame as the log records it (under the torques applied from it
         // on), so a pair is complete once the next frame's are chosen.
         let mut recorded = match &mut out.transitions {
-            Some(t) if model == "aln" && !planner.is_empty() => {
+            Some(t) if model == PolicyId::Aln && !planner.is_empty() => {
                 t.start_episode();
                 Some((t, None::<(StateFrame, Vec<f64>)>))
             }
@@ -690,7 +690,7 @@ impl TaskRun<'_> {
             seed,
             |step, frame, applied, kin| {
                 frames.task.push(self.task.to_string());
-                frames.model.push(model.to_string());
+                frames.model.push(model);
                 frames.planner.push(planner);
                 frames.budget.push(budget);
                 frames.episode.push(e as u32);
@@ -741,7 +741,8 @@ impl TaskRun<'_> {
         let frames_run = c.params.frames.get() as f64;
         out.episodes.push(planning::Episode {
             task: self.task.to_string(),
-            model: model.to_string(),
+            model,
+            round: 0,
             planner: planner.to_string(),
             budget,
             episode: e as u32,
@@ -799,7 +800,9 @@ fn write_frames(path: &Path, rows: &FrameRows, provenance: &Provenance) -> Resul
         ),
         (
             "model",
-            Arc::new(StringArray::from_iter_values(&rows.model)),
+            Arc::new(StringArray::from_iter_values(
+                rows.model.iter().map(PolicyId::to_string),
+            )),
         ),
         (
             "planner",

@@ -10,16 +10,20 @@ use std::path::Path;
 use std::sync::Arc;
 
 use alnlab_common::table::{self, Table};
-use alnlab_common::{Provenance, Result};
+use alnlab_common::{PolicyId, Provenance, Result};
 use arrow_array::{Array, Float64Array, StringArray, UInt32Array, UInt64Array};
 
 /// One row of `planning.parquet`: an episode of one policy.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Episode {
     pub task: String,
-    /// The forward model (`aln`, `linear`, `simulator@k`) or a reference
-    /// (`zero`, `random`).
-    pub model: String,
+    /// The forward model (`aln`, `linear`, `simulator@k`, `plant@k`) or a
+    /// reference (`zero`, `random`).
+    pub model: PolicyId,
+    /// The round of the planner's own data (`[plan] rounds`) whose table
+    /// the episode was read from: 0 for the first plan stage's, r for the
+    /// plan stage after r rounds. Not a column: each round writes a table.
+    pub round: u32,
     /// The planner; empty for a reference.
     pub planner: String,
     /// Sequences per decision.
@@ -59,7 +63,12 @@ pub fn write(path: &Path, rows: &[Episode], provenance: &Provenance) -> Result<(
     };
     let batch = table::batch(vec![
         ("task", text(|r| &r.task)),
-        ("model", text(|r| &r.model)),
+        (
+            "model",
+            Arc::new(StringArray::from_iter_values(
+                rows.iter().map(|r| r.model.to_string()),
+            )),
+        ),
         ("planner", text(|r| &r.planner)),
         ("budget", count(|r| r.budget)),
         ("episode", count(|r| r.episode)),
@@ -83,11 +92,8 @@ pub fn write(path: &Path, rows: &[Episode], provenance: &Provenance) -> Result<(
 /// Reads `planning.parquet`.
 pub fn read(path: &Path) -> Result<Vec<Episode>> {
     let t = Table::read(path)?;
-    let (task, model, planner) = (
-        t.strings("task")?,
-        t.strings("model")?,
-        t.strings("planner")?,
-    );
+    let model: Vec<PolicyId> = t.parsed("model")?;
+    let (task, planner) = (t.strings("task")?, t.strings("planner")?);
     let count = |name: &str| t.column::<UInt32Array>(name).map(|c| c.values());
     let real = |name: &str| t.f64_column(name).map(|c| c.values());
     let (budget, episode) = (count("budget")?, count("episode")?);
@@ -103,7 +109,8 @@ pub fn read(path: &Path) -> Result<Vec<Episode>> {
     Ok((0..t.num_rows())
         .map(|i| Episode {
             task: task[i].clone(),
-            model: model[i].clone(),
+            model: model[i],
+            round: 0,
             planner: planner[i].clone(),
             budget: budget[i],
             episode: episode[i],
@@ -127,7 +134,8 @@ mod tests {
     fn episodes_read_back_as_written() {
         let rows = vec![Episode {
             task: "bend".into(),
-            model: "aln".into(),
+            model: PolicyId::Aln,
+            round: 0,
             planner: "cem".into(),
             budget: 64,
             episode: 3,

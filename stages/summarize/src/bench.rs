@@ -6,7 +6,7 @@
 use std::collections::BTreeMap;
 use std::time::Instant;
 
-use alnlab_common::{Error, Provenance, Result, Silent};
+use alnlab_common::{Error, ModelId, Provenance, Result, Silent};
 use alnlab_tables::predictions::Predictions;
 use alnlab_tables::rollout::Rollout;
 use rand::{RngExt, SeedableRng};
@@ -21,7 +21,7 @@ pub struct SummarizeBench {
     pub errors_per_s: f64,
 }
 
-const MODELS: [&str; 3] = ["aln", "persistence", "linear"];
+const MODELS: [ModelId; 3] = [ModelId::Aln, ModelId::Persistence, ModelId::Linear];
 const VARIABLES: usize = 64;
 const ROWS: usize = 52_084;
 

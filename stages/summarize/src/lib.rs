@@ -26,7 +26,7 @@ use std::sync::Arc;
 
 use alnlab_codes::group_of;
 use alnlab_common::table::{self, Table};
-use alnlab_common::{Error, Progress, Provenance, Result};
+use alnlab_common::{Error, ModelId, Progress, Provenance, Result};
 use alnlab_tables::rollout::Rollout;
 use arrow_array::{
     Array, BooleanArray, Float64Array, StringArray, UInt16Array, UInt32Array, UInt64Array,
@@ -74,7 +74,7 @@ impl Rows {
 #[derive(Clone, Debug, PartialEq)]
 pub struct SummaryRow {
     pub rows: Rows,
-    pub model: String,
+    pub model: ModelId,
     pub variable: String,
     pub group: String,
     pub stats: ErrorStats,
@@ -94,7 +94,7 @@ pub struct SummaryRow {
 #[derive(Clone, Debug, PartialEq)]
 pub struct HorizonRow {
     pub rows: Rows,
-    pub model: String,
+    pub model: ModelId,
     pub horizon: u16,
     pub stats: ErrorStats,
 }
@@ -106,8 +106,8 @@ pub struct HorizonRow {
 #[derive(Clone, Debug, PartialEq)]
 pub struct Comparison {
     pub rows: Rows,
-    pub model: String,
-    pub against: String,
+    pub model: ModelId,
+    pub against: ModelId,
     /// The variable, or `None` for the errors averaged over the variables
     /// (one difference per row: the mean over the variables of that row).
     pub variable: Option<String>,
@@ -133,7 +133,7 @@ pub fn run(
     progress.advance(1);
     write_comparisons(
         &out_dir.join(COMPARISONS_FILE),
-        &predictions.compare("aln"),
+        &predictions.compare(ModelId::Aln),
         provenance,
     )?;
     progress.advance(1);
@@ -169,7 +169,7 @@ pub fn summarize_horizons(
                 if let Some(stats) = counts.stats() {
                     rows.push(HorizonRow {
                         rows: rows_of,
-                        model: model.clone(),
+                        model: *model,
                         horizon: h,
                         stats,
                     });
@@ -193,10 +193,7 @@ fn write_horizons(path: &Path, rows: &[HorizonRow], provenance: &Provenance) -> 
                 rows.iter().map(|r| r.rows.as_str()),
             )) as Arc<dyn Array>,
         ),
-        (
-            "model",
-            Arc::new(StringArray::from_iter_values(rows.iter().map(|r| &r.model))),
-        ),
+        ("model", names(rows.iter().map(|r| r.model))),
         (
             "horizon",
             Arc::new(UInt16Array::from_iter_values(
@@ -227,7 +224,7 @@ fn write_horizons(path: &Path, rows: &[HorizonRow], provenance: &Provenance) -> 
 #[derive(Clone, Debug, PartialEq)]
 pub struct HorizonFigures {
     pub rows: Rows,
-    pub model: String,
+    pub model: ModelId,
     /// Steps fed back (1 is the first prediction).
     pub horizon: u16,
     /// Errors pooled: one per start and variable.
@@ -241,7 +238,7 @@ pub struct HorizonFigures {
 pub fn read_horizons(path: &Path) -> Result<Vec<HorizonFigures>> {
     let table = Table::read(path)?;
     let sets = rows_column(&table, path)?;
-    let models = table.strings("model")?;
+    let models: Vec<ModelId> = table.parsed("model")?;
     let horizons = table.column::<UInt16Array>("horizon")?.values();
     let n = table.column::<UInt64Array>("n")?.values();
     let (mean, p95) = (
@@ -251,7 +248,7 @@ pub fn read_horizons(path: &Path) -> Result<Vec<HorizonFigures>> {
     Ok((0..table.num_rows())
         .map(|i| HorizonFigures {
             rows: sets[i],
-            model: models[i].clone(),
+            model: models[i],
             horizon: horizons[i],
             n: n[i],
             mean: mean[i],
@@ -262,7 +259,7 @@ pub fn read_horizons(path: &Path) -> Result<Vec<HorizonFigures>> {
 
 /// The errors of a predictions table, by model and variable.
 pub struct Predictions {
-    models: Vec<String>,
+    models: Vec<ModelId>,
     variables: Vec<String>,
     /// `errors[m * variables + v]`: model m's errors on variable v, one
     /// per test row, in the same row order for every model and variable.
@@ -351,7 +348,7 @@ impl Predictions {
                     if let Some(stats) = counts_of(self.errors(m, v), &set).stats() {
                         out.push(SummaryRow {
                             rows,
-                            model: model.clone(),
+                            model: *model,
                             variable: variable.clone(),
                             group: group_of(variable).to_string(),
                             true_std_dev: true_std_dev[v],
@@ -369,8 +366,8 @@ impl Predictions {
 
     /// `model` against every other model, per set of rows: per variable,
     /// then averaged over the variables.
-    pub fn compare(&self, model: &str) -> Vec<Comparison> {
-        let Some(a) = self.models.iter().position(|m| m == model) else {
+    pub fn compare(&self, model: ModelId) -> Vec<Comparison> {
+        let Some(a) = self.models.iter().position(|&m| m == model) else {
             return Vec::new();
         };
         let mut out = Vec::new();
@@ -389,8 +386,8 @@ impl Predictions {
                     if let Some(difference) = Interval::of(&differences) {
                         out.push(Comparison {
                             rows,
-                            model: model.to_string(),
-                            against: against.clone(),
+                            model,
+                            against: *against,
                             variable: Some(self.variables[v].clone()),
                             difference,
                         });
@@ -403,8 +400,8 @@ impl Predictions {
                 if let Some(difference) = Interval::of(&per_row) {
                     out.push(Comparison {
                         rows,
-                        model: model.to_string(),
-                        against: against.clone(),
+                        model,
+                        against: *against,
                         variable: None,
                         difference,
                     });
@@ -444,6 +441,11 @@ fn mark_best_and_worst(rows: &mut [SummaryRow]) {
     }
 }
 
+/// A text column of models' names.
+fn names(models: impl Iterator<Item = ModelId>) -> Arc<dyn Array> {
+    Arc::new(StringArray::from_iter_values(models.map(|m| m.to_string())))
+}
+
 fn write(path: &Path, rows: &[SummaryRow], provenance: &Provenance) -> Result<()> {
     let text = |f: fn(&SummaryRow) -> &str| -> Arc<dyn Array> {
         Arc::new(StringArray::from_iter_values(rows.iter().map(f)))
@@ -458,7 +460,7 @@ fn write(path: &Path, rows: &[SummaryRow], provenance: &Provenance) -> Result<()
     };
     let mut columns: Vec<(String, Arc<dyn Array>)> = vec![
         ("rows".into(), text(|r| r.rows.as_str())),
-        ("model".into(), text(|r| &r.model)),
+        ("model".into(), names(rows.iter().map(|r| r.model))),
         ("variable".into(), text(|r| &r.variable)),
         ("group".into(), text(|r| &r.group)),
         (
@@ -536,7 +538,8 @@ pub fn read(path: &Path) -> Result<Vec<SummaryRow>> {
     let table = Table::read(path)?;
     let text = |name: &str| table.strings(name);
     let number = |name: &str| -> Result<&[f64]> { Ok(table.f64_column(name)?.values()) };
-    let (models, variables, groups) = (text("model")?, text("variable")?, text("group")?);
+    let models: Vec<ModelId> = table.parsed("model")?;
+    let (variables, groups) = (text("variable")?, text("group")?);
     let sets = rows_column(&table, path)?;
     let n = table.column::<UInt64Array>("n")?.values();
     let max = table.column::<UInt32Array>("max")?.values();
@@ -559,7 +562,7 @@ pub fn read(path: &Path) -> Result<Vec<SummaryRow>> {
     Ok((0..table.num_rows())
         .map(|i| SummaryRow {
             rows: sets[i],
-            model: models[i].clone(),
+            model: models[i],
             variable: variables[i].clone(),
             group: groups[i].clone(),
             stats: ErrorStats {
@@ -592,8 +595,8 @@ fn write_comparisons(path: &Path, rows: &[Comparison], provenance: &Provenance) 
     };
     let batch = table::batch(vec![
         ("rows", text(|r| r.rows.as_str())),
-        ("model", text(|r| &r.model)),
-        ("against", text(|r| &r.against)),
+        ("model", names(rows.iter().map(|r| r.model))),
+        ("against", names(rows.iter().map(|r| r.against))),
         (
             "variable",
             Arc::new(StringArray::from(
@@ -620,10 +623,10 @@ fn write_comparisons(path: &Path, rows: &[Comparison], provenance: &Provenance) 
 /// Reads `comparisons.parquet` back.
 pub fn read_comparisons(path: &Path) -> Result<Vec<Comparison>> {
     let table = Table::read(path)?;
-    let text = |name: &str| table.strings(name);
     let number = |name: &str| -> Result<&[f64]> { Ok(table.f64_column(name)?.values()) };
     let sets = rows_column(&table, path)?;
-    let (models, against) = (text("model")?, text("against")?);
+    let (models, against): (Vec<ModelId>, Vec<ModelId>) =
+        (table.parsed("model")?, table.parsed("against")?);
     let variables = table.column::<StringArray>("variable")?;
     let n = table.column::<UInt64Array>("n")?.values();
     let (mean, std_dev, low, high) = (
@@ -636,8 +639,8 @@ pub fn read_comparisons(path: &Path) -> Result<Vec<Comparison>> {
         .map(|i| {
             Ok(Comparison {
                 rows: sets[i],
-                model: models[i].clone(),
-                against: against[i].clone(),
+                model: models[i],
+                against: against[i],
                 variable: variables
                     .is_valid(i)
                     .then(|| variables.value(i).to_string()),
@@ -684,13 +687,13 @@ mod tests {
             &[false, true, true],
             &vec![vec![20, 22, 24]; 3],
         );
-        for (m, name) in ["aln", "persistence"].into_iter().enumerate() {
+        for (m, model) in [ModelId::Aln, ModelId::Persistence].into_iter().enumerate() {
             // Predicted above the truth by the error.
             let levels: Vec<Vec<u16>> = errors[3 * m..3 * m + 3]
                 .iter()
                 .map(|(_, _, list)| list.iter().zip([20, 22, 24]).map(|(e, t)| t + e).collect())
                 .collect();
-            table.push_model(name, &levels);
+            table.push_model(model, &levels);
         }
         let predictions = dir.path().join("predictions.parquet");
         table.write(&predictions, &provenance).unwrap();
@@ -698,13 +701,16 @@ mod tests {
         // by model, then step, then variable.
         let mut rollout = Rollout::new(&["a.1.x", "a.2.x", "v.1.x"], &[10, 11], 2);
         rollout.push_model(
-            "aln",
+            ModelId::Aln,
             &[
                 vec![vec![3, 1], vec![0, 0], vec![2, 2]],
                 vec![vec![9, 5], vec![0, 0], vec![0, 0]],
             ],
         );
-        rollout.push_model("persistence", &[vec![vec![0, 0]; 3], vec![vec![1, 1]; 3]]);
+        rollout.push_model(
+            ModelId::Persistence,
+            &[vec![vec![0, 0]; 3], vec![vec![1, 1]; 3]],
+        );
         let rollout_path = dir.path().join("rollout.parquet");
         rollout.write(&rollout_path, &provenance).unwrap();
         let silent = alnlab_common::Silent;
@@ -721,19 +727,19 @@ mod tests {
         // start's (row 11, not 10: three errors a step).
         let figures: Vec<_> = horizons
             .iter()
-            .map(|h| (h.rows, h.model.as_str(), h.horizon, h.n, h.mean))
+            .map(|h| (h.rows, h.model, h.horizon, h.n, h.mean))
             .collect();
         assert_eq!(
             figures,
             [
-                (Rows::All, "aln", 1, 6, 8.0 / 6.0),
-                (Rows::All, "aln", 2, 6, 14.0 / 6.0),
-                (Rows::All, "persistence", 1, 6, 0.0),
-                (Rows::All, "persistence", 2, 6, 1.0),
-                (Rows::HeldOut, "aln", 1, 3, 1.0),
-                (Rows::HeldOut, "aln", 2, 3, 5.0 / 3.0),
-                (Rows::HeldOut, "persistence", 1, 3, 0.0),
-                (Rows::HeldOut, "persistence", 2, 3, 1.0),
+                (Rows::All, ModelId::Aln, 1, 6, 8.0 / 6.0),
+                (Rows::All, ModelId::Aln, 2, 6, 14.0 / 6.0),
+                (Rows::All, ModelId::Persistence, 1, 6, 0.0),
+                (Rows::All, ModelId::Persistence, 2, 6, 1.0),
+                (Rows::HeldOut, ModelId::Aln, 1, 3, 1.0),
+                (Rows::HeldOut, ModelId::Aln, 2, 3, 5.0 / 3.0),
+                (Rows::HeldOut, ModelId::Persistence, 1, 3, 0.0),
+                (Rows::HeldOut, ModelId::Persistence, 2, 3, 1.0),
             ]
         );
         let rows = read(&dir.path().join(SUMMARY_FILE)).unwrap();
@@ -744,17 +750,17 @@ mod tests {
             format!("{computed:?}"),
             "written = computed"
         );
-        let row = |model: &str, variable: &str| {
+        let row = |model: ModelId, variable: &str| {
             rows.iter()
                 .find(|r| r.rows == Rows::All && r.model == model && r.variable == variable)
                 .unwrap()
         };
-        let first = row("aln", "a.1.x");
+        let first = row(ModelId::Aln, "a.1.x");
         assert_eq!(first.stats, ErrorCounts::of([0, 1, 2]).stats().unwrap());
         assert_eq!(first.group, "a");
         assert!(first.best_in_group && !first.worst_in_group);
-        assert!(row("aln", "a.2.x").worst_in_group);
-        let alone = row("aln", "v.1.x");
+        assert!(row(ModelId::Aln, "a.2.x").worst_in_group);
+        let alone = row(ModelId::Aln, "v.1.x");
         assert!(
             alone.best_in_group && alone.worst_in_group,
             "alone in its group"
@@ -762,7 +768,7 @@ mod tests {
         // The held-out rows alone: the last two.
         let held = rows
             .iter()
-            .find(|r| r.rows == Rows::HeldOut && r.model == "aln" && r.variable == "a.1.x")
+            .find(|r| r.rows == Rows::HeldOut && r.model == ModelId::Aln && r.variable == "a.1.x")
             .unwrap();
         assert_eq!(held.stats, ErrorCounts::of([1, 2]).stats().unwrap());
         // True levels 20, 22, 24: std dev 2; held out, 22 and 24: √2.
@@ -800,11 +806,11 @@ mod tests {
         assert!(
             comparisons
                 .iter()
-                .all(|c| c.model == "aln" && c.against == "persistence")
+                .all(|c| c.model == ModelId::Aln && c.against == ModelId::Persistence)
         );
         assert_eq!(comparisons.len(), 2 * (3 + 1));
         // Per model: for persistence a.2.x is the best of group a.
-        assert!(row("persistence", "a.2.x").best_in_group);
-        assert!(row("persistence", "a.1.x").worst_in_group);
+        assert!(row(ModelId::Persistence, "a.2.x").best_in_group);
+        assert!(row(ModelId::Persistence, "a.1.x").worst_in_group);
     }
 }

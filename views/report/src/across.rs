@@ -4,6 +4,7 @@
 //! variants share their test rows); then the side-by-side tables and the
 //! baselines' table, given once rather than per variant.
 
+use alnlab_common::ModelId;
 use std::fmt::Write as _;
 use std::path::Path;
 
@@ -26,12 +27,12 @@ pub(super) const TRAINING: &str = "training.svg";
 /// test rows — so the baselines are given once, and errors in levels compare
 /// across variants.
 pub(super) fn shares_baselines(variants: &[Loaded]) -> bool {
-    let baselines = |v: &Loaded| -> Vec<(String, String, u64)> {
+    let baselines = |v: &Loaded| -> Vec<(ModelId, String, u64)> {
         v.judged()
             .0
             .iter()
-            .filter(|r| r.model != "aln")
-            .map(|r| (r.model.clone(), r.variable.clone(), r.stats.mean.to_bits()))
+            .filter(|r| r.model != ModelId::Aln)
+            .map(|r| (r.model, r.variable.clone(), r.stats.mean.to_bits()))
             .collect()
     };
     variants
@@ -42,15 +43,15 @@ pub(super) fn shares_baselines(variants: &[Loaded]) -> bool {
 /// The ALN's series name: with its variant's when there are several.
 pub(super) fn aln_name(v: &Loaded, variants: usize) -> String {
     if variants > 1 {
-        format!("aln · {}", v.info.name)
+        format!("{} · {}", ModelId::Aln, v.info.name)
     } else {
-        "aln".into()
+        ModelId::Aln.to_string()
     }
 }
 
 /// A model's mean error on the judged rows, across replicates when there
 /// are several.
-fn mean_point(v: &Loaded, model: &str) -> Option<(f64, Option<(f64, f64)>)> {
+fn mean_point(v: &Loaded, model: ModelId) -> Option<(f64, Option<(f64, f64)>)> {
     let (mean, _) = overall(v.judged().0, model)?;
     let values: Option<Vec<f64>> = v.replicates.iter().map(|f| f.mean_of(model)).collect();
     let across = values
@@ -68,14 +69,16 @@ fn gap_to_persistence(v: &Loaded) -> Option<(f64, Option<(f64, f64)>)> {
     let values: Option<Vec<f64>> = v
         .replicates
         .iter()
-        .map(|f| f.aln_minus("persistence"))
+        .map(|f| f.aln_minus(ModelId::Persistence))
         .collect();
     match values
         .filter(|v| v.len() > 1)
         .and_then(|v| Interval::of(&v))
     {
         Some(i) => Some((i.mean, Some((i.low, i.high)))),
-        None => v.compared("persistence", None).map(|d| (d.mean, None)),
+        None => v
+            .compared(ModelId::Persistence, None)
+            .map(|d| (d.mean, None)),
     }
 }
 
@@ -100,7 +103,7 @@ pub(super) fn charts(md: &mut String, variants: &[Loaded], shared: bool, dir: &P
     } else {
         "ALN's mean error − persistence's (levels)"
     };
-    let y_of = |v: &Loaded, model: &str| -> Option<(f64, Option<(f64, f64)>)> {
+    let y_of = |v: &Loaded, model: ModelId| -> Option<(f64, Option<(f64, f64)>)> {
         if shared {
             mean_point(v, model)
         } else {
@@ -110,13 +113,13 @@ pub(super) fn charts(md: &mut String, variants: &[Loaded], shared: bool, dir: &P
     let mut series = Vec::new();
     let mut pwl_paths = false;
     for (k, v) in variants.iter().enumerate() {
-        let Some((y, y_range)) = y_of(v, "aln") else {
+        let Some((y, y_range)) = y_of(v, ModelId::Aln) else {
             continue;
         };
         for t in v
             .timings
             .iter()
-            .filter(|t| t.model == "aln" && t.threads == 1)
+            .filter(|t| t.model == ModelId::Aln && t.threads == 1)
         {
             let single = t.path != "batched";
             // A piecewise-linear model's one-row paths: plain, lazy, compiled.
@@ -127,7 +130,7 @@ pub(super) fn charts(md: &mut String, variants: &[Loaded], shared: bool, dir: &P
             };
             // The one-row paths of one variant share its colour; each
             // path beyond the plain one has a marker no variant takes.
-            let style = style_of("aln", k);
+            let style = style_of(ModelId::Aln, k);
             let marker = match t.path.as_str() {
                 "pwl-lazy" => Marker::Plus,
                 "pwl-compiled" => Marker::Cross,
@@ -152,16 +155,16 @@ pub(super) fn charts(md: &mut String, variants: &[Loaded], shared: bool, dir: &P
         for t in v
             .timings
             .iter()
-            .filter(|t| t.model != "aln" && t.threads == 1)
+            .filter(|t| t.model != ModelId::Aln && t.threads == 1)
         {
-            let Some((y, y_range)) = y_of(v, &t.model) else {
+            let Some((y, y_range)) = y_of(v, t.model) else {
                 continue;
             };
             // The simulator is timed frame by frame alone; a learned
             // baseline both ways.
             let all_at_once = t.path == "batched";
-            let name = if t.model.starts_with("simulator@") {
-                t.model.clone()
+            let name = if t.model.is_simulator() {
+                t.model.to_string()
             } else if all_at_once {
                 format!("{}, all at once", t.model)
             } else {
@@ -169,7 +172,7 @@ pub(super) fn charts(md: &mut String, variants: &[Loaded], shared: bool, dir: &P
             };
             series.push(Series {
                 name,
-                style: style_of(&t.model, 0),
+                style: style_of(t.model, 0),
                 points: vec![Point {
                     x_range: Some((t.ns_min / 1000.0, t.ns_max / 1000.0)),
                     y_range,
@@ -187,7 +190,10 @@ pub(super) fn charts(md: &mut String, variants: &[Loaded], shared: bool, dir: &P
         } else {
             (
                 Axis::linear(unit),
-                vec![charts::Rule::horizontal(0.0, "persistence")],
+                vec![charts::Rule::horizontal(
+                    0.0,
+                    &ModelId::Persistence.to_string(),
+                )],
             )
         };
         let chart = charts::plot(&Plot {
@@ -232,7 +238,7 @@ pub(super) fn charts(md: &mut String, variants: &[Loaded], shared: bool, dir: &P
         .filter(|(_, v)| !v.training.is_empty())
         .map(|(k, v)| Series {
             name: aln_name(v, n),
-            style: style_of("aln", k),
+            style: style_of(ModelId::Aln, k),
             points: v.training.iter().map(|&(x, y)| Point::at(x, y)).collect(),
             joined: true,
             hollow: false,
@@ -270,12 +276,12 @@ pub(super) fn charts(md: &mut String, variants: &[Loaded], shared: bool, dir: &P
             .map(|(k, v)| closed_loop::Column {
                 name: aln_name(v, n),
                 variant: v,
-                model: "aln",
-                style: style_of("aln", k),
+                model: ModelId::Aln,
+                style: style_of(ModelId::Aln, k),
             })
             .collect();
         for model in closed_loop::models(&variants[0]) {
-            if model != "aln" {
+            if model != ModelId::Aln {
                 columns.push(closed_loop::Column {
                     name: model.to_string(),
                     variant: &variants[0],
@@ -306,16 +312,16 @@ pub(super) fn side_by_side(md: &mut String, variants: &[Loaded], shared: bool) {
         .numbers(&["variables worse than persistence"]);
     for v in variants {
         let (judged, rows) = v.judged();
-        let aln = overall(judged, "aln");
+        let aln = overall(judged, ModelId::Aln);
         let worse = worse_than_persistence(v).len();
-        let total = judged.iter().filter(|r| r.model == "aln").count();
+        let total = judged.iter().filter(|r| r.model == ModelId::Aln).count();
         table.row(vec![
             format!("`{}`", v.info.name),
             rows.as_str().into(),
             aln.map_or("—".into(), |(m, _)| sig3(m)),
-            normalized(judged, "aln").map_or("—".into(), sig3),
+            normalized(judged, ModelId::Aln).map_or("—".into(), sig3),
             aln.map_or("—".into(), |(_, p)| sig3(p)),
-            v.compared("persistence", None)
+            v.compared(ModelId::Persistence, None)
                 .map_or("—".into(), |d| interval(d.mean, d.low, d.high)),
             format!("{}{worse} of {total}", if worse > 0 { "⚠ " } else { "" }),
         ]);
@@ -359,7 +365,7 @@ pub(super) fn side_by_side(md: &mut String, variants: &[Loaded], shared: bool) {
         let time = |t: Option<&Timing>| t.map_or("—".into(), Spread::spread_in_column);
         let mut row = vec![
             format!("`{}`", v.info.name),
-            time(v.all_at_once("aln")),
+            time(v.all_at_once(ModelId::Aln)),
             time(v.aln_single()),
             match v.hardware.delays() {
                 // No gates: a piecewise-linear model computes with numbers.
@@ -423,7 +429,7 @@ pub(super) fn baselines_table(md: &mut String, v: &Loaded, with_aln: bool) {
         .numbers(&["failed"]);
     let mut models = baseline_models(judged);
     if with_aln {
-        models.insert(0, "aln");
+        models.insert(0, ModelId::Aln);
     }
     for model in models {
         let rows: Vec<_> = judged.iter().filter(|r| r.model == model).collect();

@@ -9,7 +9,7 @@
 
 use std::ops::Range;
 
-use alnlab_common::ModelId;
+use alnlab_common::{ModelId, PolicyId};
 use plotters::coord::ranged1d::{DefaultFormatting, KeyPointHint, Ranged};
 use plotters::element::DashedPathElement;
 use plotters::prelude::*;
@@ -106,40 +106,14 @@ pub struct Style {
 /// The style of `model`'s series: the ALN by its variant's place among the
 /// report's variants (so each variant keeps its style across the report),
 /// the baselines by name (the same in every report).
-pub fn style_of(model: &str, variant: usize) -> Style {
-    let dashed = |colour, marker| Style {
-        colour,
-        marker,
-        dashed: true,
-    };
-    // `aln (round 2)`: the first form's colour, the round's marker.
-    if let Some((first, round)) = model
-        .strip_suffix(')')
-        .and_then(|m| m.split_once(" (round "))
-    {
-        let round: usize = round.parse().unwrap_or(1);
-        return Style {
-            marker: ROUND_MARKERS[(round.max(1) - 1) % ROUND_MARKERS.len()],
-            ..style_of(first, variant)
-        };
-    }
-    if model.starts_with("plant@") {
-        return dashed(PLANT, Marker::Circle);
-    }
-    // The planning report's controllers, which no prediction table names.
+pub fn style_of(model: ModelId, variant: usize) -> Style {
     match model {
-        // Doing nothing looks the same whether it predicts or controls.
-        "zero torques" => return dashed(PERSISTENCE, Marker::Square),
-        "random torques" => return dashed(RANDOM_TORQUES, Marker::Cross),
-        _ => {}
-    }
-    match model.parse::<ModelId>() {
-        Ok(ModelId::Persistence) => dashed(PERSISTENCE, Marker::Square),
-        Ok(ModelId::Linear) => dashed(LINEAR, Marker::Triangle),
-        Ok(ModelId::Boosted) => dashed(BOOSTED, Marker::Circle),
-        Ok(ModelId::LinearNominal) => dashed(LINEAR_NOMINAL, Marker::Triangle),
-        Ok(ModelId::BoostedNominal) => dashed(BOOSTED_NOMINAL, Marker::Square),
-        Ok(ModelId::Simulator { steps }) => {
+        ModelId::Persistence => dashed(PERSISTENCE, Marker::Square),
+        ModelId::Linear => dashed(LINEAR, Marker::Triangle),
+        ModelId::Boosted => dashed(BOOSTED, Marker::Circle),
+        ModelId::LinearNominal => dashed(LINEAR_NOMINAL, Marker::Triangle),
+        ModelId::BoostedNominal => dashed(BOOSTED_NOMINAL, Marker::Square),
+        ModelId::Simulator { steps } => {
             let (k, marker) = match steps {
                 1 => (0, Marker::Diamond),
                 2..=3 => (1, Marker::Cross),
@@ -149,8 +123,7 @@ pub fn style_of(model: &str, variant: usize) -> Style {
             };
             dashed(SIMULATOR[k], marker)
         }
-        // The ALN, and the planner's other forward models, by variant.
-        Ok(ModelId::Aln) | Err(_) => Style {
+        ModelId::Aln => Style {
             colour: VARIANT_COLOURS[variant % VARIANT_COLOURS.len()],
             marker: VARIANT_MARKERS[(variant / VARIANT_COLOURS.len()) % VARIANT_MARKERS.len()],
             dashed: false,
@@ -158,11 +131,35 @@ pub fn style_of(model: &str, variant: usize) -> Style {
     }
 }
 
-/// k of `simulator@k/frame`.
-pub(crate) fn simulator_steps(model: &str) -> Option<u32> {
-    match model.parse::<ModelId>() {
-        Ok(ModelId::Simulator { steps }) => u32::try_from(steps).ok(),
-        _ => None,
+/// The style of a planning policy: a forward model's as
+/// [`style_of`] draws it (round r of the planner's own data with the r-th
+/// round's marker), the plant's own simulator and the references by name —
+/// zero torques as persistence, since doing nothing looks the same whether
+/// it predicts or controls.
+pub fn policy_style(policy: PolicyId, round: u32, variant: usize) -> Style {
+    let style = match policy {
+        PolicyId::Aln => style_of(ModelId::Aln, variant),
+        PolicyId::Linear => style_of(ModelId::Linear, variant),
+        PolicyId::Simulator { steps } => style_of(ModelId::Simulator { steps }, variant),
+        PolicyId::Plant { .. } => dashed(PLANT, Marker::Circle),
+        PolicyId::Zero => dashed(PERSISTENCE, Marker::Square),
+        PolicyId::Random => dashed(RANDOM_TORQUES, Marker::Cross),
+    };
+    match round {
+        0 => style,
+        r => Style {
+            marker: ROUND_MARKERS[(r as usize - 1) % ROUND_MARKERS.len()],
+            ..style
+        },
+    }
+}
+
+/// A baseline's style: dashed.
+fn dashed(colour: RGBColor, marker: Marker) -> Style {
+    Style {
+        colour,
+        marker,
+        dashed: true,
     }
 }
 
@@ -937,11 +934,11 @@ mod tests {
             "worst",
             &bins,
             VARIANT_COLOURS[0],
-            Some(("persistence", &bins)),
+            Some(("persistence torques", &bins)),
         );
         well_formed(&h);
-        assert!(h.contains("outline: persistence"));
-        let series = |name: &str, model: &str| Series {
+        assert!(h.contains("outline: persistence torques"));
+        let series = |name: &str, model: ModelId| Series {
             name: name.into(),
             style: style_of(model, 0),
             points: vec![Point::at(1.0, 3.0), Point::at(20.0, 0.0)],
@@ -953,8 +950,8 @@ mod tests {
             x: Axis::log("x"),
             y: Axis::log("y"),
             series: vec![
-                series("aln · walk", "aln"),
-                series("persistence", "persistence"),
+                series("aln · walk", ModelId::Aln),
+                series("persistence", ModelId::Persistence),
             ],
             pareto: true,
             rules: Vec::new(),
@@ -968,20 +965,34 @@ mod tests {
     fn styles_are_fixed_and_distinct() {
         let mut seen = Vec::new();
         for k in 0..12 {
-            seen.push(style_of("aln", k));
+            seen.push(style_of(ModelId::Aln, k));
         }
-        for model in [
-            "persistence",
-            "linear",
-            "simulator@1/frame",
-            "simulator@2/frame",
-            "simulator@5/frame",
-            "simulator@10/frame",
-            "random torques",
-        ] {
+        let simulators = [1, 2, 5, 10].map(|steps| ModelId::Simulator { steps });
+        for model in [ModelId::Persistence, ModelId::Linear]
+            .into_iter()
+            .chain(simulators)
+        {
             assert_eq!(style_of(model, 0), style_of(model, 7), "{model}");
             seen.push(style_of(model, 0));
         }
+        for policy in [PolicyId::Random, PolicyId::Plant { steps: 1 }] {
+            assert_eq!(policy_style(policy, 0, 0), policy_style(policy, 0, 7));
+            seen.push(policy_style(policy, 0, 0));
+        }
+        // Zero torques are drawn as persistence; a forward model as its
+        // prediction, round r with the r-th round's marker.
+        assert_eq!(
+            policy_style(PolicyId::Zero, 0, 3),
+            style_of(ModelId::Persistence, 0)
+        );
+        let simulator = PolicyId::Simulator { steps: 2 };
+        assert_eq!(
+            policy_style(simulator, 0, 0),
+            style_of(ModelId::Simulator { steps: 2 }, 0)
+        );
+        let round = policy_style(PolicyId::Aln, 2, 1);
+        assert_eq!(round.colour, style_of(ModelId::Aln, 1).colour);
+        assert_eq!(round.marker, ROUND_MARKERS[1]);
         for (i, a) in seen.iter().enumerate() {
             for b in &seen[..i] {
                 assert!(

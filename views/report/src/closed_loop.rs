@@ -7,7 +7,7 @@
 use std::fmt::Write as _;
 use std::path::Path;
 
-use alnlab_common::{Result, atomic};
+use alnlab_common::{ModelId, Result, atomic};
 
 use super::Loaded;
 use super::format::{MdTable, sig3, signed};
@@ -25,13 +25,13 @@ pub(super) struct Column<'a> {
     /// As the report names it (`aln · walk`, `linear`).
     pub name: String,
     pub variant: &'a Loaded<'a>,
-    pub model: &'a str,
+    pub model: ModelId,
     pub style: Style,
 }
 
 /// The models with closed-loop figures in variant `v`, in their order.
-pub(super) fn models<'a>(v: &'a Loaded) -> Vec<&'a str> {
-    let mut models: Vec<&str> = v.horizons.iter().map(|h| h.model.as_str()).collect();
+pub(super) fn models(v: &Loaded) -> Vec<ModelId> {
+    let mut models: Vec<ModelId> = v.horizons.iter().map(|h| h.model).collect();
     models.dedup();
     models
 }
@@ -46,7 +46,7 @@ fn steps(v: &Loaded) -> Vec<u16> {
 
 /// `model`'s mean closed-loop error after `step` steps, per replicate (the
 /// first replicate alone when the variant has one).
-fn per_replicate(v: &Loaded, model: &str, step: u16) -> Option<Vec<f64>> {
+fn per_replicate(v: &Loaded, model: ModelId, step: u16) -> Option<Vec<f64>> {
     if v.replicates.len() > 1 {
         v.replicates
             .iter()
@@ -81,12 +81,12 @@ fn point(step: u16, values: &[f64]) -> Point {
 
 /// `model`'s mean error minus persistence's, per step, paired replicate by
 /// replicate.
-fn difference(v: &Loaded, model: &str) -> Vec<Point> {
+fn difference(v: &Loaded, model: ModelId) -> Vec<Point> {
     steps(v)
         .into_iter()
         .filter_map(|step| {
             let a = per_replicate(v, model, step)?;
-            let p = per_replicate(v, "persistence", step)?;
+            let p = per_replicate(v, ModelId::Persistence, step)?;
             let d: Vec<f64> = a.iter().zip(&p).map(|(a, p)| a - p).collect();
             Some(point(step, &d))
         })
@@ -99,12 +99,12 @@ fn starts(v: &Loaded) -> Option<u64> {
     let first = v
         .horizons
         .iter()
-        .find(|h| h.model == "persistence" && h.horizon == 1)?;
+        .find(|h| h.model == ModelId::Persistence && h.horizon == 1)?;
     let variables = v
         .judged()
         .0
         .iter()
-        .filter(|r| r.model == "persistence")
+        .filter(|r| r.model == ModelId::Persistence)
         .count() as u64;
     (variables > 0).then(|| first.n / variables)
 }
@@ -122,7 +122,7 @@ pub(super) fn section(
     };
     let drawn: Vec<(&Column, Vec<Point>)> = columns
         .iter()
-        .filter(|c| c.model != "persistence")
+        .filter(|c| c.model != ModelId::Persistence)
         .map(|c| (c, difference(c.variant, c.model)))
         .collect();
     let reach = |points: &[Point]| {
@@ -136,7 +136,7 @@ pub(super) fn section(
     };
     let learned = drawn
         .iter()
-        .filter(|(c, _)| !c.model.starts_with("simulator"))
+        .filter(|(c, _)| !c.model.is_simulator())
         .map(|(_, p)| reach(p))
         .fold(0.0, f64::max);
     let (on, off): (Vec<_>, Vec<_>) = drawn
@@ -160,7 +160,7 @@ pub(super) fn section(
             })
             .collect(),
         pareto: false,
-        rules: vec![Rule::horizontal(0.0, "persistence")],
+        rules: vec![Rule::horizontal(0.0, &ModelId::Persistence.to_string())],
     });
     atomic::write_bytes(&dir.join(file), chart.as_bytes())?;
 
@@ -211,13 +211,13 @@ pub(super) fn section(
         first
             .replicates
             .iter()
-            .map(|f| f.mean_of("persistence"))
+            .map(|f| f.mean_of(ModelId::Persistence))
             .collect()
     } else {
-        super::overall(first.judged().0, "persistence").map(|(m, _)| vec![m])
+        super::overall(first.judged().0, ModelId::Persistence).map(|(m, _)| vec![m])
     };
     let mean = |values: Vec<f64>| values.iter().sum::<f64>() / values.len() as f64;
-    if let (Some(all), Some(here)) = (one_step, per_replicate(first, "persistence", 1)) {
+    if let (Some(all), Some(here)) = (one_step, per_replicate(first, ModelId::Persistence, 1)) {
         let _ = write!(
             md,
             " Step 1 is one prediction, as in the one-step tables, but scored on these starts \

@@ -5,27 +5,27 @@
 
 use std::fmt::Write as _;
 
-use super::charts::simulator_steps;
 use super::format::{estimate, interval, micros, sig3};
 use super::{Loaded, RunInfo, Spread, Timing, normalized, overall, paper_rows};
+use alnlab_common::ModelId;
 use alnlab_evaluate::timing::REPEATS;
 use alnlab_summarize::Rows;
 use alnlab_summarize::paired::{Interval, Verdict};
 
 /// The simulator baseline at the fewest integration steps per frame that
 /// the variant ran: (model name, steps per frame).
-pub(super) fn coarsest_simulator<'a>(v: &'a Loaded) -> Option<(&'a str, u32)> {
+pub(super) fn coarsest_simulator(v: &Loaded) -> Option<(ModelId, u64)> {
     simulators(v).first().copied()
 }
 
 /// Every simulator setting the variant measured, fewest steps per frame
 /// first: (model name, steps per frame).
-pub(super) fn simulators<'a>(v: &'a Loaded) -> Vec<(&'a str, u32)> {
-    let mut found: Vec<(&str, u32)> = v
+pub(super) fn simulators(v: &Loaded) -> Vec<(ModelId, u64)> {
+    let mut found: Vec<(ModelId, u64)> = v
         .timings
         .iter()
         .filter(|t| t.threads == 1)
-        .filter_map(|t| Some((t.model.as_str(), simulator_steps(&t.model)?)))
+        .filter_map(|t| Some((t.model, t.model.simulator_steps()?)))
         .collect();
     found.sort_by_key(|&(_, steps)| steps);
     found.dedup();
@@ -35,7 +35,7 @@ pub(super) fn simulators<'a>(v: &'a Loaded) -> Vec<(&'a str, u32)> {
 /// The ALN's mean error minus `model`'s, paired: across replicates where
 /// there are several (with whether it is), else over the test rows of one
 /// simulation.
-pub(super) fn aln_minus(v: &Loaded, model: &str) -> Option<(Interval, bool)> {
+pub(super) fn aln_minus(v: &Loaded, model: ModelId) -> Option<(Interval, bool)> {
     if v.replicates.len() > 1 {
         let values: Option<Vec<f64>> = v.replicates.iter().map(|f| f.aln_minus(model)).collect();
         return Interval::of(&values?).map(|i| (i, true));
@@ -51,7 +51,7 @@ pub(super) fn aln_minus(v: &Loaded, model: &str) -> Option<(Interval, bool)> {
 /// swap under load, which would change the rival, and the verdict, from one
 /// run to the next.
 pub(super) struct Rival<'a> {
-    pub model: &'a str,
+    pub model: ModelId,
     /// Frame by frame, one thread.
     pub timing: &'a Timing,
     /// The ALN's error minus the simulator's, and whether across replicates.
@@ -168,10 +168,13 @@ pub(super) fn runs_words(v: &Loaded, t: &Timing) -> String {
 /// saying so; none where they agree.
 fn metrics_disagree(v: &Loaded) -> Option<String> {
     let judged = v.judged().0;
-    let (aln, persistence) = (overall(judged, "aln")?.0, overall(judged, "persistence")?.0);
+    let (aln, persistence) = (
+        overall(judged, ModelId::Aln)?.0,
+        overall(judged, ModelId::Persistence)?.0,
+    );
     let (aln_n, persistence_n) = (
-        normalized(judged, "aln")?,
-        normalized(judged, "persistence")?,
+        normalized(judged, ModelId::Aln)?,
+        normalized(judged, ModelId::Persistence)?,
     );
     let (levels, secondary) = (aln - persistence, aln_n - persistence_n);
     (levels * secondary < 0.0).then(|| {
@@ -294,12 +297,12 @@ pub(super) fn findings(md: &mut String, run: &RunInfo, variants: &[Loaded]) {
 fn variant_findings(md: &mut String, v: &Loaded) {
     let name = &v.info.name;
     let (judged, rows) = v.judged();
-    let Some((aln, _)) = overall(judged, "aln") else {
+    let Some((aln, _)) = overall(judged, ModelId::Aln) else {
         return;
     };
-    let variables = judged.iter().filter(|r| r.model == "aln").count();
+    let variables = judged.iter().filter(|r| r.model == ModelId::Aln).count();
     let mut groups: Vec<(&str, usize)> = Vec::new();
-    for r in judged.iter().filter(|r| r.model == "aln") {
+    for r in judged.iter().filter(|r| r.model == ModelId::Aln) {
         match groups.iter_mut().find(|(g, _)| *g == r.group) {
             Some((_, n)) => *n += 1,
             None => groups.push((&r.group, 1)),
@@ -322,10 +325,10 @@ fn variant_findings(md: &mut String, v: &Loaded) {
         "- **`{name}`**{replicate} {which}: the ALN's mean error is {} levels ({} normalized, \
          a secondary metric) over {variables} variables ({})",
         sig3(aln),
-        sig3(normalized(judged, "aln").unwrap_or(f64::NAN)),
+        sig3(normalized(judged, ModelId::Aln).unwrap_or(f64::NAN)),
         groups.join(", ")
     );
-    for baseline in ["persistence", "linear"] {
+    for baseline in [ModelId::Persistence, ModelId::Linear] {
         if let (Some((mean, _)), Some(d)) = (overall(judged, baseline), v.compared(baseline, None))
         {
             let _ = write!(
@@ -340,7 +343,7 @@ fn variant_findings(md: &mut String, v: &Loaded) {
     if let Some(note) = metrics_disagree(v) {
         sentence.push_str(&note);
     }
-    let [lower, higher, unclear, tied] = v.verdict_counts("persistence");
+    let [lower, higher, unclear, tied] = v.verdict_counts(ModelId::Persistence);
     let _ = write!(
         sentence,
         ". Variable by variable it is better than persistence on {lower} of {variables}, worse \
@@ -358,7 +361,7 @@ fn variant_findings(md: &mut String, v: &Loaded) {
     super::replicates::finding(md, v);
     let _ = writeln!(md, "  - Model: {}.", v.description);
 
-    let batched = v.all_at_once("aln");
+    let batched = v.all_at_once(ModelId::Aln);
     let single = v.aln_single();
     if let Some(first) = single.or(batched) {
         let _ = write!(
@@ -420,13 +423,13 @@ fn variant_findings(md: &mut String, v: &Loaded) {
     }
 
     if let Some(last) = v.horizons.iter().map(|h| h.horizon).max() {
-        let at = |model: &str| {
+        let at = |model: ModelId| {
             v.horizons
                 .iter()
                 .find(|h| h.model == model && h.horizon == last)
                 .map(|h| h.mean)
         };
-        if let (Some(aln), Some(persistence)) = (at("aln"), at("persistence")) {
+        if let (Some(aln), Some(persistence)) = (at(ModelId::Aln), at(ModelId::Persistence)) {
             let _ = write!(
                 md,
                 "  - Closed loop: fed its own predictions for {last} steps, the ALN's mean error \
@@ -452,7 +455,7 @@ fn variant_findings(md: &mut String, v: &Loaded) {
 fn across_variants(md: &mut String, variants: &[Loaded]) {
     let means: Vec<(&str, f64)> = variants
         .iter()
-        .filter_map(|v| Some((v.info.name.as_str(), overall(v.judged().0, "aln")?.0)))
+        .filter_map(|v| Some((v.info.name.as_str(), overall(v.judged().0, ModelId::Aln)?.0)))
         .collect();
     let (Some(best), Some(worst)) = (
         means.iter().min_by(|a, b| a.1.total_cmp(&b.1)),
@@ -506,7 +509,7 @@ fn across_variants(md: &mut String, variants: &[Loaded]) {
     }
     let fastest = variants
         .iter()
-        .filter_map(|v| Some((v.info.name.as_str(), v.ns("aln", "batched")?)))
+        .filter_map(|v| Some((v.info.name.as_str(), v.ns(ModelId::Aln, "batched")?)))
         .min_by(|a, b| a.1.total_cmp(&b.1));
     if let Some((name, t)) = fastest {
         let _ = write!(
@@ -595,28 +598,31 @@ mod tests {
             &vec![true; rows as usize],
             &truth,
         );
-        for (name, errors) in [
-            ("aln", &aln),
-            ("same", &same),
-            ("noisy", &noisy),
-            ("worse", &worse),
+        // Constructed models under the names of real ones.
+        let (same_id, noisy_id, worse_id) =
+            (ModelId::Persistence, ModelId::Linear, ModelId::Boosted);
+        for (model, errors) in [
+            (ModelId::Aln, &aln),
+            (same_id, &same),
+            (noisy_id, &noisy),
+            (worse_id, &worse),
         ] {
             let levels: Vec<u16> = errors.iter().map(|e| 7 + e).collect();
-            table.push_model(name, &[levels.clone(), levels]);
+            table.push_model(model, &[levels.clone(), levels]);
         }
-        let comparisons = Predictions::of(&table).compare("aln");
-        let word = |against: &str| {
+        let comparisons = Predictions::of(&table).compare(ModelId::Aln);
+        let word = |against: ModelId| {
             let c = comparisons
                 .iter()
                 .find(|c| c.against == against && c.variable.is_none() && c.rows == Rows::All)
                 .unwrap();
             (accuracy_word(&c.difference), c.difference)
         };
-        assert_eq!(word("same").0, "tied with");
-        let (noisy_word, noisy) = word("noisy");
+        assert_eq!(word(same_id).0, "tied with");
+        let (noisy_word, noisy) = word(noisy_id);
         assert_eq!(noisy_word, "indistinguishable from");
         assert!(noisy.low < 0.0 && noisy.high > 0.0 && noisy.mean == 0.0);
-        let (worse_word, worse) = word("worse");
+        let (worse_word, worse) = word(worse_id);
         assert_eq!(worse_word, "better than", "the ALN's errors are lower");
         assert!(worse.high < 0.0 && (worse.mean + 0.5).abs() < 1e-12);
     }

@@ -12,6 +12,7 @@
 use std::fmt::Write as _;
 use std::path::Path;
 
+use alnlab_common::{ModelId, PolicyId};
 use alnlab_common::{Result, atomic};
 use alnlab_evaluate::timing::REPEATS;
 use alnlab_summarize::paired::Interval;
@@ -90,7 +91,7 @@ struct Entry<'a> {
     variant: &'a Loaded<'a>,
     /// Its place among the report's variants (its style).
     place: usize,
-    model: &'a str,
+    model: ModelId,
     variables: usize,
     error: Estimate,
     /// Persistence's mean error on the same rows and variables.
@@ -108,17 +109,17 @@ struct Entry<'a> {
 impl Entry<'_> {
     fn label(&self, variants: usize) -> String {
         match (self.model, variants) {
-            ("aln", 1) => "ALN".into(),
-            ("aln", _) => format!("ALN `{}`", self.variant.info.name),
+            (ModelId::Aln, 1) => "ALN".into(),
+            (ModelId::Aln, _) => format!("ALN `{}`", self.variant.info.name),
             (model, _) if self.elsewhere => format!("{model} `{}`", self.variant.info.name),
-            (model, _) => model.into(),
+            (model, _) => model.to_string(),
         }
     }
 }
 
 /// `model`'s figures in `v`: its mean error and its difference from
 /// persistence, across replicates when there are several.
-fn entry<'a>(v: &'a Loaded<'a>, place: usize, model: &'a str) -> Option<Entry<'a>> {
+fn entry<'a>(v: &'a Loaded<'a>, place: usize, model: ModelId) -> Option<Entry<'a>> {
     let judged = v.judged().0;
     let variables = judged.iter().filter(|r| r.model == model).count();
     let (mean, _) = overall(judged, model)?;
@@ -127,33 +128,34 @@ fn entry<'a>(v: &'a Loaded<'a>, place: usize, model: &'a str) -> Option<Entry<'a
             .then(|| v.replicates.iter().map(f).collect::<Option<Vec<f64>>>())
             .flatten()
     };
-    let mean_of = |model: &str, mean: f64| {
+    let mean_of = |model: ModelId, mean: f64| {
         per_seed(&|f| f.mean_of(model))
             .and_then(|values| Estimate::across_seeds(&values))
             .map(|e| Estimate { verdict: None, ..e })
             .unwrap_or(Estimate::point(mean))
     };
     let error = mean_of(model, mean);
-    let persistence = overall(judged, "persistence").map(|(p, _)| mean_of("persistence", p));
-    let against_persistence = if model == "persistence" {
+    let persistence =
+        overall(judged, ModelId::Persistence).map(|(p, _)| mean_of(ModelId::Persistence, p));
+    let against_persistence = if model == ModelId::Persistence {
         None
     } else if let Some(values) = per_seed(&|f| match model {
-        "aln" => f.aln_minus("persistence"),
-        _ => Some(f.mean_of(model)? - f.mean_of("persistence")?),
+        ModelId::Aln => f.aln_minus(ModelId::Persistence),
+        _ => Some(f.mean_of(model)? - f.mean_of(ModelId::Persistence)?),
     }) {
         Estimate::across_seeds(&values)
-    } else if model == "aln" {
-        v.compared("persistence", None).map(|i| Estimate {
+    } else if model == ModelId::Aln {
+        v.compared(ModelId::Persistence, None).map(|i| Estimate {
             mean: i.mean,
             interval: Some((i.low, i.high)),
             over: Over::Rows,
             verdict: Some(accuracy_word(i)),
         })
     } else {
-        overall(judged, "persistence").map(|(p, _)| Estimate::point(mean - p))
+        overall(judged, ModelId::Persistence).map(|(p, _)| Estimate::point(mean - p))
     };
     let (single, batched) = match model {
-        "persistence" => (None, None),
+        ModelId::Persistence => (None, None),
         _ => (v.single(model), v.all_at_once(model)),
     };
     Some(Entry {
@@ -181,7 +183,7 @@ fn entries<'a>(variants: &'a [Loaded<'a>]) -> Vec<Entry<'a>> {
     let mut alns: Vec<Entry> = variants
         .iter()
         .enumerate()
-        .filter_map(|(k, v)| entry(v, k, "aln"))
+        .filter_map(|(k, v)| entry(v, k, ModelId::Aln))
         .collect();
     alns.sort_by(|a, b| a.error.mean.total_cmp(&b.error.mean));
     let Some(best) = alns.first().map(|e| (e.variant, e.place)) else {
@@ -190,12 +192,12 @@ fn entries<'a>(variants: &'a [Loaded<'a>]) -> Vec<Entry<'a>> {
     let simulators = super::findings::simulators(best.0)
         .into_iter()
         .map(|(name, _)| name);
-    let learned = ["persistence", "linear", "boosted"];
-    let hybrids = ["linear+nominal", "boosted+nominal"];
+    let learned = [ModelId::Persistence, ModelId::Linear, ModelId::Boosted];
+    let hybrids = [ModelId::LinearNominal, ModelId::BoostedNominal];
     let same = same_data(variants);
-    let strongest = |model: &'a str| -> Option<Entry<'a>> {
+    let strongest = |model: ModelId| -> Option<Entry<'a>> {
         let own = entry(best.0, best.1, model);
-        if !same || matches!(model, "persistence") {
+        if !same || matches!(model, ModelId::Persistence) {
             return own;
         }
         let other = variants
@@ -252,17 +254,17 @@ pub(super) fn first_screen(
     };
     let planning = entries
         .iter()
-        .find(|e| e.model == "aln" && !e.variant.planning.is_empty())
+        .find(|e| e.model == ModelId::Aln && !e.variant.planning.is_empty())
         .and_then(|e| {
             let setup = e.variant.info.plan_setup.as_ref();
-            let phrases = super::plan::within_real_time(&e.variant.planning, "aln", setup);
+            let phrases = super::plan::within_real_time(&e.variant.planning, PolicyId::Aln, setup);
             (!phrases.is_empty()).then_some((e.variant.info.name.as_str(), phrases))
         });
     // The true model planning by the same rule, for scale.
     let true_model = variants.iter().find_map(|v| {
         let model = super::plan::true_model(v.planning.first()?, v.info.plant)?;
         let phrases = super::plan::within_real_time(&v.planning, model, v.info.plan_setup.as_ref());
-        (!phrases.is_empty()).then(|| (model.to_string(), phrases))
+        (!phrases.is_empty()).then_some((model, phrases))
     });
     abstract_(
         md,
@@ -282,7 +284,7 @@ pub(super) fn first_screen(
     } else {
         "row by row"
     };
-    let baselines = match entries.iter().find(|e| e.model == "persistence") {
+    let baselines = match entries.iter().find(|e| e.model == ModelId::Persistence) {
         Some(p) if entries.iter().any(|e| e.variables != p.variables) => format!(
             " The baselines are scored on the best ALN's variables ({}); an ALN over other \
              variables is set against persistence on its own, in the \"persistence's\" column.",
@@ -317,19 +319,22 @@ pub(super) fn first_screen(
          timed by the first, and that timing is quoted throughout.{decisions} Levels, baselines and intervals \
          are defined under Definitions, at the end.\n",
         others = {
-            let shown = |model: &str| entries.iter().any(|e| e.model == model);
+            let shown = |model: ModelId| entries.iter().any(|e| e.model == model);
             let mut words = String::new();
-            if shown("boosted") {
+            if shown(ModelId::Boosted) {
                 words.push_str("; boosted, gradient-boosted trees fitted to the same change");
             }
-            if shown("linear+nominal") || shown("boosted+nominal") {
+            if shown(ModelId::LinearNominal) || shown(ModelId::BoostedNominal) {
                 words.push_str(
                     "; a +nominal model is a hybrid: the nominal simulator's prediction (the \
                      scene as written, at its own step or its `nominal_steps`) plus that fit of what the data did \
                      beyond it",
                 );
             }
-            if entries.iter().any(|e| e.model == "aln" && e.variant.hybrid) {
+            if entries
+                .iter()
+                .any(|e| e.model == ModelId::Aln && e.variant.hybrid)
+            {
                 words.push_str(
                     "; an ALN hybrid is the nominal simulator's prediction plus an ALN trained \
                      as its correction, timed with the simulator's step",
@@ -388,7 +393,7 @@ fn abstract_(
     variants: &[Loaded],
     entries: &[Entry],
     planning: Option<&(&str, Vec<String>)>,
-    true_model: Option<&(String, Vec<String>)>,
+    true_model: Option<&(PolicyId, Vec<String>)>,
 ) {
     let best = &entries[0];
     let replicates = best.variant.replicates.len().max(1);
@@ -437,8 +442,8 @@ fn abstract_(
     // own), and the robust linear fit, the practitioner's first try.
     let rival = entries
         .iter()
-        .filter(|e| e.model != "aln" && e.model != "persistence")
-        .filter(|e| !e.model.starts_with("simulator@"))
+        .filter(|e| e.model != ModelId::Aln && e.model != ModelId::Persistence)
+        .filter(|e| !e.model.is_simulator())
         .min_by(|a, b| a.error.mean.total_cmp(&b.error.mean));
     let against = |other: &Entry| -> String {
         // Another variant's baseline pairs replicate by replicate: the
@@ -450,7 +455,7 @@ fn abstract_(
                     .iter()
                     .zip(&other.variant.replicates)
                     .map(|(f, g)| match other.elsewhere {
-                        true => Some(f.mean_of("aln")? - g.mean_of(other.model)?),
+                        true => Some(f.mean_of(ModelId::Aln)? - g.mean_of(other.model)?),
                         false => f.aln_minus(other.model),
                     })
                     .collect()
@@ -472,8 +477,8 @@ fn abstract_(
         } else {
             let _ = write!(md, "; the best other learned model is {}", against(rival));
         }
-        if let Some(linear) = entries.iter().find(|e| e.model == "linear")
-            && rival.model != "linear"
+        if let Some(linear) = entries.iter().find(|e| e.model == ModelId::Linear)
+            && rival.model != ModelId::Linear
         {
             let _ = write!(md, ", and {}", against(linear));
         }
@@ -493,7 +498,7 @@ fn abstract_(
                     "; by the same rule with {} as forward model: {}. (The table under \
                      the planning paragraph below pairs every forward model with the best \
                      nominal simulator.)\n\n",
-                    if model.starts_with("plant@") {
+                    if matches!(model, PolicyId::Plant { .. }) {
                         format!(
                             "{model}, the plant's own simulator (no user has it; it knows \
                              neither the torque noise nor its actuators' state)"
@@ -510,7 +515,7 @@ fn abstract_(
     }
     let aln = best.variant;
     let single = aln.aln_single();
-    let batched = aln.all_at_once("aln");
+    let batched = aln.all_at_once(ModelId::Aln);
     match (single, super::findings::simulator_rival(aln)) {
         (Some(one), Some(rival)) => {
             let _ = write!(
@@ -542,8 +547,8 @@ fn abstract_(
     // or more accurate learned rival is seen at its own cost.
     let others: Vec<String> = entries
         .iter()
-        .filter(|e| e.model != "aln" && e.model != "persistence")
-        .filter(|e| !e.model.starts_with("simulator@"))
+        .filter(|e| e.model != ModelId::Aln && e.model != ModelId::Persistence)
+        .filter(|e| !e.model.is_simulator())
         .filter(|e| e.single.is_some() || e.batched.is_some())
         .map(|e| {
             let time = |t: Option<&Timing>| t.map_or("—".into(), |t| t.spread());
@@ -640,25 +645,21 @@ impl Decisions {
     fn of(variants: &[Loaded], entries: &[Entry]) -> Option<Decisions> {
         let best = entries
             .iter()
-            .find(|e| e.model == "aln" && !e.variant.planning.is_empty())?;
+            .find(|e| e.model == ModelId::Aln && !e.variant.planning.is_empty())?;
         let (planner, budget) = super::plan::reference_policy(&best.variant.planning[0])?;
-        let plan_model = |model: &str| match model.strip_suffix("/frame") {
-            Some(simulator) => simulator.to_string(),
-            None => model.to_string(),
-        };
         let ms = entries
             .iter()
             .map(|e| {
-                let model = plan_model(e.model);
+                let policy = PolicyId::planning_with(e.model)?;
                 // The ALN's own plans; a baseline's from whichever variant
                 // planned with it.
-                let sources: Vec<&Loaded> = if e.model == "aln" {
+                let sources: Vec<&Loaded> = if e.model == ModelId::Aln {
                     vec![e.variant]
                 } else {
                     variants.iter().collect()
                 };
                 sources.iter().find_map(|v| {
-                    super::plan::decision_ms(v.planning.first()?, &model, &planner, budget)
+                    super::plan::decision_ms(v.planning.first()?, policy, &planner, budget)
                 })
             })
             .collect();
@@ -676,7 +677,7 @@ fn frontier_rows(entries: &[Entry]) -> Vec<super::synthesis::FrontierRow> {
     entries
         .iter()
         .map(|e| super::synthesis::FrontierRow {
-            model: e.model.to_string(),
+            model: e.model,
             variant: e.variant.info.name.clone(),
             variables: e.variables,
             error: e.error.mean,
@@ -716,7 +717,7 @@ fn table(md: &mut String, variants: usize, entries: &[Entry], decisions: Option<
             e.variables.to_string(),
             e.error.cell(),
             match (e.model, e.persistence) {
-                ("persistence", _) | (_, None) => "—".into(),
+                (ModelId::Persistence, _) | (_, None) => "—".into(),
                 (_, Some(p)) => p.cell(),
             },
             e.against_persistence

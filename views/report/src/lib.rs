@@ -27,6 +27,7 @@ mod replicates;
 pub mod synthesis;
 mod variant;
 
+use alnlab_common::ModelId;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
@@ -253,14 +254,14 @@ struct Loaded<'a> {
 
 impl Loaded<'_> {
     /// The timing of `model` on evaluation `path` on one thread.
-    fn timing(&self, model: &str, path: &str) -> Option<&Timing> {
+    fn timing(&self, model: ModelId, path: &str) -> Option<&Timing> {
         self.timings
             .iter()
             .find(|t| t.model == model && t.path == path && t.threads == 1)
     }
 
     /// Median ns per state of `model` on evaluation `path`, one thread.
-    fn ns(&self, model: &str, path: &str) -> Option<f64> {
+    fn ns(&self, model: ModelId, path: &str) -> Option<f64> {
         self.timing(model, path).map(|t| t.ns_per_state)
     }
 
@@ -268,25 +269,25 @@ impl Loaded<'_> {
     /// the binary search of a threshold model, a piecewise-linear model's
     /// plain path (its fastest).
     fn aln_single(&self) -> Option<&Timing> {
-        self.timing("aln", "single")
-            .or_else(|| self.timing("aln", "threshold-search"))
-            .or_else(|| self.timing("aln", "pwl-plain"))
+        self.timing(ModelId::Aln, "single")
+            .or_else(|| self.timing(ModelId::Aln, "threshold-search"))
+            .or_else(|| self.timing(ModelId::Aln, "pwl-plain"))
     }
 
     /// `model` one state at a time on one thread, where it was so timed:
     /// the ALN's path of [`Loaded::aln_single`], the robust linear fit's
     /// plain path, the simulator's frame by frame.
-    fn single(&self, model: &str) -> Option<&Timing> {
+    fn single(&self, model: ModelId) -> Option<&Timing> {
         match model {
-            "aln" => self.aln_single(),
-            "linear" => self.timing(model, "pwl-plain"),
+            ModelId::Aln => self.aln_single(),
+            ModelId::Linear => self.timing(model, "pwl-plain"),
             _ => self.timing(model, "single"),
         }
     }
 
     /// `model` predicting every test state at once on one thread, where it
     /// was so timed (the simulator never is).
-    fn all_at_once(&self, model: &str) -> Option<&Timing> {
+    fn all_at_once(&self, model: ModelId) -> Option<&Timing> {
         self.timing(model, "batched")
     }
 
@@ -294,7 +295,7 @@ impl Loaded<'_> {
     fn aln_all_threads(&self) -> Option<&Timing> {
         self.timings
             .iter()
-            .find(|t| t.model == "aln" && t.path == "batched" && t.threads > 1)
+            .find(|t| t.model == ModelId::Aln && t.path == "batched" && t.threads > 1)
     }
 
     /// The rows findings are about: the held-out ones, or all when the run
@@ -309,17 +310,20 @@ impl Loaded<'_> {
 
     /// The ALN against `against` on the judged rows: for `variable`, or
     /// averaged over the variables.
-    fn compared(&self, against: &str, variable: Option<&str>) -> Option<&Interval> {
+    fn compared(&self, against: ModelId, variable: Option<&str>) -> Option<&Interval> {
         aln_against(&self.comparisons, self.judged().1, against, variable)
     }
 
     /// How the ALN compares with `against` variable by variable on the
     /// judged rows: (lower, higher, indistinguishable, tied) error.
-    fn verdict_counts(&self, against: &str) -> [usize; 4] {
+    fn verdict_counts(&self, against: ModelId) -> [usize; 4] {
         let (_, rows) = self.judged();
         let mut counts = [0; 4];
         for c in self.comparisons.iter().filter(|c| {
-            c.rows == rows && c.model == "aln" && c.against == against && c.variable.is_some()
+            c.rows == rows
+                && c.model == ModelId::Aln
+                && c.against == against
+                && c.variable.is_some()
         }) {
             counts[match c.difference.verdict() {
                 Verdict::Lower => 0,
@@ -440,7 +444,7 @@ fn same_rows(a: &Loaded, b: &Loaded) -> bool {
         v.judged()
             .0
             .iter()
-            .filter(|r| r.model == "persistence")
+            .filter(|r| r.model == ModelId::Persistence)
             .map(|r| (r.variable.clone(), r.stats.mean.to_bits()))
             .collect()
     };
@@ -458,8 +462,8 @@ fn same_rows(a: &Loaded, b: &Loaded) -> bool {
 /// its errors are too (the same variables, to the bit). ALNs are each
 /// variant's own.
 fn one_timing_per_model(variants: &mut [Loaded]) {
-    let same_model = |a: &Loaded, b: &Loaded, model: &str| {
-        if model.starts_with("simulator@") {
+    let same_model = |a: &Loaded, b: &Loaded, model: ModelId| {
+        if model.is_simulator() {
             return same_rows(a, b);
         }
         let rows = |v: &Loaded| -> Vec<(String, u64)> {
@@ -477,9 +481,9 @@ fn one_timing_per_model(variants: &mut [Loaded]) {
         let (earlier, rest) = variants.split_at_mut(k);
         let later = &mut rest[0];
         let mut timings = std::mem::take(&mut later.timings);
-        for t in timings.iter_mut().filter(|t| t.model != "aln") {
+        for t in timings.iter_mut().filter(|t| t.model != ModelId::Aln) {
             let first = earlier.iter().find_map(|e| {
-                if !same_model(e, later, &t.model) {
+                if !same_model(e, later, t.model) {
                     return None;
                 }
                 e.timings
@@ -527,14 +531,14 @@ pub(crate) fn split_rows(summary: Vec<SummaryRow>) -> (Vec<SummaryRow>, Vec<Summ
 pub(crate) fn aln_against<'c>(
     comparisons: &'c [Comparison],
     rows: Rows,
-    against: &str,
+    against: ModelId,
     variable: Option<&str>,
 ) -> Option<&'c Interval> {
     comparisons
         .iter()
         .find(|c| {
             c.rows == rows
-                && c.model == "aln"
+                && c.model == ModelId::Aln
                 && c.against == against
                 && c.variable.as_deref() == variable
         })
@@ -647,34 +651,33 @@ fn load(info: &VariantInfo) -> Result<Loaded<'_>> {
     } else {
         Vec::new()
     };
-    let planning =
-        match &info.planning {
-            Some(first) => std::iter::once(Some(first))
-                .chain(info.replicates.iter().skip(1).map(|r| r.planning.as_ref()))
-                .flatten()
-                .zip(
-                    info.replicates
-                        .iter()
-                        .map(|r| r.rounds.as_slice())
-                        .chain(std::iter::repeat(&[][..])),
-                )
-                .map(|(path, rounds)| {
-                    let mut episodes = alnlab_plan::planning::read(path)?;
-                    // Each round's plans as models of their own: `aln (round 1)`.
-                    for (r, path) in rounds.iter().enumerate() {
-                        let round = alnlab_plan::planning::read(path)?;
-                        episodes.extend(round.into_iter().filter(|e| !e.planner.is_empty()).map(
-                            |e| Episode {
-                                model: format!("{} (round {})", e.model, r + 1),
-                                ..e
-                            },
-                        ));
-                    }
-                    Ok(episodes)
-                })
-                .collect::<Result<_>>()?,
-            None => Vec::new(),
-        };
+    let planning = match &info.planning {
+        Some(first) => std::iter::once(Some(first))
+            .chain(info.replicates.iter().skip(1).map(|r| r.planning.as_ref()))
+            .flatten()
+            .zip(
+                info.replicates
+                    .iter()
+                    .map(|r| r.rounds.as_slice())
+                    .chain(std::iter::repeat(&[][..])),
+            )
+            .map(|(path, rounds)| {
+                let mut episodes = alnlab_plan::planning::read(path)?;
+                // Each round's plans as models of their own: `aln (round 1)`.
+                for (r, path) in (1..).zip(rounds) {
+                    let round = alnlab_plan::planning::read(path)?;
+                    episodes.extend(
+                        round
+                            .into_iter()
+                            .filter(|e| !e.planner.is_empty())
+                            .map(|e| Episode { round: r, ..e }),
+                    );
+                }
+                Ok(episodes)
+            })
+            .collect::<Result<_>>()?,
+        None => Vec::new(),
+    };
     Ok(Loaded {
         planning,
         replicates,
@@ -804,7 +807,7 @@ fn describe_piecewise(model: &Model) -> String {
 }
 
 /// (mean, 95th percentile) of a model's errors, averaged over the variables.
-pub(crate) fn overall(summary: &[SummaryRow], model: &str) -> Option<(f64, f64)> {
+pub(crate) fn overall(summary: &[SummaryRow], model: ModelId) -> Option<(f64, f64)> {
     let rows: Vec<&SummaryRow> = summary.iter().filter(|r| r.model == model).collect();
     let n = rows.len() as f64;
     (!rows.is_empty()).then(|| {
@@ -816,18 +819,18 @@ pub(crate) fn overall(summary: &[SummaryRow], model: &str) -> Option<(f64, f64)>
 }
 
 /// The models other than the ALN, in summary order.
-fn baseline_models(summary: &[SummaryRow]) -> Vec<&str> {
-    let mut models: Vec<&str> = summary
+fn baseline_models(summary: &[SummaryRow]) -> Vec<ModelId> {
+    let mut models: Vec<ModelId> = summary
         .iter()
-        .map(|r| r.model.as_str())
-        .filter(|m| *m != "aln")
+        .map(|r| r.model)
+        .filter(|&m| m != ModelId::Aln)
         .collect();
     models.dedup();
     models
 }
 
 /// The mean error of `model` for `variable`.
-fn mean_of(summary: &[SummaryRow], model: &str, variable: &str) -> Option<f64> {
+fn mean_of(summary: &[SummaryRow], model: ModelId, variable: &str) -> Option<f64> {
     summary
         .iter()
         .find(|r| r.model == model && r.variable == variable)
@@ -837,7 +840,7 @@ fn mean_of(summary: &[SummaryRow], model: &str, variable: &str) -> Option<f64> {
 /// A model's normalized error averaged over the variables: each
 /// variable's mean error over the standard deviation of its true levels
 /// (variables whose truth does not vary are left out).
-fn normalized(summary: &[SummaryRow], model: &str) -> Option<f64> {
+fn normalized(summary: &[SummaryRow], model: ModelId) -> Option<f64> {
     let ratios: Vec<f64> = summary
         .iter()
         .filter(|r| r.model == model && r.true_std_dev > 0.0)
@@ -853,10 +856,10 @@ fn worse_than_persistence<'a>(v: &'a Loaded) -> Vec<(&'a str, f64, f64, &'a Inte
     let (judged, _) = v.judged();
     judged
         .iter()
-        .filter(|r| r.model == "aln")
+        .filter(|r| r.model == ModelId::Aln)
         .filter_map(|r| {
-            let persistence = mean_of(judged, "persistence", &r.variable)?;
-            let d = v.compared("persistence", Some(&r.variable))?;
+            let persistence = mean_of(judged, ModelId::Persistence, &r.variable)?;
+            let d = v.compared(ModelId::Persistence, Some(&r.variable))?;
             (d.verdict() == Verdict::Higher).then_some((
                 r.variable.as_str(),
                 r.stats.mean,
@@ -975,7 +978,7 @@ fn paper_rows(summary: &[SummaryRow]) -> Vec<(Vec<&'static str>, Option<&Summary
         .map(|line| {
             let f: Vec<&'static str> = line.split(',').collect();
             let ours = summary.iter().find(|r| {
-                r.model == "aln"
+                r.model == ModelId::Aln
                     && r.group == f[0]
                     && if f[1] == "best" {
                         r.best_in_group
@@ -992,9 +995,9 @@ fn paper_rows(summary: &[SummaryRow]) -> Vec<(Vec<&'static str>, Option<&Summary
 mod tests {
     use super::*;
 
-    fn timed(model: &str, path: &str, runs: &[f64]) -> Timing {
+    fn timed(model: ModelId, path: &str, runs: &[f64]) -> Timing {
         Timing {
-            model: model.into(),
+            model,
             path: path.into(),
             ns_per_state: f64::NAN,
             ns_min: f64::NAN,
@@ -1012,12 +1015,12 @@ mod tests {
     /// the median and range are of them all.
     #[test]
     fn timings_pool_across_replicates() {
-        let first = vec![timed("aln", "batched", &[1.0, 2.0, 3.0])];
+        let first = vec![timed(ModelId::Aln, "batched", &[1.0, 2.0, 3.0])];
         let others = vec![
-            vec![timed("aln", "batched", &[10.0, 11.0, 12.0])],
+            vec![timed(ModelId::Aln, "batched", &[10.0, 11.0, 12.0])],
             vec![
-                timed("aln", "single", &[99.0]),
-                timed("aln", "batched", &[0.5]),
+                timed(ModelId::Aln, "single", &[99.0]),
+                timed(ModelId::Aln, "batched", &[0.5]),
             ],
         ];
         let pooled = pool_timings(first, &others);

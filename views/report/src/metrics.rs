@@ -17,6 +17,7 @@
 //! - `training_error` — mean training errors per tree, per epoch (from 1);
 //! - `closed_loop/<model>` — closed-loop mean error per horizon.
 
+use alnlab_common::ModelId;
 use std::collections::BTreeMap;
 use std::path::Path;
 
@@ -51,9 +52,9 @@ pub fn read(sources: &Sources) -> Result<Metrics> {
             values.insert(name, value);
         }
     };
-    let mut models: Vec<&str> = judged.iter().map(|r| r.model.as_str()).collect();
+    let mut models: Vec<ModelId> = judged.iter().map(|r| r.model).collect();
     models.dedup();
-    for model in &models {
+    for &model in &models {
         if let Some((mean, _)) = overall(&judged, model) {
             put(format!("error/{model}"), mean);
         }
@@ -65,7 +66,7 @@ pub fn read(sources: &Sources) -> Result<Metrics> {
         );
     }
     let comparisons = read_comparisons(sources.comparisons)?;
-    for model in models.iter().filter(|m| **m != "aln") {
+    for &model in models.iter().filter(|&&m| m != ModelId::Aln) {
         if let Some(d) = aln_against(&comparisons, rows, model, None) {
             put(format!("difference/{model}"), d.mean);
             put(format!("difference/{model}/low"), d.low);

@@ -9,17 +9,55 @@
 use std::fmt::Write as _;
 use std::path::Path;
 
-use alnlab_common::{Result, atomic};
+use alnlab_common::{PolicyId, Result, atomic};
 use alnlab_plan::planning::Episode;
 
 use super::PlanSetup;
 use super::format::{Align, MdTable, estimate, interval, sig3, signed};
-use crate::charts::{self, Axis, Marker, Plot, Point, Rule, Series, style_of};
+use crate::charts::{self, Axis, Marker, Plot, Point, Rule, Series, policy_style};
 use alnlab_summarize::paired::{Interval, Verdict};
+
+/// A forward model or reference as the planning section names it: the
+/// plan stage's policy, and the round of the planner's own data it was
+/// trained again after (0: none; `[plan] rounds`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(super) struct PlanModel {
+    pub policy: PolicyId,
+    pub round: u32,
+}
+
+impl PlanModel {
+    /// The model an episode was planned with.
+    fn of(e: &Episode) -> PlanModel {
+        PlanModel {
+            policy: e.model,
+            round: e.round,
+        }
+    }
+
+    /// `policy` before any round of its own data.
+    pub(super) fn first(policy: PolicyId) -> PlanModel {
+        PlanModel { policy, round: 0 }
+    }
+
+    /// ` (round r)` after r rounds, else nothing.
+    fn round_suffix(self) -> String {
+        match self.round {
+            0 => String::new(),
+            r => format!(" (round {r})"),
+        }
+    }
+}
+
+impl std::fmt::Display for PlanModel {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{}{}", self.policy, self.round_suffix())
+    }
+}
 
 /// One policy's episodes of one task, in episode order.
 struct Policy<'a> {
-    model: &'a str,
+    model: PlanModel,
     planner: &'a str,
     budget: u32,
     evaluations: u64,
@@ -102,11 +140,11 @@ fn policies<'a>(rows: &'a [Episode], task: &str) -> Vec<Policy<'a>> {
     for e in rows.iter().filter(|e| e.task == task) {
         match out
             .iter_mut()
-            .find(|p| p.model == e.model && p.planner == e.planner && p.budget == e.budget)
+            .find(|p| p.model == PlanModel::of(e) && p.planner == e.planner && p.budget == e.budget)
         {
             Some(p) => p.episodes.push(e),
             None => out.push(Policy {
-                model: &e.model,
+                model: PlanModel::of(e),
                 planner: &e.planner,
                 budget: e.budget,
                 evaluations: e.evaluations,
@@ -125,7 +163,7 @@ fn policies<'a>(rows: &'a [Episode], task: &str) -> Vec<Policy<'a>> {
 /// budgets.
 fn within<'p, 'a>(
     policies: &'p [Policy<'a>],
-    model: &str,
+    model: PlanModel,
     planner: &str,
     limit: f64,
 ) -> Option<&'p Policy<'a>> {
@@ -155,8 +193,9 @@ fn real_time(rows: &[Episode], task: &str) -> f64 {
 pub(super) fn reference_policy(rows: &[Episode]) -> Option<(String, u32)> {
     let task = *tasks(rows).first()?;
     let policies = policies(rows, task);
-    let first = policies.iter().find(|p| p.model == "aln" && p.planned())?;
-    let chosen = within(&policies, "aln", first.planner, real_time(rows, task)).unwrap_or(first);
+    let aln = PlanModel::first(PolicyId::Aln);
+    let first = policies.iter().find(|p| p.model == aln && p.planned())?;
+    let chosen = within(&policies, aln, first.planner, real_time(rows, task)).unwrap_or(first);
     Some((chosen.planner.to_string(), chosen.budget))
 }
 
@@ -164,13 +203,13 @@ pub(super) fn reference_policy(rows: &[Episode]) -> Option<(String, u32)> {
 /// episode of every task.
 pub(super) fn decision_ms(
     rows: &[Episode],
-    model: &str,
+    model: PolicyId,
     planner: &str,
     budget: u32,
 ) -> Option<f64> {
     let mut ms: Vec<f64> = rows
         .iter()
-        .filter(|e| e.model == model && e.planner == planner && e.budget == budget)
+        .filter(|e| e.model == model && e.round == 0 && e.planner == planner && e.budget == budget)
         .map(|e| e.ms_per_decision)
         .collect();
     ms.sort_by(f64::total_cmp);
@@ -186,9 +225,10 @@ pub(super) fn decision_ms(
 /// the task's unit from `setup`. Empty when no replicate planned with it.
 pub(super) fn within_real_time(
     replicates: &[Vec<Episode>],
-    model: &str,
+    model: PolicyId,
     setup: Option<&PlanSetup>,
 ) -> Vec<String> {
+    let model = PlanModel::first(model);
     let Some(first) = replicates.first() else {
         return Vec::new();
     };
@@ -222,7 +262,7 @@ pub(super) fn within_real_time(
                     let p = policies.iter().find(|p| {
                         p.model == model && p.planner == planner && p.budget == chosen.budget
                     })?;
-                    let zero = policies.iter().find(|p| p.model == "zero")?;
+                    let zero = policies.iter().find(|p| p.model.policy == PolicyId::Zero)?;
                     let mean = |x: &[f64]| x.iter().sum::<f64>() / x.len() as f64;
                     let diffs = p.differences(zero);
                     let same = diffs.iter().all(|d| *d == 0.0);
@@ -249,12 +289,15 @@ pub(super) fn within_real_time(
                     )
                 })
             } else {
-                policies_1.iter().find(|p| p.model == "zero").map(|zero| {
-                    format!(
-                        "{} over the episodes of one replicate",
-                        chosen.against(zero, true)
-                    )
-                })
+                policies_1
+                    .iter()
+                    .find(|p| p.model.policy == PolicyId::Zero)
+                    .map(|zero| {
+                        format!(
+                            "{} over the episodes of one replicate",
+                            chosen.against(zero, true)
+                        )
+                    })
             };
             phrases.push(format!(
                 "`{task}` {planner} ({} sequences, {} ms a decision): cost {}{unit} against zero \
@@ -274,25 +317,15 @@ pub(super) fn within_real_time(
 /// at the most steps a frame where the data come from a `plant`, else the
 /// simulator at the most steps a frame (the scene as written, which then
 /// is the plant).
-pub(super) fn true_model(rows: &[Episode], plant: bool) -> Option<&str> {
-    let prefix = if plant { "plant@" } else { "simulator@" };
+pub(super) fn true_model(rows: &[Episode], plant: bool) -> Option<PolicyId> {
     rows.iter()
-        .filter_map(|e| {
-            let steps: u32 = e.model.strip_prefix(prefix)?.parse().ok()?;
-            Some((steps, e.model.as_str()))
+        .filter_map(|e| match e.model {
+            PolicyId::Plant { steps } if plant => Some((steps, e.model)),
+            PolicyId::Simulator { steps } if !plant => Some((steps, e.model)),
+            _ => None,
         })
         .max_by_key(|(steps, _)| *steps)
         .map(|(_, model)| model)
-}
-
-/// The chart's style name of a plan model (`simulator@10` is the report's
-/// `simulator@10/frame`).
-fn style_name(model: &str) -> String {
-    if model.starts_with("simulator@") {
-        format!("{model}/frame")
-    } else {
-        model.to_string()
-    }
 }
 
 /// Writes the planning section of variant `name` (nothing when it planned
@@ -333,8 +366,8 @@ pub(super) fn section(
     for task in tasks(rows) {
         let policies = policies(rows, task);
         let (Some(zero), Some(random)) = (
-            policies.iter().find(|p| p.model == "zero"),
-            policies.iter().find(|p| p.model == "random"),
+            policies.iter().find(|p| p.model.policy == PolicyId::Zero),
+            policies.iter().find(|p| p.model.policy == PolicyId::Random),
         ) else {
             continue;
         };
@@ -435,7 +468,7 @@ pub(super) fn section(
                 Some(s) => s.points.push(point),
                 None => series.push(Series {
                     name,
-                    style: style_of(&style_name(p.model), 0),
+                    style: policy_style(p.model.policy, p.model.round, 0),
                     points: vec![point],
                     joined: true,
                     hollow: p.planner == "random-shooting",
@@ -450,12 +483,12 @@ pub(super) fn section(
             let mean = Interval::of(&p.costs()).map_or(0.0, |i| i.mean);
             series.push(Series {
                 name: p.label(),
-                style: style_of(&p.label(), 0),
+                style: policy_style(p.model.policy, p.model.round, 0),
                 points: vec![Point::at(x_lo, mean), Point::at(x_hi, mean)],
                 joined: true,
                 // Hollow means random shooting here: only the square of
                 // zero torques is drawn outlined, as persistence is.
-                hollow: style_of(&p.label(), 0).marker == Marker::Square,
+                hollow: policy_style(p.model.policy, p.model.round, 0).marker == Marker::Square,
             });
         }
         let rules = if real_time > 0.0 {
@@ -502,7 +535,7 @@ fn at_equal_time(
     if real_time <= 0.0 {
         return;
     }
-    let mut methods: Vec<(&str, &str)> = policies
+    let mut methods: Vec<(PlanModel, &str)> = policies
         .iter()
         .filter(|p| p.planned())
         .map(|p| (p.model, p.planner))
@@ -515,7 +548,8 @@ fn at_equal_time(
         .column("the ALN's lowest", Align::Left)
         .column("ALN against zero torques", Align::Left)
         .column("ALN against random torques", Align::Left);
-    let aln_missing = if methods.iter().any(|&(model, _)| model == "aln") {
+    let aln = PlanModel::first(PolicyId::Aln);
+    let aln_missing = if methods.iter().any(|&(model, _)| model == aln) {
         "— (none fits)"
     } else {
         "— (not run)"
@@ -547,7 +581,7 @@ fn at_equal_time(
             }
             None => "— (no other forward model was run)".into(),
         };
-        let aln = lowest_of(&|p| p.model == "aln");
+        let aln = lowest_of(&|p| p.model == aln);
         table.row(vec![
             format!("{} ({factor}× real time)", sig3(limit)),
             name(best),
@@ -580,7 +614,7 @@ fn at_equal_time(
 /// the equal-time table), and its episode costs in every replicate.
 struct Contender {
     label: String,
-    model: String,
+    model: PlanModel,
     ms: f64,
     /// Forward-model evaluations (states predicted) a decision.
     evaluations: u64,
@@ -651,7 +685,12 @@ fn at_real_time_of(md: &mut String, variants: &[Planned]) {
                 .iter()
                 .map(|rows| {
                     let policies = policies(rows, task);
-                    Some(policies.iter().find(|p| p.model == "zero")?.costs())
+                    Some(
+                        policies
+                            .iter()
+                            .find(|p| p.model.policy == PolicyId::Zero)?
+                            .costs(),
+                    )
                 })
                 .collect()
         };
@@ -664,10 +703,10 @@ fn at_real_time_of(md: &mut String, variants: &[Planned]) {
                 continue;
             }
             let policies_1 = policies(&v.planning[0], task);
-            let mut methods: Vec<(&str, &str)> = Vec::new();
+            let mut methods: Vec<(PlanModel, &str)> = Vec::new();
             for p in &policies_1 {
                 let method = (p.model, p.planner);
-                let kept = p.model.starts_with("aln") || std::ptr::eq(*v, *first);
+                let kept = p.model.policy == PolicyId::Aln || std::ptr::eq(*v, *first);
                 if p.planned() && kept && !methods.contains(&method) {
                     methods.push(method);
                 }
@@ -690,16 +729,16 @@ fn at_real_time_of(md: &mut String, variants: &[Planned]) {
                 let Some(costs) = costs else {
                     continue;
                 };
-                let name = match (model.strip_prefix("aln"), several) {
-                    (Some(round), true) => format!("ALN{round} (`{}`)", v.name),
-                    (Some(round), false) => format!("ALN{round}"),
+                let name = match (model.policy, several) {
+                    (PolicyId::Aln, true) => format!("ALN{} (`{}`)", model.round_suffix(), v.name),
+                    (PolicyId::Aln, false) => format!("ALN{}", model.round_suffix()),
                     _ => model.to_string(),
                 };
                 let chosen_episodes = || {
                     v.planning.iter().flat_map(|rows| {
                         rows.iter().filter(|e| {
                             e.task == task
-                                && e.model == model
+                                && PlanModel::of(e) == model
                                 && e.planner == planner
                                 && e.budget == chosen.budget
                         })
@@ -709,7 +748,7 @@ fn at_real_time_of(md: &mut String, variants: &[Planned]) {
                 let horizon: Vec<f64> = chosen_episodes().map(|e| e.horizon_rms).collect();
                 contenders.push(Contender {
                     label: format!("{name}, {planner} ({} sequences)", chosen.budget),
-                    model: model.to_string(),
+                    model,
                     ms: chosen.ms(),
                     evaluations: chosen.evaluations,
                     costs,
@@ -720,7 +759,7 @@ fn at_real_time_of(md: &mut String, variants: &[Planned]) {
         }
         let nominal = contenders
             .iter()
-            .filter(|c| c.model.starts_with("simulator@"))
+            .filter(|c| matches!(c.model.policy, PolicyId::Simulator { .. }))
             .min_by(|a, b| a.mean().total_cmp(&b.mean()));
         let Some(nominal) = nominal else {
             continue;
@@ -781,7 +820,7 @@ fn at_real_time_of(md: &mut String, variants: &[Planned]) {
                     .map_or("— (every episode tied)".into(), |t| {
                         format!("{}, median {} ({n})", sig3(t.p), signed(median))
                     });
-                if c.model.starts_with("aln") {
+                if c.model.policy == PolicyId::Aln {
                     aln_words.push(format!("{}: {difference}, p = {p}", c.label));
                     let lower = Interval::of(&per).is_some_and(|d| d.verdict() == Verdict::Lower);
                     if lower {
@@ -790,7 +829,7 @@ fn at_real_time_of(md: &mut String, variants: &[Planned]) {
                 }
                 (difference, p)
             };
-            let label = if c.model.starts_with("plant@") {
+            let label = if matches!(c.model.policy, PolicyId::Plant { .. }) {
                 format!("{} — reference", c.label)
             } else {
                 c.label.clone()
@@ -846,9 +885,9 @@ fn at_real_time_of(md: &mut String, variants: &[Planned]) {
             },
             order
                 .iter()
-                .find(|c| !c.model.starts_with("plant@"))
+                .find(|c| !matches!(c.model.policy, PolicyId::Plant { .. }))
                 .map_or(best.label.clone(), |c| c.label.clone()),
-            if best.model.starts_with("plant@") {
+            if matches!(best.model.policy, PolicyId::Plant { .. }) {
                 format!(
                     " (the plant's own simulator, which no user has, has a lower mean still: {})",
                     best.label
@@ -865,7 +904,7 @@ fn at_real_time_of(md: &mut String, variants: &[Planned]) {
                 .iter()
                 .find(|e| e.budget > 0)
                 .map_or(0, |e| e.evaluations / u64::from(e.budget)),
-            if contenders.iter().any(|c| c.model.contains("(round ")) {
+            if contenders.iter().any(|c| c.model.round > 0) {
                 " A model \"(round r)\" was trained again after r rounds of the ALN's planned \
                  frames joined the training rows (DAgger for models), and planned the same \
                  episodes."
@@ -895,7 +934,8 @@ mod tests {
         (0..4)
             .map(|k| Episode {
                 task: "bend".into(),
-                model: model.into(),
+                model: model.parse().unwrap(),
+                round: 0,
                 planner: planner.into(),
                 budget: if planner.is_empty() { 0 } else { 64 },
                 episode: k,
@@ -968,7 +1008,11 @@ mod tests {
         let learned = [replicate(10.0), replicate(12.0), replicate(11.0)];
         let hybrid = [replicate(25.0), replicate(26.0), replicate(27.0)];
         let mut other = [replicate(10.0), replicate(10.0), replicate(10.0)];
-        for e in other.iter_mut().flatten().filter(|e| e.model == "zero") {
+        for e in other
+            .iter_mut()
+            .flatten()
+            .filter(|e| e.model == PolicyId::Zero)
+        {
             e.cost += 1.0;
         }
         let mut md = String::new();

@@ -5,6 +5,7 @@
 //! replicate one independent value. `replicates.csv`, beside the report,
 //! holds every figure with each replicate's value, for checking.
 
+use alnlab_common::ModelId;
 use std::fmt::Write as _;
 use std::path::Path;
 
@@ -18,14 +19,7 @@ use alnlab_summarize::paired::Interval;
 
 /// The models whose errors the headline gives (the learned peer and the
 /// hybrids where the test stage fitted them).
-pub(super) const MODELS: [&str; 6] = [
-    "aln",
-    "persistence",
-    "linear",
-    "boosted",
-    "linear+nominal",
-    "boosted+nominal",
-];
+pub(super) const MODELS: [ModelId; 6] = ModelId::FIXED;
 
 /// One replicate's headline figures, on its held-out rows (all test rows
 /// when none is held out).
@@ -36,30 +30,30 @@ pub(super) struct Figures {
     /// [`MODELS`] (the ALN itself excepted).
     pub differences: Vec<Option<f64>>,
     /// (model, step, mean) of the closed-loop errors.
-    pub horizons: Vec<(String, u16, f64)>,
+    pub horizons: Vec<(ModelId, u16, f64)>,
     /// The ALN's mean error per variable, sorted by variable: variants that
     /// predict different sets of variables pair over the ones they share.
     pub aln_by_variable: Vec<(String, f64)>,
     /// Every model's mean error over the variables, in summary order.
-    pub model_means: Vec<(String, f64)>,
+    pub model_means: Vec<(ModelId, f64)>,
 }
 
 impl Figures {
     /// The ALN's mean paired difference against `model`: the stage's paired
     /// comparison for the headline baselines, the difference of the two
     /// means (the same rows and variables) for any other model.
-    pub fn aln_minus(&self, model: &str) -> Option<f64> {
+    pub fn aln_minus(&self, model: ModelId) -> Option<f64> {
         match MODELS[1..].iter().position(|m| *m == model) {
             Some(k) => self.differences[k],
-            None => Some(self.mean_of("aln")? - self.mean_of(model)?),
+            None => Some(self.mean_of(ModelId::Aln)? - self.mean_of(model)?),
         }
     }
 
     /// `model`'s mean error over the variables, if the replicate has it.
-    pub fn mean_of(&self, model: &str) -> Option<f64> {
+    pub fn mean_of(&self, model: ModelId) -> Option<f64> {
         self.model_means
             .iter()
-            .find(|(m, _)| m == model)
+            .find(|&&(m, _)| m == model)
             .map(|(_, e)| *e)
     }
 }
@@ -77,15 +71,15 @@ impl Figures {
             .collect();
         let mut aln_by_variable: Vec<(String, f64)> = judged
             .iter()
-            .filter(|r| r.model == "aln")
+            .filter(|r| r.model == ModelId::Aln)
             .map(|r| (r.variable.clone(), r.stats.mean))
             .collect();
         aln_by_variable.sort_by(|a, b| a.0.cmp(&b.0));
-        let mut model_means: Vec<(String, f64)> = Vec::new();
+        let mut model_means: Vec<(ModelId, f64)> = Vec::new();
         for row in &judged {
-            if !model_means.iter().any(|(m, _)| *m == row.model) {
-                let (mean, _) = overall(&judged, &row.model).expect("the model has rows");
-                model_means.push((row.model.clone(), mean));
+            if !model_means.iter().any(|&(m, _)| m == row.model) {
+                let (mean, _) = overall(&judged, row.model).expect("the model has rows");
+                model_means.push((row.model, mean));
             }
         }
         Ok(Figures {
@@ -96,7 +90,7 @@ impl Figures {
             rows,
             differences: MODELS[1..]
                 .iter()
-                .map(|b| aln_against(&comparisons, rows, b, None).map(|d| d.mean))
+                .map(|&b| aln_against(&comparisons, rows, b, None).map(|d| d.mean))
                 .collect(),
         })
     }
@@ -275,11 +269,11 @@ pub(super) fn section(md: &mut String, variants: &[Loaded], dir: &Path) -> Resul
         let shown_in_table = figures.len();
         // For the first screen's check, in the file only: every other
         // model's mean, and each baseline's mean minus persistence's.
-        for (model, _) in &v.replicates[0].model_means {
-            let means = |m: &str| -> Vec<Option<f64>> {
+        for &(model, _) in &v.replicates[0].model_means {
+            let means = |m: ModelId| -> Vec<Option<f64>> {
                 v.replicates.iter().map(|f| f.mean_of(m)).collect()
             };
-            if !MODELS.contains(&model.as_str()) {
+            if !MODELS.contains(&model) {
                 figures.push((format!("{model} mean"), means(model)));
                 // The first screen sets the ALN against each simulator
                 // setting.
@@ -288,8 +282,8 @@ pub(super) fn section(md: &mut String, variants: &[Loaded], dir: &Path) -> Resul
                     v.replicates.iter().map(|f| f.aln_minus(model)).collect(),
                 ));
             }
-            if model != "aln" && model != "persistence" {
-                let persistence = means("persistence");
+            if model != ModelId::Aln && model != ModelId::Persistence {
+                let persistence = means(ModelId::Persistence);
                 let gap = means(model)
                     .iter()
                     .zip(&persistence)

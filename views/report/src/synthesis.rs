@@ -6,6 +6,7 @@
 //! file and draws one chart across experiments: each ALN and each simulator
 //! setting, error relative to persistence's against time.
 
+use alnlab_common::ModelId;
 use std::path::{Path, PathBuf};
 
 use alnlab_common::{Error, Result, atomic};
@@ -22,8 +23,7 @@ pub const SYNTHESIS: &str = "synthesis.svg";
 /// One first-screen model of a report.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct FrontierRow {
-    /// `aln`, `persistence`, `linear`, `boosted` or `simulator@k/frame`.
-    pub model: String,
+    pub model: ModelId,
     /// The variant it belongs to (a baseline: the best ALN's variant).
     pub variant: String,
     pub variables: usize,
@@ -109,7 +109,7 @@ pub fn render_synthesis(reports: &Path) -> Result<(PathBuf, Vec<String>)> {
             colour,
             marker: aln_marker,
             ..
-        } = style_of("aln", k);
+        } = style_of(ModelId::Aln, k);
         // The lowest error over persistence's among the rows `keep` picks.
         let best = |keep: &dyn Fn(&FrontierRow) -> bool| {
             rows.iter()
@@ -130,23 +130,23 @@ pub fn render_synthesis(reports: &Path) -> Result<(PathBuf, Vec<String>)> {
         };
         // The report's best ALN, and its best hybrid (the nominal simulator
         // corrected) where it has one: the model to beat on a plant.
-        if let Some((row, p)) = best(&|r| r.model == "aln") {
+        if let Some((row, p)) = best(&|r| r.model == ModelId::Aln) {
             series.push(single(
                 format!("{name}: ALN `{}`", row.variant),
                 aln_marker,
                 p,
             ));
         }
-        if let Some((row, p)) = best(&|r| r.model.ends_with("+nominal")) {
+        if let Some((row, p)) = best(&|r| r.model.is_hybrid()) {
             series.push(single(
                 format!("{name}: {} (hybrid)", row.model),
                 Marker::Triangle,
                 p,
             ));
         }
-        let mut simulators: Vec<(u32, Point)> = rows
+        let mut simulators: Vec<(u64, Point)> = rows
             .iter()
-            .filter_map(|r| Some((charts::simulator_steps(&r.model)?, point(r)?)))
+            .filter_map(|r| Some((r.model.simulator_steps()?, point(r)?)))
             .collect();
         simulators.sort_by_key(|&(steps, _)| steps);
         if simulators.is_empty() {

@@ -4,6 +4,7 @@
 //! histogram with its tail, the §5 hardware estimate, and — when the
 //! variants ran on different data — its own closed-loop chart.
 
+use alnlab_common::ModelId;
 use std::fmt::Write as _;
 use std::path::Path;
 
@@ -69,7 +70,7 @@ pub(super) fn section(
     // the held-out rows.
     let (all, held) = v.rows;
     if held < all
-        && let Some((mean, _)) = overall(&v.summary, "aln")
+        && let Some((mean, _)) = overall(&v.summary, ModelId::Aln)
     {
         let _ = writeln!(
             md,
@@ -142,7 +143,7 @@ pub(super) fn section(
         let columns: Vec<closed_loop::Column> = closed_loop::models(v)
             .into_iter()
             .map(|m| closed_loop::Column {
-                name: if m == "aln" {
+                name: if m == ModelId::Aln {
                     aln_name(v, n)
                 } else {
                     m.to_string()
@@ -168,7 +169,7 @@ fn by_group(md: &mut String, v: &Loaded) {
          size of one level, which is given beside it).\n"
     );
     let judged = v.judged().0;
-    let aln: Vec<&SummaryRow> = judged.iter().filter(|r| r.model == "aln").collect();
+    let aln: Vec<&SummaryRow> = judged.iter().filter(|r| r.model == ModelId::Aln).collect();
     let mut groups: Vec<&str> = aln.iter().map(|r| r.group.as_str()).collect();
     groups.dedup();
     let mut picked: Vec<(&str, &str, &SummaryRow)> = Vec::new();
@@ -234,12 +235,13 @@ fn by_group(md: &mut String, v: &Loaded) {
         "The same variables: mean error of the ALN and of each baseline over the held-out test \
          rows.\n"
     );
-    let mut names = vec!["aln"];
+    let mut names = vec![ModelId::Aln];
     names.extend(&baselines);
-    let mut table = MdTable::new(&keys).numbers(&names);
+    let headings: Vec<String> = names.iter().map(ModelId::to_string).collect();
+    let mut table = MdTable::new(&keys).numbers(&headings);
     for &(group, which, r) in &picked {
         let mut cells = vec![group.into(), which.into(), format!("`{}`", r.variable)];
-        for m in &names {
+        for &m in &names {
             cells.push(mean_of(judged, m, &r.variable).map_or("—".into(), sig3));
         }
         table.row(cells);
@@ -312,7 +314,7 @@ fn worse(md: &mut String, v: &Loaded) {
          interval of the paired difference above zero ({} rows; SI: the difference × the size \
          of one level):\n",
         worse.len(),
-        judged.iter().filter(|r| r.model == "aln").count(),
+        judged.iter().filter(|r| r.model == ModelId::Aln).count(),
         rows.as_str()
     );
     let mut table = MdTable::new(&["variable"])
@@ -342,7 +344,7 @@ pub(super) fn histogram_variable<'a>(variants: &'a [Loaded]) -> Option<&'a str> 
         .judged()
         .0
         .iter()
-        .filter(|r| r.model == "aln")
+        .filter(|r| r.model == ModelId::Aln)
         .max_by(|a, b| a.stats.mean.total_cmp(&b.stats.mean))?;
     variants
         .iter()
@@ -350,7 +352,7 @@ pub(super) fn histogram_variable<'a>(variants: &'a [Loaded]) -> Option<&'a str> 
             v.judged()
                 .0
                 .iter()
-                .any(|r| r.model == "aln" && r.variable == worst.variable)
+                .any(|r| r.model == ModelId::Aln && r.variable == worst.variable)
         })
         .then_some(worst.variable.as_str())
 }
@@ -385,7 +387,7 @@ fn histogram(
     dir: &Path,
 ) -> Result<()> {
     let judged = v.judged().0;
-    let aln = || judged.iter().filter(|r| r.model == "aln");
+    let aln = || judged.iter().filter(|r| r.model == ModelId::Aln);
     let chosen = variable.and_then(|name| aln().find(|r| r.variable == name));
     let Some(worst) = chosen.or_else(|| aln().max_by(|a, b| a.stats.mean.total_cmp(&b.stats.mean)))
     else {
@@ -396,15 +398,16 @@ fn histogram(
         .collect();
     let persistence = judged
         .iter()
-        .find(|r| r.model == "persistence" && r.variable == worst.variable);
+        .find(|r| r.model == ModelId::Persistence && r.variable == worst.variable);
     let name = file_name(&v.info.name, "histogram");
     let title = format!("{}: errors of {}", v.info.name, worst.variable);
     let overlay = persistence.map(bins_of);
+    let persistence_name = ModelId::Persistence.to_string();
     let chart = charts::histogram(
         &title,
         &bins_of(worst),
-        style_of("aln", k).colour,
-        overlay.as_deref().map(|o| ("persistence", o)),
+        style_of(ModelId::Aln, k).colour,
+        overlay.as_deref().map(|o| (persistence_name.as_str(), o)),
     );
     atomic::write_bytes(&dir.join(&name), chart.as_bytes())?;
     let _ = writeln!(
@@ -477,7 +480,7 @@ fn hardware(md: &mut String, v: &Loaded, forest: Option<(&str, f64)>) {
         ),
     };
     let cpu = || super::circuit::Cpu {
-        aln_batched: v.ns("aln", "batched"),
+        aln_batched: v.ns(ModelId::Aln, "batched"),
         aln_single: v.aln_single().map(|t| t.ns_per_state),
         simulator: super::findings::simulator_rival(v)
             .map(|r| (r.model.to_string(), r.timing.ns_per_state)),
