@@ -19,7 +19,7 @@ use alnlab_summarize::paired::Interval;
 
 /// The models whose errors the headline gives (the learned peer and the
 /// hybrids where the test stage fitted them).
-pub(super) const MODELS: [ModelId; 6] = ModelId::FIXED;
+pub(super) const MODELS: &[ModelId] = &ModelId::FIXED;
 
 /// One replicate's headline figures, on its held-out rows (all test rows
 /// when none is held out).
