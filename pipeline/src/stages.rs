@@ -236,8 +236,10 @@ pub const STAGES: &[Stage] = &[
         validate: |_, _| Ok(()),
         run: |c| {
             alnlab_nominal::run(
-                c.input("trajectory"),
-                c.input("pairs"),
+                &alnlab_nominal::Inputs {
+                    trajectory: c.input("trajectory"),
+                    pairs: c.input("pairs"),
+                },
                 c.provenance,
                 c.out_dir,
                 c.progress,
@@ -277,8 +279,10 @@ pub const STAGES: &[Stage] = &[
             alnlab_quantize::run(
                 &c.stages.quantize,
                 c.seed,
-                c.input("pairs"),
-                c.input("stats"),
+                &alnlab_quantize::Inputs {
+                    pairs: c.input("pairs"),
+                    stats: c.input("stats"),
+                },
                 c.provenance,
                 c.out_dir,
                 c.progress,
@@ -327,10 +331,12 @@ pub const STAGES: &[Stage] = &[
                 &c.stages.train,
                 c.seed,
                 c.shard,
-                c.input("codebook"),
-                c.input("levels"),
-                c.input("pairs"),
-                c.input("nominal"),
+                &alnlab_train::Inputs {
+                    codebook: c.input("codebook"),
+                    levels: c.input("levels"),
+                    pairs: c.input("pairs"),
+                    nominal: c.input("nominal"),
+                },
                 c.provenance,
                 c.out_dir,
                 c.progress,
@@ -390,12 +396,14 @@ pub const STAGES: &[Stage] = &[
         run: |c| {
             alnlab_evaluate::run(
                 &c.stages.test,
-                c.input("trajectory"),
-                c.input("model"),
-                c.input("codebook"),
-                c.input("levels"),
-                c.input("pairs"),
-                c.input("nominal"),
+                &alnlab_evaluate::Inputs {
+                    trajectory: c.input("trajectory"),
+                    model: c.input("model"),
+                    codebook: c.input("codebook"),
+                    levels: c.input("levels"),
+                    pairs: c.input("pairs"),
+                    nominal: c.input("nominal"),
+                },
                 c.provenance,
                 c.out_dir,
                 c.progress,
@@ -437,8 +445,10 @@ pub const STAGES: &[Stage] = &[
         validate: |_, _| Ok(()),
         run: |c| {
             alnlab_summarize::run(
-                c.input("predictions"),
-                c.input("rollout"),
+                &alnlab_summarize::Inputs {
+                    predictions: c.input("predictions"),
+                    rollout: c.input("rollout"),
+                },
                 c.provenance,
                 c.out_dir,
                 c.progress,
@@ -503,10 +513,12 @@ pub const STAGES: &[Stage] = &[
             alnlab_plan::run(
                 &c.stages.plan,
                 c.seed,
-                c.input("trajectory"),
-                c.input("model"),
-                c.input("codebook"),
-                c.input("levels"),
+                &alnlab_plan::Inputs {
+                    trajectory: c.input("trajectory"),
+                    model: c.input("model"),
+                    codebook: c.input("codebook"),
+                    levels: c.input("levels"),
+                },
                 c.provenance,
                 c.out_dir,
                 c.progress,
@@ -586,10 +598,12 @@ pub const STAGES: &[Stage] = &[
             alnlab_circuit::run(
                 &c.stages.circuit,
                 c.seed,
-                c.input("model"),
-                c.input("codebook"),
-                c.input("levels"),
-                c.input("pairs"),
+                &alnlab_circuit::Inputs {
+                    model: c.input("model"),
+                    codebook: c.input("codebook"),
+                    levels: c.input("levels"),
+                    pairs: c.input("pairs"),
+                },
                 c.provenance,
                 c.out_dir,
                 c.progress,

@@ -149,6 +149,18 @@ impl Params {
     }
 }
 
+/// The files the stage reads.
+pub struct Inputs<'a> {
+    /// The trained model (`model.aln`).
+    pub model: &'a Path,
+    /// Its codebook.
+    pub codebook: &'a Path,
+    /// The levels table whose test rows the circuit is checked on.
+    pub levels: &'a Path,
+    /// The pairs table the levels were made from.
+    pub pairs: &'a Path,
+}
+
 /// Measures the circuit of the model (`model_path`, trained with
 /// `codebook_path`) on the test rows of `levels_path` (a piecewise-linear
 /// model on their real values in `pairs_path`). A bit-forest goes into
@@ -163,18 +175,20 @@ impl Params {
 /// nextpnr's `seed`, its mapped netlist equal on the same rows. Without
 /// `synthesize`, or for a threshold model (whose binary search is
 /// sequential, not one combinational circuit), the tables are empty.
-#[allow(clippy::too_many_arguments)]
 pub fn run(
     params: &Params,
     seed: u64,
-    model_path: &Path,
-    codebook_path: &Path,
-    levels_path: &Path,
-    pairs_path: &Path,
+    inputs: &Inputs,
     provenance: &Provenance,
     out_dir: &Path,
     progress: &dyn Progress,
 ) -> Result<()> {
+    let Inputs {
+        model: model_path,
+        codebook: codebook_path,
+        levels: levels_path,
+        pairs: pairs_path,
+    } = *inputs;
     params
         .validate()
         .map_err(|e| params::invalid("circuit", e))?;

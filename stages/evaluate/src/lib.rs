@@ -229,21 +229,39 @@ impl Data {
     }
 }
 
+/// The files the stage reads.
+pub struct Inputs<'a> {
+    /// The trajectory log (MCAP) the pairs came from.
+    pub trajectory: &'a Path,
+    /// The trained model (`model.aln`).
+    pub model: &'a Path,
+    /// Its codebook.
+    pub codebook: &'a Path,
+    /// The levels table whose test rows are predicted.
+    pub levels: &'a Path,
+    /// The pairs table the levels were made from (real values).
+    pub pairs: &'a Path,
+    /// The nominal stage's predictions of the same pairs.
+    pub nominal: &'a Path,
+}
+
 /// Reads the model, codebook, levels and real values, predicts, writes the
 /// three tables.
-#[allow(clippy::too_many_arguments)]
 pub fn run(
     params: &Params,
-    trajectory_path: &Path,
-    model_path: &Path,
-    codebook_path: &Path,
-    levels_path: &Path,
-    pairs_path: &Path,
-    nominal_path: &Path,
+    inputs: &Inputs,
     provenance: &Provenance,
     out_dir: &Path,
     progress: &dyn Progress,
 ) -> Result<()> {
+    let Inputs {
+        trajectory: trajectory_path,
+        model: model_path,
+        codebook: codebook_path,
+        levels: levels_path,
+        pairs: pairs_path,
+        nominal: nominal_path,
+    } = *inputs;
     params.validate().map_err(|e| params::invalid("test", e))?;
     let data = Data::read(model_path, codebook_path, levels_path)?;
     let pairs = Pairs::read(pairs_path)?;

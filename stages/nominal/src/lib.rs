@@ -31,14 +31,25 @@ pub const FORMAT_VERSION: u32 = 2;
 /// File name of the nominal predictions.
 pub const NOMINAL_FILE: &str = "nominal.parquet";
 
+/// The files the stage reads.
+pub struct Inputs<'a> {
+    /// The trajectory log (MCAP) the pairs came from.
+    pub trajectory: &'a Path,
+    /// The pairs table to predict.
+    pub pairs: &'a Path,
+}
+
 /// Reads the trajectory and its pairs, writes `out_dir/nominal.parquet`.
 pub fn run(
-    trajectory: &Path,
-    pairs_path: &Path,
+    inputs: &Inputs,
     provenance: &Provenance,
     out_dir: &Path,
     progress: &dyn Progress,
 ) -> Result<()> {
+    let Inputs {
+        trajectory,
+        pairs: pairs_path,
+    } = *inputs;
     let log = alnlab_common::state_log::read(trajectory)?;
     let pairs = Pairs::read(pairs_path)?;
     let replays = SceneReplay::from_log(&log).map_err(|m| Error::bad_file(trajectory, m))?;
@@ -147,7 +158,11 @@ mod tests {
         };
         alnlab_stride::run(&stride, 3, &trajectory, &none, dir, &Silent).unwrap();
         let pairs_path = dir.join(pairs::FILE);
-        run(&trajectory, &pairs_path, &none, dir, &Silent)?;
+        let inputs = Inputs {
+            trajectory: &trajectory,
+            pairs: &pairs_path,
+        };
+        run(&inputs, &none, dir, &Silent)?;
         Ok((
             Pairs::read(&pairs_path)?,
             Pairs::read(&dir.join(NOMINAL_FILE))?,
@@ -221,14 +236,15 @@ mod tests {
         let sim: alnlab_simulate::Params = toml::from_str(&short).unwrap();
         let none = Provenance::default();
         alnlab_simulate::run(&sim, 3, &none, other.path(), &Silent).unwrap();
-        let e = run(
-            &other.path().join(alnlab_simulate::TRAJECTORY_FILE),
-            &dir.path().join(pairs::FILE),
-            &none,
-            other.path(),
-            &Silent,
-        )
-        .unwrap_err();
+        let (trajectory, pairs) = (
+            other.path().join(alnlab_simulate::TRAJECTORY_FILE),
+            dir.path().join(pairs::FILE),
+        );
+        let inputs = Inputs {
+            trajectory: &trajectory,
+            pairs: &pairs,
+        };
+        let e = run(&inputs, &none, other.path(), &Silent).unwrap_err();
         let message = e.to_string();
         assert!(
             message.contains("pairs.parquet: row ") && message.contains("is not in"),

@@ -347,20 +347,34 @@ impl View {
     }
 }
 
+/// The files the stage reads.
+pub struct Inputs<'a> {
+    /// The trajectory log (MCAP): the scene, its plant and start states.
+    pub trajectory: &'a Path,
+    /// The trained model (`model.aln`).
+    pub model: &'a Path,
+    /// Its codebook.
+    pub codebook: &'a Path,
+    /// The levels table it was trained on.
+    pub levels: &'a Path,
+}
+
 /// Plans every task with every model, planner and budget, and writes the
 /// two tables.
-#[allow(clippy::too_many_arguments)]
 pub fn run(
     params: &Params,
     seed: u64,
-    trajectory_path: &Path,
-    model_path: &Path,
-    codebook_path: &Path,
-    levels_path: &Path,
+    inputs: &Inputs,
     provenance: &Provenance,
     out_dir: &Path,
     progress: &dyn Progress,
 ) -> Result<()> {
+    let Inputs {
+        trajectory: trajectory_path,
+        model: model_path,
+        codebook: codebook_path,
+        levels: levels_path,
+    } = *inputs;
     params
         .validate(None)
         .map_err(|e| params::invalid("plan", e))?;

@@ -166,17 +166,28 @@ pub fn variable_seed(seed: u64, variable: &str) -> u64 {
     alnlab_common::hash::fnv1a(variable.as_bytes(), seed)
 }
 
+/// The files the stage reads.
+pub struct Inputs<'a> {
+    /// The pairs table to quantize.
+    pub pairs: &'a Path,
+    /// Its per-variable statistics.
+    pub stats: &'a Path,
+}
+
 /// Reads `pairs` and `stats`, writes the codebook and the levels table into
 /// `out_dir`.
 pub fn run(
     params: &Params,
     seed: u64,
-    pairs_path: &Path,
-    stats_path: &Path,
+    inputs: &Inputs,
     provenance: &Provenance,
     out_dir: &Path,
     progress: &dyn Progress,
 ) -> Result<()> {
+    let Inputs {
+        pairs: pairs_path,
+        stats: stats_path,
+    } = *inputs;
     params
         .validate()
         .map_err(|e| params::invalid("quantize", e))?;
@@ -388,11 +399,14 @@ mod tests {
     }
 
     fn quantize(params: &Params, dir: &Path) -> Result<()> {
+        let (pairs, stats) = (dir.join(pairs::FILE), dir.join(alnlab_simulate::STATS_FILE));
         run(
             params,
             5,
-            &dir.join(pairs::FILE),
-            &dir.join(alnlab_simulate::STATS_FILE),
+            &Inputs {
+                pairs: &pairs,
+                stats: &stats,
+            },
             &Provenance::default(),
             dir,
             &Silent,

@@ -92,13 +92,11 @@ pub fn run() -> Result<SummarizeBench> {
     predictions.write(&predictions_path, &provenance)?;
 
     let clock = Instant::now();
-    crate::run(
-        &predictions_path,
-        &rollout_path,
-        &provenance,
-        dir.path(),
-        &Silent,
-    )?;
+    let inputs = crate::Inputs {
+        predictions: &predictions_path,
+        rollout: &rollout_path,
+    };
+    crate::run(&inputs, &provenance, dir.path(), &Silent)?;
     let seconds = clock.elapsed().as_secs_f64();
     let errors = (MODELS.len() * VARIABLES * (ROWS + 1000)) as u64;
     Ok(SummarizeBench {

@@ -114,15 +114,26 @@ pub struct Comparison {
     pub difference: Interval,
 }
 
+/// The files the stage reads.
+pub struct Inputs<'a> {
+    /// The test stage's predictions.
+    pub predictions: &'a Path,
+    /// Its closed-loop rollouts.
+    pub rollout: &'a Path,
+}
+
 /// Reads the predictions and rollouts, summarizes them, writes
 /// `summary.parquet`, `comparisons.parquet` and `horizons.parquet`.
 pub fn run(
-    predictions_path: &Path,
-    rollout_path: &Path,
+    inputs: &Inputs,
     provenance: &Provenance,
     out_dir: &Path,
     progress: &dyn Progress,
 ) -> Result<()> {
+    let Inputs {
+        predictions: predictions_path,
+        rollout: rollout_path,
+    } = *inputs;
     progress.start("summarize", 3, "tables");
     let predictions = Predictions::read(predictions_path)?;
     write(
@@ -715,8 +726,10 @@ mod tests {
         rollout.write(&rollout_path, &provenance).unwrap();
         let silent = alnlab_common::Silent;
         run(
-            &predictions,
-            &rollout_path,
+            &Inputs {
+                predictions: &predictions,
+                rollout: &rollout_path,
+            },
             &provenance,
             dir.path(),
             &silent,

@@ -206,23 +206,37 @@ impl Params {
     }
 }
 
+/// The files the stage reads.
+pub struct Inputs<'a> {
+    /// The codebook.
+    pub codebook: &'a Path,
+    /// The levels table to train on.
+    pub levels: &'a Path,
+    /// The pairs table the levels were made from (real values).
+    pub pairs: &'a Path,
+    /// The nominal stage's predictions of the same pairs.
+    pub nominal: &'a Path,
+}
+
 /// Reads the codebook and levels (and, for a piecewise-linear model, the
 /// real values in `pairs.parquet`), trains `shard`'s trees ([`Shard::ALL`]
 /// for the whole forest), writes the model (a partial one for a part) and
 /// the log.
-#[allow(clippy::too_many_arguments)]
 pub fn run(
     params: &Params,
     seed: u64,
     shard: Shard,
-    codebook_path: &Path,
-    levels_path: &Path,
-    pairs_path: &Path,
-    nominal_path: &Path,
+    inputs: &Inputs,
     provenance: &Provenance,
     out_dir: &Path,
     progress: &dyn Progress,
 ) -> Result<()> {
+    let Inputs {
+        codebook: codebook_path,
+        levels: levels_path,
+        pairs: pairs_path,
+        nominal: nominal_path,
+    } = *inputs;
     params.validate().map_err(|e| params::invalid("train", e))?;
     let codebook = alnlab_tables::codebook::read(codebook_path)?;
     let levels = Levels::read(levels_path)?;
