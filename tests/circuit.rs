@@ -45,6 +45,9 @@ leaves = 64
 epochs = 1
 vote = 3
 
+[test]
+run_seconds = 0.000001
+
 [circuit]
 synthesize = true
 "#;
@@ -75,6 +78,9 @@ code = "gray"
 leaves = 64
 epochs = 1
 vote = 3
+
+[test]
+run_seconds = 0.000001
 
 [circuit]
 synthesize = true
@@ -389,19 +395,22 @@ model = "piecewise-linear"
 informative_inputs = 2
 pwl.max_pieces = 4
 
+[test]
+run_seconds = 0.000001
+
 [circuit]
 synthesize = true
 fpga = "ice40-hx8k"
 "#;
 
-#[test]
-#[ignore = "full suite: needs Yosys, nextpnr-ice40, Icarus Verilog and Verilator"]
-fn a_small_piecewise_linear_model_in_fixed_point_is_placed_routed_and_equals_its_evaluator() {
-    let dir = tempfile::tempdir().unwrap();
-    let d = dir.path();
-    write_manifest(d, "piecewise.toml", PIECEWISE);
-    let out = alnlab(d, &["-q", "run", "piecewise.toml", "--reports", "reports"]);
-    assert!(out.status.success(), "{}", stderr(&out));
+/// A small piecewise-linear model in fixed point, run in `d` with its
+/// report in `d/reports` ([`a_killed_circuit_stage_leaves_no_tool_running_and_no_scratch_behind`]'s
+/// run after the kill): placed, routed and equal to its evaluator on every
+/// test row, in both forms, its figures in the report and the bench's
+/// trade of widths.
+fn a_small_piecewise_linear_model_in_fixed_point_is_placed_routed_and_equals_its_evaluator(
+    d: &Path,
+) {
     let levels = Levels::read(&artifact_of(d, "piecewise", "levels")).unwrap();
     let test_rows = levels.test_rows().len() as u64;
     let fixed = alnlab_circuit::fixed_point::read(&artifact_of(d, "piecewise", "fixed")).unwrap();
@@ -503,7 +512,8 @@ fn a_small_piecewise_linear_model_in_fixed_point_is_placed_routed_and_equals_its
 
 /// Killed while the tools run, alnlab takes them with it and leaves their
 /// files only under the stage's unfinished output, which the next run
-/// removes: nothing in the system's temporary folder, no tool running on.
+/// removes: nothing in the system's temporary folder, no tool running on;
+/// and the next run makes the whole circuit.
 #[test]
 #[ignore = "full suite: needs Yosys, nextpnr-ice40, Icarus Verilog and Verilator"]
 fn a_killed_circuit_stage_leaves_no_tool_running_and_no_scratch_behind() {
@@ -518,7 +528,7 @@ fn a_killed_circuit_stage_leaves_no_tool_running_and_no_scratch_behind() {
         Command::new(env!("CARGO_BIN_EXE_alnlab"))
             .current_dir(d)
             .env("TMPDIR", &tmp)
-            .args(["-q", "run", "piecewise.toml"])
+            .args(["-q", "run", "piecewise.toml", "--reports", "reports"])
             .stdout(Stdio::null())
             .stderr(Stdio::null())
             .spawn()
@@ -605,4 +615,7 @@ fn a_killed_circuit_stage_leaves_no_tool_running_and_no_scratch_behind() {
         .filter(|n| n.contains("tmp") || n.starts_with("scratch"))
         .collect();
     assert!(left.is_empty(), "{left:?}");
+    // And that run made the whole circuit (both checked in one test: each
+    // runs the same synthesis, placing and routing for a minute).
+    a_small_piecewise_linear_model_in_fixed_point_is_placed_routed_and_equals_its_evaluator(d);
 }

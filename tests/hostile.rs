@@ -223,7 +223,14 @@ fn two_tiny_runs(dir: &Path) -> Vec<std::path::PathBuf> {
         .unwrap()
         .map(|e| e.unwrap().path())
         .collect();
-    records.sort();
+    // In the order they started (two quick runs may share a second, and
+    // so the first part of their ids).
+    let started = |path: &std::path::PathBuf| {
+        let record: serde_json::Value =
+            serde_json::from_slice(&std::fs::read(path).unwrap()).unwrap();
+        record["started"].as_str().unwrap().to_string()
+    };
+    records.sort_by_key(started);
     assert_eq!(records.len(), 2);
     records
 }

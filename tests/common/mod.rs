@@ -38,9 +38,11 @@ epochs = 1
 resimulate_steps = [1]
 rollout_starts = 1
 horizon = 2
+run_seconds = 0.000001
 "#;
 
-/// A small, quick experiment: a tumbling box, tiny trees.
+/// A small, quick experiment: a tumbling box, tiny trees, timing runs as
+/// short as they come (one evaluation each).
 pub const MANIFEST: &str = r#"
 [experiment]
 name = "e2e"
@@ -60,6 +62,9 @@ test_fraction = 0.4
 [train]
 leaves = 64
 epochs = 2
+
+[test]
+run_seconds = 0.000001
 "#;
 
 pub fn alnlab(dir: &Path, args: &[&str]) -> Output {

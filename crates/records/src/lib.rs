@@ -55,6 +55,9 @@ pub struct RunRecord {
     /// lists them. Empty for a clean checkout, and in records before it.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub git_changes: Vec<String>,
+    /// When the run started and finished, RFC 3339 UTC: to the millisecond
+    /// (to the second in records before), so that runs started in the same
+    /// second list in the order they started.
     pub started: String,
     pub finished: String,
     pub wall_seconds: f64,
@@ -171,7 +174,8 @@ pub struct StageRecord {
 
 /// A new run's id: when it started (UTC, to the second) and 6 hex digits
 /// of a hash of what it ran, where and when, so runs started in the same
-/// second differ: `20261123-152330-3fa9c1`. Ids sort by start.
+/// second differ: `20261123-152330-3fa9c1`. Ids sort by start to the
+/// second; listing orders by `started`, to the millisecond.
 pub fn new_id(started: SystemTime, experiment: &str, manifest_sha256: &str) -> String {
     let nanos = started
         .duration_since(SystemTime::UNIX_EPOCH)

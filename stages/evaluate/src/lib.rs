@@ -48,7 +48,7 @@ use alnlab_aln::runtime::{Runtime, Trained};
 use alnlab_aln::{ModelKind, Output, Target};
 use alnlab_codes::codes::Codec;
 use alnlab_codes::{Codebook, Entry};
-use alnlab_common::params::{self, Count, Fraction, ParamError};
+use alnlab_common::params::{self, Count, Fraction, ParamError, Positive};
 use alnlab_common::{Error, ModelId, Progress, Provenance, Result};
 use alnlab_tables::levels::Levels;
 use alnlab_tables::pairs::{Pairs, Side, Split};
@@ -107,6 +107,10 @@ pub struct Params {
     /// robust linear fit (`linear+nominal`) and, with `peer`, by boosted
     /// trees (`boosted+nominal`).
     pub hybrids: bool,
+    /// Each of a model's 5 timed runs repeats its evaluation until it has
+    /// taken at least this long (s). Smaller is quicker and noisier: a
+    /// trial run, or a test of the pipeline, needs no precise timing.
+    pub run_seconds: Positive,
 }
 
 impl Default for Params {
@@ -118,6 +122,7 @@ impl Default for Params {
             resimulate_steps: vec![Count(10), Count(5), Count(2), Count(1)],
             peer: false,
             hybrids: false,
+            run_seconds: Positive(timing::RUN_SECONDS),
         }
     }
 }
@@ -455,6 +460,7 @@ pub fn run(
     let timings = timing::in_rounds(
         models.iter().flat_map(|m| m.paths(&set)).collect(),
         timing::REPEATS,
+        params.run_seconds.get(),
     );
     progress.advance(1);
 

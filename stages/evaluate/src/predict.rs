@@ -166,7 +166,7 @@ mod tests {
         let pool = crate::timing::one_thread();
         let levels = super::levels(&aln, &x, None, &pool);
         let paths = super::paths(&aln, &x, None, &pool);
-        let timings = crate::timing::in_rounds(paths, 2);
+        let timings = crate::timing::in_rounds(paths, 2, crate::timing::RUN_SECONDS);
         let error: usize = levels[0]
             .iter()
             .zip(&x[0])

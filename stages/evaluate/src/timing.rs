@@ -4,9 +4,10 @@
 //! load on the machine falls on one round of every model, not on all runs
 //! of one. A path's figure is the median of its runs with their range; two
 //! paths compare run by run, round by round ([`Timing::runs`]). A run
-//! repeats its path until it has taken at least [`RUN_SECONDS`] (how many
-//! times is settled by an untimed warm-up run), so that a short path is not
-//! at the mercy of one scheduler blip.
+//! repeats its path until it has taken at least [`RUN_SECONDS`] (by
+//! default; `[test] run_seconds`), how many times settled by an untimed
+//! warm-up run, so that a short path is not at the mercy of one scheduler
+//! blip.
 
 use std::time::Instant;
 
@@ -16,8 +17,8 @@ use serde::Serialize;
 /// How many timed runs every evaluation path gets.
 pub const REPEATS: usize = 5;
 
-/// The least time one timed run takes (s): a path quicker than this is
-/// repeated within the run.
+/// The least time one timed run takes by default (s): a path quicker than
+/// this is repeated within the run.
 pub const RUN_SECONDS: f64 = 0.05;
 
 /// Nanoseconds per state over the timed runs of one path.
@@ -75,15 +76,16 @@ pub struct Path<'a> {
 }
 
 /// Times `paths` in `repeats` interleaved rounds, after a warm-up run of
-/// each that settles how many times a run repeats it.
-pub fn in_rounds(mut paths: Vec<Path>, repeats: usize) -> Vec<Timing> {
+/// each that settles how many times a run repeats it: enough to take at
+/// least `run_seconds`.
+pub fn in_rounds(mut paths: Vec<Path>, repeats: usize, run_seconds: f64) -> Vec<Timing> {
     let times: Vec<usize> = paths
         .iter_mut()
         .map(|path| {
             let clock = Instant::now();
             (path.run)();
             let once = clock.elapsed().as_secs_f64().max(1e-9);
-            ((RUN_SECONDS / once).ceil() as usize).clamp(1, 1_000_000)
+            ((run_seconds / once).ceil() as usize).clamp(1, 1_000_000)
         })
         .collect();
     let mut runs = vec![Vec::with_capacity(repeats); paths.len()];
@@ -155,7 +157,7 @@ mod tests {
                 move || order.borrow_mut().push(name)
             }),
         };
-        let timings = in_rounds(vec![path("a"), path("b")], 3);
+        let timings = in_rounds(vec![path("a"), path("b")], 3, RUN_SECONDS);
         // A warm-up run of each, then rounds of a then b (each run repeated
         // to fill its time: these paths take no time at all).
         let order = order.borrow();
