@@ -222,6 +222,24 @@ pub enum Learned<'a> {
     Boosted(&'a Peer),
 }
 
+/// Real values as a learned model reads them: every pair's columns
+/// `[variable][pair]`, the test rows' columns, and the test rows as rows.
+type Values<'s> = (&'s [Vec<f64>], &'s [&'s [f64]], &'s [f64]);
+
+impl Learned<'_> {
+    /// The next levels of the test rows from their inputs `x`, each output
+    /// advanced from its value in `base` (`x` itself for a model of the
+    /// dynamics), the same on every evaluation path.
+    fn levels(&self, id: ModelId, set: &TestSet, x: Values, base: Values) -> LevelColumns {
+        match self {
+            Learned::Piecewise(predictor) => {
+                piecewise::checked_levels(id, predictor, (x.1, x.2), (base.1, base.2))
+            }
+            Learned::Boosted(peer) => peer.levels(set.learned, x.0, base.0, &set.test.rows),
+        }
+    }
+}
+
 /// A model of the dynamics: the scored variables' next values from the
 /// current real values.
 pub struct Dynamics<'a> {
@@ -239,15 +257,8 @@ impl Compared for Dynamics<'_> {
     }
 
     fn one_step(&self, set: &TestSet) -> Result<LevelColumns> {
-        Ok(match &self.learned {
-            Learned::Piecewise(predictor) => piecewise::checked_levels(
-                self.id,
-                predictor,
-                (set.columns, set.states),
-                (set.columns, set.states),
-            ),
-            Learned::Boosted(peer) => peer.levels(set.learned, set.x, set.x, &set.test.rows),
-        })
+        let current = (set.x, set.columns, set.states);
+        Ok(self.learned.levels(self.id, set, current, current))
     }
 
     fn paths<'s>(&'s self, set: &'s TestSet<'s>) -> Vec<Path<'s>> {
@@ -317,17 +328,9 @@ impl Compared for Hybrid<'_> {
     }
 
     fn one_step(&self, set: &TestSet) -> Result<LevelColumns> {
-        Ok(match &self.learned {
-            Learned::Piecewise(predictor) => piecewise::checked_levels(
-                self.id,
-                predictor,
-                (set.hybrid_columns, set.hybrid_states),
-                (set.nominal_columns, set.nominal_states),
-            ),
-            Learned::Boosted(peer) => {
-                peer.levels(set.learned, set.hybrid_x, set.nominal, &set.test.rows)
-            }
-        })
+        let inputs = (set.hybrid_x, set.hybrid_columns, set.hybrid_states);
+        let nominal = (set.nominal, set.nominal_columns, set.nominal_states);
+        Ok(self.learned.levels(self.id, set, inputs, nominal))
     }
 
     fn paths<'s>(&'s self, set: &'s TestSet<'s>) -> Vec<Path<'s>> {
