@@ -165,17 +165,6 @@ impl PolicyId {
         PolicyId::Random,
     ];
 
-    /// Whether it plans nothing (zero torques, the random controller).
-    pub fn is_reference(self) -> bool {
-        match self {
-            PolicyId::Zero | PolicyId::Random => true,
-            PolicyId::Aln
-            | PolicyId::Linear
-            | PolicyId::Simulator { .. }
-            | PolicyId::Plant { .. } => false,
-        }
-    }
-
     /// The policy that plans with the test stage's `model`, where the
     /// plan stage has one.
     pub fn planning_with(model: ModelId) -> Option<PolicyId> {

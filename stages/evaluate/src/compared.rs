@@ -64,7 +64,8 @@ pub struct TestSet<'a> {
     pub columns: &'a [&'a [f64]],
     pub states: &'a [f64],
     /// Every pair's nominal prediction `[variable][pair]`, and a hybrid's
-    /// inputs (the current values, then the nominal prediction).
+    /// inputs (the current values, then the nominal prediction; empty
+    /// where no model compared is a hybrid).
     pub nominal: &'a [Vec<f64>],
     pub hybrid_x: &'a [Vec<f64>],
     /// The same on the test rows, as columns and rows.

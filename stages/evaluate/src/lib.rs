@@ -288,10 +288,14 @@ pub fn run(
     // input given is an input verified), and a hybrid's inputs: the state,
     // then its nominal prediction.
     let nominal = hybrid::base(nominal_path, &pairs, &learned)?;
-    let hybrid_x = hybrid::columns(&real_x, &nominal);
     // An ALN hybrid reads the state, then its nominal prediction, and
-    // advances from that prediction.
+    // advances from that prediction; the inputs are made only where a
+    // hybrid reads them.
     let aln_hybrid = piecewise && data.model.header.base == Base::Nominal;
+    let hybrid_x = match aln_hybrid || params.hybrids {
+        true => hybrid::columns(&real_x, &nominal),
+        false => Vec::new(),
+    };
     // Every model is scored on the variables the model predicts.
     let scored: Vec<usize> = if piecewise {
         data.reads.iter().map(|r| r.variable).collect()
