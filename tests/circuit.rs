@@ -117,7 +117,7 @@ fn the_circuit_equals_the_software_on_every_test_row_and_its_figures_reach_the_r
     // Three parts per learned variable; every test row simulated equal
     // (the stage fails otherwise).
     let figures = Table::read(&artifact(d, "circuit")).unwrap();
-    let levels = Levels::read(&artifact(d, "levels")).unwrap();
+    let levels = Levels::read(&artifact(d, "levels"), &artifact(d, "codebook")).unwrap();
     let test_rows = levels.test_rows().len() as u64;
     let variables = figures.strings("variable").unwrap();
     let parts = figures.strings("part").unwrap();
@@ -261,7 +261,11 @@ fn a_small_forest_placed_and_routed_on_an_ice40_equals_the_software_in_nanosecon
     write_manifest(d, "fpga.toml", FPGA);
     let out = alnlab(d, &["-q", "run", "fpga.toml", "--reports", "reports"]);
     assert!(out.status.success(), "{}", stderr(&out));
-    let levels = Levels::read(&artifact_of(d, "fpga", "levels")).unwrap();
+    let levels = Levels::read(
+        &artifact_of(d, "fpga", "levels"),
+        &artifact_of(d, "fpga", "codebook"),
+    )
+    .unwrap();
     let test_rows = levels.test_rows().len() as u64;
     let gates = alnlab_circuit::measured::read(&artifact_of(d, "fpga", "circuit"))
         .unwrap()
@@ -411,7 +415,11 @@ fpga = "ice40-hx8k"
 fn a_small_piecewise_linear_model_in_fixed_point_is_placed_routed_and_equals_its_evaluator(
     d: &Path,
 ) {
-    let levels = Levels::read(&artifact_of(d, "piecewise", "levels")).unwrap();
+    let levels = Levels::read(
+        &artifact_of(d, "piecewise", "levels"),
+        &artifact_of(d, "piecewise", "codebook"),
+    )
+    .unwrap();
     let test_rows = levels.test_rows().len() as u64;
     let fixed = alnlab_circuit::fixed_point::read(&artifact_of(d, "piecewise", "fixed")).unwrap();
     let routed = alnlab_circuit::routed::read(&artifact_of(d, "piecewise", "fpga"))

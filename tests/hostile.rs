@@ -797,7 +797,7 @@ fn piecewise_linear_models_refuse_what_they_cannot_do() {
                 "--out",
                 "s1",
             ],
-            &["piecewise-linear", "--train-shard"],
+            &["piecewise-linear", "without --shard"],
             Some(Path::new("s1")),
         )
         .exits(2),

@@ -608,6 +608,7 @@ pub fn train_shard(
     shard: Shard,
 ) -> Result<PathBuf> {
     let variant = manifest.variant(variant)?;
+    stages::refuse_sharded_piecewise(&variant.stages, shard, "--train-shard")?;
     let train = stages::sharded();
     let TrainInputs { inputs, provenance } = up_to_train(manifest, options, variant)?;
     let key = shard_key(&StageKey::of(&provenance, train.format_version), shard);

@@ -632,6 +632,19 @@ pub fn sharded() -> &'static Stage {
         .expect("the table has a sharded stage")
 }
 
+/// Refuses to train a piecewise-linear model in shards, naming `flag`, the
+/// one the user gave (`--shard` of `alnlab train`, `--train-shard` of
+/// `alnlab run`): it trains in one process, its trees being few.
+pub fn refuse_sharded_piecewise(stages: &Stages, shard: Shard, flag: &str) -> Result<()> {
+    match (stages.train.model, shard.is_part()) {
+        (ModelKind::PiecewiseLinear, true) => Err(alnlab_common::Error::Invalid(format!(
+            "a piecewise-linear model trains in one process (its trees are few): run without \
+             {flag}"
+        ))),
+        (ModelKind::PiecewiseLinear | ModelKind::BitForest | ModelKind::Threshold, _) => Ok(()),
+    }
+}
+
 /// The names of the stages, in order.
 pub fn names() -> Vec<&'static str> {
     STAGES.iter().map(|s| s.name).collect()

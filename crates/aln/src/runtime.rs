@@ -6,7 +6,7 @@
 //! row at a time. Every path decodes through the outputs' [`Output`], with
 //! optional rate limiting.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use alnlab_codes::Codebook;
 use alnlab_codes::bits::{BitMatrix, Columns, encode, encode_columns};
@@ -27,6 +27,8 @@ use alnlab_common::{Error, Result};
 pub struct Trained {
     pub model: Model,
     pub codebook: Codebook,
+    /// Where the codebook was read from.
+    pub codebook_path: PathBuf,
     /// The learned variables' codecs, in the model's variable order.
     pub codecs: Vec<Codec>,
     /// What decodes each learned variable from its trees' bits (none for
@@ -88,6 +90,7 @@ impl Trained {
         Ok(Trained {
             model,
             codebook,
+            codebook_path: codebook_path.to_path_buf(),
             codecs,
             outputs,
             reads,

@@ -8,7 +8,7 @@
 //! levels, never null, each below its variable's level count (checked
 //! against the codebook as a column is read).
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 use alnlab_codes::Entry;
@@ -51,14 +51,22 @@ pub fn write(
 pub struct Levels {
     table: Table,
     keys: Vec<Key>,
+    /// The codebook the levels are read against, named where they disagree.
+    codebook: PathBuf,
 }
 
 impl Levels {
-    /// Reads the table at `path`, its keys checked row by row.
-    pub fn read(path: &Path) -> Result<Levels> {
+    /// Reads the table at `path`, its keys checked row by row, for reading
+    /// against the codebook at `codebook` (which a level it does not give
+    /// names with the levels file).
+    pub fn read(path: &Path, codebook: &Path) -> Result<Levels> {
         let table = Table::read(path)?;
         let keys = read_keys(&table)?;
-        Ok(Levels { table, keys })
+        Ok(Levels {
+            table,
+            keys,
+            codebook: codebook.to_path_buf(),
+        })
     }
 
     /// The pairs' keys, row by row.
@@ -134,8 +142,10 @@ impl Levels {
             return Err(Error::bad_file(
                 self.path(),
                 format!(
-                    "row {r}: `{name}` is level {}, but the codebook gives `{}` {count} levels (0…{})",
+                    "row {r}: `{name}` is level {}, but the codebook {} gives `{}` {count} levels \
+                     (0…{})",
                     column.value(r),
+                    self.codebook.display(),
                     entry.variable,
                     count - 1
                 ),
@@ -168,7 +178,7 @@ mod tests {
         let path = dir.path().join(FILE);
         let (x, y) = (vec![vec![0, 1, 2]], vec![vec![1, 2, 7]]);
         write(&path, &keys(), &["a"], &x, &y, &provenance()).unwrap();
-        let levels = Levels::read(&path).unwrap();
+        let levels = Levels::read(&path, Path::new("codebook.parquet")).unwrap();
         assert_eq!(levels.keys(), keys());
         assert_eq!(
             (levels.train_rows(), levels.test_rows()),
@@ -196,13 +206,13 @@ mod tests {
         )
         .unwrap();
         edit_u16_columns(&path, |columns| columns[5].as_mut().unwrap()[2] = 8);
-        let levels = Levels::read(&path).unwrap();
+        let levels = Levels::read(&path, Path::new("cb/codebook.parquet")).unwrap();
         let message = levels
             .column(Side::Next, &entry("a"))
             .unwrap_err()
             .to_string();
         assert!(
-            message.contains("row 2: `y.a` is level 8, but the codebook gives `a` 8 levels (0…7)"),
+            message.contains("row 2: `y.a` is level 8, but the codebook cb/codebook.parquet gives `a` 8 levels (0…7)"),
             "{message}"
         );
     }

@@ -136,6 +136,7 @@ pub fn execute(stage: &'static Stage, args: &ArgMatches, quiet: bool) -> Result<
         .flatten()
         .copied()
         .unwrap_or(Shard::ALL);
+    crate::stages::refuse_sharded_piecewise(&variant.stages, shard, "--shard")?;
     // The stage writes into a hidden folder inside `out`; its files move
     // into `out` only when it has finished, so a failure leaves none.
     atomic::create_dir(out)?;

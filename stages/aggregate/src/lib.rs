@@ -53,7 +53,7 @@ pub fn run(
     let pairs = Pairs::read(inputs.pairs)?;
     let nominal = Pairs::read(inputs.nominal)?;
     let codebook = alnlab_tables::codebook::read(inputs.codebook)?;
-    let levels = levels::Levels::read(inputs.levels)?;
+    let levels = levels::Levels::read(inputs.levels, inputs.codebook)?;
     let planned = Pairs::read(inputs.transitions)?;
     let planned_nominal = Pairs::read(inputs.transitions_nominal)?;
     for (table, of) in [(&nominal, &pairs), (&planned_nominal, &planned)] {
@@ -308,7 +308,7 @@ mod tests {
         assert_eq!(nominal.keys(), joined.keys());
         let predicted = nominal.column(Side::Next, "q").unwrap();
         assert_eq!(predicted.values().to_vec(), [1.5, 2.5, 3.5, 4.5]);
-        let levels = levels::Levels::read(&out.join(LEVELS_FILE)).unwrap();
+        let levels = levels::Levels::read(&out.join(LEVELS_FILE), &c).unwrap();
         let entry = &codebook.entries[0];
         assert_eq!(levels.column(Side::Current, entry).unwrap(), [0, 1, 2, 3]);
         assert_eq!(levels.column(Side::Next, entry).unwrap(), [1, 2, 3, 4]);

@@ -278,7 +278,7 @@ pub fn piecewise_rows(
     levels_path: &Path,
     pairs_path: &Path,
 ) -> Result<piecewise::Rows> {
-    let levels = Levels::read(levels_path)?;
+    let levels = Levels::read(levels_path, &trained.codebook_path)?;
     let pairs = Pairs::read(pairs_path)?;
     levels.check_made_from(&pairs)?;
     let learned: Vec<&Entry> = trained.codebook.learned().collect();
@@ -319,7 +319,7 @@ pub fn measure_test_rows(
     progress: &dyn Progress,
 ) -> Result<(Measurement, usize)> {
     let circuit = circuit_of(trained, model_path)?;
-    let levels = Levels::read(levels_path)?;
+    let levels = Levels::read(levels_path, &trained.codebook_path)?;
     let mut test = levels.test_rows();
     if let Some(n) = rows {
         test.truncate(n);

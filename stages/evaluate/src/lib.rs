@@ -184,13 +184,14 @@ impl Data {
             codecs,
             outputs,
             reads,
+            ..
         } = Trained::read(model_path, codebook_path)?;
         Ok(Data {
             model,
             codecs,
             outputs,
             reads,
-            levels: Levels::read(levels_path)?,
+            levels: Levels::read(levels_path, codebook_path)?,
             codebook,
         })
     }

@@ -433,7 +433,7 @@ pub fn run(
             .frames;
         let starts = start_states(p, logged, params, seed, trajectory_path)?;
         let trained = Trained::read(model_path, codebook_path)?;
-        let levels = Levels::read(levels_path)?;
+        let levels = Levels::read(levels_path, codebook_path)?;
         let learned: Vec<_> = trained.codebook.learned().collect();
         let train_rows = levels.train_rows();
         let x_train = levels.select(Side::Current, &learned, &train_rows)?;

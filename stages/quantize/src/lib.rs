@@ -507,7 +507,11 @@ mod tests {
             .collect();
         assert!(!missing.is_empty(), "{:?}", codebook.entries);
         assert!(missing.iter().all(|e| !e.learned));
-        let levels = alnlab_tables::levels::Levels::read(&dir.path().join(levels::FILE)).unwrap();
+        let levels = alnlab_tables::levels::Levels::read(
+            &dir.path().join(levels::FILE),
+            &dir.path().join(CODEBOOK_FILE),
+        )
+        .unwrap();
         let scenes: std::collections::BTreeSet<&str> =
             levels.keys().iter().map(|k| k.scene.as_str()).collect();
         assert_eq!(scenes, ["pendulum", "worm"].into());

@@ -239,7 +239,7 @@ pub fn run(
     } = *inputs;
     params.validate().map_err(|e| params::invalid("train", e))?;
     let codebook = alnlab_tables::codebook::read(codebook_path)?;
-    let levels = Levels::read(levels_path)?;
+    let levels = Levels::read(levels_path, codebook_path)?;
     let learned: Vec<_> = codebook.learned().collect();
     if learned.is_empty() {
         return Err(Error::bad_file(
@@ -259,8 +259,8 @@ pub fn run(
     if piecewise {
         if shard.is_part() {
             return Err(Error::Invalid(
-                "a piecewise-linear model trains in one process: its trees are few; run \
-                 without --train-shard"
+                "a piecewise-linear model trains in one process (its trees are few): it \
+                 takes no shard"
                     .into(),
             ));
         }
