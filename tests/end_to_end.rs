@@ -64,7 +64,7 @@ fn check_reports_three_kinds_of_error_with_line_and_column() {
     assert!(out.status.success(), "{}", stderr(&out));
     let text = String::from_utf8(out.stdout).unwrap();
     assert!(
-        text.contains("# variant `base`") && text.contains("integrator = \"semi-implicit-euler\""),
+        text.contains("# variant `base`") && text.contains("integrator = \"implicit\""),
         "{text}"
     );
 }

@@ -19,6 +19,7 @@ use nalgebra::{
 };
 
 use crate::dynamics::{Loads, State};
+use crate::integrate::REFINEMENTS;
 use crate::model::{Joint, Model, Root};
 use crate::spatial::{Transform, angular, cross_force, cross_motion, linear, skew, spatial};
 
@@ -45,6 +46,13 @@ pub struct LoadsLanes {
     pub tau: Vec<Vector3<Lanes>>,
     pub effort: Vec<Lanes>,
     pub f_ext: Vec<Vector6<Lanes>>,
+    /// How each one-DOF joint's effort falls with its velocity and its
+    /// position (b, k ≥ 0), which an implicit step takes implicitly.
+    pub effort_damping: Vec<Lanes>,
+    pub effort_stiffness: Vec<Lanes>,
+    /// Added to each one-DOF joint's diagonal of the mass matrix (an
+    /// implicit step's h b + h² k).
+    pub armature: Vec<Lanes>,
 }
 
 /// Accelerations of [`LANES`] states: the root's linear one (root frame),
@@ -80,6 +88,21 @@ pub trait LaneForces {
         kin: &KinematicsLanes,
         loads: &mut LoadsLanes,
     );
+
+    /// As [`crate::integrate::Forces::refine`] for group `g`'s states
+    /// `state`, their accelerations `qdd`: each one-DOF joint's effort that
+    /// is piecewise affine in the velocity moved, lane by lane, to the piece
+    /// holding at the step's end; whether any moved. None, by default.
+    fn refine(
+        &mut self,
+        _g: usize,
+        _state: &StateLanes,
+        _qdd: &[Lanes],
+        _h: f64,
+        _loads: &mut LoadsLanes,
+    ) -> bool {
+        false
+    }
 }
 
 /// The loads packed with the states, held.
@@ -218,6 +241,15 @@ impl LoadsLanes {
             f_ext: (0..model.len())
                 .map(|i| Vector6::from_fn(|k, _| lanes(&|l| l.f_ext[i][k])))
                 .collect(),
+            effort_damping: (0..model.len())
+                .map(|i| lanes(&|l| l.effort_damping[i]))
+                .collect(),
+            effort_stiffness: (0..model.len())
+                .map(|i| lanes(&|l| l.effort_stiffness[i]))
+                .collect(),
+            armature: (0..model.len())
+                .map(|i| lanes(&|l| l.armature[i]))
+                .collect(),
         }
     }
 }
@@ -351,17 +383,17 @@ impl Batch {
     }
 
     /// Group `g`'s states, their kinematics and their accelerations under
-    /// the loads `forces` gives them now.
+    /// the loads `forces` gives them now — as a step of `implicit` (h)
+    /// evaluates them ([`crate::Integrator::Implicit`]), or explicitly
+    /// (`None`).
     pub fn evaluate(
         &mut self,
         model: &Model,
         g: usize,
+        implicit: Option<f64>,
         forces: &mut impl LaneForces,
     ) -> (&StateLanes, &KinematicsLanes, &AccelLanes) {
-        self.ws.kinematics(model, &self.states[g]);
-        forces.apply(model, g, &self.states[g], &self.ws.kin, &mut self.loads[g]);
-        self.ws
-            .forward(model, &self.states[g], &self.loads[g], &mut self.accel);
+        self.solve(model, g, implicit, forces);
         (&self.states[g], &self.ws.kin, &self.accel)
     }
 
@@ -369,31 +401,75 @@ impl Batch {
     /// (kinematics and the articulated-body algorithm, as
     /// [`crate::dynamics::Workspace::forward`] computes them).
     pub fn accelerations(&mut self, model: &Model, g: usize) -> &AccelLanes {
-        self.evaluate(model, g, &mut Held).2
+        self.evaluate(model, g, None, &mut Held).2
+    }
+
+    /// Group `g`'s kinematics, the loads `forces` gives its states and
+    /// their accelerations; with `implicit` (h), each one-DOF joint's
+    /// effort and armature as an implicit step takes them: −h k q̇ added,
+    /// h b + h² k on the diagonal, efforts whose piece changes at the step's
+    /// end solved again (as [`crate::integrate::Evaluation::run_for`] takes
+    /// one state's).
+    fn solve(
+        &mut self,
+        model: &Model,
+        g: usize,
+        implicit: Option<f64>,
+        forces: &mut impl LaneForces,
+    ) {
+        self.ws.kinematics(model, &self.states[g]);
+        let loads = &mut self.loads[g];
+        forces.apply(model, g, &self.states[g], &self.ws.kin, loads);
+        let Some(dt) = implicit else {
+            self.ws
+                .forward(model, &self.states[g], &self.loads[g], &mut self.accel);
+            return;
+        };
+        let h = Lanes::splat(dt);
+        let qd = &self.states[g].qd;
+        for ((effort, k), qd) in loads.effort.iter_mut().zip(&loads.effort_stiffness).zip(qd) {
+            *effort -= h * *k * *qd;
+        }
+        for pass in 0..=REFINEMENTS {
+            let loads = &mut self.loads[g];
+            if pass > 0 && !forces.refine(g, &self.states[g], &self.accel.qdd, dt, loads) {
+                break;
+            }
+            for i in 0..model.len() {
+                loads.armature[i] = h * loads.effort_damping[i] + h * h * loads.effort_stiffness[i];
+            }
+            self.ws
+                .forward(model, &self.states[g], &self.loads[g], &mut self.accel);
+        }
     }
 
     /// Advances every state by `dt` with semi-implicit Euler under its held
     /// loads, as [`crate::integrate::Stepper::step`] does one state's.
     pub fn step(&mut self, model: &Model, dt: f64) {
-        self.step_under(model, dt, &mut Held);
+        self.step_under(model, dt, false, &mut Held);
     }
 
     /// Advances every state by `dt` with semi-implicit Euler under the loads
-    /// `forces` gives at the step's start, as
+    /// `forces` gives at the step's start — with `implicit`, the one-DOF
+    /// joints' effort slopes taken implicitly, as
+    /// [`crate::Integrator::Implicit`] takes them — as
     /// [`crate::integrate::Stepper::step`] does one state's (a free root's
     /// linear momentum tracked across steps, from the first after the
     /// states were set).
-    pub fn step_under(&mut self, model: &Model, dt: f64, forces: &mut impl LaneForces) {
+    pub fn step_under(
+        &mut self,
+        model: &Model,
+        dt: f64,
+        implicit: bool,
+        forces: &mut impl LaneForces,
+    ) {
         let h = Lanes::splat(dt);
         for g in 0..self.states.len() {
-            self.ws.kinematics(model, &self.states[g]);
-            forces.apply(model, g, &self.states[g], &self.ws.kin, &mut self.loads[g]);
+            self.solve(model, g, implicit.then_some(dt), forces);
             if model.root == Root::Free && self.momentum[g].is_none() {
                 self.momentum[g] = Some(self.ws.linear_momentum(model));
             }
             let external = self.ws.external_force(model, &self.loads[g]);
-            self.ws
-                .forward(model, &self.states[g], &self.loads[g], &mut self.accel);
             let (s, a) = (&mut self.states[g], &self.accel);
             s.root_v += a.root_v * h;
             for (w, wd) in s.rates.iter_mut().zip(&a.rates) {
@@ -591,7 +667,7 @@ impl Scratch {
         let (before, rest) = self.articulated.split_at_mut(i);
         let ia = &rest[0];
         let big_u = ia * s;
-        let d_inv = Lanes::splat(1.0) / s.dot(&big_u);
+        let d_inv = Lanes::splat(1.0) / (s.dot(&big_u) + loads.armature[i]);
         let u = loads.effort[i] - s.dot(&self.bias[i]);
         self.axis_u[i] = big_u;
         self.axis_d_inv[i] = d_inv;

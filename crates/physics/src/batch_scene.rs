@@ -15,6 +15,7 @@ use nalgebra::{Matrix3, SimdValue, Vector3, Vector6};
 use crate::Integrator;
 use crate::batch::{Batch, KinematicsLanes, LANES, LaneForces, Lanes, LoadsLanes, StateLanes};
 use crate::dynamics::{Loads, State};
+use crate::joints::DrivePiece;
 use crate::model::{Model, Root};
 use crate::runner::Prepared;
 use crate::spatial::{angular, linear, spatial};
@@ -39,14 +40,15 @@ pub struct SceneBatch<'a> {
 impl<'a> SceneBatch<'a> {
     /// A batch of scene `p` reading its variables `read` (indices into its
     /// layout's variables); `None` where the scene cannot be stepped in
-    /// lanes: an integrator other than semi-implicit Euler, a plant whose
+    /// lanes: Runge–Kutta (a batch steps by semi-implicit Euler, its joints'
+    /// slopes taken implicitly under the implicit integrator), a plant whose
     /// actuators produce other than the command (their lag, delay and noise
     /// are tracked state by state by [`crate::Runner`]), or a variable read
     /// that a batch does not give (a link's acceleration or external
     /// force).
     pub fn new(p: &'a Prepared, read: &[usize]) -> Option<SceneBatch<'a>> {
         let actuators = p.scene.plant.as_ref().is_some_and(|pl| pl.has_actuators());
-        if p.scene.integrator != Integrator::SemiImplicitEuler || actuators {
+        if p.scene.integrator == Integrator::Rk4 || actuators {
             return None;
         }
         let read = read
@@ -60,6 +62,7 @@ impl<'a> SceneBatch<'a> {
             forces: BatchForces {
                 p,
                 g: Vec::new(),
+                drive: Vec::new(),
                 damping: Lanes::splat(p.scene.added_damping()),
                 limit: p.scene.controller().torque_limit.get(),
             },
@@ -82,6 +85,8 @@ impl<'a> SceneBatch<'a> {
                 let batch = Batch::pack(model, &states, &loads);
                 let zero = Vector3::from_element(Lanes::splat(0.0));
                 self.forces.g = vec![vec![zero; model.len()]; batch.states.len()];
+                self.forces.drive =
+                    vec![vec![[DrivePiece::default(); LANES]; model.len()]; batch.states.len()];
                 self.values = vec![0.0; n * self.read.len()];
                 self.finite = vec![true; n];
                 self.batch = Some(batch);
@@ -118,8 +123,9 @@ impl<'a> SceneBatch<'a> {
     /// Advances every state `steps` steps of `dt`.
     pub fn advance(&mut self, steps: u64, dt: f64) {
         let batch = self.batch.as_mut().expect("started");
+        let implicit = self.p.scene.integrator == Integrator::Implicit;
         for _ in 0..steps {
-            batch.step_under(&self.p.model, dt, &mut self.forces);
+            batch.step_under(&self.p.model, dt, implicit, &mut self.forces);
         }
     }
 
@@ -132,10 +138,12 @@ impl<'a> SceneBatch<'a> {
             self.finite[k] = batch.is_finite(k);
         }
         let model = &self.p.model;
+        let implicit =
+            (self.p.scene.integrator == Integrator::Implicit).then(|| self.p.scene.dt.get());
         for g in 0..batch.states.len() {
             let (state, kin, accel) = match self.accelerations {
                 true => {
-                    let (state, kin, accel) = batch.evaluate(model, g, &mut self.forces);
+                    let (state, kin, accel) = batch.evaluate(model, g, implicit, &mut self.forces);
                     (state, kin, Some(accel))
                 }
                 false => {
@@ -167,6 +175,9 @@ struct BatchForces<'a> {
     /// Per group, per link, the control torque g on its parent (a one-DOF
     /// joint's effort in x, already clamped to its limit).
     g: Vec<Vec<Vector3<Lanes>>>,
+    /// Per group, per link, lane by lane, the piece of its one-DOF joint's
+    /// drive the last evaluation took.
+    drive: Vec<Vec<[DrivePiece; LANES]>>,
     /// Viscous damping at every ball hinge.
     damping: Lanes,
     /// The controller's torque limit.
@@ -189,14 +200,22 @@ impl LaneForces for BatchForces<'_> {
         if model.root == Root::Pinned {
             loads.tau[0] = Vector3::from_element(Lanes::splat(0.0));
         }
+        let zero = Lanes::splat(0.0);
         for (i, law) in self.p.laws.iter().enumerate() {
-            loads.effort[i] = match law {
-                Some(law) => Lanes::from(std::array::from_fn::<f64, LANES, _>(|j| {
-                    let (q, qd) = (state.q[i].extract(j), state.qd[i].extract(j));
-                    law.drive(torques[i].x.extract(j), qd) + law.passive(q, qd)
-                })),
-                None => Lanes::splat(0.0),
+            let Some(law) = law else {
+                (loads.effort[i], loads.effort_damping[i]) = (zero, zero);
+                loads.effort_stiffness[i] = zero;
+                continue;
             };
+            for j in 0..LANES {
+                let (q, qd) = (state.q[i].extract(j), state.qd[i].extract(j));
+                let drive = law.drive_piece(torques[i].x.extract(j), qd);
+                self.drive[g][i][j] = drive;
+                let (b, k) = law.slopes(q, qd);
+                loads.effort[i].replace(j, drive.at(qd) + law.passive(q, qd));
+                loads.effort_damping[i].replace(j, b + drive.slope);
+                loads.effort_stiffness[i].replace(j, k);
+            }
         }
         loads.f_ext.fill(Vector6::from_element(Lanes::splat(0.0)));
         for point in &self.p.points {
@@ -217,5 +236,37 @@ impl LaneForces for BatchForces<'_> {
                 }
             }
         }
+    }
+
+    /// As [`crate::runner::SceneForces`] refines one state's drives.
+    fn refine(
+        &mut self,
+        g: usize,
+        state: &StateLanes,
+        qdd: &[Lanes],
+        h: f64,
+        loads: &mut LoadsLanes,
+    ) -> bool {
+        let mut moved = false;
+        for (i, law) in self.p.laws.iter().enumerate() {
+            let Some(law) = law.filter(|l| l.velocity.is_finite()) else {
+                continue;
+            };
+            for j in 0..LANES {
+                let qd = state.qd[i].extract(j);
+                let now = self.drive[g][i][j];
+                let effort = self.g[g][i].x.extract(j);
+                let end = law.drive_toward(effort, now, qd + h * qdd[i].extract(j));
+                if end != now {
+                    let effort = loads.effort[i].extract(j) + end.at(qd) - now.at(qd);
+                    loads.effort[i].replace(j, effort);
+                    let slope = loads.effort_damping[i].extract(j) + end.slope - now.slope;
+                    loads.effort_damping[i].replace(j, slope);
+                    self.drive[g][i][j] = end;
+                    moved = true;
+                }
+            }
+        }
+        moved
     }
 }

@@ -15,8 +15,9 @@ use crate::model::Model;
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum Integrator {
-    /// Velocities first, then positions with the new velocities.
-    #[default]
+    /// Velocities first, then positions with the new velocities; every
+    /// effort explicit, so a scene's damping must be one its step resolves
+    /// (the scene's check says which dt does).
     SemiImplicitEuler,
     /// Classical fourth-order Runge–Kutta.
     Rk4,
@@ -27,8 +28,12 @@ pub enum Integrator {
     /// (M + diag(h b + h² k)) q̈ = τ − C − h k q̇, the linearised backward
     /// Euler step, whatever b and k are: stable for damping and limit
     /// springs no explicit step of that h resolves. Ball hinges' damping
-    /// and contacts stay explicit. Without damping, friction or a limit
-    /// engaged it is semi-implicit Euler, bit for bit.
+    /// and contacts stay explicit. Without damping, friction, a limit
+    /// engaged or a drive braking it is semi-implicit Euler, bit for bit.
+    /// The default, as MuJoCo's Euler integrator takes joint damping
+    /// implicitly by default: a robot loaded as its description gives it
+    /// runs at a real step.
+    #[default]
     Implicit,
 }
 
@@ -37,7 +42,22 @@ pub enum Integrator {
 /// excluded) for a state whose kinematics are given.
 pub trait Forces {
     fn apply(&mut self, model: &Model, state: &State, kin: &Kinematics, loads: &mut Loads);
+
+    /// For an implicit step of `h` from `state`, whose accelerations under
+    /// `loads` came out as `qdd`: moves each one-DOF joint's effort that is
+    /// piecewise affine in the velocity to the piece holding at the step's
+    /// end, q̇ + h q̈ (its value at `state` in `loads.effort`, its slope in
+    /// `loads.effort_damping`); returns whether any moved, and the step is
+    /// then solved again. None, by default.
+    fn refine(&mut self, _state: &State, _qdd: &[f64], _h: f64, _loads: &mut Loads) -> bool {
+        false
+    }
 }
+
+/// How many times an implicit step solves again for efforts whose piece
+/// changed at its end ([`Forces::refine`]): the pieces of a joint's drive
+/// are three, and each pass settles at least one joint.
+pub(crate) const REFINEMENTS: usize = 4;
 
 /// No torques, no external forces.
 pub struct NoForces;
@@ -115,7 +135,19 @@ impl Evaluation {
         }
         self.ws
             .forward(model, state, &self.kin, &self.loads, &mut self.deriv);
-        if implicit.is_some() {
+        if let Some(h) = implicit {
+            for _ in 0..REFINEMENTS {
+                if !forces.refine(state, &self.deriv.qd, h, &mut self.loads) {
+                    break;
+                }
+                let loads = &mut self.loads;
+                for i in 0..model.len() {
+                    loads.armature[i] =
+                        h * loads.effort_damping[i] + h * h * loads.effort_stiffness[i];
+                }
+                self.ws
+                    .forward(model, state, &self.kin, &self.loads, &mut self.deriv);
+            }
             for (i, effort) in self.implicit_effort.iter_mut().enumerate() {
                 *effort -= self.loads.armature[i] * self.deriv.qd[i];
             }

@@ -5,10 +5,12 @@
 //! - Damping: −b q̇, b the URDF's `damping` plus the scene's
 //!   `hinge_damping`.
 //! - Friction: −μ q̇ / max(|q̇|, 0.01), Coulomb above a slip speed of 0.01
-//!   rad/s (or m/s) and viscous below it, its viscous coefficient capped at
-//!   I / (2 dt) (I the link's own inertia about the axis) as an explicit
-//!   step cannot resolve a stiffer one; uncapped under the implicit
-//!   integrator, which takes its slope implicitly ([`JointLaw::slopes`]).
+//!   rad/s (or m/s) and viscous below it. Under the implicit integrator
+//!   (the default) its slope is taken implicitly ([`JointLaw::slopes`]), so
+//!   it is Coulomb above the slip speed whatever the link's inertia; under
+//!   semi-implicit Euler its viscous coefficient is capped at I / (2 dt) (I
+//!   the link's own inertia about the axis), as an explicit step cannot
+//!   resolve a stiffer one.
 //! - Limits: past a bound by d > 0, a spring–damper pushing back,
 //!   max(0, k d + c ḋ), that never pulls; k = I (2π / (20 dt))² (a period of
 //!   20 of the scene's integration steps) and c = 2 √(k I), critical
@@ -25,14 +27,14 @@
 //!   within ± the URDF's `velocity` the way ros_control's soft limits do:
 //!   the effort is clamped to [−k (q̇ + v), −k (q̇ − v)] (within ± the effort
 //!   limit E), so no effort speeds the joint past its limit and one beyond
-//!   it is braked; k = min(E / (0.1 v), I / (2 dt)) — the whole effort
-//!   until within a tenth of the limit, unless that is stiffer than an
-//!   explicit step resolves (friction's cap, on the link's own inertia:
-//!   then a light distal link's drive gives less than its effort limit
-//!   near the velocity limit, k v at rest). A soft brake: a joint pushed on by
-//!   the rest of the robot may pass its limit by a margin that grows as
-//!   its own inertia shrinks (the UR5 driven hard: by at most 15%, where
-//!   without it the wrist spins at 94 rad/s against 3.2).
+//!   it is braked. Under the implicit integrator k = E / (0.05 v): the
+//!   drive gives its whole effort until within 5% of the limit, none at
+//!   it, and brakes with its whole effort 5% past it, its slope k taken
+//!   implicitly ([`JointLaw::drive`]). Under semi-implicit Euler k = min(E
+//!   / (0.1 v), I / (2 dt)), capped as friction is: there a light link's
+//!   drive gives less than its effort limit near the velocity limit, k v at
+//!   rest, and a joint pushed on by the rest of the robot may pass its
+//!   limit by a margin that grows as its own inertia shrinks.
 
 use crate::urdf::JointSpec;
 
@@ -42,6 +44,29 @@ pub const FRICTION_SLIP_SPEED: f64 = 0.01;
 /// Integration steps per period of a limit's spring on the joint's
 /// effective inertia.
 pub const LIMIT_PERIOD_STEPS: f64 = 20.0;
+
+/// Under the implicit integrator, the fraction of its velocity limit within
+/// which a drive gives less than its whole effort (and past which it brakes
+/// with all of it).
+pub const DRIVE_BAND: f64 = 0.05;
+
+/// One affine piece of a drive's effort as a function of the joint
+/// velocity: `offset − slope · q̇`.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct DrivePiece {
+    /// Which piece, in the order of rising velocity (−2 … 2).
+    pub index: i8,
+    pub offset: f64,
+    /// −∂effort/∂q̇ (≥ 0).
+    pub slope: f64,
+}
+
+impl DrivePiece {
+    /// The piece's effort at velocity `qd`.
+    pub fn at(&self, qd: f64) -> f64 {
+        self.offset - self.slope * qd
+    }
+}
 
 /// One joint's limits and passive dynamics, ready to apply.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -69,14 +94,16 @@ impl JointLaw {
     /// The law of a joint as `spec` states it, with `added_damping` and,
     /// from a plant, `added_friction`, for integration steps of `dt`; with
     /// `hold_velocity`, the drive holds the joint within the description's
-    /// velocity limit, if it gives one. Friction's viscous cap and the
-    /// velocity drive's gain are sized on `own`, the link's own inertia
-    /// about the axis; the limit's spring and damper on the smaller of that
+    /// velocity limit, if it gives one. The limit's spring and damper are
+    /// sized on the smaller of `own`, the link's own inertia about the axis,
     /// and `effective`, the joint's effective inertia
     /// ([`crate::dynamics::effective_inertias`]): sized on its link's own
     /// alone, they were too stiff for a joint whose parent moves too, and a
     /// humanoid's waist blew up at its limit. With `implicit`, steps take
-    /// the passive efforts' slopes implicitly, and friction's is not capped.
+    /// the passive efforts' and the drive's slopes implicitly: friction's is
+    /// not capped and the drive's gain is its effort's over
+    /// [`DRIVE_BAND`] of its velocity limit. Without, both are capped at
+    /// `own` / (2 dt), what an explicit step resolves.
     pub fn new(
         (own, effective): (f64, f64),
         spec: &JointSpec,
@@ -85,7 +112,6 @@ impl JointLaw {
         hold_velocity: bool,
         (dt, implicit): (f64, bool),
     ) -> JointLaw {
-        let inertia = own;
         let held = own.min(effective);
         let omega = std::f64::consts::TAU / (LIMIT_PERIOD_STEPS * dt);
         let stiffness = held * omega * omega;
@@ -94,9 +120,16 @@ impl JointLaw {
             .velocity
             .filter(|_| hold_velocity)
             .unwrap_or(f64::INFINITY);
+        let explicit_cap = own / (2.0 * dt);
+        let velocity_gain = match implicit && effort.is_finite() {
+            true => effort / (DRIVE_BAND * velocity),
+            // With no effort limit to size it on, the drive brakes as an
+            // explicit step allows.
+            false => (effort / (0.1 * velocity)).min(explicit_cap),
+        };
         JointLaw {
             velocity,
-            velocity_gain: (effort / (0.1 * velocity)).min(inertia / (2.0 * dt)),
+            velocity_gain,
             damping: spec.damping + added_damping,
             friction: match added_friction {
                 Some(added) => spec.friction + added,
@@ -105,7 +138,7 @@ impl JointLaw {
             friction_cap: if implicit {
                 f64::INFINITY
             } else {
-                inertia / (2.0 * dt)
+                explicit_cap
             },
             range: spec.range,
             stiffness,
@@ -120,16 +153,70 @@ impl JointLaw {
     }
 
     /// The effort the drive gives for `effort` (already within the effort
-    /// limit) at joint velocity `qd`: within the velocity limit's soft
-    /// bounds, if it holds one.
-    pub fn drive(&self, effort: f64, qd: f64) -> f64 {
+    /// limit) at joint velocity `qd` — within the velocity limit's soft
+    /// bounds, if it holds one — and how it falls as the velocity rises,
+    /// −∂/∂q̇ (the gain where a bound binds between the effort limits, else
+    /// zero).
+    pub fn drive(&self, effort: f64, qd: f64) -> (f64, f64) {
+        let piece = self.drive_piece(effort, qd);
+        (piece.at(qd), piece.slope)
+    }
+
+    /// The affine piece of the drive's effort, as a function of the joint
+    /// velocity, that holds at velocity `at` for the command `effort`
+    /// (already within the effort limit).
+    pub fn drive_piece(&self, effort: f64, at: f64) -> DrivePiece {
+        self.piece(effort, self.piece_index(effort, at))
+    }
+
+    /// The piece next to `from` toward the one holding at velocity `end`
+    /// (`from` itself when that holds there), for the command `effort`. An
+    /// implicit step takes the piece holding at its end
+    /// ([`crate::integrate::Forces::refine`]), found one piece at a time:
+    /// a light link's whole effort may carry it across the band in one
+    /// step, and back under the brake, while the step's end lies in the
+    /// band between.
+    pub fn drive_toward(&self, effort: f64, from: DrivePiece, end: f64) -> DrivePiece {
+        let to = self.piece_index(effort, end);
+        match to.cmp(&from.index) {
+            std::cmp::Ordering::Equal => from,
+            order => self.piece(effort, from.index + order as i8),
+        }
+    }
+
+    /// Which piece holds at velocity `x`, in the order of rising velocity:
+    /// −2 the brake at +E, −1 the lower bound's slope, 0 the command, 1 the
+    /// upper bound's slope, 2 the brake at −E.
+    fn piece_index(&self, effort: f64, x: f64) -> i8 {
         if self.velocity.is_infinite() {
-            return effort;
+            return 0;
         }
         let k = self.velocity_gain;
-        let low = (-k * (qd + self.velocity)).clamp(-self.effort, self.effort);
-        let high = (-k * (qd - self.velocity)).clamp(-self.effort, self.effort);
-        effort.clamp(low, high)
+        let (low, high) = (-k * (x + self.velocity), -k * (x - self.velocity));
+        match () {
+            () if effort > high && high > -self.effort => 1,
+            () if effort > high => 2,
+            () if effort < low && low < self.effort => -1,
+            () if effort < low => -2,
+            () => 0,
+        }
+    }
+
+    /// Piece `index` (see [`JointLaw::piece_index`]) for the command `effort`.
+    fn piece(&self, effort: f64, index: i8) -> DrivePiece {
+        let k = self.velocity_gain;
+        let (offset, slope) = match index {
+            2 => (-self.effort, 0.0),
+            1 => (k * self.velocity, k),
+            -1 => (-k * self.velocity, k),
+            -2 => (self.effort, 0.0),
+            _ => (effort, 0.0),
+        };
+        DrivePiece {
+            index,
+            offset,
+            slope,
+        }
     }
 
     /// The passive effort at position `q` and velocity `qd`: damping,
@@ -197,8 +284,7 @@ mod tests {
         JointLaw::new((INERTIA, INERTIA), &spec, 0.25, None, false, (1e-3, false))
     }
 
-    #[test]
-    fn a_drive_holding_its_velocity_limit_gives_no_effort_past_it_and_brakes() {
+    fn driven(hold: bool, implicit: bool, own: f64) -> JointLaw {
         let spec = JointSpec {
             range: None,
             effort: Some(10.0),
@@ -206,40 +292,82 @@ mod tests {
             damping: 0.0,
             friction: 0.0,
         };
-        let free = JointLaw::new((INERTIA, INERTIA), &spec, 0.0, None, false, (1e-3, false));
+        JointLaw::new((own, own), &spec, 0.0, None, hold, (1e-3, implicit))
+    }
+
+    #[test]
+    fn a_drive_holding_its_velocity_limit_gives_no_effort_past_it_and_brakes() {
+        let applied = |law: &JointLaw, effort, qd| law.drive(effort, qd).0;
+        let free = driven(false, false, INERTIA);
         assert_eq!(
             free.drive(10.0, 5.0),
-            10.0,
+            (10.0, 0.0),
             "not held: the command as it is"
         );
-        let law = JointLaw::new((INERTIA, INERTIA), &spec, 0.0, None, true, (1e-3, false));
+        let law = driven(true, false, INERTIA);
         // k = min(10 / 0.2, 0.6 / 2e-3) = 50.
         assert_eq!(law.velocity_gain, 50.0);
         assert_eq!(
             law.drive(10.0, 0.0),
-            10.0,
+            (10.0, 0.0),
             "far from the limit: the whole effort"
         );
-        assert_eq!(law.drive(-10.0, 0.0), -10.0);
-        assert!(
-            (law.drive(10.0, 1.9) - 5.0).abs() < 1e-12,
-            "within a tenth: less"
+        assert_eq!(applied(&law, -10.0, 0.0), -10.0);
+        let (near, slope) = law.drive(10.0, 1.9);
+        assert!((near - 5.0).abs() < 1e-12, "within a tenth: less");
+        assert_eq!(slope, 50.0, "falling with the speed");
+        assert_eq!(
+            law.drive(10.0, 2.0),
+            (0.0, 50.0),
+            "at the limit: none onward"
         );
-        assert_eq!(law.drive(10.0, 2.0), 0.0, "at the limit: none onward");
         assert!(
-            (law.drive(10.0, 2.1) + 5.0).abs() < 1e-12,
+            (applied(&law, 10.0, 2.1) + 5.0).abs() < 1e-12,
             "past it: braked"
         );
-        assert_eq!(law.drive(-10.0, 2.1), -10.0, "braking more is allowed");
+        assert_eq!(
+            law.drive(-10.0, 2.1),
+            (-10.0, 0.0),
+            "braking more is allowed"
+        );
         assert_eq!(
             law.drive(10.0, 3.0),
-            -10.0,
+            (-10.0, 0.0),
             "the brake within the effort limit"
         );
         assert!(
-            (law.drive(-10.0, -1.9) + 5.0).abs() < 1e-12,
+            (applied(&law, -10.0, -1.9) + 5.0).abs() < 1e-12,
             "and the same the other way"
         );
+    }
+
+    /// Under semi-implicit Euler a light link's drive is capped at what an
+    /// explicit step resolves (k v at rest, less than its effort limit);
+    /// under the implicit integrator it gives its whole effort until within
+    /// 5% of the velocity limit, whatever the link's inertia.
+    #[test]
+    fn an_implicit_drive_gives_its_effort_whatever_the_links_inertia() {
+        let light = 1e-3;
+        let capped = driven(true, false, light);
+        // k = 1e-3 / 2e-3 = 0.5: 1 N m at rest against 10.
+        assert_eq!(capped.velocity_gain, 0.5);
+        assert_eq!(capped.drive(10.0, 0.0).0, 1.0);
+        let law = driven(true, true, light);
+        assert_eq!(law.velocity_gain, 10.0 / (DRIVE_BAND * 2.0));
+        assert_eq!(law.drive(10.0, 0.0), (10.0, 0.0));
+        assert_eq!(law.drive(10.0, 1.9), (10.0, 0.0), "5% short of the limit");
+        let (near, slope) = law.drive(10.0, 1.95);
+        assert!(
+            (near - 5.0).abs() < 1e-9 && slope == 100.0,
+            "{near} {slope}"
+        );
+        assert_eq!(law.drive(10.0, 2.0), (0.0, 100.0), "none at the limit");
+        assert_eq!(law.drive(10.0, 2.1), (-10.0, 0.0), "5% past it: all of it");
+        for qd in [-2.2, -2.04, -1.97, 0.0, 1.96, 1.99, 2.03] {
+            let e = 1e-7;
+            let by_qd = -(law.drive(3.0, qd + e).0 - law.drive(3.0, qd - e).0) / (2.0 * e);
+            assert!((law.drive(3.0, qd).1 - by_qd).abs() < 1e-5, "{qd}: {by_qd}");
+        }
     }
 
     #[test]

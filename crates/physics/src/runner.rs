@@ -13,7 +13,7 @@ use crate::contact::{ContactPoint, Surfaces, contact_points};
 use crate::controller::{Controller, ControllerKind};
 use crate::dynamics::{Kinematics, Loads, State, effective_inertias};
 use crate::integrate::{Evaluation, Forces, Integrator, Stepper};
-use crate::joints::JointLaw;
+use crate::joints::{DrivePiece, JointLaw};
 use crate::model::{Model, Root};
 use crate::plant::{Actuators, Plant};
 use crate::scene::{self, Scene};
@@ -182,7 +182,8 @@ impl Prepared {
 /// `joint.<joint>.qd`; last, each one-DOF joint's passive effort
 /// `joint.<joint>.passive` (damping, friction and limits at that instant,
 /// as the step from it applies them — under the implicit integrator with
-/// its implicit part —, which replay the dynamics; not part of the state)
+/// what taking the step implicitly changed, the drive's slope included —,
+/// which replay the dynamics; not part of the state)
 /// and, where the
 /// effort applied differs from the command (`applied`: a plant's actuators,
 /// drives holding velocity limits), each one-DOF joint's applied effort
@@ -367,8 +368,15 @@ pub struct SceneForces<'a> {
     /// clamped to its effort limit when applied), set by the runner.
     pub actuated: Option<Vec<Vector3<f64>>>,
     /// Per link, the effort its one-DOF joint's actuator applied in the last
-    /// evaluation.
+    /// evaluation (at the state evaluated: an implicit step's change is
+    /// apart, see [`SceneForces::drive`]).
     pub applied: Vec<f64>,
+    /// Per link, the command to its one-DOF joint's drive in the last
+    /// evaluation, within the effort limit.
+    pub commanded: Vec<f64>,
+    /// Per link, the piece of its one-DOF joint's drive the last evaluation
+    /// took (an implicit step's, the one holding at the step's end).
+    pub drive: Vec<DrivePiece>,
     /// The controller's torque limit, which caps a ball hinge's actuator too.
     pub torque_limit: f64,
 }
@@ -390,6 +398,8 @@ impl<'a> SceneForces<'a> {
                 .is_some_and(Plant::has_actuators)
                 .then(|| vec![Vector3::zeros(); p.model.len()]),
             applied: vec![0.0; p.model.len()],
+            commanded: vec![0.0; p.model.len()],
+            drive: vec![DrivePiece::default(); p.model.len()],
             torque_limit: p.scene.controller().torque_limit.get(),
         }
     }
@@ -427,9 +437,11 @@ impl Forces for SceneForces<'_> {
                     Some(actuated) => law.clamp(actuated[i].x),
                     None => self.g[i].x,
                 };
-                let applied = law.drive(commanded, state.qd[i]);
-                self.applied[i] = applied;
-                loads.effort[i] = applied + self.passive[i];
+                let drive = law.drive_piece(commanded, state.qd[i]);
+                loads.effort_damping[i] += drive.slope;
+                (self.commanded[i], self.drive[i]) = (commanded, drive);
+                self.applied[i] = drive.at(state.qd[i]);
+                loads.effort[i] = self.applied[i] + self.passive[i];
             }
         }
         loads.f_ext.fill(Vector6::zeros());
@@ -437,6 +449,28 @@ impl Forces for SceneForces<'_> {
             self.surfaces
                 .apply(model, self.points, kin, &mut loads.f_ext);
         }
+    }
+
+    /// A drive holding a velocity limit is piecewise affine in the velocity:
+    /// each joint's piece moves to the one holding at the step's end.
+    fn refine(&mut self, state: &State, qdd: &[f64], h: f64, loads: &mut Loads) -> bool {
+        let mut moved = false;
+        for (i, law) in self.laws.iter().enumerate() {
+            let Some(law) = law.filter(|l| l.velocity.is_finite()) else {
+                continue;
+            };
+            let qd = state.qd[i];
+            let now = self.drive[i];
+            let end = law.drive_toward(self.commanded[i], now, qd + h * qdd[i]);
+            if end != now {
+                loads.effort[i] += end.at(qd) - now.at(qd);
+                loads.effort_damping[i] += end.slope - now.slope;
+                self.applied[i] = end.at(qd);
+                self.drive[i] = end;
+                moved = true;
+            }
+        }
+        moved
     }
 }
 
@@ -697,16 +731,22 @@ impl<'a> Runner<'a> {
         self.eval
             .run_for(&p.model, state, &mut self.forces, implicit);
         generalized_state(&p.model, state, &mut frame.state);
-        // The passive effort the step from this frame applies: an implicit
-        // step's includes what taking it implicitly changed.
+        // The efforts the step from this frame applies: an implicit step's
+        // include what taking it implicitly changed, the drive's part
+        // (−h k q̈ of its piece's slope k) in the applied effort, the rest
+        // in the passive one.
         let eval = &self.eval;
-        frame
-            .state
-            .extend(one_dof(&p.model).map(|i| self.forces.passive[i] + eval.implicit_effort[i]));
+        let forces = &self.forces;
+        let drive_change =
+            |i: usize| -implicit.unwrap_or(0.0) * forces.drive[i].slope * eval.deriv.qd[i];
+        frame.state.extend(
+            one_dof(&p.model)
+                .map(|i| forces.passive[i] + eval.implicit_effort[i] - drive_change(i)),
+        );
         if p.scene.logs_applied() {
             frame
                 .state
-                .extend(one_dof(&p.model).map(|i| self.forces.applied[i]));
+                .extend(one_dof(&p.model).map(|i| forces.applied[i] + drive_change(i)));
         }
         p.variables
             .values(state, &self.eval, &self.forces.g, &mut frame.variables);
