@@ -1,13 +1,14 @@
 //! The findings' verdicts must not flip with noise: the quickstart run twice
-//! (the second time with `--force`, every stage recomputed and re-timed)
-//! says the same accuracy words — better, worse, indistinguishable, tied —
-//! in the same sentences. Figures are masked, and so are speed verdicts:
-//! they rest on timings, and a test must not pass or fail with how busy the
-//! machine is.
+//! (side by side, each into an output folder of its own: every stage
+//! computed and timed twice) says the same accuracy words — better, worse,
+//! indistinguishable, tied — in the same sentences. Figures are masked, and
+//! so are speed verdicts: they rest on timings, and a test must not pass or
+//! fail with how busy the machine is.
 
 use std::path::Path;
+use std::process::{Command, Stdio};
 
-use crate::common::{alnlab, stderr, write_manifest};
+use crate::common::{stderr, write_manifest};
 
 /// The findings section of a report, every number replaced by `#` and
 /// every speed verdict by `<speed>`.
@@ -54,7 +55,7 @@ fn mask_speed(text: &str) -> String {
 }
 
 #[test]
-#[ignore = "full suite: runs the quickstart twice (about 2 minutes)"]
+#[ignore = "full suite: runs the quickstart twice side by side (about 2 minutes)"]
 fn quickstart_findings_say_the_same_when_run_again() {
     let committed = Path::new(env!("CARGO_MANIFEST_DIR")).join("experiments/quickstart.toml");
     let dir = tempfile::tempdir().unwrap();
@@ -75,18 +76,29 @@ fn quickstart_findings_say_the_same_when_run_again() {
         "quickstart.toml",
         &toml::to_string(&manifest).unwrap(),
     );
+    // Side by side: one run alone keeps two cores little more than half
+    // busy.
+    let runs: Vec<_> = ["a", "b"]
+        .iter()
+        .map(|out| {
+            let args = ["-q", "run", "quickstart.toml", "--out", out];
+            let reports = format!("{out}/reports");
+            Command::new(env!("CARGO_BIN_EXE_alnlab"))
+                .current_dir(dir.path())
+                .args(args)
+                .args(["--reports", &reports])
+                .stderr(Stdio::piped())
+                .stdout(Stdio::null())
+                .spawn()
+                .expect("alnlab runs")
+        })
+        .collect();
     let mut said = Vec::new();
-    for force in [false, true] {
-        let mut args = vec!["-q", "run", "quickstart.toml", "--out", "runs"];
-        args.extend(["--reports", "reports"]);
-        if force {
-            args.push("--force");
-        }
-        let out = alnlab(dir.path(), &args);
-        assert!(out.status.success(), "{}", stderr(&out));
-        let report =
-            std::fs::read_to_string(dir.path().join("reports/quickstart/report.md")).unwrap();
-        said.push(verdicts(&report));
+    for (run, out) in runs.into_iter().zip(["a", "b"]) {
+        let done = run.wait_with_output().unwrap();
+        assert!(done.status.success(), "{}", stderr(&done));
+        let report = dir.path().join(out).join("reports/quickstart/report.md");
+        said.push(verdicts(&std::fs::read_to_string(report).unwrap()));
     }
     assert!(
         ["better than", "worse than", "indistinguishable", "tied"]

@@ -5,10 +5,10 @@
 //!   suite needs and the machine lacks ([`setup`]: Debian packages, a Python
 //!   environment of its own), then runs the whole suite ([`suite`]): `cargo
 //!   test --workspace -- --include-ignored` (the fast tier and the tests it
-//!   leaves out), the interop check with standard readers, the
-//!   quickstart's Gray forest as a circuit placed and routed on an iCE40,
-//!   the MLflow round trip against a real server on loopback and the
-//!   Snakemake workflow.
+//!   leaves out: circuits placed and routed on an iCE40 among them), the
+//!   interop check with standard readers, the Python package, robots
+//!   against Pinocchio, the MLflow round trip against a real server on
+//!   loopback and the Snakemake workflow.
 //! - `cargo xtask setup` — only the installing.
 
 mod setup;

@@ -1,8 +1,8 @@
 //! The whole suite, step by step: what `cargo test` covers, then what needs
 //! the real binary and outside programs together — standard readers on a
-//! real run, the quickstart's Gray forest as a circuit on an FPGA, a real
-//! MLflow server, a
-//! real Snakemake workflow. Every step writes under `target/xtask/`.
+//! real run, the Python package, Pinocchio, a real MLflow server, a real
+//! Snakemake workflow. (Circuits on an FPGA are `cargo test`'s:
+//! `tests/circuit.rs`.) Every step writes under `target/xtask/`.
 
 use std::io::{Read, Write};
 use std::net::{TcpListener, TcpStream};
@@ -34,10 +34,6 @@ const STEPS: &[Step] = &[
         "the Python package: built into the suite's environment, tested by pytest on the \
          quickstart's models, its rollout benchmark and MPC example run once",
         python_package,
-    ),
-    (
-        "the quickstart's Gray forest as a circuit, placed and routed on an iCE40",
-        quickstart_circuit,
     ),
     (
         "robots from URDF: twelve robots' logs against Pinocchio, and bench sim beside it",
@@ -208,20 +204,6 @@ fn python_package(suite: &Suite) -> Result<(), String> {
     )
 }
 
-/// The quickstart's Gray forest (57 variables) exported, synthesized by
-/// Yosys, placed and routed by nextpnr-ice40 and simulated by Icarus
-/// Verilog on every test row — the Verilog, the netlist and the mapped
-/// netlist — each level equal to the software's or the command fails. (A
-/// walk forest's circuit is checked end to end by `tests/circuit.rs`.)
-fn quickstart_circuit(suite: &Suite) -> Result<(), String> {
-    run_in_root(
-        alnlab()
-            .args(["-q", "bench", "circuit", "--run"])
-            .arg(runs(suite).join("quickstart"))
-            .args(["--variant", "gray", "--fpga", "ice40-hx8k"]),
-    )
-}
-
 /// Every robot of the installed example-robot-data that Pinocchio loads,
 /// 10 s at 1 ms with no torque and with random torques, under semi-implicit
 /// Euler and the implicit integrator (`tests/hard_cases.py`): each runs or
@@ -293,8 +275,8 @@ fn robots_against_pinocchio(suite: &Suite) -> Result<(), String> {
     }
 }
 
-/// Each `alnlab bench` subcommand the other steps do not run (they run
-/// `sim` and `circuit`), once and with the fewest repeats it takes, on the
+/// Each `alnlab bench` subcommand the other steps and tests do not run
+/// (`sim` here, `circuit` by `tests/circuit.rs`), once and with the fewest repeats it takes, on the
 /// quickstart's runs where it needs a run or a manifest. A bench must exit
 /// 0 and its `--json` hold the figures it promises; how fast is the
 /// benchmark's to say, not a test's. Sharded training must still give the
