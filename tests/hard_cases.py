@@ -45,7 +45,9 @@ def collection():
     found = []
     for urdf in sorted(data.rglob("*.urdf")):
         try:
-            model = pin.buildModelFromUrdf(str(urdf))
+            # Mimic joints as Pinocchio models them: followers without
+            # coordinates of their own.
+            model = pin.buildModelFromUrdf(str(urdf), mimic="<mimic" in urdf.read_text())
         except Exception as error:  # Pinocchio's own refusal: not a case here
             print(f"skipped {urdf.name}: Pinocchio does not load it ({error})")
             continue

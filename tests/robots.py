@@ -88,6 +88,9 @@ def robots():
           "link_velocities": ["left_wrist_yaw_link"]}),
         ("gantry", ROOT / "tests/data/gantry.urdf",
          {"amplitude": 5.0, "link_velocities": ["slide", "arm"]}),
+        # Mimic joints (issue 60): the right finger follows the left.
+        ("panda", data / "panda_description/urdf/panda.urdf",
+         {"amplitude": 5.0, "link_velocities": ["panda_leftfinger", "panda_rightfinger"]}),
         ("anymal", data / "anymal_c_simple_description/urdf/anymal.urdf",
          {"base": "free", "amplitude": 5.0, "initial_height": 1.0, "link_velocities": ["LF_SHANK"]}),
         # Driven hard, with drives that hold the URDF's velocity limits:
@@ -200,7 +203,11 @@ def check(name: str, log: Path, need_velocities: bool = True) -> dict:
     scene = json.loads(scene_record["json"])
     urdf = scene_record["urdf"]
     free = scene["base"] == "free"
-    model = pin.buildModelFromXML(urdf, pin.JointModelFreeFlyer()) if free else pin.buildModelFromXML(urdf)
+    # Mimic joints as Pinocchio models them: a follower has no coordinate
+    # of its own (nq = nv = 0), its leader's scaled and offset.
+    mimic = "<mimic" in urdf
+    root_joint = (pin.JointModelFreeFlyer(),) if free else ()
+    model = pin.buildModelFromXML(urdf, *root_joint, mimic=mimic)
     model.gravity.linear = np.array(scene["gravity"])
     plant = scene.get("plant") or {}
     perturb(model, plant)
@@ -211,7 +218,10 @@ def check(name: str, log: Path, need_velocities: bool = True) -> dict:
     # Which Pinocchio joint each model link is.
     ids = {j: model.getJointId(j) for j in joints}
     assert all(i < model.njoints for i in ids.values()), f"{name}: joints Pinocchio does not have"
-    assert model.nv == len(joints) + (6 if free else 0), (model.nv, len(joints))
+    # Each follower's scaling and offset, and its leader's velocity index.
+    followers = {j: model.joints[ids[j]].extract() for j in joints
+                 if model.joints[ids[j]].shortname() == "JointModelMimic"}
+    assert model.nv == len(joints) - len(followers) + (6 if free else 0), (model.nv, len(joints))
     worst = {"acceleration": 0.0, "velocity": 0.0, "pose": 0.0, "applied": 0.0}
     actuators = ("actuator_gain", "actuator_lag", "actuator_delay_frames", "torque_noise")
     recomputed = None
@@ -246,6 +256,8 @@ def check(name: str, log: Path, need_velocities: bool = True) -> dict:
         for j in joints:
             joint = model.joints[ids[j]]
             angle, rate = x[f"joint.{j}.q"], x[f"joint.{j}.qd"]
+            if j in followers:
+                continue  # after every leader's
             if joint.nq == 2:  # continuous: cos, sin
                 q[joint.idx_q:joint.idx_q + 2] = [math.cos(angle), math.sin(angle)]
             else:
@@ -261,6 +273,15 @@ def check(name: str, log: Path, need_velocities: bool = True) -> dict:
                 worst["applied"] = max(worst["applied"], abs(effort - want) / max(1.0, abs(want)))
             tau[joint.idx_v] = effort + x[f"joint.{j}.passive"]
             logged[joint.idx_v] = x[f"qdd.{j}"]
+        # A follower's effort acts on its leader through the coupling; its
+        # logged position and velocity are its leader's scaled and offset.
+        for j, follower in followers.items():
+            leader = follower.idx_v
+            effort = x.get(f"joint.{j}.applied", x.get(f"tau.{j}", 0.0))
+            tau[leader] += follower.scaling * (effort + x[f"joint.{j}.passive"])
+            position = follower.scaling * q[follower.idx_q] + follower.offset
+            for got, want in ((x[f"joint.{j}.q"], position), (x[f"joint.{j}.qd"], follower.scaling * v[leader])):
+                worst["pose"] = max(worst["pose"], abs(got - want) / max(1.0, abs(want)))
         fext = [pin.Force.Zero() for _ in range(model.njoints)]
         for i, link in enumerate(links):
             key = link["link"]
@@ -271,7 +292,17 @@ def check(name: str, log: Path, need_velocities: bool = True) -> dict:
                     continue  # a welded base does not move, whatever touches it
                 joint_id = 1 if i == 0 else ids[link["joint_name"]]
                 fext[joint_id] = pin.Force(force, torque)
-        ddq = pin.aba(model, data, q, v, tau, fext)
+        if followers:
+            # No aba for mimic joints: CRBA and RNEA on the reduced model.
+            mass = pin.crba(model, data, q)
+            mass = np.triu(mass) + np.triu(mass, 1).T
+            ddq = np.linalg.solve(mass, tau - pin.rnea(model, data, q, v, np.zeros(model.nv), fext))
+        else:
+            ddq = pin.aba(model, data, q, v, tau, fext)
+        for j, follower in followers.items():
+            want = follower.scaling * ddq[follower.idx_v]
+            worst["acceleration"] = max(worst["acceleration"],
+                                        abs(x[f"qdd.{j}"] - want) / max(1.0, float(np.max(np.abs(ddq)))))
         scale = max(1.0, float(np.max(np.abs(ddq))))
         largest_acceleration = max(largest_acceleration, float(np.max(np.abs(ddq))))
         worst["acceleration"] = max(worst["acceleration"], float(np.max(np.abs(ddq - logged))) / scale)

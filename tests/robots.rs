@@ -67,13 +67,13 @@ fn malformed_robot_descriptions_are_refused_naming_file_and_element() {
             "not supported",
         ),
         (
-            "mimic joint",
+            "mimic of no joint",
             edited(
                 elbow,
-                &format!("{elbow}<mimic joint=\"shoulder_lift_joint\" multiplier=\"1\"/>"),
+                &format!("{elbow}<mimic joint=\"shoulder_joint\" multiplier=\"1\"/>"),
             ),
-            "<joint name=\"elbow_joint\">",
-            "mimic joint is refused",
+            "<mimic>",
+            "follows joint `shoulder_joint`, which is not a joint of this robot",
         ),
         (
             "zero axis",

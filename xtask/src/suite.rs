@@ -36,7 +36,7 @@ const STEPS: &[Step] = &[
         python_package,
     ),
     (
-        "robots from URDF: twelve robots' logs against Pinocchio, and bench sim beside it",
+        "robots from URDF: thirteen robots' logs against Pinocchio, and bench sim beside it",
         robots_against_pinocchio,
     ),
     (

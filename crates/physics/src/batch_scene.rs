@@ -41,14 +41,16 @@ impl<'a> SceneBatch<'a> {
     /// A batch of scene `p` reading its variables `read` (indices into its
     /// layout's variables); `None` where the scene cannot be stepped in
     /// lanes: Runge–Kutta (a batch steps by semi-implicit Euler, its joints'
-    /// slopes taken implicitly under the implicit integrator), a plant whose
+    /// slopes taken implicitly under the implicit integrator), coupled
+    /// joints (a URDF's mimics, which the batch's algorithm cannot take), a
+    /// plant whose
     /// actuators produce other than the command (their lag, delay and noise
     /// are tracked state by state by [`crate::Runner`]), or a variable read
     /// that a batch does not give (a link's acceleration or external
     /// force).
     pub fn new(p: &'a Prepared, read: &[usize]) -> Option<SceneBatch<'a>> {
         let actuators = p.scene.plant.as_ref().is_some_and(|pl| pl.has_actuators());
-        if p.scene.integrator == Integrator::Rk4 || actuators {
+        if p.scene.integrator == Integrator::Rk4 || actuators || !p.model.couplings.is_empty() {
             return None;
         }
         let read = read

@@ -337,6 +337,8 @@ fn joint_velocity(link: &Link, state: &State, i: usize) -> Vector6<f64> {
 pub fn effective_inertias(model: &Model, state: &State) -> Vec<Option<f64>> {
     let mut still = model.clone();
     still.gravity = Vector3::zeros();
+    // Each joint alone, a follower of a coupling too.
+    still.couplings.clear();
     let at_rest = State {
         root_v: Vector3::zeros(),
         rates: vec![Vector3::zeros(); model.len()],
@@ -410,6 +412,9 @@ impl Workspace {
         loads: &Loads,
         out: &mut Derivative,
     ) {
+        if !model.couplings.is_empty() {
+            return self.forward_coupled(model, state, kin, loads, out);
+        }
         let n = model.len();
         // Outward: velocity-product accelerations and bias forces.
         for i in 0..n {
@@ -481,6 +486,72 @@ impl Workspace {
             self.accel[i] = a;
             out.orient[i] = match (i, model.root) {
                 // A welded root keeps its orientation whatever its rate says.
+                (0, Root::Fixed) => Quaternion::identity() * 0.0,
+                _ => *state.orient[i].quaternion() * Quaternion::from_imag(state.rates[i]) * 0.5,
+            };
+        }
+        out.root_p = match model.root {
+            Root::Free => kin.rot[0] * state.root_v,
+            Root::Pinned | Root::Fixed => Vector3::zeros(),
+        };
+        if model.root_held() {
+            out.root_v = Vector3::zeros();
+        }
+    }
+
+    /// [`Workspace::forward`] for a model with couplings, which the
+    /// articulated-body algorithm cannot take: the accelerations of the
+    /// joint-space formulation in the coordinates that remain
+    /// ([`crate::joint_space::coupled_accelerations`]), then each link's
+    /// spatial acceleration from them as the algorithm's last pass gives it.
+    fn forward_coupled(
+        &mut self,
+        model: &Model,
+        state: &State,
+        kin: &Kinematics,
+        loads: &Loads,
+        out: &mut Derivative,
+    ) {
+        let qdd = crate::joint_space::coupled_accelerations(model, state, kin, loads);
+        let mut at = 0;
+        for i in 0..model.len() {
+            let link = &model.links[i];
+            out.q[i] = 0.0;
+            out.qd[i] = 0.0;
+            out.rates[i] = Vector3::zeros();
+            let a = match (link.parent, model.root) {
+                (None, Root::Free) => {
+                    out.rates[i] = Vector3::new(qdd[0], qdd[1], qdd[2]);
+                    out.root_v = Vector3::new(qdd[3], qdd[4], qdd[5]);
+                    at = 6;
+                    spatial(&out.rates[i], &out.root_v)
+                }
+                (None, Root::Fixed) => Vector6::zeros(),
+                (parent, _) => {
+                    let a_in = match parent {
+                        Some(p) => {
+                            kin.x[i].motion(&self.accel[p])
+                                + cross_motion(&kin.vel[i], &joint_velocity(link, state, i))
+                        }
+                        None => Vector6::zeros(),
+                    };
+                    match link.joint.axis_motion().filter(|_| parent.is_some()) {
+                        None => {
+                            out.rates[i] = Vector3::new(qdd[at], qdd[at + 1], qdd[at + 2]);
+                            at += 3;
+                            a_in + spatial(&out.rates[i], &Vector3::zeros())
+                        }
+                        Some(s) => {
+                            out.q[i] = state.qd[i];
+                            out.qd[i] = qdd[at];
+                            at += 1;
+                            a_in + s * out.qd[i]
+                        }
+                    }
+                }
+            };
+            self.accel[i] = a;
+            out.orient[i] = match (i, model.root) {
                 (0, Root::Fixed) => Quaternion::identity() * 0.0,
                 _ => *state.orient[i].quaternion() * Quaternion::from_imag(state.rates[i]) * 0.5,
             };
@@ -614,8 +685,8 @@ pub(crate) mod tests {
     use super::*;
     use crate::Integrator;
     use crate::integrate::{Evaluation, Forces, NoForces, Stepper};
+    use crate::joint_space::{forward_dense, generalized_acceleration};
     use crate::model::{Link, Shape};
-    use crate::reference::{forward_dense, generalized_acceleration};
     use rand::{Rng, RngExt, SeedableRng};
     use rand_chacha::ChaCha8Rng;
 
@@ -646,6 +717,7 @@ pub(crate) mod tests {
             root,
             links,
             gravity: vec3(rng, 10.0),
+            couplings: Vec::new(),
         }
     }
 

@@ -229,6 +229,9 @@ impl Stepper {
             }
             Integrator::Rk4 => self.rk4(model, state, dt, forces),
         };
+        // Followers' coordinates move with their leaders' to rounding;
+        // imposed, they stay on the coupling exactly.
+        model.impose_couplings(state);
         if let Some(momentum) = &mut self.momentum {
             *momentum += momentum_rate * dt;
             let kin = &mut self.eval.kin;

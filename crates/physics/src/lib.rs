@@ -32,11 +32,10 @@ pub mod controller;
 pub mod dynamics;
 pub mod foxglove;
 pub mod integrate;
+mod joint_space;
 pub mod joints;
 pub mod model;
 pub mod plant;
-#[cfg(test)]
-mod reference;
 pub mod replay;
 pub mod runner;
 pub mod scene;

@@ -149,6 +149,19 @@ impl Shape {
     }
 }
 
+/// A one-DOF joint whose coordinate follows another's, as a URDF
+/// `<mimic>` states it: q = multiplier · q_leader + offset (so q̇ and q̈
+/// follow by the multiplier alone).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Coupling {
+    /// The following link (its one-DOF joint).
+    pub follower: usize,
+    /// The link it follows, itself no follower.
+    pub leader: usize,
+    pub multiplier: f64,
+    pub offset: f64,
+}
+
 /// A tree of links with gravity.
 #[derive(Clone, Debug)]
 pub struct Model {
@@ -158,6 +171,10 @@ pub struct Model {
     pub links: Vec<Link>,
     /// Gravity, inertial frame (m/s²).
     pub gravity: Vector3<f64>,
+    /// The joints that follow others ([`Coupling`]); the dynamics run in
+    /// the coordinates that remain, the leaders carrying their followers'
+    /// inertia and efforts through the couplings.
+    pub couplings: Vec<Coupling>,
 }
 
 impl Model {
@@ -185,6 +202,7 @@ impl Model {
             root,
             links,
             gravity,
+            couplings: Vec::new(),
         }
     }
 
@@ -216,5 +234,19 @@ impl Model {
     /// Whether the root's hinge point stays where it is (pinned or welded).
     pub fn root_held(&self) -> bool {
         self.root != Root::Free
+    }
+
+    /// The coupling link `i` follows, if it follows one.
+    pub fn coupling(&self, i: usize) -> Option<&Coupling> {
+        self.couplings.iter().find(|c| c.follower == i)
+    }
+
+    /// Sets every follower's position and velocity from its leader's, as
+    /// its coupling says.
+    pub fn impose_couplings(&self, state: &mut crate::dynamics::State) {
+        for c in &self.couplings {
+            state.q[c.follower] = c.multiplier * state.q[c.leader] + c.offset;
+            state.qd[c.follower] = c.multiplier * state.qd[c.leader];
+        }
     }
 }

@@ -360,6 +360,7 @@ mod tests {
             root: Root::Pinned,
             links: vec![link(None), link(Some(0))],
             gravity: Vector3::zeros(),
+            couplings: Vec::new(),
         }
     }
 

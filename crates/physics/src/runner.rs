@@ -55,6 +55,8 @@ impl Prepared {
         let mut controls = Vec::new();
         for i in 1..self.model.len() {
             match (self.model.links[i].joint.dof(), &self.robot) {
+                // A follower has no drive of its own.
+                (1, Some(_)) if self.model.coupling(i).is_some() => {}
                 (1, Some(robot)) => controls.push(Control {
                     hinge: i - 1,
                     axis: 0,
@@ -691,6 +693,10 @@ impl<'a> Runner<'a> {
             if let Some(law) = law {
                 torque.x = law.clamp(torque.x);
             }
+        }
+        // A follower has no drive of its own: its leader's moves it.
+        for c in &self.p.model.couplings {
+            self.hinge_torques[c.follower - 1] = Vector3::zeros();
         }
         self.forces.g[1..].copy_from_slice(&self.hinge_torques);
         if let (Some(actuators), Some(actuated)) = (&mut self.actuators, &mut self.forces.actuated)

@@ -892,6 +892,7 @@ impl Scene {
                     state.rates[0] = uniform(spin);
                     state.root_v = uniform(self.initial_speed.expect("resolved"));
                 }
+                model.impose_couplings(&mut state);
                 return state;
             }
             SceneKind::Pendulum => {

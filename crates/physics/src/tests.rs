@@ -1296,7 +1296,8 @@ fn random_robots_run_through_their_limits_without_a_blow_up() {
             Err(e) if e.starts_with("dt:") => explicit_refused += 1,
             Err(_) => explicit_blown += 1,
         }
-        match run(Integrator::Implicit) {
+        // The default integrator, the implicit one.
+        match run(Integrator::default()) {
             Ok(past) => limits_met += usize::from(past),
             Err(e) => panic!(
                 "robot {robot} ({base:?}) blew up under the implicit integrator: {e}\n{text}"

@@ -16,8 +16,10 @@
 //! collision geometry, transmissions and Gazebo tags are not read.
 //!
 //! Checks, each an error naming the element: a joint type other than
-//! revolute, continuous, prismatic or fixed; a mimic joint (refused: its
-//! coupling is a constraint this simulator does not impose); a zero axis; a
+//! revolute, continuous, prismatic or fixed; a `<mimic>` that follows no
+//! joint of the robot, a fixed one, or forms a cycle (a mimic joint is a
+//! [`Coupling`]: its coordinate follows its leader's, and a fixed joint's
+//! `<mimic>` is moot); a zero axis; a
 //! revolute or prismatic joint without `<limit>`; duplicate names; a joint
 //! whose parent or child is no link; a link with two parents; two roots; a
 //! cycle; a negative mass; a moving body (after merging the links fixed to
@@ -31,7 +33,7 @@ use std::collections::HashMap;
 use alnlab_core::bounded;
 use nalgebra::{Isometry3, Matrix3, Rotation3, Translation3, UnitQuaternion, Vector3};
 
-use crate::model::{Joint, Link, Model, Root};
+use crate::model::{Coupling, Joint, Link, Model, Root};
 use crate::spatial::parallel_axis;
 
 /// How the robot's root link is held.
@@ -138,11 +140,21 @@ enum Kind {
 struct JointTag<'a> {
     name: &'a str,
     kind: Kind,
+    /// The joint it follows, if it mimics one.
+    mimic: Option<MimicTag<'a>>,
     parent: &'a str,
     child: &'a str,
     origin: Isometry3<f64>,
     axis: Vector3<f64>,
     spec: JointSpec,
+    node: roxmltree::Node<'a, 'a>,
+}
+
+/// A `<mimic joint multiplier offset/>`: q = multiplier · q_joint + offset.
+struct MimicTag<'a> {
+    leader: &'a str,
+    multiplier: f64,
+    offset: f64,
     node: roxmltree::Node<'a, 'a>,
 }
 
@@ -296,12 +308,14 @@ pub fn parse(text: &str, base: Base) -> Result<Robot> {
         }
         model_links.push(link);
     }
+    let couplings = couplings(&joints, &bodies)?;
     Ok(Robot {
         name: root.attribute("name").unwrap_or("robot").to_string(),
         model: Model {
             root: root_kind,
             links: model_links,
             gravity: Vector3::new(0.0, 0.0, -9.81),
+            couplings,
         },
         links: bodies
             .iter()
@@ -314,6 +328,71 @@ pub fn parse(text: &str, base: Base) -> Result<Robot> {
         specs: bodies.iter().map(|b| b.spec).collect(),
         frames,
     })
+}
+
+/// The couplings of the bodies whose joints mimic another, each resolved to
+/// a leader that mimics none (a mimic of a mimic composes the two).
+fn couplings(joints: &[JointTag], bodies: &[Body]) -> Result<Vec<Coupling>> {
+    let body_of = |j: usize| bodies.iter().position(|b| b.joint_tag == Some(j));
+    let mut couplings = Vec::new();
+    for (follower, body) in bodies.iter().enumerate() {
+        let Some(mut j) = body.joint_tag.filter(|&j| joints[j].mimic.is_some()) else {
+            continue;
+        };
+        let (mut multiplier, mut offset) = (1.0, 0.0);
+        // A chain of mimics is at most as long as the joints are many.
+        for _ in 0..=joints.len() {
+            let Some(mimic) = &joints[j].mimic else {
+                break;
+            };
+            let leader = joints
+                .iter()
+                .position(|t| t.name == mimic.leader)
+                .ok_or_else(|| {
+                    at(
+                        &mimic.node,
+                        format!(
+                            "follows joint `{}`, which is not a joint of this robot",
+                            mimic.leader
+                        ),
+                    )
+                })?;
+            if joints[leader].kind == Kind::Fixed {
+                return Err(at(
+                    &mimic.node,
+                    format!(
+                        "follows `{}`, a fixed joint; expected a joint that moves",
+                        mimic.leader
+                    ),
+                ));
+            }
+            (multiplier, offset) = (
+                multiplier * mimic.multiplier,
+                multiplier * mimic.offset + offset,
+            );
+            j = leader;
+        }
+        let leader = match joints[j].mimic {
+            Some(_) => None,
+            None => body_of(j).filter(|&l| l != follower),
+        };
+        let Some(leader) = leader else {
+            let tag = body.joint_tag.expect("a follower has a joint");
+            return Err(at(
+                &joints[tag].node,
+                "its mimics form a cycle: expected each chain of <mimic> to end at a joint that \
+                 follows none"
+                    .into(),
+            ));
+        };
+        couplings.push(Coupling {
+            follower,
+            leader,
+            multiplier,
+            offset,
+        });
+    }
+    Ok(couplings)
 }
 
 /// Reads a robot from a URDF file; errors name the file.
@@ -737,14 +816,23 @@ fn joint_tag<'a>(node: roxmltree::Node<'a, 'a>) -> Result<JointTag<'a>> {
             ));
         }
     };
-    if child(node, "mimic").is_some() {
-        return Err(at(
-            &node,
-            "a mimic joint is refused: it couples this joint to another, a constraint this \
-             simulator does not impose; remove <mimic> to simulate it as an independent joint"
-                .into(),
-        ));
-    }
+    let mimic = match child(node, "mimic") {
+        None => None,
+        // A fixed joint moves with nothing (Talos' grippers state one):
+        // its <mimic> is moot, as Pinocchio takes it.
+        Some(_) if kind == Kind::Fixed => None,
+        Some(m) => Some(MimicTag {
+            leader: m.attribute("joint").ok_or_else(|| {
+                at(
+                    &m,
+                    "expected a `joint` attribute: the joint it follows".into(),
+                )
+            })?,
+            multiplier: number(m, "multiplier", Some(1.0))?,
+            offset: number(m, "offset", Some(0.0))?,
+            node: m,
+        }),
+    };
     let link_of = |tag: &str| -> Result<&'a str> {
         let element =
             child(node, tag).ok_or_else(|| at(&node, format!("expected a <{tag} link=\"…\"/>")))?;
@@ -809,6 +897,7 @@ fn joint_tag<'a>(node: roxmltree::Node<'a, 'a>) -> Result<JointTag<'a>> {
     Ok(JointTag {
         name: joint_name,
         kind,
+        mimic,
         parent,
         child: child_link,
         origin: origin(node)?,

@@ -193,7 +193,9 @@ impl VariableSet {
             quantities.push(Quantity::JointEffort);
         }
         for q in quantities {
-            entries.extend((1..n).map(|i| (q, i)));
+            // A follower of a coupling has no effort of its own.
+            let driven = |i: &usize| q != Quantity::JointEffort || model.coupling(*i).is_none();
+            entries.extend((1..n).filter(driven).map(|i| (q, i)));
         }
         let touched = |i: usize, off_origin: bool| {
             contacts

@@ -67,8 +67,9 @@ use crate::compared::{
 /// the robust linear fit timed one state at a time too; 8: hybrids, the
 /// nominal predictions an input; 9: the ALN as a hybrid, hybrids' closed
 /// loops; 10: the linear and boosted baselines kept as models; 11: the
-/// simulator's joint limits sized on what the joint moves).
-pub const FORMAT_VERSION: u32 = 11;
+/// simulator's joint limits sized on what the joint moves; 12: its drives
+/// implicit, mimic joints).
+pub const FORMAT_VERSION: u32 = 12;
 
 /// File name of the predictions table ([`alnlab_tables::predictions`]).
 pub const PREDICTIONS_FILE: &str = alnlab_tables::predictions::FILE;

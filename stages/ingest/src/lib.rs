@@ -27,8 +27,9 @@ use serde::{Deserialize, Serialize};
 
 use crate::frames::{Gaps, Grid, Resample, Source};
 
-/// Version of what this stage writes (part of every cache key).
-pub const FORMAT_VERSION: u32 = 1;
+/// Version of what this stage writes (part of every cache key; 2: mimic
+/// joints taken).
+pub const FORMAT_VERSION: u32 = 2;
 
 /// The `[ingest]` table: how a recording (`[data] recording`) becomes
 /// frames, and the robot it records.

@@ -25,8 +25,8 @@ use alnlab_tables::pairs::{self, Pairs, Side};
 use arrow_array::Array;
 
 /// Version of what this stage writes (part of every cache key; 2: joint
-/// limits sized on what the joint moves).
-pub const FORMAT_VERSION: u32 = 2;
+/// limits sized on what the joint moves; 3: implicit drives, mimic joints).
+pub const FORMAT_VERSION: u32 = 3;
 
 /// File name of the nominal predictions.
 pub const NOMINAL_FILE: &str = "nominal.parquet";

@@ -82,8 +82,9 @@ use crate::transitions::Transitions;
 /// planner's states; 7: frames as the log records them, the plant's
 /// actuators given each decision's torques from its first step; 8: the
 /// simulator costs a decision's candidates together in SIMD lanes, which
-/// round differently; 9: joint limits sized on what the joint moves).
-pub const FORMAT_VERSION: u32 = 9;
+/// round differently; 9: joint limits sized on what the joint moves; 10:
+/// implicit drives, batched implicitly, mimic joints).
+pub const FORMAT_VERSION: u32 = 10;
 /// File name of the per-frame table.
 pub const PLAN_FILE: &str = "plan.parquet";
 /// File name of the per-episode table.

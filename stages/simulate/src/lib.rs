@@ -30,8 +30,9 @@ pub use alnlab_physics::{Integrator, Scene, SceneKind};
 /// Version of what this stage writes; part of every cache key, bumped when the
 /// same parameters would produce different bytes (5: a log of applied
 /// efforts says its total effort is applied + passive; 6: half turns on
-/// /tf, joint limits sized on what the joint moves).
-pub const FORMAT_VERSION: u32 = 6;
+/// /tf, joint limits sized on what the joint moves; 7: implicit drives
+/// that give their effort, mimic joints).
+pub const FORMAT_VERSION: u32 = 7;
 
 /// File name of the trajectory log.
 pub const TRAJECTORY_FILE: &str = "trajectory.mcap";

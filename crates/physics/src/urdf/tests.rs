@@ -172,8 +172,32 @@ fn malformed_descriptions_name_the_element() {
                 &two,
                 &joint("j", "continuous", "a", "b", "<mimic joint=\"k\"/>"),
             ),
+            "<mimic>",
+            "follows joint `k`, which is not a joint of this robot",
+        ),
+        (
+            robot(
+                &format!("{two}{}", link("c")),
+                &format!(
+                    "{}{}",
+                    joint("j", "continuous", "a", "b", "<mimic joint=\"k\"/>"),
+                    joint("k", "continuous", "b", "c", "<mimic joint=\"j\"/>")
+                ),
+            ),
             "<joint name=\"j\">",
-            "mimic joint is refused",
+            "its mimics form a cycle",
+        ),
+        (
+            robot(
+                &format!("{two}{}", link("c")),
+                &format!(
+                    "{}{}",
+                    joint("j", "fixed", "a", "b", ""),
+                    joint("k", "continuous", "b", "c", "<mimic joint=\"j\"/>")
+                ),
+            ),
+            "<mimic>",
+            "follows `j`, a fixed joint",
         ),
         (
             robot(
@@ -401,4 +425,90 @@ fn inertias_are_judged_by_the_bodys_scale_and_only_where_they_move() {
         error.contains("link `base`") && error.contains("not positive semi-definite"),
         "{error}"
     );
+}
+
+/// A `<mimic>` makes a coupling to the joint that follows none: a mimic of
+/// a mimic composes the two (q_c = 2 (3 q_a + 1) − 0.5), and a fixed
+/// joint's `<mimic>` is moot.
+#[test]
+fn mimics_couple_a_follower_to_its_leader() {
+    let inertial = r#"<inertial><mass value="1"/><inertia ixx="1" ixy="0" ixz="0" iyy="1" iyz="0" izz="1"/></inertial>"#;
+    let link = |name: &str| format!("<link name=\"{name}\">{inertial}</link>");
+    let text = format!(
+        r#"<robot name="hand">{}{}{}{}{}
+          <joint name="ja" type="continuous"><parent link="base"/><child link="a"/></joint>
+          <joint name="jb" type="continuous"><parent link="base"/><child link="b"/><mimic joint="ja" multiplier="3" offset="1"/></joint>
+          <joint name="jc" type="continuous"><parent link="base"/><child link="c"/><mimic joint="jb" multiplier="2" offset="-0.5"/></joint>
+          <joint name="jd" type="fixed"><parent link="c"/><child link="d"/><mimic joint="ja"/></joint>
+        </robot>"#,
+        link("base"),
+        link("a"),
+        link("b"),
+        link("c"),
+        link("d")
+    );
+    let robot = parse(&text, Base::Fixed).unwrap();
+    assert_eq!(robot.joints, ["", "ja", "jb", "jc"]);
+    assert_eq!(
+        robot.model.couplings,
+        [
+            Coupling {
+                follower: 2,
+                leader: 1,
+                multiplier: 3.0,
+                offset: 1.0
+            },
+            Coupling {
+                follower: 3,
+                leader: 1,
+                multiplier: 6.0,
+                offset: 1.5
+            },
+        ]
+    );
+}
+
+/// A body that follows another about the same axis, one for one, moves as
+/// if welded to it: the coupled model's accelerations (the joint-space
+/// formulation in the leader's coordinate) equal the welded model's (the
+/// articulated-body algorithm), and the follower's are the leader's.
+#[test]
+fn a_follower_one_for_one_on_the_same_axis_moves_as_if_welded() {
+    let text = |second: &str| {
+        format!(
+            r#"<robot name="pair">
+              <link name="base"><inertial><mass value="1"/><inertia ixx="1" ixy="0" ixz="0" iyy="1" iyz="0" izz="1"/></inertial></link>
+              <link name="a"><inertial><origin xyz="0 0.2 0.1"/><mass value="2"/><inertia ixx="0.1" ixy="0.01" ixz="0" iyy="0.2" iyz="0" izz="0.3"/></inertial></link>
+              <link name="b"><inertial><origin xyz="0.1 -0.3 0.05"/><mass value="0.5"/><inertia ixx="0.02" ixy="0" ixz="0.003" iyy="0.04" iyz="0" izz="0.05"/></inertial></link>
+              <joint name="ja" type="continuous"><parent link="base"/><child link="a"/><origin xyz="0 0 0.5"/><axis xyz="1 0 0"/></joint>
+              {second}
+            </robot>"#
+        )
+    };
+    let coupled = text(
+        r#"<joint name="jb" type="continuous"><parent link="base"/><child link="b"/><origin xyz="0 0 0.5"/><axis xyz="1 0 0"/><mimic joint="ja"/></joint>"#,
+    );
+    let welded =
+        text(r#"<joint name="jb" type="fixed"><parent link="a"/><child link="b"/></joint>"#);
+    let accelerate = |text: &str| {
+        let model = parse(text, Base::Fixed).unwrap().model;
+        let mut state = State::rest(&model, Vector3::zeros());
+        state.q[1] = 0.7;
+        state.qd[1] = -1.3;
+        model.impose_couplings(&mut state);
+        let mut kin = Kinematics::new(&model);
+        kin.update(&model, &state);
+        let mut loads = Loads::zeros(&model);
+        loads.effort[1] = 2.0;
+        let mut out = Derivative::zeros(&model);
+        Workspace::new(&model).forward(&model, &state, &kin, &loads, &mut out);
+        out.qd
+    };
+    let (coupled, welded) = (accelerate(&coupled), accelerate(&welded));
+    assert_eq!(coupled.len(), 3);
+    assert!(
+        (coupled[1] - welded[1]).abs() < 1e-12 * welded[1].abs().max(1.0),
+        "{coupled:?} against {welded:?}"
+    );
+    assert_eq!(coupled[2], coupled[1]);
 }

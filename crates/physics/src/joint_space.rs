@@ -1,7 +1,10 @@
-//! An independent formulation of the forward dynamics, for tests only: the
-//! recursive Newton–Euler algorithm gives the generalized forces for given
+//! The joint-space formulation of the forward dynamics: the recursive
+//! Newton–Euler algorithm gives the generalized forces for given
 //! accelerations; from it the joint-space mass matrix M and the bias C, and
-//! the accelerations by solving M q̈ = τ − C densely.
+//! the accelerations by solving M q̈ = τ − C densely. The simulator uses it
+//! for a model whose joints are coupled ([`coupled_accelerations`]), which
+//! the articulated-body algorithm cannot take; the tests check that
+//! algorithm against it.
 
 use nalgebra::{DMatrix, DVector, Vector3, Vector6};
 
@@ -117,14 +120,14 @@ fn inverse_dynamics(
     tau
 }
 
-/// Generalized accelerations by (M + diag(armature)) q̈ = τ − C, solved
-/// densely, in [`offsets`]' layout.
-pub fn forward_dense(
+/// The mass matrix with the armatures on its diagonal, M + diag(armature),
+/// and the generalized forces less the bias, τ − C, in [`offsets`]' layout.
+fn mass_and_forces(
     model: &Model,
     state: &State,
     kin: &Kinematics,
     loads: &Loads,
-) -> DVector<f64> {
+) -> (DMatrix<f64>, DVector<f64>) {
     let dof = model.dof();
     let at = offsets(model);
     let bias = inverse_dynamics(model, state, kin, &DVector::zeros(dof), &loads.f_ext);
@@ -160,12 +163,78 @@ pub fn forward_dense(
             _ => {}
         }
     }
-    mass.lu()
-        .solve(&(applied - bias))
-        .expect("mass matrix is invertible")
+    (mass, applied - bias)
+}
+
+/// Generalized accelerations by (M + diag(armature)) q̈ = τ − C, solved
+/// densely, in [`offsets`]' layout.
+#[cfg(test)]
+pub fn forward_dense(
+    model: &Model,
+    state: &State,
+    kin: &Kinematics,
+    loads: &Loads,
+) -> DVector<f64> {
+    let (mass, forces) = mass_and_forces(model, state, kin, loads);
+    mass.lu().solve(&forces).expect("mass matrix is invertible")
+}
+
+/// Generalized accelerations, in [`offsets`]' layout, of a model whose
+/// followers' coordinates are tied to their leaders' ([`Model::couplings`]):
+/// with G the map from the coordinates that remain (every one but the
+/// followers') to all, q̇ = G q̇ᵣ, the reduced equations Gᵀ (M +
+/// diag(armature)) G q̈ᵣ = Gᵀ (τ − C) — a leader carries its followers'
+/// inertia and efforts — then q̈ = G q̈ᵣ. (A coupling is linear, so G is
+/// constant and adds no velocity term.) NaN where the reduced mass matrix
+/// is singular.
+pub fn coupled_accelerations(
+    model: &Model,
+    state: &State,
+    kin: &Kinematics,
+    loads: &Loads,
+) -> DVector<f64> {
+    let (mass, forces) = mass_and_forces(model, state, kin, loads);
+    let at = offsets(model);
+    let dof = model.dof();
+    // The reduced column of each generalized coordinate that remains.
+    let mut column = vec![None; dof];
+    let mut reduced = 0;
+    for (i, &(start, width)) in at.iter().enumerate() {
+        if model.coupling(i).is_none() {
+            for slot in &mut column[start..start + width] {
+                *slot = Some(reduced);
+                reduced += 1;
+            }
+        }
+    }
+    let mut g = DMatrix::zeros(dof, reduced);
+    for (i, &(start, width)) in at.iter().enumerate() {
+        match model.coupling(i) {
+            Some(c) => {
+                let leader = column[at[c.leader].0].expect("a leader follows none");
+                g[(start, leader)] = c.multiplier;
+            }
+            None => {
+                for k in start..start + width {
+                    g[(k, column[k].expect("remains"))] = 1.0;
+                }
+            }
+        }
+    }
+    let reduced_mass = g.transpose() * &mass * &g;
+    let reduced_forces = g.transpose() * forces;
+    let qdd = match reduced_mass.clone().cholesky() {
+        Some(c) => c.solve(&reduced_forces),
+        None => reduced_mass
+            .lu()
+            .solve(&reduced_forces)
+            .unwrap_or_else(|| DVector::from_element(reduced, f64::NAN)),
+    };
+    g * qdd
 }
 
 /// The accelerations of a derivative, in [`offsets`]' layout.
+#[cfg(test)]
 pub fn generalized_acceleration(model: &Model, d: &crate::dynamics::Derivative) -> DVector<f64> {
     let at = offsets(model);
     let mut a = DVector::zeros(model.dof());
