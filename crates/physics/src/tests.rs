@@ -820,9 +820,9 @@ fn a_chain_point_is_where_the_kinematics_put_its_frame() {
 /// Driven hard by a random controller, the UR5 leaves its velocity limits
 /// far behind (the wrists allow 3.2 rad/s, the rest 3.15); with
 /// `velocity_limits` its drives hold every joint within 5% of its own
-/// limit under the default, implicit integrator (2.3% at most here, wrist
-/// 1; under semi-implicit Euler, whose drives are capped by what an
-/// explicit step resolves, 14%, shoulder_pan) — also where a command
+/// limit under the default, implicit integrator (3.0% at most here,
+/// shoulder_lift; under semi-implicit Euler, whose drives are capped by
+/// what an explicit step resolves, 16%, shoulder_pan) — also where a command
 /// flips and a light wrist's whole effort would carry it across the
 /// drive's band in one step — and the log stays one the dynamics explain
 /// (its applied efforts are the drives', `robots.py`).
