@@ -267,6 +267,10 @@ impl Batch {
     /// stepping) for `model`. Panics if the two differ in length or are
     /// empty.
     pub fn pack(model: &Model, states: &[State], loads: &[Loads]) -> Batch {
+        debug_assert!(
+            model.couplings.is_empty(),
+            "the batch's algorithm takes no couplings"
+        );
         assert!(
             !states.is_empty() && states.len() == loads.len(),
             "a batch needs one load per state"
@@ -409,7 +413,8 @@ impl Batch {
     /// effort and armature as an implicit step takes them: −h k q̇ added,
     /// h b + h² k on the diagonal, efforts whose piece changes at the step's
     /// end solved again (as [`crate::integrate::Evaluation::run_for`] takes
-    /// one state's).
+    /// one state's). Explicitly (`None`) the loads' armature stays as it
+    /// is: what was packed, for held loads.
     fn solve(
         &mut self,
         model: &Model,

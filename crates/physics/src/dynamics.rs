@@ -401,7 +401,9 @@ impl Workspace {
 
     /// The articulated-body algorithm: from the kinematics and the `loads`
     /// (gravity is added here; a ball hinge torque on a free root is
-    /// ignored), writes the state's derivative into `out`.
+    /// ignored), writes the state's derivative into `out`. A model with
+    /// couplings goes to the dense joint-space solve instead
+    /// ([`Workspace::forward_coupled`]), which allocates.
     // The three passes index several per-link arrays by link number.
     #[allow(clippy::needless_range_loop)]
     pub fn forward(

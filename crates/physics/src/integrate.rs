@@ -2,7 +2,9 @@
 //! first, then positions with the new velocities), the same with the joints'
 //! damping, friction slope and limit springs taken implicitly, and classical
 //! RK4. All keep the quaternions unit. All scratch space lives in the
-//! [`Stepper`], so a step allocates nothing.
+//! [`Stepper`], so a step allocates nothing — but for a model with
+//! couplings (a URDF's mimic joints), whose dense solve allocates
+//! ([`crate::joint_space::coupled_accelerations`]).
 
 use nalgebra::{Quaternion, UnitQuaternion, Vector3};
 
@@ -29,7 +31,8 @@ pub enum Integrator {
     /// Euler step, whatever b and k are: stable for damping and limit
     /// springs no explicit step of that h resolves. Ball hinges' damping
     /// and contacts stay explicit. Without damping, friction, a limit
-    /// engaged or a drive braking it is semi-implicit Euler, bit for bit.
+    /// engaged or a velocity-limit drive (whose gain differs) it is
+    /// semi-implicit Euler, bit for bit.
     /// The default, as MuJoCo's Euler integrator takes joint damping
     /// implicitly by default: a robot loaded as its description gives it
     /// runs at a real step.
@@ -55,8 +58,9 @@ pub trait Forces {
 }
 
 /// How many times an implicit step solves again for efforts whose piece
-/// changed at its end ([`Forces::refine`]): the pieces of a joint's drive
-/// are three, and each pass settles at least one joint.
+/// changed at its end ([`Forces::refine`]): a drive's pieces are five, of
+/// which a step crosses one or two (the command's to its band, the band to
+/// the brake) — joints coupled through the mass matrix may take more.
 pub(crate) const REFINEMENTS: usize = 4;
 
 /// No torques, no external forces.
@@ -202,6 +206,9 @@ impl Stepper {
         integrator: Integrator,
         forces: &mut impl Forces,
     ) {
+        // A state set from outside (a hybrid's prediction) may be off its
+        // couplings: each step starts on them.
+        model.impose_couplings(state);
         let momentum_rate = match integrator {
             Integrator::SemiImplicitEuler | Integrator::Implicit => {
                 let implicit = (integrator == Integrator::Implicit).then_some(dt);

@@ -27,7 +27,8 @@
 //!   within ± the URDF's `velocity` the way ros_control's soft limits do:
 //!   the effort is clamped to [−k (q̇ + v), −k (q̇ − v)] (within ± the effort
 //!   limit E), so no effort speeds the joint past its limit and one beyond
-//!   it is braked. Under the implicit integrator k = E / (0.05 v): the
+//!   it is braked. Under the implicit integrator (with an effort limit to
+//!   size it on; else as under semi-implicit Euler) k = E / (0.05 v): the
 //!   drive gives its whole effort until within 5% of the limit, none at
 //!   it, and brakes with its whole effort 5% past it, its slope k taken
 //!   implicitly ([`JointLaw::drive`]). Under semi-implicit Euler k = min(E
@@ -178,10 +179,19 @@ impl JointLaw {
     /// band between.
     pub fn drive_toward(&self, effort: f64, from: DrivePiece, end: f64) -> DrivePiece {
         let to = self.piece_index(effort, end);
-        match to.cmp(&from.index) {
-            std::cmp::Ordering::Equal => from,
-            order => self.piece(effort, from.index + order as i8),
+        let step = match to.cmp(&from.index) {
+            std::cmp::Ordering::Equal => return from,
+            order => order as i8,
+        };
+        let mut next = from.index + step;
+        // A slope no velocity takes for this command (the lower one for a
+        // command at +E, the upper for −E) is passed over.
+        while next != to
+            && ((next == -1 && effort >= self.effort) || (next == 1 && effort <= -self.effort))
+        {
+            next += step;
         }
+        self.piece(effort, next)
     }
 
     /// Which piece holds at velocity `x`, in the order of rising velocity:
@@ -345,6 +355,28 @@ mod tests {
     /// explicit step resolves (k v at rest, less than its effort limit);
     /// under the implicit integrator it gives its whole effort until within
     /// 5% of the velocity limit, whatever the link's inertia.
+    /// Toward the piece at a step's end, one piece at a time, passing over
+    /// a slope the command never meets: a command at +E goes from the
+    /// brake at +E (far below −v) straight to the command.
+    #[test]
+    fn a_step_moves_toward_the_piece_at_its_end_one_piece_at_a_time() {
+        let law = driven(true, true, INERTIA);
+        let at = |effort: f64, qd: f64| law.drive_piece(effort, qd).index;
+        // k = 100: the lower bound is 5 at −2.05, the upper 2 at 1.98.
+        assert_eq!((at(3.0, -3.0), at(3.0, -2.05), at(3.0, 0.0)), (-2, -1, 0));
+        assert_eq!((at(3.0, 1.98), at(3.0, 3.0)), (1, 2));
+        let from = law.drive_piece(3.0, 0.0);
+        assert_eq!(law.drive_toward(3.0, from, 3.0).index, 1, "one piece on");
+        assert_eq!(law.drive_toward(3.0, from, 0.5), from, "where it holds");
+        let braked = law.drive_piece(10.0, -3.0);
+        assert_eq!(braked.index, -2);
+        assert_eq!(
+            law.drive_toward(10.0, braked, 0.0).index,
+            0,
+            "no lower slope for a command at +E"
+        );
+    }
+
     #[test]
     fn an_implicit_drive_gives_its_effort_whatever_the_links_inertia() {
         let light = 1e-3;

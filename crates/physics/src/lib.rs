@@ -5,11 +5,14 @@
 //! re-simulates logged frames with it as the simulator baseline.
 //!
 //! - [`spatial`], [`model`], [`dynamics`]: 6D spatial algebra, the link tree
-//!   (ball hinges and one-DOF joints), the articulated-body algorithm (O(n)),
-//!   energy and momenta.
-//! - [`integrate`]: semi-implicit Euler and RK4 over a reusable [`Stepper`].
+//!   (ball hinges and one-DOF joints, couplings between them), the
+//!   articulated-body algorithm (O(n); a coupled model's dynamics by the
+//!   dense joint-space formulation), energy and momenta.
+//! - [`integrate`]: the implicit integrator (the default: semi-implicit
+//!   Euler with the joints' damping, friction, limits and drives taken
+//!   implicitly), semi-implicit Euler and RK4 over a reusable [`Stepper`].
 //! - [`batch`]: many states at once on one thread (SIMD lanes), the
-//!   articulated-body algorithm and the semi-implicit Euler step;
+//!   articulated-body algorithm and the (implicit) semi-implicit Euler step;
 //!   [`batch_scene`]: a scene's states stepped so, each under its own
 //!   torques, as a planner tries candidates.
 //! - [`contact`], [`controller`]: floor and arena wall; hinge torques.

@@ -346,6 +346,9 @@ pub fn state_from_generalized(model: &Model, values: &[f64]) -> Option<State> {
             }
         }
     }
+    // A follower's logged values may be off its coupling (a sensor's
+    // noise): the state is its leader's.
+    model.impose_couplings(&mut state);
     Some(state)
 }
 
@@ -702,6 +705,10 @@ impl<'a> Runner<'a> {
         if let (Some(actuators), Some(actuated)) = (&mut self.actuators, &mut self.forces.actuated)
         {
             actuated[1..].copy_from_slice(actuators.update(t, &self.hinge_torques));
+            // Nor does an actuator's noise drive a follower.
+            for c in &self.p.model.couplings {
+                actuated[c.follower] = Vector3::zeros();
+            }
         }
     }
 

@@ -27,8 +27,8 @@ use serde::{Deserialize, Serialize};
 
 use crate::frames::{Gaps, Grid, Resample, Source};
 
-/// Version of what this stage writes (part of every cache key; 2: mimic
-/// joints taken).
+/// Version of what this stage writes (part of every cache key; 2: the
+/// implicit integrator's drives by default).
 pub const FORMAT_VERSION: u32 = 2;
 
 /// The `[ingest]` table: how a recording (`[data] recording`) becomes
@@ -127,7 +127,12 @@ impl Params {
         resolved
             .validate()
             .map_err(|(field, message)| (format!("robot.{field}"), message))?;
-        log::joints(&Prepared::new(&resolved)).map_err(|m| ("robot.base".to_string(), m))?;
+        let prepared = Prepared::new(&resolved);
+        let field = match prepared.model.couplings.is_empty() {
+            true => "robot.base",
+            false => "robot.file",
+        };
+        log::joints(&prepared).map_err(|m| (field.to_string(), m))?;
         *robot = resolved;
         Ok(())
     }

@@ -37,6 +37,14 @@ pub fn joints(p: &Prepared) -> std::result::Result<Vec<String>, String> {
             p.scene.name
         ));
     }
+    if let Some(c) = p.model.couplings.first() {
+        let robot = p.robot.as_ref().expect("a robot scene");
+        return Err(format!(
+            "robot `{}` has mimic joints (`{}` follows `{}`): a recording of them is not read \
+             yet; remove the <mimic> elements to read each joint as recorded",
+            p.scene.name, robot.joints[c.follower], robot.joints[c.leader]
+        ));
+    }
     Ok(p.controls()
         .into_iter()
         .map(|c| c.name["tau.".len()..].to_string())

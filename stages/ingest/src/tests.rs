@@ -200,3 +200,30 @@ fn a_recorded_simulation_is_ingested_as_its_own_log_and_replays() {
         }
     }
 }
+
+/// A recording of a robot with mimic joints is refused, naming a follower
+/// and its leader, until a reader of its joints takes the coupling.
+#[test]
+fn a_robot_with_mimic_joints_is_refused_naming_them() {
+    let inertial = r#"<inertial><mass value="1"/><inertia ixx="1" ixy="0" ixz="0" iyy="1" iyz="0" izz="1"/></inertial>"#;
+    let text = format!(
+        r#"<robot name="gripper">
+          <link name="palm">{inertial}</link><link name="l">{inertial}</link><link name="r">{inertial}</link>
+          <joint name="left" type="prismatic"><parent link="palm"/><child link="l"/><limit lower="0" upper="0.04" effort="20" velocity="0.2"/></joint>
+          <joint name="right" type="prismatic"><parent link="palm"/><child link="r"/><limit lower="0" upper="0.04" effort="20" velocity="0.2"/><mimic joint="left"/></joint>
+        </robot>"#
+    );
+    let mut scene = Scene {
+        name: "gripper".into(),
+        kind: SceneKind::Urdf,
+        ..Scene::default()
+    };
+    scene.set_description(&text).unwrap();
+    let scene = scene.resolve();
+    scene.validate().unwrap();
+    let message = log::joints(&Prepared::new(&scene)).unwrap_err();
+    assert!(
+        message.contains("robot `gripper` has mimic joints (`right` follows `left`)"),
+        "{message}"
+    );
+}

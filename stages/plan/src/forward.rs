@@ -50,7 +50,8 @@ pub trait Model: Forward {
 /// A simulator at `steps` integration steps per frame. It costs a
 /// decision's candidates together, in SIMD lanes ([`SceneBatch`]), where
 /// the scene allows; one at a time otherwise (an RK4 scene, a plant's
-/// actuators, a task reading a variable the state alone does not give).
+/// actuators, a robot's mimic joints, a task reading a variable the state
+/// alone does not give).
 pub struct Simulator<'a> {
     p: &'a Prepared,
     controls: Controls,
