@@ -362,6 +362,26 @@ pub fn effective_inertias(model: &Model, state: &State) -> Vec<Option<f64>> {
         .collect()
 }
 
+/// The parts of a state's derivative that are its pose's rates: each
+/// orientation's, a free root's position's; and a held root's velocity
+/// kept still.
+fn pose_rates(model: &Model, state: &State, kin: &Kinematics, out: &mut Derivative) {
+    for i in 0..model.len() {
+        out.orient[i] = match (i, model.root) {
+            // A welded root keeps its orientation whatever its rate says.
+            (0, Root::Fixed) => Quaternion::identity() * 0.0,
+            _ => *state.orient[i].quaternion() * Quaternion::from_imag(state.rates[i]) * 0.5,
+        };
+    }
+    out.root_p = match model.root {
+        Root::Free => kin.rot[0] * state.root_v,
+        Root::Pinned | Root::Fixed => Vector3::zeros(),
+    };
+    if model.root_held() {
+        out.root_v = Vector3::zeros();
+    }
+}
+
 /// Scratch space of the articulated-body algorithm, allocated once per model
 /// so that stepping allocates nothing.
 #[derive(Clone, Debug)]
@@ -486,19 +506,8 @@ impl Workspace {
                 }
             };
             self.accel[i] = a;
-            out.orient[i] = match (i, model.root) {
-                // A welded root keeps its orientation whatever its rate says.
-                (0, Root::Fixed) => Quaternion::identity() * 0.0,
-                _ => *state.orient[i].quaternion() * Quaternion::from_imag(state.rates[i]) * 0.5,
-            };
         }
-        out.root_p = match model.root {
-            Root::Free => kin.rot[0] * state.root_v,
-            Root::Pinned | Root::Fixed => Vector3::zeros(),
-        };
-        if model.root_held() {
-            out.root_v = Vector3::zeros();
-        }
+        pose_rates(model, state, kin, out);
     }
 
     /// [`Workspace::forward`] for a model with couplings, which the
@@ -553,18 +562,8 @@ impl Workspace {
                 }
             };
             self.accel[i] = a;
-            out.orient[i] = match (i, model.root) {
-                (0, Root::Fixed) => Quaternion::identity() * 0.0,
-                _ => *state.orient[i].quaternion() * Quaternion::from_imag(state.rates[i]) * 0.5,
-            };
         }
-        out.root_p = match model.root {
-            Root::Free => kin.rot[0] * state.root_v,
-            Root::Pinned | Root::Fixed => Vector3::zeros(),
-        };
-        if model.root_held() {
-            out.root_v = Vector3::zeros();
-        }
+        pose_rates(model, state, kin, out);
     }
 
     /// The inward step of a ball hinge (or a pinned root).
