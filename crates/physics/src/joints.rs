@@ -157,8 +157,10 @@ impl JointLaw {
     /// limit) at joint velocity `qd` — within the velocity limit's soft
     /// bounds, if it holds one — and how it falls as the velocity rises,
     /// −∂/∂q̇ (the gain where a bound binds between the effort limits, else
-    /// zero).
-    pub fn drive(&self, effort: f64, qd: f64) -> (f64, f64) {
+    /// zero). The simulator takes the piece ([`JointLaw::drive_piece`]);
+    /// the tests read its value.
+    #[cfg(test)]
+    pub(crate) fn drive(&self, effort: f64, qd: f64) -> (f64, f64) {
         let piece = self.drive_piece(effort, qd);
         (piece.at(qd), piece.slope)
     }
