@@ -37,7 +37,8 @@ struct Cli {
 #[derive(Debug, Subcommand)]
 enum Command {
     /// Install what the suite needs and is missing, then run the whole
-    /// suite, step by step, stopping at the first step that fails.
+    /// suite: `cargo test`, then two lanes of steps side by side, each
+    /// stopping at its first step that fails.
     ///
     /// Debian packages (yosys, iverilog, chromium) are installed with
     /// apt-get when this runs as root; otherwise a missing one stops the

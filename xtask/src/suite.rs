@@ -1,8 +1,9 @@
-//! The whole suite, step by step: what `cargo test` covers, then what needs
-//! the real binary and outside programs together — standard readers on a
-//! real run, the Python package, Pinocchio, a real MLflow server, a real
-//! Snakemake workflow. (Circuits on an FPGA are `cargo test`'s:
-//! `tests/circuit.rs`.) Every step writes under `target/xtask/`.
+//! The whole suite: what `cargo test` covers, then what needs the real
+//! binary and outside programs together, in two lanes side by side — on the
+//! quickstart's runs, standard readers, the Python package, a real MLflow
+//! server and a real Snakemake workflow; and the robots against Pinocchio.
+//! (Circuits on an FPGA are `cargo test`'s: `tests/circuit.rs`.) Every step
+//! writes under `target/xtask/`.
 
 use std::io::{Read, Write};
 use std::net::{TcpListener, TcpStream};
@@ -13,19 +14,26 @@ use std::time::{Duration, Instant};
 
 use crate::{Failure, root, target_dir};
 
-/// What the steps share: the interpreter of the suite's environment and
-/// where their files go.
+/// What the steps share: the interpreter of the suite's environment, where
+/// their files go, and where their programs' output goes.
 struct Suite {
     python: PathBuf,
     /// `target/xtask`.
     work: PathBuf,
+    /// The file a lane's programs write to (stdout and stderr), or `None`
+    /// for the terminal's.
+    log: Option<PathBuf>,
 }
 
 /// One step: its name and what it does.
 type Step = (&'static str, fn(&Suite) -> Result<(), String>);
 
-const STEPS: &[Step] = &[
-    ("cargo test --workspace -- --include-ignored", cargo_test),
+/// The first step: it builds the binary every later step runs.
+const FIRST: Step = ("cargo test --workspace -- --include-ignored", cargo_test);
+
+/// The steps on the quickstart's runs, in order: each reads what the one
+/// before left in the suite's runs folder.
+const QUICKSTART_LANE: &[Step] = &[
     (
         "the quickstart (three replicates) read by standard readers, its figures recomputed",
         quickstart_interop,
@@ -34,15 +42,6 @@ const STEPS: &[Step] = &[
         "the Python package: built into the suite's environment, tested by pytest on the \
          quickstart's models, its rollout benchmark and MPC example run once",
         python_package,
-    ),
-    (
-        "robots from URDF: thirteen robots' logs against Pinocchio, and bench sim beside it",
-        robots_against_pinocchio,
-    ),
-    (
-        "hard cases: every robot of example-robot-data at 1 ms under both integrators, \
-         the implicit runs against Pinocchio",
-        hard_cases,
     ),
     (
         "MLflow: runs exported to a real server and read back",
@@ -60,12 +59,60 @@ const STEPS: &[Step] = &[
     ),
 ];
 
-/// Runs every step in order, stopping at the first that fails; prints each
+/// The robots' steps: they share nothing with the quickstart's, and run
+/// beside them — half of their time is one compiler building the
+/// Pinocchio harness and Python on one core, which would leave the
+/// machine's second core idle.
+const ROBOT_LANE: &[Step] = &[
+    (
+        "robots from URDF: thirteen robots' logs against Pinocchio, and bench sim beside it",
+        robots_against_pinocchio,
+    ),
+    (
+        "hard cases: every robot of example-robot-data at 1 ms under both integrators, \
+         the implicit runs against Pinocchio",
+        hard_cases,
+    ),
+];
+
+/// What one lane did: each step's name and wall time, and the first
+/// failure, which ends the lane.
+#[derive(Default)]
+struct Lane {
+    times: Vec<(&'static str, Duration)>,
+    failure: Option<String>,
+}
+
+impl Lane {
+    /// Runs `steps` in order, stopping at the first that fails; each
+    /// step's name is printed (to the lane's log, when it has one) as it
+    /// starts.
+    fn run(suite: &Suite, steps: &[Step]) -> Lane {
+        let mut lane = Lane::default();
+        for (name, step) in steps {
+            suite.say(&format!("== {name}"));
+            let start = Instant::now();
+            let result = step(suite);
+            lane.times.push((*name, start.elapsed()));
+            if let Err(message) = result {
+                lane.failure = Some(format!("{name}: {message}"));
+                break;
+            }
+        }
+        lane
+    }
+}
+
+/// Runs the first step, then the two lanes side by side — the robots'
+/// output kept in `target/xtask/robots.log` and printed when its lane
+/// ends —, stopping each lane at its first failing step; prints each
 /// step's wall time, then a closing line of passed and failed steps.
 pub fn run(python: &Path) -> Result<(), Failure> {
+    let work = target_dir().join("xtask");
     let suite = Suite {
         python: python.to_path_buf(),
-        work: target_dir().join("xtask"),
+        work: work.clone(),
+        log: None,
     };
     let marker = format!("{}-{}", std::process::id(), unix_nanos());
     // SAFETY: the suite has started no thread yet, so nothing reads the
@@ -76,44 +123,113 @@ pub fn run(python: &Path) -> Result<(), Failure> {
     // written beside them, so the checkout stays clean.
     // SAFETY: as above.
     unsafe { std::env::set_var("PYTHONDONTWRITEBYTECODE", "1") };
-    let mut times = Vec::new();
-    let mut failure = None;
-    for (name, step) in STEPS {
-        println!("== {name}");
-        let start = Instant::now();
-        let result = step(&suite);
-        times.push((*name, start.elapsed()));
-        if let Err(message) = result {
-            failure = Some(format!("{name}: {message}"));
-            break;
-        }
+    let start = Instant::now();
+    let mut lanes = vec![Lane::run(&suite, &[FIRST])];
+    if lanes[0].failure.is_none() {
+        let robots = Suite {
+            python: python.to_path_buf(),
+            work,
+            log: Some(suite.work.join("robots.log")),
+        };
+        let (quickstart, robot) = std::thread::scope(|s| {
+            let robot = s.spawn(|| robots.start_log().map(|()| Lane::run(&robots, ROBOT_LANE)));
+            let quickstart = Lane::run(&suite, QUICKSTART_LANE);
+            (
+                quickstart,
+                robot.join().expect("the robots' lane does not panic"),
+            )
+        });
+        let log = robots.log.as_deref().expect("the robots' lane has a log");
+        println!(
+            "\n== the robots' lane, beside the quickstart's ({}):",
+            log.display()
+        );
+        print!("{}", std::fs::read_to_string(log).unwrap_or_default());
+        lanes.push(quickstart);
+        lanes.push(robot.unwrap_or_else(|e| Lane {
+            failure: Some(e),
+            ..Lane::default()
+        }));
     }
     // Whatever a step left behind (a server's child, a stray run) is found
     // by the marker it inherited, even when the step failed.
     let left = nothing_left_running(&marker, Duration::from_secs(10));
-    println!("\nwall time per step:");
-    for (name, time) in &times {
-        println!("  {:>7.1} s  {name}", time.as_secs_f64());
+    println!("\nwall time per step (the last two lanes side by side):");
+    for lane in &lanes {
+        for (name, time) in &lane.times {
+            println!("  {:>7.1} s  {name}", time.as_secs_f64());
+        }
     }
-    let total: f64 = times.iter().map(|(_, t)| t.as_secs_f64()).sum();
-    println!("  {total:>7.1} s  in all");
-    let failed = usize::from(failure.is_some());
-    println!("steps: {} passed, {failed} failed", times.len() - failed);
+    println!("  {:>7.1} s  in all", start.elapsed().as_secs_f64());
+    let ran: usize = lanes.iter().map(|l| l.times.len()).sum();
+    let mut failures: Vec<String> = lanes.into_iter().filter_map(|l| l.failure).collect();
+    println!(
+        "steps: {} passed, {} failed",
+        ran - failures.len(),
+        failures.len()
+    );
     match left {
         Ok(true) => println!("left running: nothing"),
         Ok(false) => println!("left running: unchecked (no /proc to read environments from)"),
         Err(message) => {
             println!("left running: {message}");
-            failure.get_or_insert(message);
+            failures.push(message);
         }
     }
-    failure.map_or(Ok(()), |f| Err(Failure::Step(f)))
+    match failures.is_empty() {
+        true => Ok(()),
+        false => Err(Failure::Step(failures.join("; "))),
+    }
+}
+
+impl Suite {
+    /// Starts the lane's log afresh.
+    fn start_log(&self) -> Result<(), String> {
+        match &self.log {
+            Some(log) => std::fs::create_dir_all(&self.work)
+                .and_then(|()| std::fs::write(log, ""))
+                .map_err(|e| format!("{}: {e}", log.display())),
+            None => Ok(()),
+        }
+    }
+
+    /// Prints `line` to the terminal, or appends it to the lane's log.
+    fn say(&self, line: &str) {
+        match &self.log {
+            Some(log) => {
+                let appended = std::fs::OpenOptions::new()
+                    .append(true)
+                    .open(log)
+                    .and_then(|mut f| writeln!(f, "{line}"));
+                if let Err(e) = appended {
+                    eprintln!("{}: {e}", log.display());
+                }
+            }
+            None => println!("{line}"),
+        }
+    }
+
+    /// Runs `command` in the workspace's root, its output passed through to
+    /// the terminal or appended to the lane's log; an error names the
+    /// command and its exit status.
+    fn run(&self, command: &mut Command) -> Result<(), String> {
+        if let Some(log) = &self.log {
+            let open = || {
+                std::fs::OpenOptions::new()
+                    .append(true)
+                    .open(log)
+                    .map_err(|e| format!("{}: {e}", log.display()))
+            };
+            command.stdout(open()?).stderr(open()?);
+        }
+        run_in_root(command)
+    }
 }
 
 /// Every test, the full suite's too: the fast tier (`cargo test
 /// --workspace`) leaves out those marked `#[ignore = "full suite: …"]`.
-fn cargo_test(_: &Suite) -> Result<(), String> {
-    run_in_root(cargo().args(["test", "--workspace", "--", "--include-ignored"]))
+fn cargo_test(suite: &Suite) -> Result<(), String> {
+    suite.run(cargo().args(["test", "--workspace", "--", "--include-ignored"]))
 }
 
 /// The runs of the interop steps.
@@ -127,7 +243,7 @@ fn reports(suite: &Suite) -> PathBuf {
 
 /// `alnlab run` of the quickstart into the suite's runs and reports.
 fn run_quickstart(suite: &Suite) -> Result<(), String> {
-    run_in_root(
+    suite.run(
         alnlab()
             .args(["--quiet", "run", "experiments/quickstart.toml", "--out"])
             .arg(runs(suite))
@@ -162,7 +278,7 @@ fn python_package(suite: &Suite) -> Result<(), String> {
         std::env::split_paths(&std::env::var_os("PATH").unwrap_or_default()),
     ))
     .map_err(|e| format!("PATH: {e}"))?;
-    run_in_root(
+    suite.run(
         Command::new(&suite.python)
             .args([
                 "-m",
@@ -180,7 +296,7 @@ fn python_package(suite: &Suite) -> Result<(), String> {
         command
             .env("ALNLAB_TEST_RUNS", runs(suite))
             .env("ALNLAB_BIN", alnlab_bin());
-        run_in_root(command)
+        suite.run(command)
     };
     python(Command::new(&suite.python).args([
         "-m",
@@ -218,7 +334,7 @@ fn hard_cases(suite: &Suite) -> Result<(), String> {
 fn robot_script(suite: &Suite, script: &str, work: &str) -> Result<PathBuf, String> {
     let dir = suite.work.join(work);
     let _ = std::fs::remove_dir_all(&dir);
-    run_in_root(
+    suite.run(
         Command::new(&suite.python)
             .arg(script)
             .arg(alnlab_bin())
@@ -235,7 +351,7 @@ fn robot_script(suite: &Suite, script: &str, work: &str) -> Result<PathBuf, Stri
 fn robots_against_pinocchio(suite: &Suite) -> Result<(), String> {
     let dir = robot_script(suite, "tests/robots.py", "robots")?;
     let harness = dir.join("pinocchio-aba");
-    run_in_root(
+    suite.run(
         Command::new("bash")
             .arg("bench/pinocchio/build.sh")
             .arg(&harness)
@@ -353,7 +469,7 @@ fn every_bench(suite: &Suite) -> Result<(), String> {
 }
 
 fn interop(suite: &Suite, record: &Path, report: &Path) -> Result<(), String> {
-    run_in_root(
+    suite.run(
         Command::new(&suite.python)
             .arg("tests/interop.py")
             .arg(record)
@@ -373,7 +489,7 @@ fn mlflow_round_trip(suite: &Suite) -> Result<(), String> {
     let server = MlflowServer::start(&suite.python, &dir)?;
     let uri = format!("http://127.0.0.1:{}", server.port);
     for run in ["quickstart~1", "quickstart~1", "quickstart"] {
-        run_in_root(
+        suite.run(
             alnlab()
                 .args(["export", "mlflow", run, "--out"])
                 .arg(runs(suite))
@@ -404,7 +520,7 @@ fn mlflow_round_trip(suite: &Suite) -> Result<(), String> {
         return Err(format!("expected two recorded runs, listed {records:?}"));
     }
     for record in records {
-        run_in_root(
+        suite.run(
             Command::new(&suite.python)
                 .arg("tests/mlflow_check.py")
                 .arg(record)
@@ -416,15 +532,14 @@ fn mlflow_round_trip(suite: &Suite) -> Result<(), String> {
 
 fn snakemake(suite: &Suite) -> Result<(), String> {
     let bin = suite.python.parent().expect("the venv's bin folder");
-    run_in_root(
+    suite.run(
         Command::new("bash")
             .arg("tests/snakemake.sh")
             .arg(alnlab_bin())
             .arg(bin.join("snakemake"))
             .arg(&suite.python)
             .arg(suite.work.join("snakemake"))
-            // The direct runs beside the interop step's quickstart: that
-            // one comes from the cache.
+            // The direct runs beside the quickstart's, sharing its cache.
             .arg(runs(suite))
             .arg(reports(suite)),
     )
