@@ -17,6 +17,7 @@ use alnlab_aln::pwl::Tree;
 use alnlab_aln::pwl::predict::{self, Path as Evaluation, Predictor};
 use alnlab_codes::Entry;
 use alnlab_common::ModelId;
+use rayon::prelude::*;
 
 use crate::rollout::{LoggedFrames, Start};
 use crate::timing::Path;
@@ -124,7 +125,7 @@ pub fn robust_linear(
     rows: &[usize],
 ) -> Vec<Tree> {
     reads
-        .iter()
+        .par_iter()
         .map(|r| {
             let inputs: Vec<f64> = rows
                 .iter()
