@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
-# The Snakemake export end to end (run by .ci/run). The quickstart exported
-# with 4 training shards per variant runs under `snakemake --cores 2`; on the
+# The Snakemake export end to end (run by .ci/run). A small experiment of the
+# quickstart's structure (tests/data/sharded.toml) exported with 4 training
+# shards per variant runs under `snakemake --cores 2`; on the
 # way, a shard with nowhere to write fails the workflow with the shard named, and
 # the re-run resumes without redoing the finished shards. The result must
 # equal `alnlab run`'s on the same manifest; so must a small experiment's
@@ -9,8 +10,7 @@
 # Usage: tests/snakemake.sh ALNLAB SNAKEMAKE PYTHON WORK_DIR [DIRECT_RUNS DIRECT_REPORTS]
 #
 # The direct runs go to DIRECT_RUNS and DIRECT_REPORTS when given (the
-# suite passes the folders its quickstart already ran in, so that run comes
-# from the cache), else under WORK_DIR.
+# suite passes its runs and reports folders), else under WORK_DIR.
 set -euo pipefail
 alnlab=$(realpath "$1")
 snakemake=$2
@@ -23,11 +23,12 @@ work=$(realpath "$4")
 direct=${5:-$work/direct}
 direct_reports=${6:-$work/direct-reports}
 
-"$alnlab" -q run experiments/quickstart.toml --out "$direct" --reports "$direct_reports" >/dev/null
-"$alnlab" export snakemake experiments/quickstart.toml --shards 4 -o "$work/wf" \
+sharded=tests/data/sharded.toml
+"$alnlab" -q run "$sharded" --out "$direct" --reports "$direct_reports" >/dev/null
+"$alnlab" export snakemake "$sharded" --shards 4 -o "$work/wf" \
   --out "$work/runs" --reports "$work/reports" --alnlab "$alnlab" >/dev/null
 smk() { "$snakemake" --snakefile "$work/wf/Snakefile" --directory "$work/wf" --cores 2 "$@"; }
-mark="$work/runs/quickstart/snakemake"
+mark="$work/runs/sharded/snakemake"
 
 # Variant walk up to two of its four shards.
 smk "$mark/walk/train-shard-1-of-4.done" "$mark/walk/train-shard-2-of-4.done" >"$work/first.log" 2>&1
@@ -54,8 +55,8 @@ rm "${keydir}3-of-4" "${keydir}4-of-4"
 smk >"$work/resumed.log" 2>&1 || { cat "$work/resumed.log"; exit 1; }
 [ "$before" = "$(stamps)" ] || { echo "snakemake: finished shards were run again"; exit 1; }
 
-"$python" tests/snakemake_check.py "$direct/quickstart/run.json" "$work/runs/quickstart/run.json" \
-  "$direct_reports/quickstart/report.md" "$work/reports/quickstart/report.md"
+"$python" tests/snakemake_check.py "$direct/sharded/run.json" "$work/runs/sharded/run.json" \
+  "$direct_reports/sharded/report.md" "$work/reports/sharded/report.md"
 
 # Rounds of the planner's own data run in the workflow too, to the same
 # artifacts.
