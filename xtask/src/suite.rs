@@ -108,10 +108,9 @@ impl Lane {
 /// ends —, stopping each lane at its first failing step; prints each
 /// step's wall time, then a closing line of passed and failed steps.
 pub fn run(python: &Path) -> Result<(), Failure> {
-    let work = target_dir().join("xtask");
     let suite = Suite {
         python: python.to_path_buf(),
-        work: work.clone(),
+        work: target_dir().join("xtask"),
         log: None,
     };
     let marker = format!("{}-{}", std::process::id(), unix_nanos());
@@ -128,7 +127,7 @@ pub fn run(python: &Path) -> Result<(), Failure> {
     if lanes[0].failure.is_none() {
         let robots = Suite {
             python: python.to_path_buf(),
-            work,
+            work: suite.work.clone(),
             log: Some(suite.work.join("robots.log")),
         };
         let (quickstart, robot) = std::thread::scope(|s| {
@@ -197,12 +196,10 @@ impl Suite {
     fn say(&self, line: &str) {
         match &self.log {
             Some(log) => {
-                let appended = std::fs::OpenOptions::new()
-                    .append(true)
-                    .open(log)
-                    .and_then(|mut f| writeln!(f, "{line}"));
-                if let Err(e) = appended {
-                    eprintln!("{}: {e}", log.display());
+                if let Err(e) = append_to(log).and_then(|mut f| {
+                    writeln!(f, "{line}").map_err(|e| format!("{}: {e}", log.display()))
+                }) {
+                    eprintln!("{e}");
                 }
             }
             None => println!("{line}"),
@@ -214,16 +211,18 @@ impl Suite {
     /// command and its exit status.
     fn run(&self, command: &mut Command) -> Result<(), String> {
         if let Some(log) = &self.log {
-            let open = || {
-                std::fs::OpenOptions::new()
-                    .append(true)
-                    .open(log)
-                    .map_err(|e| format!("{}: {e}", log.display()))
-            };
-            command.stdout(open()?).stderr(open()?);
+            command.stdout(append_to(log)?).stderr(append_to(log)?);
         }
         run_in_root(command)
     }
+}
+
+/// The lane's `log`, opened to append to; an error names it.
+fn append_to(log: &Path) -> Result<std::fs::File, String> {
+    std::fs::OpenOptions::new()
+        .append(true)
+        .open(log)
+        .map_err(|e| format!("{}: {e}", log.display()))
 }
 
 /// Every test, the full suite's too: the fast tier (`cargo test
