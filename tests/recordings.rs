@@ -3,7 +3,9 @@
 //! place, and every bad one — a missing topic, another message type,
 //! joints the robot lacks or misses, time going backwards, a gap, damage —
 //! and every manifest that cannot go with a recording is refused, naming
-//! the file, the topic and the time.
+//! the file, the topic and the time. The same samples as tables (`[data]
+//! tables`, CSV) give the same frames, and bad tables are refused naming
+//! the file, the column and the row.
 
 use std::collections::BTreeMap;
 use std::io::Cursor;
@@ -30,6 +32,16 @@ struct Message {
 }
 
 impl Message {
+    /// Joint `j`'s position, velocity and effort at the message's stamp.
+    fn values(&self, j: usize) -> [f64; 3] {
+        let t = (self.stamp_ns % 1_000_000_000_000) as f64 * 1e-9;
+        [
+            0.3 * (t + j as f64).sin(),
+            0.3 * (t + j as f64).cos(),
+            1.0 + j as f64,
+        ]
+    }
+
     fn at(ms: i64) -> Message {
         Message {
             stamp_ns: 1_700_000_000_000_000_000 + ms * 1_000_000,
@@ -60,18 +72,12 @@ impl Message {
         for name in &self.names {
             string(&mut m, name);
         }
-        let t = (self.stamp_ns % 1_000_000_000_000) as f64 * 1e-9;
         for field in 0..3 {
             align(&mut m, 4);
             m.extend_from_slice(&(self.names.len() as u32).to_le_bytes());
             align(&mut m, 8);
             for j in 0..self.names.len() {
-                let x = match field {
-                    0 => 0.3 * (t + j as f64).sin(),
-                    1 => 0.3 * (t + j as f64).cos(),
-                    _ => 1.0 + j as f64,
-                };
-                m.extend_from_slice(&x.to_le_bytes());
+                m.extend_from_slice(&self.values(j)[field].to_le_bytes());
             }
         }
         m
@@ -103,6 +109,26 @@ fn steady(seconds: f64) -> Vec<Message> {
     (0..(seconds * 100.0) as i64)
         .map(|k| Message::at(10 * k))
         .collect()
+}
+
+/// `messages` as a CSV table: a time column `t` (s from the first), then
+/// each joint's `<joint>.position`, `.velocity` and `.effort`.
+fn table(path: &Path, messages: &[Message]) {
+    let mut text = String::from("t");
+    for j in JOINTS {
+        text += &format!(",{j}.position,{j}.velocity,{j}.effort");
+    }
+    text += "\n";
+    for m in messages {
+        text += &format!("{}", (m.stamp_ns - messages[0].stamp_ns) as f64 * 1e-9);
+        for j in 0..JOINTS.len() {
+            for x in m.values(j) {
+                text += &format!(",{x:?}");
+            }
+        }
+        text += "\n";
+    }
+    std::fs::write(path, text).unwrap();
 }
 
 /// A manifest learning from `recording`, with `extra` appended.
@@ -175,6 +201,98 @@ fn a_recording_is_ingested_where_the_simulation_would_be() {
     assert!(ingested.join("stats.parquet").is_file());
 }
 
+/// A manifest learning from the CSV tables `tables` (a TOML value), with
+/// `extra` appended.
+fn tables_manifest(tables: &str, extra: &str) -> String {
+    manifest("-", extra).replace(
+        "recording = \"-\"",
+        &format!("tables = {tables}\n\n[ingest.table]\ntime = \"t\""),
+    )
+}
+
+/// The ingest stage's trajectory log in the run folder `out`.
+fn ingested(out: &Path) -> alnlab_common::state_log::StateLog {
+    let [dir]: [std::path::PathBuf; 1] = std::fs::read_dir(out.join("cache/ingest"))
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .collect::<Vec<_>>()
+        .try_into()
+        .expect("one ingest artifact");
+    alnlab_common::state_log::read(&dir.join("trajectory.mcap")).unwrap()
+}
+
+#[test]
+fn tables_of_the_same_samples_give_the_recordings_frames_one_run_a_table() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let run = |manifest: &str, text: String| {
+        let m = write_manifest(d, manifest, &text);
+        let out = d.join(format!("out-{manifest}"));
+        let (m, o) = (m.to_str().unwrap(), out.to_str().unwrap());
+        let o = alnlab(d, &["-q", "run", m, "--out", o, "--until", "stride"]);
+        assert!(o.status.success(), "{}", stderr(&o));
+        ingested(&out)
+    };
+    // The recording split by a gap where the tables split by file: its
+    // messages 60.. 0.2 s later, a run of their own; the same messages in
+    // two tables.
+    let mut gapped = steady(1.0);
+    for m in &mut gapped[60..] {
+        m.stamp_ns += 200_000_000;
+    }
+    record(
+        &d.join("gapped.mcap"),
+        "/joint_states",
+        "sensor_msgs/msg/JointState",
+        &gapped,
+    );
+    table(&d.join("a.csv"), &gapped[..60]);
+    table(&d.join("b.csv"), &gapped[60..]);
+    let from_mcap = run(
+        "mcap.toml",
+        manifest("gapped.mcap", "").replace(
+            "[ingest.robot]",
+            "[ingest]\ngaps = \"split\"\n\n[ingest.robot]",
+        ),
+    );
+    let from_tables = run("tables.toml", tables_manifest("\"*.csv\"", ""));
+    let (a, b) = (&from_mcap.scenes[0].frames, &from_tables.scenes[0].frames);
+    // Two runs of 60 and 40 samples: 58 and 38 frames logged.
+    assert_eq!(b.len(), 96);
+    assert_eq!(b.iter().filter(|f| f.run == 1).count(), 38);
+    for (x, y) in a.iter().zip(b) {
+        assert_eq!((x.run, x.frame), (y.run, y.frame));
+        // The same samples; the tables' times count from each file's first.
+        let close = |u: &[f64], v: &[f64]| u.iter().zip(v).all(|(u, v)| (u - v).abs() < 1e-12);
+        assert!(
+            close(&x.state, &y.state) && close(&x.variables, &y.variables),
+            "run {} frame {}: {:?} {:?} against {:?} {:?}",
+            x.run,
+            x.frame,
+            x.state,
+            x.variables,
+            y.state,
+            y.variables
+        );
+    }
+    assert_eq!(a.len(), b.len());
+    let scene = |log: &alnlab_common::state_log::StateLog| -> BTreeMap<String, String> {
+        log.metadata
+            .iter()
+            .find(|(name, _)| name == "alnlab.scene")
+            .expect("a scene record")
+            .1
+            .clone()
+    };
+    let record = scene(&from_tables);
+    assert_eq!(record["source"], "tables");
+    assert_eq!(record["table.0.file"], "a.csv");
+    assert_eq!(record["table.1.samples"], "40");
+    assert_eq!(record["run_tables"], "0,1");
+    let hz: f64 = record["table.0.implied_hz"].parse().unwrap();
+    assert!((hz - 100.0).abs() < 0.5, "{hz}");
+}
+
 #[test]
 fn bad_recordings_and_what_cannot_go_with_one_are_refused_by_name_and_time() {
     let dir = tempfile::tempdir().unwrap();
@@ -227,6 +345,18 @@ fn bad_recordings_and_what_cannot_go_with_one_are_refused_by_name_and_time() {
     let middle = bytes.len() / 2;
     bytes[middle] ^= 0x40;
     std::fs::write(d.join("damaged.mcap"), bytes).unwrap();
+
+    table(&d.join("good.csv"), &good);
+    let mut nan = steady(1.0);
+    nan[40].stamp_ns = nan[38].stamp_ns;
+    table(&d.join("backwards.csv"), &nan);
+    let text = std::fs::read_to_string(d.join("good.csv")).unwrap();
+    std::fs::write(d.join("nan.csv"), text.replacen(",1.0,", ",NaN,", 1)).unwrap();
+    std::fs::write(
+        d.join("no-effort.csv"),
+        text.replace("wrist_3_joint.effort", "wrist_3_joint.torque"),
+    )
+    .unwrap();
 
     let run = |name: &str, text: String, mentions: &[&str]| {
         let m = write_manifest(d, &format!("{name}.toml"), &text);
@@ -300,12 +430,62 @@ fn bad_recordings_and_what_cannot_go_with_one_are_refused_by_name_and_time() {
                 "other-topic.mcap",
                 "\n[[plan.task]]\nkind = \"hold-angles\"\nname = \"t\"\ntargets = { \"q.elbow_joint\" = 0.5 }\n",
             ),
-            &["plan.task", "a recording has none", "remove [[plan.task]]"],
+            &[
+                "plan.task",
+                "recorded data have none",
+                "remove [[plan.task]]",
+            ],
         ),
         run(
             "simulate-beside",
             manifest("other-topic.mcap", "\n[[simulate.scene]]\nname = \"w\"\n"),
-            &["simulate", "the data come from `[data] recording`"],
+            &["simulate", "the data come from `[data]`'s recorded data"],
+        ),
+        run(
+            "a-table-lacks-a-column",
+            tables_manifest("[\"good.csv\", \"no-effort.csv\"]", ""),
+            &[
+                "no-effort.csv: no column `wrist_3_joint.effort` (its columns: t, shoulder_pan_joint.position",
+            ],
+        ),
+        run(
+            "a-table-goes-backwards",
+            tables_manifest("\"backwards.csv\"", ""),
+            &["backwards.csv: column `t`, row 41: time goes backwards"],
+        ),
+        run(
+            "a-table-holds-nan",
+            tables_manifest("\"nan.csv\"", ""),
+            &["nan.csv: column `shoulder_pan_joint.effort`, row 1: NaN"],
+        ),
+        run(
+            "a-rate-the-data-contradict",
+            tables_manifest("\"good.csv\"", "").replace("time = \"t\"", "rate = 50"),
+            &[
+                "good.csv: the positions and velocities imply samples 10.00 ms apart (100.0 Hz",
+                "rate = 50 Hz puts them 20.00 ms apart",
+            ],
+        ),
+        run(
+            "a-glob-matching-nothing",
+            tables_manifest("\"trajectories/*.parquet\"", ""),
+            &["data.tables", "`trajectories/*.parquet` matches no file"],
+        ),
+        run(
+            "a-recording-and-tables",
+            manifest("good.mcap", "").replace("[data]", "[data]\ntables = \"good.csv\""),
+            &["data", "not more"],
+        ),
+        run(
+            "columns-for-a-recording",
+            manifest("other-topic.mcap", "").replace(
+                "[ingest.robot]",
+                "[ingest.table]\ntime = \"t\"\n\n[ingest.robot]",
+            ),
+            &[
+                "ingest.table",
+                "a recording's joints are named in its messages",
+            ],
         ),
         run(
             "not-a-robot",

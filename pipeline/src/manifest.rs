@@ -15,6 +15,7 @@ use std::path::{Path, PathBuf};
 use alnlab_common::bounded;
 use alnlab_common::hash::sha256_hex;
 use alnlab_common::params::Count;
+use alnlab_stride::{Fold, Split};
 use serde::{Deserialize, Serialize};
 use serde_spanned::Spanned;
 use toml::de::{DeTable, DeValue};
@@ -22,7 +23,7 @@ use toml::de::{DeTable, DeValue};
 use crate::stages::{Archived, STAGES, Stage, Stages};
 
 mod locate;
-use locate::{Locator, has_key, span_of};
+use locate::{Locator, has_key, has_path, span_of};
 
 /// A parsed, validated manifest with every variant resolved.
 #[derive(Debug)]
@@ -92,7 +93,8 @@ pub fn replicate_seed(seed: u64, r: u32) -> u64 {
 
 /// The `[data]` table: where the data come from instead of a simulation —
 /// an archived dataset (standing for simulate and stride), or a robot's
-/// recording (the ingest stage standing for simulate).
+/// recording or tables of its samples (the ingest stage standing for
+/// simulate).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Data {
@@ -107,6 +109,29 @@ pub struct Data {
     /// The recording's topic (default `/joint_states`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub topic: Option<String>,
+    /// Tables of a robot's samples (CSV or Parquet), each a trajectory: a
+    /// path or glob relative to the manifest, or a list of them;
+    /// `[ingest.table]` maps their columns.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub tables: Option<Tables>,
+}
+
+/// `[data] tables`: one path or glob, or a list of them.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(untagged)]
+pub enum Tables {
+    One(String),
+    Many(Vec<String>),
+}
+
+impl Tables {
+    /// The patterns, in order.
+    pub fn patterns(&self) -> Vec<String> {
+        match self {
+            Tables::One(p) => vec![p.clone()],
+            Tables::Many(ps) => ps.clone(),
+        }
+    }
 }
 
 /// Where a manifest's data come from.
@@ -115,7 +140,8 @@ enum Source {
     Simulated,
     /// `[data] dataset`: the archive stands for the stages it holds.
     Archived,
-    /// `[data] recording`: the ingest stage stands for simulate.
+    /// `[data] recording` or `tables`: the ingest stage stands for
+    /// simulate.
     Recorded,
 }
 
@@ -127,6 +153,9 @@ impl Source {
             }) => Source::Archived,
             Some(Data {
                 recording: Some(_), ..
+            })
+            | Some(Data {
+                tables: Some(_), ..
             }) => Source::Recorded,
             _ => Source::Simulated,
         }
@@ -155,6 +184,18 @@ pub struct Variant {
     /// The stage tables the manifest, with this variant's overrides, sets
     /// (a stage an archived dataset stands for must not be set).
     pub tables: BTreeSet<&'static str>,
+}
+
+impl Variant {
+    /// The variant as replicate `replicate` (from 0) runs it: where its
+    /// split holds whole trajectories out, the replicate tests its own fold.
+    pub fn for_replicate(&self, replicate: u32) -> Variant {
+        let mut variant = self.clone();
+        if let Some(fold) = &mut variant.stages.stride.fold {
+            fold.index = u64::from(replicate);
+        }
+        variant
+    }
 }
 
 /// The whole document as deserialized (variants handled separately).
@@ -251,6 +292,7 @@ impl Manifest {
         if variant_entries.is_empty() {
             let mut stages = base_stages;
             read_descriptions(&mut stages, data.as_ref(), &base, &locate, None)?;
+            fold_trajectories(&mut stages, &base, &experiment, source);
             validate(&stages, &base, &locate, None, source)?;
             within_budget(&stages, &experiment, &base, &locate, None, source)?;
             variants.push(Variant {
@@ -267,6 +309,7 @@ impl Manifest {
             let doc = deserialize(&merged, root_span.clone(), &locate, Some(&name))?;
             let (_, _, mut stages) = split(doc);
             read_descriptions(&mut stages, data.as_ref(), &merged, &locate, Some(&name))?;
+            fold_trajectories(&mut stages, &merged, &experiment, source);
             validate(&stages, &merged, &locate, Some(&name), source)?;
             within_budget(&stages, &experiment, &merged, &locate, Some(&name), source)?;
             variants.push(Variant {
@@ -540,7 +583,7 @@ fn check_experiment(
 
 /// Reads the files the data come from, relative to the manifest's folder:
 /// the robot descriptions of the simulation's `urdf` scenes, or a
-/// recording and its robot's (none for an archived dataset).
+/// recording or tables and their robot's (none for an archived dataset).
 fn read_descriptions(
     stages: &mut Stages,
     data: Option<&Data>,
@@ -558,6 +601,12 @@ fn read_descriptions(
                 variant,
                 message,
             ),
+            ("ingest", "tables") => locate.error(
+                span_of(table, &["data", "tables"]),
+                "data.tables".into(),
+                variant,
+                message,
+            ),
             _ => locate.error(span_of(table, &path), path.join("."), variant, message),
         }
     };
@@ -568,18 +617,44 @@ fn read_descriptions(
             .map_err(|(key, message)| located("simulate", key, message)),
         Source::Archived => Ok(()),
         Source::Recorded => {
-            let data = data.expect("a recording");
-            let recording = data.recording.as_deref().expect("a recording");
-            stages
-                .ingest
-                .read_sources(dir, recording, data.topic.as_deref())
-                .map_err(|(key, message)| located("ingest", key, message))
+            let data = data.expect("recorded data");
+            let read = match (&data.recording, &data.tables) {
+                (Some(recording), _) => {
+                    stages
+                        .ingest
+                        .read_sources(dir, recording, data.topic.as_deref())
+                }
+                (None, Some(tables)) => stages.ingest.read_tables(dir, &tables.patterns()),
+                (None, None) => unreachable!("a recording or tables"),
+            };
+            read.map_err(|(key, message)| located("ingest", key, message))
         }
     }
 }
 
-/// Refuses a `[data]` table that names no source or two, a topic without
-/// a recording, and `[ingest]` without a recording.
+/// Holds whole trajectories out where the data are recorded and `[stride]
+/// split` is not given; a `by-trajectory` split deals them into as many
+/// folds as replicates, the first tested here (the run sets each
+/// replicate's: [`Variant::for_replicate`]).
+fn fold_trajectories(
+    stages: &mut Stages,
+    table: &DeTable,
+    experiment: &Experiment,
+    source: Source,
+) {
+    if source == Source::Recorded && !has_path(table, &["stride", "split"]) {
+        stages.stride.split = Split::ByTrajectory;
+    }
+    if stages.stride.split == Split::ByTrajectory {
+        stages.stride.fold = Some(Fold {
+            index: 0,
+            of: experiment.replicates.0,
+        });
+    }
+}
+
+/// Refuses a `[data]` table that names no source or more than one, a topic
+/// without a recording, and `[ingest]` without recorded data.
 fn check_data(data: Option<&Data>, table: &DeTable, locate: &Locator) -> Result<(), ManifestError> {
     let at = |path: &[&str], message: &str| {
         Err(locate.error(
@@ -589,22 +664,26 @@ fn check_data(data: Option<&Data>, table: &DeTable, locate: &Locator) -> Result<
             message.to_string(),
         ))
     };
+    let sources = data.map_or(0, |d| {
+        [
+            d.dataset.is_some(),
+            d.recording.is_some(),
+            d.tables.is_some(),
+        ]
+        .iter()
+        .filter(|&&s| s)
+        .count()
+    });
     match data {
-        Some(Data {
-            dataset: Some(_),
-            recording: Some(_),
-            ..
-        }) => at(
-            &["data", "recording"],
-            "the data come from an archived dataset or a recording, not both",
-        ),
-        Some(Data {
-            dataset: None,
-            recording: None,
-            ..
-        }) => at(
+        Some(_) if sources > 1 => at(
             &["data"],
-            "expected `dataset` (an archived dataset) or `recording`",
+            "the data come from one of an archived dataset (`dataset`), a recording \
+             (`recording`) or tables (`tables`), not more",
+        ),
+        Some(_) if sources == 0 => at(
+            &["data"],
+            "expected `dataset` (an archived dataset), `recording` (a ROS 2 recording) or \
+             `tables` (CSV or Parquet files of samples)",
         ),
         Some(Data {
             recording: None,
@@ -616,10 +695,13 @@ fn check_data(data: Option<&Data>, table: &DeTable, locate: &Locator) -> Result<
         ),
         Some(Data {
             recording: Some(_), ..
+        })
+        | Some(Data {
+            tables: Some(_), ..
         }) => Ok(()),
         _ if has_key(table, crate::stages::INGEST.name) => at(
             &[crate::stages::INGEST.name],
-            "[ingest] frames a recording: add [data] recording (or remove [ingest])",
+            "[ingest] frames recorded data: add [data] recording or tables (or remove [ingest])",
         ),
         _ => Ok(()),
     }
@@ -640,8 +722,8 @@ fn validate(
         let names: Vec<&str> = STAGES.iter().filter(held).map(|s| s.name).collect();
         let message = match source {
             Source::Recorded => format!(
-                "the data come from `[data] recording`, which the ingest stage turns into the \
-                 simulate stage's outputs; remove `{}` (the robot is [ingest.robot])",
+                "the data come from `[data]`'s recorded data, which the ingest stage turns into \
+                 the simulate stage's outputs; remove `{}` (the robot is [ingest.robot])",
                 stage.name
             ),
             _ => format!(
@@ -663,8 +745,8 @@ fn validate(
             span_of(table, &["plan", "task"]),
             "plan.task".into(),
             variant,
-            "planning executes its torques in the plant the data come from, and a recording \
-             has none (the robot is not here to try them; its URDF is only the nominal model): \
+            "planning executes its torques in the plant the data come from, and recorded data \
+             have none (the robot is not here to try them; its URDF is only the nominal model): \
              remove [[plan.task]]"
                 .into(),
         ));

@@ -89,6 +89,12 @@ pub fn render(record: &RunRecord, dir: &Path) -> Result<PathBuf> {
             })
         })
         .collect::<Result<_>>()?;
+    // The split the rows were held out by (an archived dataset carries its
+    // own, which its record does not say).
+    let split = match (&record.dataset, record.variants.first()) {
+        (None, Some(v)) => Some(resolved(v)?.stride.split.describe().to_string()),
+        _ => None,
+    };
     let run = RunInfo {
         experiment: record.experiment.clone(),
         manifest_path: record.manifest_path.clone(),
@@ -111,6 +117,12 @@ pub fn render(record: &RunRecord, dir: &Path) -> Result<PathBuf> {
             .recording
             .as_ref()
             .map(|r| (r.recording.clone(), r.sha256.clone(), r.topic.clone())),
+        tables: record
+            .tables
+            .iter()
+            .map(|t| (t.file.clone(), t.sha256.clone()))
+            .collect(),
+        split,
     };
     report::render(&run, dir)
 }

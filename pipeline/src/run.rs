@@ -24,7 +24,7 @@ use crate::dataset::{Archive, Entry};
 use crate::manifest::{Manifest, Variant, replicate_seed};
 use crate::progress::{Bar, Overall};
 use crate::records::{
-    self, ArtifactRef, DatasetRef, RecordingRef, RunRecord, StageRecord, VariantRecord,
+    self, ArtifactRef, DatasetRef, RecordingRef, RunRecord, StageRecord, TableRef, VariantRecord,
 };
 use crate::stages::{self, Archived, Call, STAGES, Stage, stage_params};
 use alnlab_aln::shard::Shard;
@@ -138,6 +138,7 @@ pub fn run(manifest: &Manifest, options: &RunOptions) -> Result<RunRecord> {
     let count = variants.len();
     for (k, variant) in variants.iter().enumerate() {
         for replicate in 0..replicates {
+            let variant = &variant.for_replicate(replicate);
             let seed = replicate_seed(manifest.experiment.seed, replicate);
             let mut graph = Graph {
                 manifest,
@@ -218,6 +219,17 @@ pub fn run(manifest: &Manifest, options: &RunOptions) -> Result<RunRecord> {
                 topic: ingest.topic.clone(),
             })
         }),
+        tables: manifest.variants.first().map_or(Vec::new(), |v| {
+            v.stages
+                .ingest
+                .tables
+                .iter()
+                .map(|t| TableRef {
+                    file: t.file.clone(),
+                    sha256: t.sha256.clone(),
+                })
+                .collect()
+        }),
     };
     if options.until.is_none() {
         records::store(&options.out, &record)?;
@@ -269,7 +281,9 @@ impl Graph<'_> {
             let from_archive = archived
                 .as_ref()
                 .filter(|(_, entry)| stage.archived.holds(entry.has_levels()));
-            let recorded = variant.stages.ingest.recording.is_some() && stage.name == "simulate";
+            let ingest = &variant.stages.ingest;
+            let recorded = (ingest.recording.is_some() || !ingest.tables.is_empty())
+                && stage.name == "simulate";
             let artifact = match from_archive {
                 Some((artifact, _)) => artifact.clone(),
                 // A recording stands where the simulation would, the same

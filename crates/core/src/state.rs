@@ -180,6 +180,11 @@ pub struct SceneFrames {
     pub frames: Vec<StateFrame>,
 }
 
+/// Name of the metadata records holding what re-simulates each scene: its
+/// resolved parameters, its index and the experiment seed; for recorded
+/// data, where they came from (and which table each run, `run_tables`).
+pub const SCENE_RECORD: &str = "alnlab.scene";
+
 /// A whole trajectory log read into memory.
 #[derive(Debug)]
 pub struct StateLog {

@@ -20,9 +20,7 @@ use crate::controller::ControllerKind;
 use crate::model::{Joint, Root};
 use crate::{Prepared, Runner, Scene, state_from_generalized};
 
-/// Name of the metadata records holding what re-simulates each scene: its
-/// resolved parameters, its index and the experiment seed.
-pub const SCENE_RECORD: &str = "alnlab.scene";
+pub use alnlab_core::state::SCENE_RECORD;
 
 /// Name of the metadata records describing each scene's model.
 pub const MODEL_RECORD: &str = "alnlab.model";

@@ -77,6 +77,17 @@ pub struct RunRecord {
     /// The recording the data came from, if any.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub recording: Option<RecordingRef>,
+    /// The tables of samples the data came from, if any, each a trajectory.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub tables: Vec<TableRef>,
+}
+
+/// A table of a robot's samples, as a run record names it.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct TableRef {
+    /// Its path, as the manifest's patterns found it.
+    pub file: String,
+    pub sha256: String,
 }
 
 /// A robot's recording, as a run record names it.

@@ -92,13 +92,28 @@ fn search_value(value: &DeValue, offset: usize, path: &mut Vec<String>, best: &m
     }
 }
 
-/// The span of the value at a dotted `path`, or of its nearest present
-/// ancestor (a defaulted field has no span of its own).
 /// Whether `table` has `key`.
 pub(super) fn has_key(table: &DeTable, key: &str) -> bool {
     table.iter().any(|(k, _)| k.get_ref() == key)
 }
 
+/// Whether `table` has a value at the dotted `path` (through tables only).
+pub(super) fn has_path(table: &DeTable, path: &[&str]) -> bool {
+    let Some((first, rest)) = path.split_first() else {
+        return true;
+    };
+    match table.iter().find(|(k, _)| k.get_ref() == first) {
+        None => false,
+        Some(_) if rest.is_empty() => true,
+        Some((_, value)) => match value.get_ref() {
+            DeValue::Table(t) => has_path(t, rest),
+            _ => false,
+        },
+    }
+}
+
+/// The span of the value at a dotted `path`, or of its nearest present
+/// ancestor (a defaulted field has no span of its own).
 pub(super) fn span_of(table: &DeTable, path: &[&str]) -> Option<std::ops::Range<usize>> {
     let (first, rest) = path.split_first()?;
     let (key, value) = table.iter().find(|(k, _)| k.get_ref() == first)?;

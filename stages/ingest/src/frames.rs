@@ -105,46 +105,51 @@ pub fn frames(source: &Source, samples: &[Sample], grid: &Grid) -> Result<Vec<Ru
     };
     let first_ns = first.state.stamp_ns;
     let measured = measure(source, first_ns, samples)?;
+    for pair in samples.windows(2) {
+        let (before, s) = (&pair[0], &pair[1]);
+        let gap = (s.state.stamp_ns - before.state.stamp_ns) as f64 * 1e-9;
+        if gap <= 0.0 {
+            return Err(source.at(
+                first_ns,
+                s,
+                format!(
+                    "time goes backwards: message {} before it is stamped {}",
+                    before.number,
+                    stamp(before.state.stamp_ns)
+                ),
+            ));
+        }
+        if gap > grid.max_gap && grid.gaps == Gaps::Error {
+            return Err(source.at(
+                first_ns,
+                s,
+                format!(
+                    "a gap of {gap:.3} s after message {}, longer than max_gap = {} s \
+                     (set ingest.gaps = \"split\" to start a new run after a gap)",
+                    before.number, grid.max_gap
+                ),
+            ));
+        }
+    }
+    let stamps: Vec<i64> = samples.iter().map(|s| s.state.stamp_ns).collect();
+    Ok(runs(&stamps, &measured, grid))
+}
+
+/// The runs `measured` at `stamps` (increasing) make on `grid`: a new run
+/// after each gap longer than `max_gap`, each resampled.
+pub fn runs(stamps: &[i64], measured: &[Measured], grid: &Grid) -> Vec<Run> {
     let mut runs = Vec::new();
     let mut start = 0;
-    for i in 1..=samples.len() {
-        let ends = match samples.get(i) {
-            None => true,
-            Some(s) => {
-                let before = &samples[i - 1];
-                let gap = (s.state.stamp_ns - before.state.stamp_ns) as f64 * 1e-9;
-                if gap <= 0.0 {
-                    return Err(source.at(
-                        first_ns,
-                        s,
-                        format!(
-                            "time goes backwards: message {} before it is stamped {}",
-                            before.number,
-                            stamp(before.state.stamp_ns)
-                        ),
-                    ));
-                }
-                if gap > grid.max_gap && grid.gaps == Gaps::Error {
-                    return Err(source.at(
-                        first_ns,
-                        s,
-                        format!(
-                            "a gap of {gap:.3} s after message {}, longer than max_gap = {} s \
-                             (set ingest.gaps = \"split\" to start a new run after a gap)",
-                            before.number, grid.max_gap
-                        ),
-                    ));
-                }
-                gap > grid.max_gap
-            }
-        };
+    for i in 1..=stamps.len() {
+        let ends = stamps
+            .get(i)
+            .is_none_or(|&t| (t - stamps[i - 1]) as f64 * 1e-9 > grid.max_gap);
         if ends {
-            let stamps: Vec<i64> = samples[start..i].iter().map(|s| s.state.stamp_ns).collect();
-            runs.push(resample(&stamps, &measured[start..i], grid));
+            runs.push(resample(&stamps[start..i], &measured[start..i], grid));
             start = i;
         }
     }
-    Ok(runs)
+    runs
 }
 
 /// Each sample's values in the robot's joint order, checked.
@@ -227,15 +232,18 @@ fn resample(stamps: &[i64], measured: &[Measured], grid: &Grid) -> Run {
     let count = (span / grid.frame_dt + 1e-9).floor() as usize + 1;
     let mut frames = Vec::with_capacity(count);
     let mut i = 0;
+    // Times from the run's start: an absolute stamp (~1.7e18 ns) has no
+    // exact f64.
+    let since = |k: usize| (stamps[k] - start_ns) as f64;
     for k in 0..count {
-        let t = start_ns as f64 + k as f64 * grid.frame_dt * 1e9;
-        while i + 1 < stamps.len() && stamps[i + 1] as f64 <= t {
+        let t = k as f64 * grid.frame_dt * 1e9;
+        while i + 1 < stamps.len() && since(i + 1) <= t {
             i += 1;
         }
         let (a, b) = (&measured[i], measured.get(i + 1));
         frames.push(match (grid.resample, b) {
             (Resample::Linear, Some(b)) => {
-                let w = (t - stamps[i] as f64) / (stamps[i + 1] - stamps[i]) as f64;
+                let w = (t - since(i)) / (stamps[i + 1] - stamps[i]) as f64;
                 let mix = |x: &[f64], y: &[f64]| -> Vec<f64> {
                     x.iter().zip(y).map(|(x, y)| x + w * (y - x)).collect()
                 };

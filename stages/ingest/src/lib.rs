@@ -1,18 +1,20 @@
 //! The ingest stage (issue 44): data from a robot rather than a simulation.
 //! A ROS 2 recording (MCAP) of `sensor_msgs/msg/JointState` on one topic is
-//! read and decoded ([`recording`], [`joint_state`]), its joints matched to
-//! the robot's description by name and resampled onto frames
-//! ([`frames`]), and written as the simulate stage writes a robot's frames
-//! ([`log`]): the trajectory log and its statistics, so that every later
-//! stage learns and evaluates as from a simulation. A manifest names the
-//! recording in `[data]` and says how to frame it in `[ingest]`
-//! ([`Params`]); the ingest stage then stands where the simulate stage
-//! would.
+//! read and decoded ([`recording`], [`joint_state`]), or tables of samples
+//! — CSV or Parquet files, one a trajectory — are read column by column
+//! ([`table`]); the joints are matched to the robot's description by name
+//! and resampled onto frames ([`frames`]), and written as the simulate
+//! stage writes a robot's frames ([`log`]): the trajectory log and its
+//! statistics, so that every later stage learns and evaluates as from a
+//! simulation. A manifest names the recording or the tables in `[data]`
+//! and says how to frame them in `[ingest]` ([`Params`]); the ingest stage
+//! then stands where the simulate stage would.
 
 pub mod frames;
 pub mod joint_state;
 pub mod log;
 pub mod recording;
+pub mod table;
 #[cfg(test)]
 mod tests;
 
@@ -22,14 +24,16 @@ use std::path::{Path, PathBuf};
 use alnlab_common::hash::sha256_hex;
 use alnlab_common::params::{self, ParamError, Positive};
 use alnlab_common::{Error, Progress, Provenance, Result};
+use alnlab_physics::model::Joint;
 use alnlab_physics::{Prepared, Scene, SceneKind};
 use serde::{Deserialize, Serialize};
 
 use crate::frames::{Gaps, Grid, Resample, Source};
 
 /// Version of what this stage writes (part of every cache key; 2: the
-/// implicit integrator's drives by default).
-pub const FORMAT_VERSION: u32 = 2;
+/// implicit integrator's drives by default; 3: frame times counted from
+/// each run's start, exact where absolute stamps as f64 were not).
+pub const FORMAT_VERSION: u32 = 3;
 
 /// The `[ingest]` table: how a recording (`[data] recording`) becomes
 /// frames, and the robot it records.
@@ -61,6 +65,24 @@ pub struct Params {
     /// The recording's path, filled in when the manifest is read.
     #[serde(skip)]
     pub recording: Option<PathBuf>,
+    /// How tables of samples (`[data] tables`) map to the robot's joints.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub table: Option<table::Columns>,
+    /// The tables (`[data] tables`, patterns expanded), filled in when the
+    /// manifest is read: each a trajectory, in order.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub tables: Vec<TableFile>,
+}
+
+/// One table of samples: its name as the manifest's patterns found it, its
+/// sha256 (its identity in the cache key) and where it is.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TableFile {
+    pub file: String,
+    pub sha256: String,
+    #[serde(skip)]
+    pub path: PathBuf,
 }
 
 fn joint_states() -> String {
@@ -81,6 +103,8 @@ impl Default for Params {
             robot: None,
             recording_sha256: None,
             recording: None,
+            table: None,
+            tables: Vec::new(),
         }
     }
 }
@@ -107,10 +131,63 @@ impl Params {
         if let Some(topic) = topic {
             self.topic = topic.to_string();
         }
+        if self.table.is_some() {
+            return Err((
+                "table".into(),
+                "[ingest.table] maps the columns of tables: a recording's joints are named in \
+                 its messages (remove [ingest.table], or give [data] tables)"
+                    .into(),
+            ));
+        }
+        self.read_robot(dir)
+    }
+
+    /// Takes the tables that `patterns` (paths or globs relative to `dir`,
+    /// the manifest's folder) name, each a trajectory, in the patterns'
+    /// order (a glob's matches sorted), and reads the robot's description;
+    /// on error, the field and what is wrong.
+    pub fn read_tables(
+        &mut self,
+        dir: &Path,
+        patterns: &[String],
+    ) -> std::result::Result<(), ParamError> {
+        let columns = self.table.get_or_insert_with(table::Columns::default);
+        columns
+            .validate()
+            .map_err(|(field, message)| (format!("table.{field}"), message))?;
+        if patterns.is_empty() {
+            return Err(("tables".into(), "expected at least one table".into()));
+        }
+        let mut tables: Vec<TableFile> = Vec::new();
+        for pattern in patterns {
+            let matched = expand(dir, pattern).map_err(|m| ("tables".to_string(), m))?;
+            for (file, path) in matched {
+                if tables.iter().any(|t| t.path == path) {
+                    return Err((
+                        "tables".into(),
+                        format!("`{file}` is named twice: each table is one trajectory"),
+                    ));
+                }
+                let bytes = std::fs::read(&path)
+                    .map_err(|e| ("tables".to_string(), format!("{}: {e}", path.display())))?;
+                tables.push(TableFile {
+                    file,
+                    sha256: sha256_hex(&bytes),
+                    path,
+                });
+            }
+        }
+        self.tables = tables;
+        self.read_robot(dir)
+    }
+
+    /// Reads the robot's description (relative to `dir`) and resolves it.
+    fn read_robot(&mut self, dir: &Path) -> std::result::Result<(), ParamError> {
         let robot = self.robot.as_mut().ok_or_else(|| {
             (
                 "robot".to_string(),
-                "a recording needs its robot: [ingest.robot] with kind = \"urdf\" and its file"
+                "recorded data need their robot: [ingest.robot] with kind = \"urdf\" and its \
+                 file"
                     .to_string(),
             )
         })?;
@@ -157,28 +234,47 @@ pub fn run(
     params
         .validate()
         .map_err(|e| params::invalid("ingest", e))?;
-    let (Some(recording), Some(robot)) = (&params.recording, &params.robot) else {
+    let Some(robot) = &params.robot else {
         return Err(Error::Invalid(
-            "ingest: no recording to read ([data] recording and [ingest.robot])".into(),
+            "ingest: no robot the data are of ([ingest.robot])".into(),
         ));
     };
-    progress.start("ingest", 1, "recordings");
     let file = robot.file.clone().unwrap_or_default();
-    let source = Recorded {
-        recording,
-        topic: &params.topic,
-        robot,
-        robot_file: Path::new(&file),
-    };
+    let robot_file = Path::new(&file);
     let grid = Grid {
         frame_dt: robot.frame_dt.get(),
         resample: params.resample,
         max_gap: params.max_gap.get(),
         gaps: params.gaps,
     };
-    ingest(&source, &grid, provenance, out_dir)?;
-    progress.advance(1);
-    Ok(())
+    match (&params.recording, &params.table, params.tables.is_empty()) {
+        (Some(recording), None, true) => {
+            progress.start("ingest", 1, "recordings");
+            let source = Recorded {
+                recording,
+                topic: &params.topic,
+                robot,
+                robot_file,
+            };
+            ingest(&source, &grid, provenance, out_dir)?;
+            progress.advance(1);
+            Ok(())
+        }
+        (None, Some(columns), false) => {
+            let source = Tabled {
+                tables: &params.tables,
+                columns,
+                robot,
+                robot_file,
+            };
+            ingest_tables(&source, &grid, provenance, out_dir, progress)
+        }
+        _ => Err(Error::Invalid(
+            "ingest: expected a recording ([data] recording) or tables ([data] tables and \
+             [ingest.table]) to read"
+                .into(),
+        )),
+    }
 }
 
 /// Where the data come from: a recording, its topic, and the robot (a
@@ -234,4 +330,118 @@ pub fn ingest(
         ("runs_left_out".to_string(), (all - runs.len()).to_string()),
     ]);
     log::write(&p, &runs, record, provenance, out_dir)
+}
+
+/// Where the data come from: tables of samples, each a trajectory, what
+/// their columns hold, and the robot (a `urdf` scene, its description
+/// read) the joints belong to.
+pub struct Tabled<'a> {
+    pub tables: &'a [TableFile],
+    pub columns: &'a table::Columns,
+    pub robot: &'a Scene,
+    /// The robot's description, for messages.
+    pub robot_file: &'a Path,
+}
+
+/// Reads `source`'s tables, frames each on `grid` (a table's stretches
+/// between gaps each a run, where gaps split) and writes `trajectory.mcap`
+/// and `stats.parquet` into `out_dir`. The scene record names each table,
+/// its sha256 and the rate its data imply (`table.<i>.*`), and the table
+/// each run came from (`run_tables`, one index a run): whole trajectories
+/// can then be held out together.
+pub fn ingest_tables(
+    source: &Tabled,
+    grid: &Grid,
+    provenance: &Provenance,
+    out_dir: &Path,
+    progress: &dyn Progress,
+) -> Result<()> {
+    let p = Prepared::new(source.robot);
+    let names = log::joints(&p).map_err(|m| Error::bad_file(source.robot_file, m))?;
+    let joints: Vec<table::Joint> = names
+        .into_iter()
+        .zip(p.controls())
+        .map(|(name, c)| table::Joint {
+            name,
+            revolute: matches!(p.model.links[c.hinge + 1].joint, Joint::Revolute { .. }),
+        })
+        .collect();
+    progress.start("ingest", source.tables.len() as u64, "tables");
+    let mut runs = Vec::new();
+    let mut run_tables = Vec::new();
+    let mut left_out = 0;
+    let mut record = BTreeMap::from([
+        ("source".to_string(), "tables".to_string()),
+        ("tables".to_string(), source.tables.len().to_string()),
+    ]);
+    for (i, t) in source.tables.iter().enumerate() {
+        let trajectory = table::read(&t.path, source.columns, &joints)?;
+        if grid.gaps == Gaps::Error {
+            table::check_gaps(&t.path, source.columns, &trajectory.stamps_ns, grid.max_gap)?;
+        }
+        for run in frames::runs(&trajectory.stamps_ns, &trajectory.samples, grid) {
+            match run.frames.len() >= log::LEAST_FRAMES {
+                true => {
+                    runs.push(run);
+                    run_tables.push(i.to_string());
+                }
+                false => left_out += 1,
+            }
+        }
+        let implied = trajectory
+            .implied_dt
+            .map_or("not checked: the joints barely move".to_string(), |dt| {
+                format!("{:.4}", 1.0 / dt)
+            });
+        record.insert(format!("table.{i}.file"), t.file.clone());
+        record.insert(format!("table.{i}.sha256"), t.sha256.clone());
+        record.insert(
+            format!("table.{i}.samples"),
+            trajectory.samples.len().to_string(),
+        );
+        record.insert(format!("table.{i}.implied_hz"), implied);
+        progress.advance(1);
+    }
+    if runs.is_empty() {
+        return Err(Error::Invalid(format!(
+            "ingest: no table makes {} frames of {} s without a gap",
+            log::LEAST_FRAMES,
+            grid.frame_dt
+        )));
+    }
+    record.insert("run_tables".to_string(), run_tables.join(","));
+    record.insert("runs_left_out".to_string(), left_out.to_string());
+    let p = Prepared::new(&log::recorded_scene(source.robot, &runs));
+    log::write(&p, &runs, record, provenance, out_dir)
+}
+
+/// The files `pattern` names relative to `dir`: the path itself, or a
+/// glob's matches sorted; each with its name as the pattern gave it.
+fn expand(dir: &Path, pattern: &str) -> std::result::Result<Vec<(String, PathBuf)>, String> {
+    if !pattern.contains(['*', '?', '[']) {
+        return Ok(vec![(pattern.to_string(), dir.join(pattern))]);
+    }
+    let full = dir.join(pattern);
+    let full = full
+        .to_str()
+        .ok_or_else(|| format!("`{pattern}`: the path is not UTF-8"))?;
+    let mut found: Vec<PathBuf> = glob::glob(full)
+        .map_err(|e| format!("`{pattern}` is not a glob pattern: {e}"))?
+        .collect::<std::result::Result<_, _>>()
+        .map_err(|e| format!("`{pattern}`: {e}"))?;
+    found.sort();
+    if found.is_empty() {
+        return Err(format!("`{pattern}` matches no file"));
+    }
+    Ok(found
+        .into_iter()
+        .map(|path| {
+            let name = path
+                .strip_prefix(dir)
+                .unwrap_or(&path)
+                .to_string_lossy()
+                .into_owned();
+            (name, path)
+        })
+        .collect())
 }

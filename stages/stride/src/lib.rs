@@ -7,12 +7,19 @@
 //! `x.` values), `split` (string: `train`, `test`, or `both` — only the
 //! `paper` split puts a row in both), then `x.<variable>` and `y.<variable>`
 //! (f64) for the union of the scenes' variables (null where a scene lacks one).
+//!
+//! The `by-trajectory` split holds whole trajectories out: a scene's run is
+//! one trajectory, or, where its scene record says which table each run
+//! came from (`run_tables`, the ingest stage's), the runs of one table are.
+//! The trajectories are dealt into `fold.of` folds in order (the i-th into
+//! fold i mod `fold.of`), and fold `fold.index` is tested: a run's
+//! replicates, one a fold, test each trajectory once.
 
 use std::path::Path;
 
 use alnlab_common::hash::{fnv1a, mix_seed};
 use alnlab_common::params::{self, Count, Fraction, ParamError};
-use alnlab_common::state_log::StateFrame;
+use alnlab_common::state_log::{SCENE_RECORD, StateFrame, StateLog};
 use alnlab_common::{Error, Progress, Provenance, Result};
 // A pair's split is its role here: `Split` is the parameter that assigns them.
 use alnlab_tables::pairs::{self, Key, Side, Split as Role};
@@ -35,6 +42,27 @@ pub enum Split {
     /// the first `test_rows` rows, so with 1000 and 9000 one test row in nine
     /// was also seen in training.
     Paper,
+    /// Whole trajectories held out: the trajectories of one fold
+    /// (`fold`) are tested, the others trained on; `train_rows` /
+    /// `test_rows`, if given, cap each side as `disjoint` does.
+    ByTrajectory,
+}
+
+impl Split {
+    /// The split as a report names it.
+    pub fn describe(self) -> &'static str {
+        match self {
+            Split::Disjoint => {
+                "rows drawn at random (neighbouring rows of one trajectory can fall on both sides)"
+            }
+            Split::Paper => {
+                "the paper's (§4.3: the first rows trained on, the first rows tested, one test row in nine also trained on)"
+            }
+            Split::ByTrajectory => {
+                "by trajectory (whole trajectories held out, one fold of them a replicate)"
+            }
+        }
+    }
 }
 
 /// The `[stride]` table of a manifest.
@@ -53,6 +81,18 @@ pub struct Params {
     pub train_rows: Option<Count>,
     /// Number of test rows (required by `paper`, a cap for `disjoint`).
     pub test_rows: Option<Count>,
+    /// With `by-trajectory`: the fold tested (set by the run: the
+    /// replicate's, of as many folds as replicates).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub fold: Option<Fold>,
+}
+
+/// One fold of a `by-trajectory` split: the `index`-th (from 0) of `of`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Fold {
+    pub index: u64,
+    pub of: u64,
 }
 
 impl Default for Params {
@@ -64,6 +104,7 @@ impl Default for Params {
             test_fraction: Fraction(0.5),
             train_rows: None,
             test_rows: None,
+            fold: None,
         }
     }
 }
@@ -78,6 +119,16 @@ impl Params {
                     "expected an offset below n = {}, found {}",
                     self.n.0, self.offset
                 ),
+            ));
+        }
+        if self.split == Split::ByTrajectory
+            && self.fold.is_none_or(|f| f.of < 2 || f.index >= f.of)
+        {
+            return Err((
+                "split".into(),
+                "the `by-trajectory` split tests one fold of the trajectories a replicate: it \
+                 needs at least 2 replicates"
+                    .into(),
             ));
         }
         if self.split == Split::Paper {
@@ -97,9 +148,11 @@ impl Params {
     }
 }
 
-/// One pair: the scene and the two frames.
+/// One pair: the scene, its trajectory (an index among the log's) and the
+/// two frames.
 struct Pair<'a> {
     scene: usize,
+    trajectory: usize,
     x: &'a StateFrame,
     y: &'a StateFrame,
 }
@@ -129,19 +182,56 @@ pub fn run(
     progress.start("stride", total as u64, "frames");
 
     let mut pairs = Vec::new();
+    let mut trajectories: Vec<(usize, u32)> = Vec::new();
     for (scene_index, scene) in log.scenes.iter().enumerate() {
+        let run_tables =
+            run_tables(&log, &scene.layout.scene).map_err(|e| Error::bad_file(trajectory, e))?;
         for window in scene.frames.windows(2) {
             let (x, y) = (&window[0], &window[1]);
             let taken = u64::from(x.frame) % params.n.0 == params.offset;
             if taken && y.run == x.run && y.frame == x.frame + 1 {
+                let id = match &run_tables {
+                    Some(tables) => *tables.get(x.run as usize).ok_or_else(|| {
+                        Error::bad_file(
+                            trajectory,
+                            format!(
+                                "scene `{}`: run {} has no table in its scene record's \
+                                 run_tables",
+                                scene.layout.scene, x.run
+                            ),
+                        )
+                    })?,
+                    None => x.run,
+                };
+                let t = match trajectories.iter().position(|&t| t == (scene_index, id)) {
+                    Some(t) => t,
+                    None => {
+                        trajectories.push((scene_index, id));
+                        trajectories.len() - 1
+                    }
+                };
                 pairs.push(Pair {
                     scene: scene_index,
+                    trajectory: t,
                     x,
                     y,
                 });
             }
         }
         progress.advance(scene.frames.len() as u64);
+    }
+    if let Some(fold) = params.fold.filter(|_| params.split == Split::ByTrajectory)
+        && (trajectories.len() as u64) < fold.of
+    {
+        return Err(Error::bad_file(
+            trajectory,
+            format!(
+                "has {} trajectories, fewer than the {} folds the `by-trajectory` split deals \
+                 them into (one a replicate: lower experiment.replicates)",
+                trajectories.len(),
+                fold.of
+            ),
+        ));
     }
     if pairs.is_empty() {
         return Err(Error::bad_file(
@@ -153,9 +243,13 @@ pub fn run(
         ));
     }
     let scene_name = |p: &Pair| log.scenes[p.scene].layout.scene.as_str();
-    let roles = assign(params, seed, &pairs, |p| {
-        (scene_name(p), p.x.run, p.x.frame)
-    })
+    let roles = assign(
+        params,
+        seed,
+        &pairs,
+        |p| (scene_name(p), p.x.run, p.x.frame),
+        |p| p.trajectory,
+    )
     .map_err(|e| Error::bad_file(trajectory, e))?;
     let chosen: Vec<(&Pair, Role)> = pairs
         .iter()
@@ -197,12 +291,33 @@ pub fn run(
     )
 }
 
-/// The split of every pair (`None`: left out), from its identity.
+/// Which table each run of `scene` came from, where its scene record says
+/// (`run_tables`: one table index a run, comma-separated).
+fn run_tables(log: &StateLog, scene: &str) -> std::result::Result<Option<Vec<u32>>, String> {
+    let record = log
+        .records(SCENE_RECORD)
+        .find(|r| r.get("scene").is_some_and(|s| s == scene));
+    let Some(list) = record.and_then(|r| r.get("run_tables")) else {
+        return Ok(None);
+    };
+    list.split(',')
+        .map(|t| {
+            t.parse().map_err(|_| {
+                format!("scene `{scene}`: run_tables `{list}` is not a list of table indices")
+            })
+        })
+        .collect::<std::result::Result<_, _>>()
+        .map(Some)
+}
+
+/// The split of every pair (`None`: left out), from its identity and its
+/// trajectory (an index).
 fn assign<T>(
     params: &Params,
     seed: u64,
     pairs: &[T],
     identity: impl Fn(&T) -> (&str, u32, u32),
+    trajectory: impl Fn(&T) -> usize,
 ) -> std::result::Result<Vec<Option<Role>>, String> {
     match params.split {
         Split::Paper => {
@@ -225,12 +340,17 @@ fn assign<T>(
                 })
                 .collect())
         }
-        Split::Disjoint => {
+        Split::Disjoint | Split::ByTrajectory => {
             let mut roles: Vec<Option<Role>> = pairs
                 .iter()
                 .map(|p| {
-                    let (scene, run, step) = identity(p);
-                    let test = unit_hash(seed, scene, run, step) < params.test_fraction.get();
+                    let test = match (params.split, params.fold) {
+                        (Split::ByTrajectory, Some(f)) => trajectory(p) as u64 % f.of == f.index,
+                        _ => {
+                            let (scene, run, step) = identity(p);
+                            unit_hash(seed, scene, run, step) < params.test_fraction.get()
+                        }
+                    };
                     Some(if test { Role::Test } else { Role::Train })
                 })
                 .collect();
@@ -250,11 +370,16 @@ fn assign<T>(
                     })
                     .collect();
                 if members.len() < cap.get() {
+                    let with = match (params.split, params.fold) {
+                        (Split::ByTrajectory, Some(f)) => {
+                            format!("in fold {} of {} (by trajectory)", f.index + 1, f.of)
+                        }
+                        _ => format!("with test_fraction = {}", params.test_fraction.get()),
+                    };
                     return Err(format!(
-                        "has {} {} rows with test_fraction = {}, fewer than the {} asked for",
+                        "has {} {} rows {with}, fewer than the {} asked for",
                         members.len(),
                         role.name(),
-                        params.test_fraction.get(),
                         cap.get()
                     ));
                 }
@@ -337,7 +462,13 @@ mod tests {
 
     fn roles(params: &Params, n: u32) -> std::result::Result<Vec<Option<Role>>, String> {
         let ids: Vec<u32> = (0..n).collect();
-        assign(params, 5, &ids, |&i| ("s", i / 100, i % 100))
+        assign(
+            params,
+            5,
+            &ids,
+            |&i| ("s", i / 100, i % 100),
+            |&i| (i / 100) as usize,
+        )
     }
 
     #[test]
@@ -392,6 +523,61 @@ mod tests {
             roles(&too_many, 1000)
                 .unwrap_err()
                 .contains("fewer than the 900 asked for")
+        );
+    }
+
+    #[test]
+    fn by_trajectory_tests_each_trajectory_in_one_fold_and_never_trains_on_it() {
+        // 1000 rows: 10 trajectories (runs) of 100; 3 folds.
+        let mut tested = vec![0; 10];
+        for fold in 0..3 {
+            let params = Params {
+                split: Split::ByTrajectory,
+                fold: Some(Fold { index: fold, of: 3 }),
+                test_rows: Some(Count(250)),
+                ..Params::default()
+            };
+            params.validate().unwrap();
+            let r = roles(&params, 1000).unwrap();
+            for t in 0..10 {
+                let of = &r[t * 100..(t + 1) * 100];
+                let is = |role| of.iter().any(|x| *x == Some(role));
+                assert!(
+                    !(is(Role::Test) && is(Role::Train)),
+                    "trajectory {t} on both sides"
+                );
+                if t as u64 % 3 == fold {
+                    assert!(!is(Role::Train));
+                    tested[t] += 1;
+                } else {
+                    assert!(of.iter().all(|x| *x == Some(Role::Train)));
+                }
+            }
+            // Fold 0 holds trajectories 0, 3, 6, 9 (400 rows), capped at 250.
+            let test = r.iter().filter(|x| **x == Some(Role::Test)).count();
+            assert_eq!(test, 250.min(100 * [4, 3, 3][fold as usize]));
+        }
+        assert_eq!(tested, vec![1; 10]);
+        let one = Params {
+            split: Split::ByTrajectory,
+            ..Params::default()
+        };
+        assert!(
+            one.validate()
+                .unwrap_err()
+                .1
+                .contains("at least 2 replicates")
+        );
+        let capped = Params {
+            split: Split::ByTrajectory,
+            fold: Some(Fold { index: 1, of: 3 }),
+            test_rows: Some(Count(301)),
+            ..Params::default()
+        };
+        let err = roles(&capped, 1000).unwrap_err();
+        assert!(
+            err.contains("has 300 test rows in fold 2 of 3 (by trajectory), fewer than the 301"),
+            "{err}"
         );
     }
 

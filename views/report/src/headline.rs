@@ -401,7 +401,7 @@ fn abstract_(
     let _ = write!(
         md,
         "**Abstract.** {description} — {} variant{}, {replicates} replicate{}{} ({}), every error \
-         in quantization levels on rows held out of training.",
+         in quantization levels on rows held out of training{}.",
         variants.len(),
         if variants.len() == 1 { "" } else { "s" },
         if replicates == 1 { "" } else { "s" },
@@ -415,8 +415,15 @@ fn abstract_(
                 "the same recording; a new seed for the model and, where it is drawn at random, \
                  the split"
             }
+            _ if !run.tables.is_empty() => {
+                "the same recorded tables; a new seed for the model and, where it is drawn at \
+                 random, the split"
+            }
             _ => "a new simulation, split and model",
         },
+        run.split
+            .as_ref()
+            .map_or(String::new(), |s| format!(" (the split: {s})")),
     );
     let name = if variants.len() == 1 {
         "The ALN".to_string()

@@ -69,6 +69,12 @@ pub struct RunInfo {
     /// The recording the data came from (its path as the manifest names
     /// it, its sha256, the topic).
     pub recording: Option<(String, String, String)>,
+    /// The tables of samples the data came from (each a trajectory: its
+    /// path as the manifest's patterns found it, its sha256).
+    pub tables: Vec<(String, String)>,
+    /// How the rows were held out of training, in words (none for an
+    /// archived dataset, whose record does not say).
+    pub split: Option<String>,
 }
 
 /// The paper's §4.6 results table (Armstrong, Supynuk & Green, "Adaptive
@@ -899,6 +905,12 @@ fn reproducibility(md: &mut String, run: &RunInfo, variants: &[Loaded]) {
             "recording",
             format!("`{recording}`, topic `{topic}` (sha256 `{sha256}`)"),
         );
+    }
+    for (file, sha256) in &run.tables {
+        add("table", format!("`{file}` (sha256 `{sha256}`)"));
+    }
+    if let Some(split) = &run.split {
+        add("split", split.clone());
     }
     add("seed", run.seed.to_string());
     if let Some(v) = variants.first().filter(|v| v.info.replicates.len() > 1) {
