@@ -93,6 +93,11 @@ def robots():
          {"amplitude": 5.0, "link_velocities": ["panda_leftfinger", "panda_rightfinger"]}),
         ("anymal", data / "anymal_c_simple_description/urdf/anymal.urdf",
          {"base": "free", "amplitude": 5.0, "initial_height": 1.0, "link_velocities": ["LF_SHANK"]}),
+        # The real arm whose recordings experiments/lwr4.toml learns
+        # (issue 61): its description as FloBaRoID publishes it, damping and
+        # friction at every joint.
+        ("kuka-lwr4", ROOT / "robots/kuka_lwr4/kuka_lwr4.urdf",
+         {"amplitude": 10.0, "link_velocities": ["lwr_7_link"]}),
         # Driven hard, with drives that hold the URDF's velocity limits:
         # the efforts they applied are logged, and must explain the motion.
         ("ur5-held", ROOT / "robots/ur5/ur5_robot.urdf",

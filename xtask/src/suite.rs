@@ -65,7 +65,7 @@ const QUICKSTART_LANE: &[Step] = &[
 /// machine's second core idle.
 const ROBOT_LANE: &[Step] = &[
     (
-        "robots from URDF: thirteen robots' logs against Pinocchio, and bench sim beside it",
+        "robots from URDF: fourteen robots' logs against Pinocchio, and bench sim beside it",
         robots_against_pinocchio,
     ),
     (
