@@ -53,13 +53,14 @@ impl Split {
     pub fn describe(self) -> &'static str {
         match self {
             Split::Disjoint => {
-                "rows drawn at random (neighbouring rows of one trajectory can fall on both sides)"
+                "rows drawn at random, so neighbouring rows of one trajectory can fall on both sides"
             }
             Split::Paper => {
-                "the paper's (§4.3: the first rows trained on, the first rows tested, one test row in nine also trained on)"
+                "the paper's, §4.3: the first rows trained on and the first rows tested, one test \
+                 row in nine also trained on"
             }
             Split::ByTrajectory => {
-                "by trajectory (whole trajectories held out, one fold of them a replicate)"
+                "by trajectory: whole trajectories held out, one fold of them a replicate"
             }
         }
     }
