@@ -378,8 +378,10 @@ fn the_committed_dataset_verifies_and_runs() {
         )
         .unwrap();
     }
-    let said = ok(dir.path(), &["dataset", "verify", "tiny-worm@1"]);
+    let said = ok(dir.path(), &["dataset", "verify"]);
     assert!(said.contains("ok       tiny-worm@1 (3 files)"), "{said}");
+    // A real arm's recordings, kept with their licence.
+    assert!(said.contains("ok       kuka-lwr4@1 (4 files)"), "{said}");
     write_manifest(dir.path(), "m.toml", &from_dataset("tiny-worm@1", false));
     let record = run_ok(dir.path(), &["m.toml"]);
     assert_eq!(record.dataset.unwrap().dataset, "tiny-worm@1");
@@ -388,5 +390,152 @@ fn the_committed_dataset_verifies_and_runs() {
     assert!(
         rows.iter().any(|r| r.variable == "roll.2"),
         "the worm's variables"
+    );
+}
+
+/// The UR5's joints, as its URDF names them.
+const UR5_JOINTS: [&str; 6] = [
+    "shoulder_pan_joint",
+    "shoulder_lift_joint",
+    "elbow_joint",
+    "wrist_1_joint",
+    "wrist_2_joint",
+    "wrist_3_joint",
+];
+
+/// A CSV table of `seconds` of the UR5 at 100 Hz: a slow swing of every
+/// joint (phase `phase`), its efforts constant.
+fn swing(path: &Path, seconds: f64, phase: f64) {
+    let mut text = String::from("t");
+    for j in UR5_JOINTS {
+        text += &format!(",{j}.position,{j}.velocity,{j}.effort");
+    }
+    for k in 0..(seconds * 100.0) as usize {
+        let t = k as f64 * 0.01;
+        text += &format!("\n{t}");
+        for j in 0..UR5_JOINTS.len() {
+            let a = t + j as f64 + phase;
+            text += &format!(",{},{},{}", 0.3 * a.sin(), 0.3 * a.cos(), 1.0 + j as f64);
+        }
+    }
+    std::fs::write(path, text + "\n").unwrap();
+}
+
+#[test]
+fn imported_recordings_are_kept_with_their_terms_and_held_out_by_trajectory() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    for (k, name) in ["a.csv", "b.csv", "c.csv"].iter().enumerate() {
+        swing(&d.join(name), 1.0, k as f64);
+    }
+    std::fs::write(d.join("LICENCE"), "the terms\n").unwrap();
+    std::fs::write(d.join("notes.txt"), "not a table\n").unwrap();
+    let import = |source: &str, tables: &[&str]| {
+        let mut args = vec![
+            "dataset",
+            "import",
+            "--name",
+            "arm",
+            "--source",
+            source,
+            "--citation",
+            "Someone, 2026",
+            "--licence",
+            "CC-BY-4.0",
+            "--licence-file",
+            "LICENCE",
+        ];
+        args.extend_from_slice(tables);
+        alnlab(d, &args)
+    };
+    // Kept only with their terms, and only tables.
+    let refused = import(" ", &["a.csv"]);
+    assert_eq!(refused.status.code(), Some(2));
+    assert!(
+        stderr(&refused).contains("--source: expected some text"),
+        "{}",
+        stderr(&refused)
+    );
+    let refused = import("https://example.org/arm", &["a.csv", "notes.txt"]);
+    assert_eq!(refused.status.code(), Some(2));
+    assert!(
+        stderr(&refused).contains("notes.txt: expected a table of samples"),
+        "{}",
+        stderr(&refused)
+    );
+    let out = import("https://example.org/arm", &["a.csv", "b.csv", "c.csv"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let shown = ok(d, &["dataset", "show", "arm@1"]);
+    for said in [
+        "source      https://example.org/arm",
+        "citation    Someone, 2026",
+        "licence     CC-BY-4.0",
+        "table       a.csv",
+        "licence     LICENCE",
+    ] {
+        assert!(shown.contains(said), "{said}: {shown}");
+    }
+
+    // Three replicates, three folds: replicate k tests table k alone.
+    let urdf = Path::new(env!("CARGO_MANIFEST_DIR")).join("robots/ur5/ur5_robot.urdf");
+    let manifest = format!(
+        "[experiment]\nname = \"e2e\"\nseed = 3\nreplicates = 3\n\n[data]\ndataset = \"arm@1\"\n\n\
+         [ingest.table]\ntime = \"t\"\n\n[ingest.robot]\nname = \"ur5\"\nkind = \"urdf\"\n\
+         file = \"{}\"\ndt = 0.001\nframe_dt = 0.01\n\n[stride]\nn = 1\n\n[quantize]\n\
+         levels = 64\n\n[train]\nmodel = \"piecewise-linear\"\ncontrols = \"given\"\n\n\
+         [test]\nrun_seconds = 0.000001\n",
+        urdf.display()
+    );
+    write_manifest(d, "m.toml", &manifest);
+    let record = run_ok(d, &["m.toml"]);
+    assert_eq!(record.dataset.as_ref().unwrap().dataset, "arm@1");
+    let files: Vec<&str> = record.tables.iter().map(|t| t.file.as_str()).collect();
+    assert_eq!(files, ["arm@1/a.csv", "arm@1/b.csv", "arm@1/c.csv"]);
+    for v in &record.variants {
+        let pairs = alnlab_tables::pairs::Pairs::read(&d.join(&v.artifacts["pairs"].path)).unwrap();
+        for key in pairs.keys() {
+            let tested = key.split == alnlab_tables::pairs::Split::Test;
+            assert_eq!(
+                tested,
+                key.run == v.replicate,
+                "{key:?} in replicate {}",
+                v.replicate
+            );
+        }
+    }
+    let report = std::fs::read_to_string(d.join("runs/e2e/report/report.md")).unwrap();
+    assert!(report.contains("(the split: by trajectory: whole trajectories held out"));
+
+    // A run's data are not framed, and recordings need their robot.
+    ok(
+        d,
+        &[
+            "dataset",
+            "archive",
+            "--run",
+            "runs/e2e",
+            "--replicate",
+            "1",
+            "--name",
+            "run",
+        ],
+    );
+    write_manifest(d, "framed.toml", &manifest.replace("arm@1", "run@1"));
+    let refused = alnlab(d, &["-q", "run", "framed.toml"]);
+    assert_eq!(refused.status.code(), Some(2));
+    assert!(
+        stderr(&refused).contains("run@1 holds a run's data, not tables of recordings"),
+        "{}",
+        stderr(&refused)
+    );
+    let without_robot = manifest[..manifest.find("[ingest.robot]").unwrap()].to_string()
+        + &manifest[manifest.find("[stride]").unwrap()..];
+    write_manifest(d, "no-robot.toml", &without_robot);
+    let refused = alnlab(d, &["-q", "run", "no-robot.toml"]);
+    assert_eq!(refused.status.code(), Some(2));
+    assert!(
+        stderr(&refused).contains("add [ingest.robot]"),
+        "{}",
+        stderr(&refused)
     );
 }

@@ -1,6 +1,8 @@
 //! The dataset archive (docs/design.md §2): a run's
 //! simulate and stride outputs (the trajectory log, its statistics and the
-//! pairs table; optionally the quantize outputs too) kept for reuse.
+//! pairs table; optionally the quantize outputs too) kept for reuse, and
+//! recordings of a robot imported from elsewhere (tables of samples, with
+//! their source, citation and licence).
 //!
 //! Files are stored once each, content-addressed by SHA-256 under
 //! `<archive>/objects/`; `<archive>/catalog.toml` lists every dataset
@@ -21,8 +23,17 @@ use crate::manifest::is_identifier;
 
 mod catalog;
 pub use catalog::{
-    BASE_ROLES, CATALOG_FILE, Catalog, DatasetProvenance, Entry, FileEntry, LEVEL_ROLES,
+    BASE_ROLES, CATALOG_FILE, Catalog, DatasetProvenance, Entry, FileEntry, ImportedSource,
+    LEVEL_ROLES, LICENCE_ROLE, TABLE_ROLE,
 };
+
+/// Where a dataset comes from.
+pub enum Origin {
+    /// A run's data.
+    Run(DatasetProvenance),
+    /// Recordings made elsewhere.
+    Imported(ImportedSource),
+}
 
 /// The folder of content-addressed files in the archive folder.
 const OBJECTS_DIR: &str = "objects";
@@ -88,7 +99,7 @@ impl Archive {
     }
 
     /// The stored file with content `sha256`.
-    fn object(&self, sha256: &str) -> PathBuf {
+    pub fn object(&self, sha256: &str) -> PathBuf {
         self.dir.join(OBJECTS_DIR).join(sha256)
     }
 
@@ -129,12 +140,7 @@ impl Archive {
     /// Archives `sources` as a version of `name`. Content already stored is
     /// not stored again, and if the latest version of `name` holds exactly
     /// these files, that entry is returned (with `false`) and nothing changes.
-    pub fn archive(
-        &self,
-        name: &str,
-        sources: &[Source],
-        provenance: DatasetProvenance,
-    ) -> Result<(Entry, bool)> {
+    pub fn archive(&self, name: &str, sources: &[Source], origin: Origin) -> Result<(Entry, bool)> {
         check_name(name)?;
         let _lock = self.lock()?;
         let mut files = Vec::new();
@@ -164,9 +170,14 @@ impl Archive {
             sha256: String::new(),
             created: humantime::format_rfc3339_seconds(std::time::SystemTime::now()).to_string(),
             bytes: files.iter().map(|f| f.bytes).sum(),
-            provenance,
+            provenance: None,
+            source: None,
             files,
         };
+        match origin {
+            Origin::Run(p) => entry.provenance = Some(p),
+            Origin::Imported(s) => entry.source = Some(s),
+        }
         entry.sha256 = entry.content_sha256();
         catalog.datasets.push(entry.clone());
         self.write_catalog(&catalog)?;
@@ -488,8 +499,8 @@ pub fn check_name(name: &str) -> Result<()> {
 mod tests {
     use super::*;
 
-    fn provenance() -> DatasetProvenance {
-        DatasetProvenance {
+    fn provenance() -> Origin {
+        Origin::Run(DatasetProvenance {
             experiment: "e".into(),
             variant: "base".into(),
             manifest: "m.toml".into(),
@@ -498,7 +509,7 @@ mod tests {
             seed: 7,
             alnlab_version: "0.1.0".into(),
             git_commit: String::new(),
-        }
+        })
     }
 
     /// Three data files with the given contents, as sources.

@@ -146,8 +146,14 @@ enum Source {
 }
 
 impl Source {
-    fn of(data: Option<&Data>) -> Source {
+    /// Where the data come from: `[data]`, and whether `[ingest]` names a
+    /// robot (an archived dataset of tables is then read by the ingest
+    /// stage, not stood in for the first stages).
+    fn of(data: Option<&Data>, ingest: &alnlab_ingest::Params) -> Source {
         match data {
+            Some(Data {
+                dataset: Some(_), ..
+            }) if ingest.robot.is_some() => Source::Recorded,
             Some(Data {
                 dataset: Some(_), ..
             }) => Source::Archived,
@@ -287,7 +293,7 @@ impl Manifest {
             split(deserialize(&base, root_span.clone(), &locate, None)?);
         check_experiment(&experiment, &base, &locate)?;
         check_data(data.as_ref(), &base, &locate)?;
-        let source = Source::of(data.as_ref());
+        let source = Source::of(data.as_ref(), &base_stages.ingest);
         let mut variants = Vec::new();
         if variant_entries.is_empty() {
             let mut stages = base_stages;
@@ -388,7 +394,7 @@ impl Manifest {
         };
         let mut table =
             toml::Table::try_from(&resolved).expect("resolved parameters serialize to TOML");
-        let source = Source::of(self.data.as_ref());
+        let source = Source::of(self.data.as_ref(), &variant.stages.ingest);
         for stage in STAGES.iter().filter(|s| source.stands_for(s)) {
             table.remove(stage.name);
         }
@@ -610,11 +616,18 @@ fn read_descriptions(
             _ => locate.error(span_of(table, &path), path.join("."), variant, message),
         }
     };
-    match Source::of(data) {
+    match Source::of(data, &stages.ingest) {
         Source::Simulated => stages
             .simulate
             .read_descriptions(dir)
             .map_err(|(key, message)| located("simulate", key, message)),
+        Source::Archived if has_key(table, crate::stages::INGEST.name) => Err(located(
+            "ingest",
+            "robot".into(),
+            "[ingest] reads the tables of an archived dataset of recordings with their robot: \
+             add [ingest.robot] (or remove [ingest]: a run's archived data need no framing)"
+                .into(),
+        )),
         Source::Archived => Ok(()),
         Source::Recorded => {
             let data = data.expect("recorded data");
@@ -625,7 +638,9 @@ fn read_descriptions(
                         .read_sources(dir, recording, data.topic.as_deref())
                 }
                 (None, Some(tables)) => stages.ingest.read_tables(dir, &tables.patterns()),
-                (None, None) => unreachable!("a recording or tables"),
+                // An archived dataset of tables: the run reads them from
+                // the archive it is given.
+                (None, None) => stages.ingest.read_archived_tables(dir),
             };
             read.map_err(|(key, message)| located("ingest", key, message))
         }
@@ -698,6 +713,9 @@ fn check_data(data: Option<&Data>, table: &DeTable, locate: &Locator) -> Result<
         })
         | Some(Data {
             tables: Some(_), ..
+        })
+        | Some(Data {
+            dataset: Some(_), ..
         }) => Ok(()),
         _ if has_key(table, crate::stages::INGEST.name) => at(
             &[crate::stages::INGEST.name],

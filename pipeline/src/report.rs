@@ -89,10 +89,12 @@ pub fn render(record: &RunRecord, dir: &Path) -> Result<PathBuf> {
             })
         })
         .collect::<Result<_>>()?;
-    // The split the rows were held out by (an archived dataset carries its
-    // own, which its record does not say).
-    let split = match (&record.dataset, record.variants.first()) {
-        (None, Some(v)) => Some(resolved(v)?.stride.split.describe().to_string()),
+    // The split the rows were held out by (an archived run's data carry
+    // their own, which the record does not say; archived recordings are
+    // split here).
+    let archived_pairs = record.dataset.is_some() && record.tables.is_empty();
+    let split = match (archived_pairs, record.variants.first()) {
+        (false, Some(v)) => Some(resolved(v)?.stride.split.describe().to_string()),
         _ => None,
     };
     let run = RunInfo {

@@ -28,6 +28,7 @@ use crate::records::{
 };
 use crate::stages::{self, Archived, Call, STAGES, Stage, stage_params};
 use alnlab_aln::shard::Shard;
+use alnlab_ingest::TableFile;
 
 /// How to run.
 #[derive(Clone, Debug)]
@@ -107,6 +108,26 @@ pub fn run(manifest: &Manifest, options: &RunOptions) -> Result<RunRecord> {
                 .find_pinned(dataset)
                 .map_err(|e| e.context(&format!("{}: [data] dataset", manifest.path.display())))?;
             archive.require_whole(&entry)?;
+            let reads_tables = variants.iter().any(|v| v.stages.ingest.robot.is_some());
+            match (reads_tables, entry.tables().is_empty()) {
+                (true, true) => {
+                    return Err(Error::Invalid(format!(
+                        "{}: [data] dataset: {} holds a run's data, not tables of recordings; \
+                         remove [ingest] (its data need no framing)",
+                        manifest.path.display(),
+                        entry.label()
+                    )));
+                }
+                (false, false) => {
+                    return Err(Error::Invalid(format!(
+                        "{}: [data] dataset: {} holds tables of recordings: frame them with \
+                         [ingest.table] and [ingest.robot]",
+                        manifest.path.display(),
+                        entry.label()
+                    )));
+                }
+                _ => {}
+            }
             for variant in &variants {
                 let set = STAGES
                     .iter()
@@ -128,6 +149,25 @@ pub fn run(manifest: &Manifest, options: &RunOptions) -> Result<RunRecord> {
         }
         None => None,
     };
+    // An archived dataset of recordings is read by the ingest stage, table
+    // by table from the archive (verified above); a run's data stand for
+    // the first stages.
+    let (dataset, archived_tables) = match dataset {
+        Some(entry) if !entry.tables().is_empty() => {
+            let tables: Vec<TableFile> = entry
+                .tables()
+                .iter()
+                .map(|f| TableFile {
+                    file: format!("{}/{}", entry.label(), f.name),
+                    sha256: f.sha256.clone(),
+                    path: archive.object(&f.sha256),
+                })
+                .collect();
+            (Some(entry), Some(tables))
+        }
+        other => (other, None),
+    };
+    let stood_for = dataset.as_ref().filter(|_| archived_tables.is_none());
     let _lock = OutLock::acquire(&options.out)?;
     let cache = Cache::new(&options.out);
     cache.sweep_unfinished()?;
@@ -138,13 +178,17 @@ pub fn run(manifest: &Manifest, options: &RunOptions) -> Result<RunRecord> {
     let count = variants.len();
     for (k, variant) in variants.iter().enumerate() {
         for replicate in 0..replicates {
-            let variant = &variant.for_replicate(replicate);
+            let mut variant = variant.for_replicate(replicate);
+            if let Some(tables) = &archived_tables {
+                variant.stages.ingest.tables = tables.clone();
+            }
+            let variant = &variant;
             let seed = replicate_seed(manifest.experiment.seed, replicate);
             let mut graph = Graph {
                 manifest,
                 options,
                 cache: &cache,
-                dataset: dataset.as_ref().map(|entry| (&archive, entry)),
+                dataset: stood_for.map(|entry| (&archive, entry)),
                 made_now: &mut made_now,
                 seed,
                 label: if replicates > 1 {
@@ -219,17 +263,19 @@ pub fn run(manifest: &Manifest, options: &RunOptions) -> Result<RunRecord> {
                 topic: ingest.topic.clone(),
             })
         }),
-        tables: manifest.variants.first().map_or(Vec::new(), |v| {
-            v.stages
-                .ingest
-                .tables
-                .iter()
-                .map(|t| TableRef {
-                    file: t.file.clone(),
-                    sha256: t.sha256.clone(),
-                })
-                .collect()
-        }),
+        tables: archived_tables
+            .as_deref()
+            .or(manifest
+                .variants
+                .first()
+                .map(|v| &v.stages.ingest.tables[..]))
+            .unwrap_or_default()
+            .iter()
+            .map(|t| TableRef {
+                file: t.file.clone(),
+                sha256: t.sha256.clone(),
+            })
+            .collect(),
     };
     if options.until.is_none() {
         records::store(&options.out, &record)?;

@@ -6,7 +6,8 @@ use std::path::{Path, PathBuf};
 use alnlab_common::{Error, Result};
 
 use crate::dataset::{
-    Archive, BASE_ROLES, DatasetProvenance, Entry, LEVEL_ROLES, Source, check_name,
+    Archive, BASE_ROLES, DatasetProvenance, Entry, ImportedSource, LEVEL_ROLES, LICENCE_ROLE,
+    Origin, Source, TABLE_ROLE, check_name,
 };
 use crate::records::pick_variant;
 use crate::records::read_record;
@@ -39,6 +40,40 @@ pub enum DatasetCommand {
         /// starts at train.
         #[arg(long)]
         with_levels: bool,
+    },
+    /// Import a robot's recordings made elsewhere — tables of samples, CSV
+    /// or Parquet, one a trajectory — as a new version of NAME, with where
+    /// they were published, how to cite them and their licence (its text
+    /// kept beside them). A manifest reads them with `[data] dataset` and
+    /// `[ingest.table]`.
+    #[command(after_help = "Example:
+  alnlab dataset import --name kuka-lwr4 \\
+    --source 'https://github.com/kjyv/FloBaRoID (commit e6c077e, data/KUKA/HW)' \\
+    --citation 'S. Bethge et al., FloBaRoID, RAAD 2017' \\
+    --licence LGPL-3.0-only --licence-file LICENSE measurements_1.parquet measurements_2.parquet")]
+    Import {
+        /// The dataset's name: letters, digits, `-`, `_`.
+        #[arg(long)]
+        name: String,
+        /// Where the recordings were published (a URL, with a commit or
+        /// version where there is one).
+        #[arg(long)]
+        source: String,
+        /// How to cite them.
+        #[arg(long)]
+        citation: String,
+        /// Their licence's SPDX identifier, e.g. LGPL-3.0-only.
+        #[arg(long)]
+        licence: String,
+        /// The licence's text, archived beside the tables.
+        #[arg(long)]
+        licence_file: PathBuf,
+        /// What else a user must know (what was converted, caveats).
+        #[arg(long, default_value = "")]
+        notes: String,
+        /// The tables, each one trajectory (`.csv` or `.parquet`), in order.
+        #[arg(required = true)]
+        tables: Vec<PathBuf>,
     },
     /// List the archived datasets.
     #[command(after_help = "Example:
@@ -104,6 +139,23 @@ pub fn execute(datasets: &Path, command: DatasetCommand) -> Result<()> {
             &name,
             with_levels,
         ),
+        DatasetCommand::Import {
+            name,
+            source,
+            citation,
+            licence,
+            licence_file,
+            notes,
+            tables,
+        } => {
+            let imported = ImportedSource {
+                url: source,
+                citation,
+                licence,
+                notes,
+            };
+            import(&archive, &name, imported, &licence_file, &tables)
+        }
         DatasetCommand::List => {
             let catalog = archive.catalog()?;
             if catalog.datasets.is_empty() {
@@ -111,14 +163,18 @@ pub fn execute(datasets: &Path, command: DatasetCommand) -> Result<()> {
             }
             for entry in &catalog.datasets {
                 let roles: Vec<&str> = entry.files.iter().map(|f| f.role.as_str()).collect();
+                let origin = match (&entry.provenance, &entry.source) {
+                    (Some(p), _) => format!("{}/{}", p.experiment, p.variant),
+                    (None, Some(s)) => format!("imported ({})", s.licence),
+                    (None, None) => "(no origin recorded)".into(),
+                };
                 println!(
-                    "{:<24} {}  {:>10}  {}  {}/{}  [{}]",
+                    "{:<24} {}  {:>10}  {}  {}  [{}]",
                     entry.label(),
                     &entry.sha256[..12.min(entry.sha256.len())],
                     human_bytes(entry.bytes),
                     entry.created,
-                    entry.provenance.experiment,
-                    entry.provenance.variant,
+                    origin,
                     roles.join(", ")
                 );
             }
@@ -223,7 +279,74 @@ fn archive_run(
         alnlab_version: record.alnlab_version.clone(),
         git_commit: record.git_commit.clone().unwrap_or_default(),
     };
-    let (entry, new) = archive.archive(name, &sources, provenance)?;
+    let (entry, new) = archive.archive(name, &sources, Origin::Run(provenance))?;
+    report_archived(&entry, new);
+    Ok(())
+}
+
+/// `alnlab dataset import`: tables of a robot's samples, with their source
+/// and licence.
+fn import(
+    archive: &Archive,
+    name: &str,
+    imported: ImportedSource,
+    licence_file: &Path,
+    tables: &[PathBuf],
+) -> Result<()> {
+    check_name(name)?;
+    for (field, value) in [
+        ("--source", &imported.url),
+        ("--citation", &imported.citation),
+        ("--licence", &imported.licence),
+    ] {
+        if value.trim().is_empty() {
+            return Err(Error::Invalid(format!(
+                "{field}: expected some text: recordings are kept only with their source, \
+                 citation and licence"
+            )));
+        }
+    }
+    let mut sources = Vec::new();
+    for path in tables {
+        let file_name = path
+            .file_name()
+            .map(|n| n.to_string_lossy().into_owned())
+            .unwrap_or_default();
+        let extension = Path::new(&file_name)
+            .extension()
+            .and_then(|e| e.to_str())
+            .map(str::to_ascii_lowercase);
+        if !matches!(extension.as_deref(), Some("csv" | "parquet")) {
+            return Err(Error::bad_file(
+                path,
+                "expected a table of samples: a `.csv` or `.parquet` file",
+            ));
+        }
+        if sources.iter().any(|s: &Source| s.name == file_name) {
+            return Err(Error::Invalid(format!(
+                "two tables are named `{file_name}`: each keeps its file name in the archive"
+            )));
+        }
+        sources.push(Source {
+            role: TABLE_ROLE.into(),
+            name: file_name,
+            path: path.clone(),
+            sha256: None,
+        });
+    }
+    sources.push(Source {
+        role: LICENCE_ROLE.into(),
+        name: "LICENCE".into(),
+        path: licence_file.to_path_buf(),
+        sha256: None,
+    });
+    let (entry, new) = archive.archive(name, &sources, Origin::Imported(imported))?;
+    report_archived(&entry, new);
+    Ok(())
+}
+
+/// Says what archiving did.
+fn report_archived(entry: &Entry, new: bool) {
     if new {
         println!(
             "archived {} ({}, sha256 {})",
@@ -234,20 +357,47 @@ fn archive_run(
     } else {
         println!("already archived as {} (nothing stored)", entry.label());
     }
-    Ok(())
 }
 
 /// A catalog entry for people.
 fn show(entry: &Entry) -> String {
-    let p = &entry.provenance;
     let mut text = format!(
-        "dataset     {}\nsha256      {}\ncreated     {}\nsize        {}\n\
-         experiment  {} (variant {}{})\nmanifest    {} (sha256 {})\nseed        {}\n\
-         alnlab      {}\ngit commit  {}\nfiles:\n",
+        "dataset     {}\nsha256      {}\ncreated     {}\nsize        {}\n",
         entry.label(),
         entry.sha256,
         entry.created,
         human_bytes(entry.bytes),
+    );
+    if let Some(s) = &entry.source {
+        text.push_str(&format!(
+            "source      {}\ncitation    {}\nlicence     {} (its text: the `{LICENCE_ROLE}` file)\n",
+            s.url, s.citation, s.licence
+        ));
+        if !s.notes.is_empty() {
+            text.push_str(&format!("notes       {}\n", s.notes));
+        }
+    }
+    if let Some(p) = &entry.provenance {
+        text.push_str(&provenance(p));
+    }
+    text.push_str("files:\n");
+    for f in &entry.files {
+        text.push_str(&format!(
+            "  {:<11} {:<18} {:>10}  {}\n",
+            f.role,
+            f.name,
+            human_bytes(f.bytes),
+            f.sha256
+        ));
+    }
+    text
+}
+
+/// The run a dataset was archived from, for people.
+fn provenance(p: &DatasetProvenance) -> String {
+    format!(
+        "experiment  {} (variant {}{})\nmanifest    {} (sha256 {})\nseed        {}\n\
+         alnlab      {}\ngit commit  {}\n",
         p.experiment,
         p.variant,
         p.replicate
@@ -262,17 +412,7 @@ fn show(entry: &Entry) -> String {
         } else {
             &p.git_commit
         },
-    );
-    for f in &entry.files {
-        text.push_str(&format!(
-            "  {:<11} {:<18} {:>10}  {}\n",
-            f.role,
-            f.name,
-            human_bytes(f.bytes),
-            f.sha256
-        ));
-    }
-    text
+    )
 }
 
 /// "1.2 MiB".

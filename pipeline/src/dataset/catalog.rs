@@ -11,6 +11,10 @@ pub const CATALOG_FILE: &str = "catalog.toml";
 pub const BASE_ROLES: [&str; 3] = ["trajectory", "stats", "pairs"];
 /// The roles `--with-levels` adds: the quantize outputs.
 pub const LEVEL_ROLES: [&str; 2] = ["codebook", "levels"];
+/// The role of an imported table of a robot's samples (one a trajectory).
+pub const TABLE_ROLE: &str = "table";
+/// The role of an imported dataset's licence text.
+pub const LICENCE_ROLE: &str = "licence";
 
 /// `catalog.toml`: every archived dataset version.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
@@ -36,10 +40,32 @@ pub struct Entry {
     pub created: String,
     /// Total size of its files.
     pub bytes: u64,
-    /// Where it came from.
-    pub provenance: DatasetProvenance,
+    /// The run it was archived from (none for imported recordings).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub provenance: Option<DatasetProvenance>,
+    /// Where imported recordings were published, and on what terms (none
+    /// for a run's data).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub source: Option<ImportedSource>,
     /// Its files.
     pub files: Vec<FileEntry>,
+}
+
+/// Recordings made elsewhere and imported (`alnlab dataset import`): where
+/// they were published, how to cite them and the licence they are kept
+/// under (its text is the dataset's `licence` file).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ImportedSource {
+    /// Where they were published (a URL, with a commit or version where
+    /// there is one).
+    pub url: String,
+    pub citation: String,
+    /// The licence's SPDX identifier.
+    pub licence: String,
+    /// What else a user must know (what was converted, caveats).
+    #[serde(default, skip_serializing_if = "String::is_empty")]
+    pub notes: String,
 }
 
 /// The run a dataset was archived from.
@@ -99,6 +125,11 @@ impl Entry {
     /// Whether the dataset holds the quantize outputs too.
     pub fn has_levels(&self) -> bool {
         LEVEL_ROLES.iter().all(|r| self.file(r).is_some())
+    }
+
+    /// The imported tables of samples, in order (none for a run's data).
+    pub fn tables(&self) -> Vec<&FileEntry> {
+        self.files.iter().filter(|f| f.role == TABLE_ROLE).collect()
     }
 }
 

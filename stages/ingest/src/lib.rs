@@ -74,8 +74,9 @@ pub struct Params {
     pub tables: Vec<TableFile>,
 }
 
-/// One table of samples: its name as the manifest's patterns found it, its
-/// sha256 (its identity in the cache key) and where it is.
+/// One table of samples: its name as the manifest's patterns found it (or,
+/// archived, `NAME@VERSION/<file>`), its sha256 (its identity in the cache
+/// key) and where it is.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct TableFile {
@@ -178,6 +179,17 @@ impl Params {
             }
         }
         self.tables = tables;
+        self.read_robot(dir)
+    }
+
+    /// Checks `[ingest.table]` and reads the robot's description, for tables
+    /// an archived dataset holds (the run fills in `tables`, from the
+    /// archive it is given).
+    pub fn read_archived_tables(&mut self, dir: &Path) -> std::result::Result<(), ParamError> {
+        self.table
+            .get_or_insert_with(table::Columns::default)
+            .validate()
+            .map_err(|(field, message)| (format!("table.{field}"), message))?;
         self.read_robot(dir)
     }
 
@@ -375,9 +387,10 @@ pub fn ingest_tables(
         ("tables".to_string(), source.tables.len().to_string()),
     ]);
     for (i, t) in source.tables.iter().enumerate() {
-        let trajectory = table::read(&t.path, source.columns, &joints)?;
+        let named = Path::new(&t.file);
+        let trajectory = table::read(&t.path, named, source.columns, &joints)?;
         if grid.gaps == Gaps::Error {
-            table::check_gaps(&t.path, source.columns, &trajectory.stamps_ns, grid.max_gap)?;
+            table::check_gaps(named, source.columns, &trajectory.stamps_ns, grid.max_gap)?;
         }
         for run in frames::runs(&trajectory.stamps_ns, &trajectory.samples, grid) {
             match run.frames.len() >= log::LEAST_FRAMES {

@@ -175,9 +175,12 @@ pub struct Trajectory {
     pub implied_dt: Option<f64>,
 }
 
-/// Reads the table `path` (`.csv` or `.parquet`) as the trajectory of
-/// `joints` that `columns` (validated) describe.
-pub fn read(path: &Path, columns: &Columns, joints: &[Joint]) -> Result<Trajectory> {
+/// Reads the table at `stored` as the trajectory of `joints` that
+/// `columns` (validated) describe; `path` names it — its extension says
+/// whether it is CSV or Parquet (`.csv`, `.parquet`), and every message
+/// names it (an archived table is stored under its hash, named by its
+/// dataset and file name).
+pub fn read(stored: &Path, path: &Path, columns: &Columns, joints: &[Joint]) -> Result<Trajectory> {
     let bad = |what: String| Error::bad_file(path, what);
     let mut wanted: Vec<String> = Vec::new();
     if let Some(t) = &columns.time {
@@ -193,8 +196,8 @@ pub fn read(path: &Path, columns: &Columns, joints: &[Joint]) -> Result<Trajecto
         .and_then(|e| e.to_str())
         .map(str::to_ascii_lowercase);
     let values = match extension.as_deref() {
-        Some("csv") => read_csv(path, &wanted)?,
-        Some("parquet") => read_parquet(path, &wanted)?,
+        Some("csv") => read_csv(stored, path, &wanted)?,
+        Some("parquet") => read_parquet(stored, path, &wanted)?,
         _ => {
             return Err(bad(
                 "expected a table of samples: a `.csv` or `.parquet` file".into(),
@@ -328,13 +331,13 @@ fn ms(seconds: f64) -> String {
     format!("{:.2} ms", seconds * 1e3)
 }
 
-/// The `wanted` columns of the CSV file `path` (a header row, then one row
-/// a sample), each as numbers.
-fn read_csv(path: &Path, wanted: &[String]) -> Result<Vec<Vec<f64>>> {
+/// The `wanted` columns of the CSV file at `stored`, named `path` (a header
+/// row, then one row a sample), each as numbers.
+fn read_csv(stored: &Path, path: &Path, wanted: &[String]) -> Result<Vec<Vec<f64>>> {
     let bad = |what: String| Error::bad_file(path, what);
     let mut reader = csv::ReaderBuilder::new()
         .trim(csv::Trim::All)
-        .from_path(path)
+        .from_path(stored)
         .map_err(|e| csv_error(path, e))?;
     let header = reader.headers().map_err(|e| csv_error(path, e))?.clone();
     let at: Vec<usize> = wanted
@@ -386,11 +389,11 @@ fn finite(path: &Path, column: &str, row: usize, x: f64) -> Result<f64> {
     }
 }
 
-/// The `wanted` columns of the Parquet file `path`, each of a numeric type
-/// and without nulls.
-fn read_parquet(path: &Path, wanted: &[String]) -> Result<Vec<Vec<f64>>> {
+/// The `wanted` columns of the Parquet file at `stored`, named `path`, each
+/// of a numeric type and without nulls.
+fn read_parquet(stored: &Path, path: &Path, wanted: &[String]) -> Result<Vec<Vec<f64>>> {
     let bad = |what: String| Error::bad_file(path, what);
-    let file = File::open(path).map_err(|e| Error::io(path, e))?;
+    let file = File::open(stored).map_err(|e| Error::io(path, e))?;
     let builder = ParquetRecordBatchReaderBuilder::try_new(file)
         .map_err(|e| bad(format!("not a Parquet table: {e}")))?;
     let schema = builder.schema().clone();
@@ -550,7 +553,7 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let data = rows(200, 0.005, 1.0);
         let path = csv(dir.path(), "a.csv", HEADER, &data);
-        let t = read(&path, &timed(), &joints()).unwrap();
+        let t = read(&path, &path, &timed(), &joints()).unwrap();
         assert_eq!(t.stamps_ns.len(), 200);
         assert_eq!(t.stamps_ns[3], 15_000_000);
         assert_eq!(t.samples[7].q, [data[7][1], data[7][4]]);
@@ -581,7 +584,7 @@ mod tests {
             ArrowWriter::try_new(File::create(&parquet).unwrap(), batch.schema(), None).unwrap();
         w.write(&batch).unwrap();
         w.close().unwrap();
-        let p = read(&parquet, &timed(), &joints()).unwrap();
+        let p = read(&parquet, &parquet, &timed(), &joints()).unwrap();
         assert_eq!(p.samples, t.samples);
         let drift = p
             .stamps_ns
@@ -597,7 +600,7 @@ mod tests {
             rate: Some(Positive(200.0)),
             ..Columns::default()
         };
-        let r = read(&path, &rated, &joints()).unwrap();
+        let r = read(&path, &path, &rated, &joints()).unwrap();
         assert_eq!(r.stamps_ns, t.stamps_ns);
         // The wrong rate, or velocities in another unit, are refused with
         // the rate the data imply.
@@ -605,7 +608,9 @@ mod tests {
             rate: Some(Positive(100.0)),
             ..Columns::default()
         };
-        let text = read(&path, &wrong, &joints()).unwrap_err().to_string();
+        let text = read(&path, &path, &wrong, &joints())
+            .unwrap_err()
+            .to_string();
         assert!(
             text.contains(
                 "a.csv: the positions and velocities imply samples 5.00 ms apart (200.0 Hz"
@@ -613,7 +618,9 @@ mod tests {
             "{text}"
         );
         let fast = csv(dir.path(), "fast.csv", HEADER, &rows(200, 0.005, 2.0));
-        let text = read(&fast, &timed(), &joints()).unwrap_err().to_string();
+        let text = read(&fast, &fast, &timed(), &joints())
+            .unwrap_err()
+            .to_string();
         assert!(
             text.contains("imply samples 2.50 ms apart")
                 && text.contains("column `t` puts them 5.00 ms apart (median)"),
@@ -634,7 +641,7 @@ mod tests {
             angles: Angles::Deg,
             ..timed()
         };
-        let t = read(&path, &columns, &joints()).unwrap();
+        let t = read(&path, &path, &columns, &joints()).unwrap();
         let rad = std::f64::consts::PI / 180.0;
         assert_eq!(t.samples[3].q, [data[3][1] * rad, data[3][4]]);
         assert_eq!(t.samples[3].qd, [data[3][2] * rad, data[3][5]]);
@@ -664,7 +671,11 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let d = dir.path();
         let data = rows(40, 0.01, 1.0);
-        let fails = |path: &Path| read(path, &timed(), &joints()).unwrap_err().to_string();
+        let fails = |path: &Path| {
+            read(path, path, &timed(), &joints())
+                .unwrap_err()
+                .to_string()
+        };
 
         let missing = csv(
             d,
@@ -754,12 +765,16 @@ mod tests {
         w.write(&batch).unwrap();
         w.close().unwrap();
         let only_time = vec!["t".to_string(), "a.position".to_string()];
-        let text = read_parquet(&bad, &only_time).unwrap_err().to_string();
+        let text = read_parquet(&bad, &bad, &only_time)
+            .unwrap_err()
+            .to_string();
         assert!(
             text.contains("bad.parquet: column `t`, row 2: missing (null)"),
             "{text}"
         );
-        let text = read_parquet(&bad, &only_time[1..]).unwrap_err().to_string();
+        let text = read_parquet(&bad, &bad, &only_time[1..])
+            .unwrap_err()
+            .to_string();
         assert!(
             text.contains("column `a.position` holds Utf8, not numbers"),
             "{text}"

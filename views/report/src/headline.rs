@@ -407,6 +407,10 @@ fn abstract_(
         if replicates == 1 { "" } else { "s" },
         if variants.len() == 1 { "" } else { " each" },
         match (&run.dataset, &run.recording) {
+            (Some(_), _) if !run.tables.is_empty() => {
+                "the same archived recordings; a new seed for the model and, where it is drawn at \
+                 random, the split"
+            }
             (Some(_), _) => {
                 "the same archived data; a new seed for the model and, where it is drawn at \
                  random, the split"
