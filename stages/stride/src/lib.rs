@@ -56,8 +56,8 @@ impl Split {
                 "rows drawn at random, so neighbouring rows of one trajectory can fall on both sides"
             }
             Split::Paper => {
-                "the paper's, §4.3: the first rows trained on and the first rows tested, one test \
-                 row in nine also trained on"
+                "the paper's §4.3 split: training on the first train_rows rows and testing on the \
+                 first test_rows, so the training rows are tested too"
             }
             Split::ByTrajectory => {
                 "by trajectory: whole trajectories held out, one fold of them a replicate"
