@@ -159,8 +159,16 @@ impl Archive {
             .iter()
             .filter(|e| e.name == name)
             .max_by_key(|e| e.version);
+        let (provenance, source) = match origin {
+            Origin::Run(p) => (Some(p), None),
+            Origin::Imported(s) => (None, Some(s)),
+        };
+        // The same files are the same dataset, whichever run made them; but
+        // imported files with a corrected source (a citation, a licence)
+        // make a new version.
         if let Some(latest) = latest
             && latest.files == files
+            && latest.source == source
         {
             return Ok((latest.clone(), false));
         }
@@ -170,14 +178,10 @@ impl Archive {
             sha256: String::new(),
             created: humantime::format_rfc3339_seconds(std::time::SystemTime::now()).to_string(),
             bytes: files.iter().map(|f| f.bytes).sum(),
-            provenance: None,
-            source: None,
+            provenance,
+            source,
             files,
         };
-        match origin {
-            Origin::Run(p) => entry.provenance = Some(p),
-            Origin::Imported(s) => entry.source = Some(s),
-        }
         entry.sha256 = entry.content_sha256();
         catalog.datasets.push(entry.clone());
         self.write_catalog(&catalog)?;

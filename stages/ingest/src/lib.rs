@@ -21,7 +21,7 @@ mod tests;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
-use alnlab_common::hash::sha256_hex;
+use alnlab_common::hash::{sha256_file, sha256_hex};
 use alnlab_common::params::{self, ParamError, Positive};
 use alnlab_common::{Error, Progress, Provenance, Result};
 use alnlab_physics::model::Joint;
@@ -163,19 +163,31 @@ impl Params {
         for pattern in patterns {
             let matched = expand(dir, pattern).map_err(|m| ("tables".to_string(), m))?;
             for (file, path) in matched {
-                if tables.iter().any(|t| t.path == path) {
+                if let Some(twin) = tables.iter().find(|t| t.path == path) {
                     return Err((
                         "tables".into(),
-                        format!("`{file}` is named twice: each table is one trajectory"),
+                        format!(
+                            "`{file}` is named twice (also as `{}`): each table is one trajectory",
+                            twin.file
+                        ),
                     ));
                 }
-                let bytes = std::fs::read(&path)
-                    .map_err(|e| ("tables".to_string(), format!("{}: {e}", path.display())))?;
-                tables.push(TableFile {
-                    file,
-                    sha256: sha256_hex(&bytes),
-                    path,
-                });
+                if !path.is_file() {
+                    return Err(("tables".into(), format!("{}: no such file", path.display())));
+                }
+                let sha256 =
+                    sha256_file(&path).map_err(|e| ("tables".to_string(), e.to_string()))?;
+                if let Some(twin) = tables.iter().find(|t| t.sha256 == sha256) {
+                    return Err((
+                        "tables".into(),
+                        format!(
+                            "`{file}` holds the same bytes as `{}`: one trajectory named twice \
+                             would be trained on and tested",
+                            twin.file
+                        ),
+                    ));
+                }
+                tables.push(TableFile { file, sha256, path });
             }
         }
         self.tables = tables;
@@ -388,10 +400,24 @@ pub fn ingest_tables(
     ]);
     for (i, t) in source.tables.iter().enumerate() {
         let named = Path::new(&t.file);
-        let trajectory = table::read(&t.path, named, source.columns, &joints)?;
-        if grid.gaps == Gaps::Error {
-            table::check_gaps(named, source.columns, &trajectory.stamps_ns, grid.max_gap)?;
+        // The bytes read are the bytes the cache key was made from.
+        let found = sha256_file(&t.path)?;
+        if found != t.sha256 {
+            return Err(Error::Corrupt(format!(
+                "{}: its sha256 is {found}, not the {} it had when the manifest was read: it \
+                 changed under the run; run again",
+                t.file, t.sha256
+            )));
         }
+        let gaps = match grid.gaps {
+            Gaps::Error => table::Gaps::Refused {
+                max_gap: grid.max_gap,
+            },
+            Gaps::Split => table::Gaps::Split {
+                max_gap: grid.max_gap,
+            },
+        };
+        let trajectory = table::read(&t.path, named, source.columns, &joints, gaps)?;
         for run in frames::runs(&trajectory.stamps_ns, &trajectory.samples, grid) {
             match run.frames.len() >= log::LEAST_FRAMES {
                 true => {
@@ -431,17 +457,27 @@ pub fn ingest_tables(
 /// The files `pattern` names relative to `dir`: the path itself, or a
 /// glob's matches sorted; each with its name as the pattern gave it.
 fn expand(dir: &Path, pattern: &str) -> std::result::Result<Vec<(String, PathBuf)>, String> {
-    if !pattern.contains(['*', '?', '[']) {
+    // A file of that very name is taken as named (`run[1].csv`).
+    if !pattern.contains(['*', '?', '[']) || dir.join(pattern).is_file() {
         return Ok(vec![(pattern.to_string(), dir.join(pattern))]);
     }
-    let full = dir.join(pattern);
-    let full = full
+    // The manifest's folder is a path, not a pattern; hidden files and
+    // folders are no tables.
+    let folder = dir
         .to_str()
-        .ok_or_else(|| format!("`{pattern}`: the path is not UTF-8"))?;
-    let mut found: Vec<PathBuf> = glob::glob(full)
+        .ok_or_else(|| format!("`{pattern}`: the manifest's folder is not UTF-8"))?;
+    let full = Path::new(&glob::Pattern::escape(folder)).join(pattern);
+    let options = glob::MatchOptions {
+        require_literal_leading_dot: true,
+        ..glob::MatchOptions::new()
+    };
+    let mut found: Vec<PathBuf> = glob::glob_with(&full.to_string_lossy(), options)
         .map_err(|e| format!("`{pattern}` is not a glob pattern: {e}"))?
-        .collect::<std::result::Result<_, _>>()
-        .map_err(|e| format!("`{pattern}`: {e}"))?;
+        .collect::<std::result::Result<Vec<_>, _>>()
+        .map_err(|e| format!("`{pattern}`: {e}"))?
+        .into_iter()
+        .filter(|p| p.is_file())
+        .collect();
     found.sort();
     if found.is_empty() {
         return Err(format!("`{pattern}` matches no file"));

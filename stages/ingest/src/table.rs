@@ -180,7 +180,13 @@ pub struct Trajectory {
 /// whether it is CSV or Parquet (`.csv`, `.parquet`), and every message
 /// names it (an archived table is stored under its hash, named by its
 /// dataset and file name).
-pub fn read(stored: &Path, path: &Path, columns: &Columns, joints: &[Joint]) -> Result<Trajectory> {
+pub fn read(
+    stored: &Path,
+    path: &Path,
+    columns: &Columns,
+    joints: &[Joint],
+    gaps: Gaps,
+) -> Result<Trajectory> {
     let bad = |what: String| Error::bad_file(path, what);
     let mut wanted: Vec<String> = Vec::new();
     if let Some(t) = &columns.time {
@@ -188,7 +194,15 @@ pub fn read(stored: &Path, path: &Path, columns: &Columns, joints: &[Joint]) -> 
     }
     for (i, j) in joints.iter().enumerate() {
         for template in [&columns.position, &columns.velocity, &columns.effort] {
-            wanted.push(Columns::column(template, &j.name, i));
+            let column = Columns::column(template, &j.name, i);
+            if wanted.contains(&column) {
+                return Err(Error::Invalid(format!(
+                    "ingest.table: `{column}` would be read twice (for joint `{}`): each \
+                     quantity of each joint needs a column of its own",
+                    j.name
+                )));
+            }
+            wanted.push(column);
         }
     }
     let extension = path
@@ -238,8 +252,13 @@ pub fn read(stored: &Path, path: &Path, columns: &Columns, joints: &[Joint]) -> 
             s.effort.push(effort[k]);
         }
     }
-    let implied_dt = implied_dt(&samples);
-    check_rate(path, columns, &stamps_ns, implied_dt)?;
+    if let Gaps::Refused { max_gap } = gaps {
+        check_gaps(path, columns, &stamps_ns, max_gap)?;
+    }
+    let max_gap = match gaps {
+        Gaps::Refused { max_gap } | Gaps::Split { max_gap } => max_gap,
+    };
+    let implied_dt = check_rate(path, columns, &stamps_ns, &samples, max_gap)?;
     Ok(Trajectory {
         stamps_ns,
         samples,
@@ -274,40 +293,70 @@ fn stamps(path: &Path, column: &str, times: &[f64], unit: TimeUnit) -> Result<Ve
     Ok(ns)
 }
 
-/// The step between samples that best explains the positions' changes by
-/// the mean of the velocities around them: Σ Δq·q̄̇ / Σ q̄̇² over every
-/// joint and pair of samples (s); none when the joints barely move (their
-/// mean speed under 1e-3 rad/s or m/s).
-pub fn implied_dt(samples: &[Measured]) -> Option<f64> {
-    let (mut cross, mut square, mut n) = (0.0, 0.0, 0usize);
-    for pair in samples.windows(2) {
+/// How a table's gaps (steps longer than `max_gap`, s) are taken.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Gaps {
+    /// A gap is refused, named.
+    Refused { max_gap: f64 },
+    /// A gap ends a run; it takes no part in the rate check.
+    Split { max_gap: f64 },
+}
+
+/// How far the stated steps are from what the data imply: the scale s that
+/// best explains the positions' changes by the mean of the velocities
+/// around them over each pair's own step, Δq ≈ s q̄̇ Δt (least squares over
+/// every joint and pair no more than `max_gap` apart; 1 when the stated
+/// times are right). None when the joints barely move (mean speed under
+/// 1e-3 rad/s or m/s); negative when the velocities oppose the motion.
+pub fn rate_scale(samples: &[Measured], stamps_ns: &[i64], max_gap: f64) -> Option<f64> {
+    let (mut cross, mut square, mut speed, mut n) = (0.0, 0.0, 0.0, 0usize);
+    for (pair, stamps) in samples.windows(2).zip(stamps_ns.windows(2)) {
+        let dt = (stamps[1] - stamps[0]) as f64 * 1e-9;
+        if dt > max_gap {
+            continue;
+        }
         for j in 0..pair[0].q.len() {
             let dq = pair[1].q[j] - pair[0].q[j];
             let v = 0.5 * (pair[1].qd[j] + pair[0].qd[j]);
-            cross += dq * v;
-            square += v * v;
+            cross += dq * v * dt;
+            square += v * v * dt * dt;
+            speed += v * v;
             n += 1;
         }
     }
-    (n > 0 && square / n as f64 > 1e-6 && cross > 0.0).then(|| cross / square)
+    (n > 0 && speed / n as f64 > 1e-6).then(|| cross / square)
 }
 
-/// Refuses a stated step (the time column's median, or 1 / rate) that the
-/// data contradict.
+/// Refuses stated times (a time column, or a rate) that the data
+/// contradict by more than [`RATE_TOLERANCE`], and velocities that oppose
+/// the positions' change; returns the step the data imply (the median
+/// stated step, scaled), when the joints move enough to say.
 fn check_rate(
     path: &Path,
     columns: &Columns,
     stamps_ns: &[i64],
-    implied: Option<f64>,
-) -> Result<()> {
-    let Some(implied) = implied else {
-        return Ok(());
+    samples: &[Measured],
+    max_gap: f64,
+) -> Result<Option<f64>> {
+    let Some(scale) = rate_scale(samples, stamps_ns, max_gap) else {
+        return Ok(None);
     };
+    if scale <= 0.0 {
+        return Err(Error::bad_file(
+            path,
+            format!(
+                "the velocities ({}) oppose the positions' change ({}): a velocity column of the \
+                 wrong sign, or columns swapped",
+                columns.velocity, columns.position
+            ),
+        ));
+    }
     let mut steps: Vec<i64> = stamps_ns.windows(2).map(|w| w[1] - w[0]).collect();
     steps.sort_unstable();
     let stated = steps[steps.len() / 2] as f64 * 1e-9;
-    if (implied / stated - 1.0).abs() <= RATE_TOLERANCE {
-        return Ok(());
+    let implied = stated * scale;
+    if (scale - 1.0).abs() <= RATE_TOLERANCE {
+        return Ok(Some(implied));
     }
     let says = match (&columns.time, columns.rate) {
         (Some(c), _) => format!("column `{c}` puts them {} apart (median)", ms(stated)),
@@ -357,10 +406,11 @@ fn read_csv(stored: &Path, path: &Path, wanted: &[String]) -> Result<Vec<Vec<f64
         for ((column, &i), out) in wanted.iter().zip(&at).zip(values.iter_mut()) {
             let cell = record.get(i).unwrap_or("");
             let x: f64 = cell.parse().map_err(|_| {
-                bad(format!(
-                    "column `{column}`, row {}: `{cell}` is not a number",
-                    row + 1
-                ))
+                let what = match cell.is_empty() {
+                    true => "empty".to_string(),
+                    false => format!("`{cell}` is not a number"),
+                };
+                bad(format!("column `{column}`, row {}: {what}", row + 1))
             })?;
             out.push(finite(path, column, row, x)?);
         }
@@ -384,7 +434,10 @@ fn finite(path: &Path, column: &str, row: usize, x: f64) -> Result<f64> {
         true => Ok(x),
         false => Err(Error::bad_file(
             path,
-            format!("column `{column}`, row {}: {x}", row + 1),
+            format!(
+                "column `{column}`, row {}: {x}, expected a finite number",
+                row + 1
+            ),
         )),
     }
 }
@@ -493,6 +546,8 @@ mod tests {
 
     use super::*;
 
+    const REFUSED: Gaps = Gaps::Refused { max_gap: 0.05 };
+
     fn joints() -> Vec<Joint> {
         vec![
             Joint {
@@ -553,7 +608,7 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let data = rows(200, 0.005, 1.0);
         let path = csv(dir.path(), "a.csv", HEADER, &data);
-        let t = read(&path, &path, &timed(), &joints()).unwrap();
+        let t = read(&path, &path, &timed(), &joints(), REFUSED).unwrap();
         assert_eq!(t.stamps_ns.len(), 200);
         assert_eq!(t.stamps_ns[3], 15_000_000);
         assert_eq!(t.samples[7].q, [data[7][1], data[7][4]]);
@@ -584,7 +639,7 @@ mod tests {
             ArrowWriter::try_new(File::create(&parquet).unwrap(), batch.schema(), None).unwrap();
         w.write(&batch).unwrap();
         w.close().unwrap();
-        let p = read(&parquet, &parquet, &timed(), &joints()).unwrap();
+        let p = read(&parquet, &parquet, &timed(), &joints(), REFUSED).unwrap();
         assert_eq!(p.samples, t.samples);
         let drift = p
             .stamps_ns
@@ -600,7 +655,7 @@ mod tests {
             rate: Some(Positive(200.0)),
             ..Columns::default()
         };
-        let r = read(&path, &path, &rated, &joints()).unwrap();
+        let r = read(&path, &path, &rated, &joints(), REFUSED).unwrap();
         assert_eq!(r.stamps_ns, t.stamps_ns);
         // The wrong rate, or velocities in another unit, are refused with
         // the rate the data imply.
@@ -608,7 +663,7 @@ mod tests {
             rate: Some(Positive(100.0)),
             ..Columns::default()
         };
-        let text = read(&path, &path, &wrong, &joints())
+        let text = read(&path, &path, &wrong, &joints(), REFUSED)
             .unwrap_err()
             .to_string();
         assert!(
@@ -618,7 +673,7 @@ mod tests {
             "{text}"
         );
         let fast = csv(dir.path(), "fast.csv", HEADER, &rows(200, 0.005, 2.0));
-        let text = read(&fast, &fast, &timed(), &joints())
+        let text = read(&fast, &fast, &timed(), &joints(), REFUSED)
             .unwrap_err()
             .to_string();
         assert!(
@@ -626,6 +681,47 @@ mod tests {
                 && text.contains("column `t` puts them 5.00 ms apart (median)"),
             "{text}"
         );
+    }
+
+    #[test]
+    fn a_gap_takes_no_part_in_the_rate_and_a_velocity_of_the_wrong_sign_is_refused() {
+        let dir = tempfile::tempdir().unwrap();
+        // 0.5 s missing after row 100, the arm moving through it.
+        let data: Vec<[f64; 7]> = rows(300, 0.005, 1.0)
+            .into_iter()
+            .enumerate()
+            .filter(|(k, _)| !(100..200).contains(k))
+            .map(|(_, r)| r)
+            .collect();
+        let path = csv(dir.path(), "gap.csv", HEADER, &data);
+        let split = Gaps::Split { max_gap: 0.05 };
+        let t = read(&path, &path, &timed(), &joints(), split).unwrap();
+        assert!((t.implied_dt.unwrap() - 0.005).abs() < 1e-7);
+        // Where gaps are refused, the gap is what the message names.
+        let text = read(&path, &path, &timed(), &joints(), REFUSED)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            text.contains("row 101: a gap of 0.505 s after row 100"),
+            "{text}"
+        );
+        let backwards = csv(dir.path(), "sign.csv", HEADER, &rows(200, 0.005, -1.0));
+        let text = read(&backwards, &backwards, &timed(), &joints(), REFUSED)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            text.contains("the velocities ({joint}.velocity) oppose the positions' change"),
+            "{text}"
+        );
+        // One column read as two quantities.
+        let twice = Columns {
+            velocity: "{joint}.position".into(),
+            ..timed()
+        };
+        let text = read(&path, &path, &twice, &joints(), REFUSED)
+            .unwrap_err()
+            .to_string();
+        assert!(text.contains("`a.position` would be read twice"), "{text}");
     }
 
     #[test]
@@ -641,7 +737,7 @@ mod tests {
             angles: Angles::Deg,
             ..timed()
         };
-        let t = read(&path, &path, &columns, &joints()).unwrap();
+        let t = read(&path, &path, &columns, &joints(), REFUSED).unwrap();
         let rad = std::f64::consts::PI / 180.0;
         assert_eq!(t.samples[3].q, [data[3][1] * rad, data[3][4]]);
         assert_eq!(t.samples[3].qd, [data[3][2] * rad, data[3][5]]);
@@ -672,7 +768,7 @@ mod tests {
         let d = dir.path();
         let data = rows(40, 0.01, 1.0);
         let fails = |path: &Path| {
-            read(path, path, &timed(), &joints())
+            read(path, path, &timed(), &joints(), REFUSED)
                 .unwrap_err()
                 .to_string()
         };
@@ -730,7 +826,7 @@ mod tests {
             format!("{HEADER}\n0,1,2,3,4,5,6\n0.01,1,,3,4,5,6\n"),
         )
         .unwrap();
-        assert!(fails(&empty).contains("column `a.velocity`, row 2: `` is not a number"));
+        assert!(fails(&empty).contains("column `a.velocity`, row 2: empty"));
 
         let short = d.join("short.csv");
         std::fs::write(&short, format!("{HEADER}\n0,1,2,3,4,5,6\n")).unwrap();

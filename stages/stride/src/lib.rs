@@ -127,8 +127,9 @@ impl Params {
         {
             return Err((
                 "split".into(),
-                "the `by-trajectory` split tests one fold of the trajectories a replicate: it \
-                 needs at least 2 replicates"
+                "the `by-trajectory` split (the default for recorded data) tests one fold of \
+                 the trajectories a replicate: it needs experiment.replicates of at least 2 \
+                 (or set [stride] split = \"disjoint\" to draw rows at random)"
                     .into(),
             ));
         }
@@ -227,8 +228,10 @@ pub fn run(
         return Err(Error::bad_file(
             trajectory,
             format!(
-                "has {} trajectories, fewer than the {} folds the `by-trajectory` split deals \
-                 them into (one a replicate: lower experiment.replicates)",
+                "has {} trajectories, fewer than the {} folds the `by-trajectory` split (the \
+                 default for recorded data) deals them into, one a replicate: lower \
+                 experiment.replicates, or set [stride] split = \"disjoint\" to draw rows at \
+                 random",
                 trajectories.len(),
                 fold.of
             ),
@@ -567,7 +570,7 @@ mod tests {
             one.validate()
                 .unwrap_err()
                 .1
-                .contains("at least 2 replicates")
+                .contains("experiment.replicates of at least 2")
         );
         let capped = Params {
             split: Split::ByTrajectory,
