@@ -22,6 +22,7 @@ use alnlab_tables::pairs::{Pairs, Side};
 use arrow_array::Array;
 use serde::{Deserialize, Serialize};
 
+use alnlab_codes::codebook::is_control;
 use alnlab_codes::codes::{Code, binary_width};
 use alnlab_codes::walk::WalkSpec;
 use alnlab_codes::{Codebook, Entry, GROUPS, Quantizer, group_of};
@@ -74,6 +75,12 @@ pub struct Params {
     /// Ranges given by hand, by group (`a`, `R`, …) or variable (`a.1.z`);
     /// a variable's own entry wins over its group's.
     pub range: BTreeMap<String, [f64; 2]>,
+    /// Groups no model learns or reads (`qdd`, …): a forward model of a
+    /// robot is its state a controller knows and the torque it applies,
+    /// and a recording's accelerations are taken from the velocities
+    /// around a frame, the next one's included.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub never_learned: Vec<String>,
 }
 
 impl Default for Params {
@@ -86,6 +93,7 @@ impl Default for Params {
             walk_span: Count(7),
             ranges: RangeSource::Observed,
             range: BTreeMap::new(),
+            never_learned: Vec::new(),
         }
     }
 }
@@ -121,6 +129,23 @@ impl Params {
                     format!(
                         "a walk of step {s} over span {h} needs width ≥ {}, found {w}",
                         s * (h + 1)
+                    ),
+                ));
+            }
+        }
+        for group in &self.never_learned {
+            if !GROUPS.contains(&group.as_str()) || is_control(&format!("{group}.")) {
+                return Err((
+                    "never_learned".into(),
+                    format!(
+                        "`{group}` is not a group of state variables (expected some of {}; the \
+                         controls are [train] controls')",
+                        GROUPS
+                            .iter()
+                            .filter(|g| !is_control(&format!("{g}.")))
+                            .copied()
+                            .collect::<Vec<_>>()
+                            .join(", ")
                     ),
                 ));
             }
@@ -275,6 +300,13 @@ pub fn run(
                  of {} in the data",
                 hi - lo,
                 scales[group_of(v)],
+                group_of(v)
+            );
+        }
+        if entry.learned && params.never_learned.iter().any(|g| g == group_of(v)) {
+            entry.learned = false;
+            entry.note = format!(
+                "never learned: [quantize] never_learned names `{}`",
                 group_of(v)
             );
         }
@@ -515,6 +547,39 @@ mod tests {
         let scenes: std::collections::BTreeSet<&str> =
             levels.keys().iter().map(|k| k.scene.as_str()).collect();
         assert_eq!(scenes, ["pendulum", "worm"].into());
+    }
+
+    #[test]
+    fn a_group_never_learned_is_not_learned_and_says_why() {
+        let dir = data();
+        let params = Params {
+            never_learned: vec!["a".into()],
+            ..Params::default()
+        };
+        quantize(&params, dir.path()).unwrap();
+        let codebook = alnlab_tables::codebook::read(&dir.path().join(CODEBOOK_FILE)).unwrap();
+        let a: Vec<&Entry> = codebook
+            .entries
+            .iter()
+            .filter(|e| group_of(&e.variable) == "a")
+            .collect();
+        assert!(!a.is_empty());
+        assert!(
+            a.iter().all(
+                |e| !e.learned && e.note == "never learned: [quantize] never_learned names `a`"
+            )
+        );
+        assert!(
+            codebook.learned().count() > 30,
+            "the other groups are learned"
+        );
+        for bad in ["tau", "g", "speed"] {
+            let p = Params {
+                never_learned: vec![bad.into()],
+                ..Params::default()
+            };
+            assert_eq!(p.validate().unwrap_err().0, "never_learned", "{bad}");
+        }
     }
 
     #[test]
