@@ -93,9 +93,20 @@ pub fn render(record: &RunRecord, dir: &Path) -> Result<PathBuf> {
     // their own, which the record does not say; archived recordings are
     // split here).
     let archived_pairs = record.dataset.is_some() && record.tables.is_empty();
-    let split = match (archived_pairs, record.variants.first()) {
-        (false, Some(v)) => Some(resolved(v)?.stride.split.describe().to_string()),
-        _ => None,
+    let mut splits: Vec<(&str, &str)> = Vec::new();
+    for v in record.variants.iter().filter(|v| v.replicate == 0) {
+        splits.push((&v.name, resolved(v)?.stride.split.describe()));
+    }
+    let split = match splits.as_slice() {
+        _ if archived_pairs => None,
+        [] => None,
+        [(_, first), rest @ ..] if rest.iter().all(|(_, s)| s == first) => Some(first.to_string()),
+        many => Some(
+            many.iter()
+                .map(|(name, s)| format!("`{name}` {s}"))
+                .collect::<Vec<_>>()
+                .join("; "),
+        ),
     };
     let run = RunInfo {
         experiment: record.experiment.clone(),

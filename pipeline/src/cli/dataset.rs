@@ -312,16 +312,7 @@ fn import(
             .file_name()
             .map(|n| n.to_string_lossy().into_owned())
             .unwrap_or_default();
-        let extension = Path::new(&file_name)
-            .extension()
-            .and_then(|e| e.to_str())
-            .map(str::to_ascii_lowercase);
-        if !matches!(extension.as_deref(), Some("csv" | "parquet")) {
-            return Err(Error::bad_file(
-                path,
-                "expected a table of samples: a `.csv` or `.parquet` file",
-            ));
-        }
+        alnlab_ingest::table::Format::of(path)?;
         if sources.iter().any(|s: &Source| s.name == file_name) {
             return Err(Error::Invalid(format!(
                 "two tables are named `{file_name}`: each keeps its file name in the archive"

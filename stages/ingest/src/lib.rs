@@ -393,7 +393,7 @@ pub fn ingest_tables(
     progress.start("ingest", source.tables.len() as u64, "tables");
     let mut runs = Vec::new();
     let mut run_tables = Vec::new();
-    let mut left_out = 0;
+    let mut left_out: Vec<String> = Vec::new();
     let mut record = BTreeMap::from([
         ("source".to_string(), "tables".to_string()),
         ("tables".to_string(), source.tables.len().to_string()),
@@ -424,7 +424,11 @@ pub fn ingest_tables(
                     runs.push(run);
                     run_tables.push(i.to_string());
                 }
-                false => left_out += 1,
+                false => left_out.push(format!(
+                    "{} (from {:.3} s)",
+                    t.file,
+                    run.start_ns as f64 * 1e-9
+                )),
             }
         }
         let implied = trajectory
@@ -443,13 +447,18 @@ pub fn ingest_tables(
     }
     if runs.is_empty() {
         return Err(Error::Invalid(format!(
-            "ingest: no table makes {} frames of {} s without a gap",
+            "ingest: no stretch of the tables makes {} frames of {} s without a gap (too \
+             short: {})",
             log::LEAST_FRAMES,
-            grid.frame_dt
+            grid.frame_dt,
+            left_out.join(", ")
         )));
     }
     record.insert("run_tables".to_string(), run_tables.join(","));
-    record.insert("runs_left_out".to_string(), left_out.to_string());
+    record.insert("runs_left_out".to_string(), left_out.len().to_string());
+    if !left_out.is_empty() {
+        record.insert("runs_left_out_from".to_string(), left_out.join(", "));
+    }
     let p = Prepared::new(&log::recorded_scene(source.robot, &runs));
     log::write(&p, &runs, record, provenance, out_dir)
 }

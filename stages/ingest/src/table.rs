@@ -156,6 +156,32 @@ impl Columns {
     }
 }
 
+/// A table's file format, by its name's extension.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Format {
+    Csv,
+    Parquet,
+}
+
+impl Format {
+    /// The format `path` names (`.csv`, `.parquet`, any case); an error
+    /// naming the file for anything else.
+    pub fn of(path: &Path) -> Result<Format> {
+        let extension = path
+            .extension()
+            .and_then(|e| e.to_str())
+            .map(str::to_ascii_lowercase);
+        match extension.as_deref() {
+            Some("csv") => Ok(Format::Csv),
+            Some("parquet") => Ok(Format::Parquet),
+            _ => Err(Error::bad_file(
+                path,
+                "expected a table of samples: a `.csv` or `.parquet` file",
+            )),
+        }
+    }
+}
+
 /// A robot joint, as the table is read for it.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Joint {
@@ -205,18 +231,9 @@ pub fn read(
             wanted.push(column);
         }
     }
-    let extension = path
-        .extension()
-        .and_then(|e| e.to_str())
-        .map(str::to_ascii_lowercase);
-    let values = match extension.as_deref() {
-        Some("csv") => read_csv(stored, path, &wanted)?,
-        Some("parquet") => read_parquet(stored, path, &wanted)?,
-        _ => {
-            return Err(bad(
-                "expected a table of samples: a `.csv` or `.parquet` file".into(),
-            ));
-        }
+    let values = match Format::of(path)? {
+        Format::Csv => read_csv(stored, path, &wanted)?,
+        Format::Parquet => read_parquet(stored, path, &wanted)?,
     };
     let rows = values.first().map_or(0, Vec::len);
     if rows < 2 {
