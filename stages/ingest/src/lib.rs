@@ -152,10 +152,7 @@ impl Params {
         dir: &Path,
         patterns: &[String],
     ) -> std::result::Result<(), ParamError> {
-        let columns = self.table.get_or_insert_with(table::Columns::default);
-        columns
-            .validate()
-            .map_err(|(field, message)| (format!("table.{field}"), message))?;
+        self.validate_table()?;
         if patterns.is_empty() {
             return Err(("tables".into(), "expected at least one table".into()));
         }
@@ -198,11 +195,16 @@ impl Params {
     /// an archived dataset holds (the run fills in `tables`, from the
     /// archive it is given).
     pub fn read_archived_tables(&mut self, dir: &Path) -> std::result::Result<(), ParamError> {
+        self.validate_table()?;
+        self.read_robot(dir)
+    }
+
+    /// Checks `[ingest.table]` (its defaults where it is left out).
+    fn validate_table(&mut self) -> std::result::Result<(), ParamError> {
         self.table
             .get_or_insert_with(table::Columns::default)
             .validate()
-            .map_err(|(field, message)| (format!("table.{field}"), message))?;
-        self.read_robot(dir)
+            .map_err(|(field, message)| (format!("table.{field}"), message))
     }
 
     /// Reads the robot's description (relative to `dir`) and resolves it.
@@ -409,15 +411,7 @@ pub fn ingest_tables(
                 t.file, t.sha256
             )));
         }
-        let gaps = match grid.gaps {
-            Gaps::Error => table::Gaps::Refused {
-                max_gap: grid.max_gap,
-            },
-            Gaps::Split => table::Gaps::Split {
-                max_gap: grid.max_gap,
-            },
-        };
-        let trajectory = table::read(&t.path, named, source.columns, &joints, gaps)?;
+        let trajectory = table::read(&t.path, named, source.columns, &joints, grid)?;
         for run in frames::runs(&trajectory.stamps_ns, &trajectory.samples, grid) {
             match run.frames.len() >= log::LEAST_FRAMES {
                 true => {

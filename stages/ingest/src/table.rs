@@ -21,7 +21,7 @@ use arrow_schema::DataType;
 use parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder;
 use serde::{Deserialize, Serialize};
 
-use crate::frames::Measured;
+use crate::frames::{Gaps, Grid, Measured};
 
 /// How far the step the data imply may be from the stated one (relative).
 pub const RATE_TOLERANCE: f64 = 0.1;
@@ -205,13 +205,14 @@ pub struct Trajectory {
 /// `columns` (validated) describe; `path` names it — its extension says
 /// whether it is CSV or Parquet (`.csv`, `.parquet`), and every message
 /// names it (an archived table is stored under its hash, named by its
-/// dataset and file name).
+/// dataset and file name). A gap longer than the `grid`'s `max_gap` is
+/// refused where its gaps are errors, and takes no part in the rate check.
 pub fn read(
     stored: &Path,
     path: &Path,
     columns: &Columns,
     joints: &[Joint],
-    gaps: Gaps,
+    grid: &Grid,
 ) -> Result<Trajectory> {
     let bad = |what: String| Error::bad_file(path, what);
     let mut wanted: Vec<String> = Vec::new();
@@ -269,13 +270,10 @@ pub fn read(
             s.effort.push(effort[k]);
         }
     }
-    if let Gaps::Refused { max_gap } = gaps {
-        check_gaps(path, columns, &stamps_ns, max_gap)?;
+    if grid.gaps == Gaps::Error {
+        check_gaps(path, columns, &stamps_ns, grid.max_gap)?;
     }
-    let max_gap = match gaps {
-        Gaps::Refused { max_gap } | Gaps::Split { max_gap } => max_gap,
-    };
-    let implied_dt = check_rate(path, columns, &stamps_ns, &samples, max_gap)?;
+    let implied_dt = check_rate(path, columns, &stamps_ns, &samples, grid.max_gap)?;
     Ok(Trajectory {
         stamps_ns,
         samples,
@@ -308,15 +306,6 @@ fn stamps(path: &Path, column: &str, times: &[f64], unit: TimeUnit) -> Result<Ve
         }
     }
     Ok(ns)
-}
-
-/// How a table's gaps (steps longer than `max_gap`, s) are taken.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub enum Gaps {
-    /// A gap is refused, named.
-    Refused { max_gap: f64 },
-    /// A gap ends a run; it takes no part in the rate check.
-    Split { max_gap: f64 },
 }
 
 /// How far the stated steps are from what the data imply: the scale s that
@@ -534,7 +523,7 @@ fn append(path: &Path, column: &str, array: &ArrayRef, out: &mut Vec<f64>) -> Re
 
 /// Refuses a gap between samples longer than `max_gap` (s), naming the
 /// rows around it, where gaps are errors.
-pub fn check_gaps(path: &Path, columns: &Columns, stamps_ns: &[i64], max_gap: f64) -> Result<()> {
+fn check_gaps(path: &Path, columns: &Columns, stamps_ns: &[i64], max_gap: f64) -> Result<()> {
     for (k, w) in stamps_ns.windows(2).enumerate() {
         let gap = (w[1] - w[0]) as f64 * 1e-9;
         if gap > max_gap {
@@ -562,8 +551,16 @@ mod tests {
     use parquet::arrow::ArrowWriter;
 
     use super::*;
+    use crate::frames::Resample;
 
-    const REFUSED: Gaps = Gaps::Refused { max_gap: 0.05 };
+    fn grid(gaps: Gaps) -> Grid {
+        Grid {
+            frame_dt: 0.01,
+            resample: Resample::Linear,
+            max_gap: 0.05,
+            gaps,
+        }
+    }
 
     fn joints() -> Vec<Joint> {
         vec![
@@ -625,7 +622,7 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let data = rows(200, 0.005, 1.0);
         let path = csv(dir.path(), "a.csv", HEADER, &data);
-        let t = read(&path, &path, &timed(), &joints(), REFUSED).unwrap();
+        let t = read(&path, &path, &timed(), &joints(), &grid(Gaps::Error)).unwrap();
         assert_eq!(t.stamps_ns.len(), 200);
         assert_eq!(t.stamps_ns[3], 15_000_000);
         assert_eq!(t.samples[7].q, [data[7][1], data[7][4]]);
@@ -656,7 +653,7 @@ mod tests {
             ArrowWriter::try_new(File::create(&parquet).unwrap(), batch.schema(), None).unwrap();
         w.write(&batch).unwrap();
         w.close().unwrap();
-        let p = read(&parquet, &parquet, &timed(), &joints(), REFUSED).unwrap();
+        let p = read(&parquet, &parquet, &timed(), &joints(), &grid(Gaps::Error)).unwrap();
         assert_eq!(p.samples, t.samples);
         let drift = p
             .stamps_ns
@@ -672,7 +669,7 @@ mod tests {
             rate: Some(Positive(200.0)),
             ..Columns::default()
         };
-        let r = read(&path, &path, &rated, &joints(), REFUSED).unwrap();
+        let r = read(&path, &path, &rated, &joints(), &grid(Gaps::Error)).unwrap();
         assert_eq!(r.stamps_ns, t.stamps_ns);
         // The wrong rate, or velocities in another unit, are refused with
         // the rate the data imply.
@@ -680,7 +677,7 @@ mod tests {
             rate: Some(Positive(100.0)),
             ..Columns::default()
         };
-        let text = read(&path, &path, &wrong, &joints(), REFUSED)
+        let text = read(&path, &path, &wrong, &joints(), &grid(Gaps::Error))
             .unwrap_err()
             .to_string();
         assert!(
@@ -690,7 +687,7 @@ mod tests {
             "{text}"
         );
         let fast = csv(dir.path(), "fast.csv", HEADER, &rows(200, 0.005, 2.0));
-        let text = read(&fast, &fast, &timed(), &joints(), REFUSED)
+        let text = read(&fast, &fast, &timed(), &joints(), &grid(Gaps::Error))
             .unwrap_err()
             .to_string();
         assert!(
@@ -711,11 +708,10 @@ mod tests {
             .map(|(_, r)| r)
             .collect();
         let path = csv(dir.path(), "gap.csv", HEADER, &data);
-        let split = Gaps::Split { max_gap: 0.05 };
-        let t = read(&path, &path, &timed(), &joints(), split).unwrap();
+        let t = read(&path, &path, &timed(), &joints(), &grid(Gaps::Split)).unwrap();
         assert!((t.implied_dt.unwrap() - 0.005).abs() < 1e-7);
         // Where gaps are refused, the gap is what the message names.
-        let text = read(&path, &path, &timed(), &joints(), REFUSED)
+        let text = read(&path, &path, &timed(), &joints(), &grid(Gaps::Error))
             .unwrap_err()
             .to_string();
         assert!(
@@ -723,9 +719,15 @@ mod tests {
             "{text}"
         );
         let backwards = csv(dir.path(), "sign.csv", HEADER, &rows(200, 0.005, -1.0));
-        let text = read(&backwards, &backwards, &timed(), &joints(), REFUSED)
-            .unwrap_err()
-            .to_string();
+        let text = read(
+            &backwards,
+            &backwards,
+            &timed(),
+            &joints(),
+            &grid(Gaps::Error),
+        )
+        .unwrap_err()
+        .to_string();
         assert!(
             text.contains("the velocities ({joint}.velocity) oppose the positions' change"),
             "{text}"
@@ -735,7 +737,7 @@ mod tests {
             velocity: "{joint}.position".into(),
             ..timed()
         };
-        let text = read(&path, &path, &twice, &joints(), REFUSED)
+        let text = read(&path, &path, &twice, &joints(), &grid(Gaps::Error))
             .unwrap_err()
             .to_string();
         assert!(text.contains("`a.position` would be read twice"), "{text}");
@@ -754,7 +756,7 @@ mod tests {
             angles: Angles::Deg,
             ..timed()
         };
-        let t = read(&path, &path, &columns, &joints(), REFUSED).unwrap();
+        let t = read(&path, &path, &columns, &joints(), &grid(Gaps::Error)).unwrap();
         let rad = std::f64::consts::PI / 180.0;
         assert_eq!(t.samples[3].q, [data[3][1] * rad, data[3][4]]);
         assert_eq!(t.samples[3].qd, [data[3][2] * rad, data[3][5]]);
@@ -785,7 +787,7 @@ mod tests {
         let d = dir.path();
         let data = rows(40, 0.01, 1.0);
         let fails = |path: &Path| {
-            read(path, path, &timed(), &joints(), REFUSED)
+            read(path, path, &timed(), &joints(), &grid(Gaps::Error))
                 .unwrap_err()
                 .to_string()
         };
