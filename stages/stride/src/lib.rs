@@ -545,7 +545,7 @@ mod tests {
             let r = roles(&params, 1000).unwrap();
             for t in 0..10 {
                 let of = &r[t * 100..(t + 1) * 100];
-                let is = |role| of.iter().any(|x| *x == Some(role));
+                let is = |role| of.contains(&Some(role));
                 assert!(
                     !(is(Role::Test) && is(Role::Train)),
                     "trajectory {t} on both sides"
