@@ -288,9 +288,21 @@ fn tables_of_the_same_samples_give_the_recordings_frames_one_run_a_table() {
     assert_eq!(record["source"], "tables");
     assert_eq!(record["table.0.file"], "a.csv");
     assert_eq!(record["table.1.samples"], "40");
-    assert_eq!(record["run_tables"], "0,1");
+    assert_eq!(record["run_trajectories"], "0,1");
+    assert_eq!(record["table.1.trajectory"], "1");
     let hz: f64 = record["table.0.implied_hz"].parse().unwrap();
     assert!((hz - 100.0).abs() < 0.5, "{hz}");
+    // Named as repeats of one trajectory, the two tables are one.
+    let repeated = run(
+        "repeats.toml",
+        tables_manifest("\"*.csv\"", "").replace(
+            "[ingest.table]",
+            "[ingest]\nrepeats = [[\"b.csv\", \"a.csv\"]]\n\n[ingest.table]",
+        ),
+    );
+    let record = scene(&repeated);
+    assert_eq!(record["run_trajectories"], "0,0");
+    assert_eq!(record["table.1.trajectory"], "0");
 }
 
 #[test]
@@ -464,6 +476,17 @@ fn bad_recordings_and_what_cannot_go_with_one_are_refused_by_name_and_time() {
             &[
                 "good.csv: the positions and velocities imply samples 10.00 ms apart (100.0 Hz",
                 "rate = 50 Hz puts them 20.00 ms apart",
+            ],
+        ),
+        run(
+            "repeats-naming-no-table",
+            tables_manifest("\"good.csv\"", "").replace(
+                "[ingest.table]",
+                "[ingest]\nrepeats = [[\"good.csv\", \"god.csv\"]]\n\n[ingest.table]",
+            ),
+            &[
+                "ingest.repeats[0]",
+                "`god.csv` is none of the tables (`good.csv`)",
             ],
         ),
         run(

@@ -181,6 +181,16 @@ pub fn run(manifest: &Manifest, options: &RunOptions) -> Result<RunRecord> {
             let mut variant = variant.for_replicate(replicate);
             if let Some(tables) = &archived_tables {
                 variant.stages.ingest.tables = tables.clone();
+                variant
+                    .stages
+                    .ingest
+                    .trajectories()
+                    .map_err(|(field, message)| {
+                        Error::Invalid(format!(
+                            "{}: `ingest.{field}`: {message}",
+                            manifest.path.display()
+                        ))
+                    })?;
             }
             let variant = &variant;
             let seed = replicate_seed(manifest.experiment.seed, replicate);

@@ -182,7 +182,7 @@ pub struct SceneFrames {
 
 /// Name of the metadata records holding what re-simulates each scene: its
 /// resolved parameters, its index and the experiment seed; for recorded
-/// data, where they came from (and which table each run, `run_tables`).
+/// data, where they came from (and which trajectory each run records, `run_trajectories`).
 pub const SCENE_RECORD: &str = "alnlab.scene";
 
 /// A whole trajectory log read into memory.

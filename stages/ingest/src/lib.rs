@@ -32,8 +32,9 @@ use crate::frames::{Gaps, Grid, Resample, Source};
 
 /// Version of what this stage writes (part of every cache key; 2: the
 /// implicit integrator's drives by default; 3: frame times counted from
-/// each run's start, exact where absolute stamps as f64 were not).
-pub const FORMAT_VERSION: u32 = 3;
+/// each run's start, exact where absolute stamps as f64 were not; 4: the
+/// trajectory each run records, `run_trajectories`, where it was the table).
+pub const FORMAT_VERSION: u32 = 4;
 
 /// The `[ingest]` table: how a recording (`[data] recording`) becomes
 /// frames, and the robot it records.
@@ -72,6 +73,12 @@ pub struct Params {
     /// manifest is read: each a trajectory, in order.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub tables: Vec<TableFile>,
+    /// Tables that record one trajectory run again, each group named by
+    /// the tables' names as `[data] tables` lists them (or their file
+    /// names): one trajectory to a `by-trajectory` split, so a repeat is
+    /// never trained on while its twin is tested.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub repeats: Vec<Vec<String>>,
 }
 
 /// One table of samples: its name as the manifest's patterns found it (or,
@@ -106,6 +113,7 @@ impl Default for Params {
             recording: None,
             table: None,
             tables: Vec::new(),
+            repeats: Vec::new(),
         }
     }
 }
@@ -188,7 +196,81 @@ impl Params {
             }
         }
         self.tables = tables;
+        self.trajectories()?;
         self.read_robot(dir)
+    }
+
+    /// The trajectory each table records (an index, in the order the
+    /// tables first record them): its own, or its group's in `repeats`;
+    /// on error, the name in `repeats` that names no table, two, or one
+    /// already grouped.
+    pub fn trajectories(&self) -> std::result::Result<Vec<usize>, ParamError> {
+        let mut group: Vec<Option<usize>> = vec![None; self.tables.len()];
+        for (g, names) in self.repeats.iter().enumerate() {
+            if names.len() < 2 {
+                return Err((
+                    format!("repeats[{g}]"),
+                    "expected at least two tables that record one trajectory".into(),
+                ));
+            }
+            for name in names {
+                let named: Vec<usize> = (0..self.tables.len())
+                    .filter(|&i| {
+                        let file = &self.tables[i].file;
+                        file == name || Path::new(file).file_name() == Some(name.as_ref())
+                    })
+                    .collect();
+                let i = match named[..] {
+                    [i] => i,
+                    [] => {
+                        return Err((
+                            format!("repeats[{g}]"),
+                            format!(
+                                "`{name}` is none of the tables ({})",
+                                self.tables
+                                    .iter()
+                                    .map(|t| format!("`{}`", t.file))
+                                    .collect::<Vec<_>>()
+                                    .join(", ")
+                            ),
+                        ));
+                    }
+                    _ => {
+                        return Err((
+                            format!("repeats[{g}]"),
+                            format!("`{name}` names {} tables: give its path", named.len()),
+                        ));
+                    }
+                };
+                if let Some(other) = group[i] {
+                    return Err((
+                        format!("repeats[{g}]"),
+                        format!(
+                            "`{}` is already in repeats[{other}]: a table records one trajectory",
+                            self.tables[i].file
+                        ),
+                    ));
+                }
+                group[i] = Some(g);
+            }
+        }
+        // Trajectories numbered in the order the tables first record them.
+        let mut first: Vec<(Option<usize>, usize)> = Vec::new();
+        Ok((0..self.tables.len())
+            .map(|i| {
+                let key = match group[i] {
+                    Some(g) => (Some(g), 0),
+                    None => (None, i),
+                };
+                match first.iter().position(|k| *k == key) {
+                    Some(t) => t,
+                    None => {
+                        first.push(key);
+                        first.len() - 1
+                    }
+                }
+            })
+            .collect())
     }
 
     /// Checks `[ingest.table]` and reads the robot's description, for tables
@@ -287,8 +369,12 @@ pub fn run(
             Ok(())
         }
         (None, Some(columns), false) => {
+            let trajectories = params
+                .trajectories()
+                .map_err(|e| params::invalid("ingest", e))?;
             let source = Tabled {
                 tables: &params.tables,
+                trajectories: &trajectories,
                 columns,
                 robot,
                 robot_file,
@@ -363,6 +449,8 @@ pub fn ingest(
 /// read) the joints belong to.
 pub struct Tabled<'a> {
     pub tables: &'a [TableFile],
+    /// The trajectory each table records ([`Params::trajectories`]).
+    pub trajectories: &'a [usize],
     pub columns: &'a table::Columns,
     pub robot: &'a Scene,
     /// The robot's description, for messages.
@@ -372,9 +460,10 @@ pub struct Tabled<'a> {
 /// Reads `source`'s tables, frames each on `grid` (a table's stretches
 /// between gaps each a run, where gaps split) and writes `trajectory.mcap`
 /// and `stats.parquet` into `out_dir`. The scene record names each table,
-/// its sha256 and the rate its data imply (`table.<i>.*`), and the table
-/// each run came from (`run_tables`, one index a run): whole trajectories
-/// can then be held out together.
+/// its sha256, the rate its data imply and the trajectory it records
+/// (`table.<i>.*`), and the trajectory each run records
+/// (`run_trajectories`, one index a run): whole trajectories can then be
+/// held out together.
 pub fn ingest_tables(
     source: &Tabled,
     grid: &Grid,
@@ -394,7 +483,7 @@ pub fn ingest_tables(
         .collect();
     progress.start("ingest", source.tables.len() as u64, "tables");
     let mut runs = Vec::new();
-    let mut run_tables = Vec::new();
+    let mut run_trajectories = Vec::new();
     let mut left_out: Vec<String> = Vec::new();
     let mut record = BTreeMap::from([
         ("source".to_string(), "tables".to_string()),
@@ -416,7 +505,7 @@ pub fn ingest_tables(
             match run.frames.len() >= log::LEAST_FRAMES {
                 true => {
                     runs.push(run);
-                    run_tables.push(i.to_string());
+                    run_trajectories.push(source.trajectories[i].to_string());
                 }
                 false => left_out.push(format!(
                     "{} (from {:.3} s)",
@@ -437,6 +526,10 @@ pub fn ingest_tables(
             trajectory.samples.len().to_string(),
         );
         record.insert(format!("table.{i}.implied_hz"), implied);
+        record.insert(
+            format!("table.{i}.trajectory"),
+            source.trajectories[i].to_string(),
+        );
         progress.advance(1);
     }
     if runs.is_empty() {
@@ -448,7 +541,7 @@ pub fn ingest_tables(
             left_out.join(", ")
         )));
     }
-    record.insert("run_tables".to_string(), run_tables.join(","));
+    record.insert("run_trajectories".to_string(), run_trajectories.join(","));
     record.insert("runs_left_out".to_string(), left_out.len().to_string());
     if !left_out.is_empty() {
         record.insert("runs_left_out_from".to_string(), left_out.join(", "));

@@ -227,3 +227,45 @@ fn a_robot_with_mimic_joints_is_refused_naming_them() {
         "{message}"
     );
 }
+
+#[test]
+fn repeated_tables_record_one_trajectory_numbered_where_first_met() {
+    let table = |file: &str| TableFile {
+        file: file.into(),
+        sha256: String::new(),
+        path: PathBuf::new(),
+    };
+    let mut params = Params {
+        tables: ["x@1/a.csv", "x@1/b.csv", "x@1/c.csv", "d.csv"]
+            .map(table)
+            .to_vec(),
+        repeats: vec![vec!["d.csv".into(), "b.csv".into()]],
+        ..Params::default()
+    };
+    assert_eq!(params.trajectories().unwrap(), [0, 1, 2, 1]);
+    params.repeats = vec![];
+    assert_eq!(params.trajectories().unwrap(), [0, 1, 2, 3]);
+    let refused = |repeats: Vec<Vec<&str>>| {
+        let params = Params {
+            repeats: repeats
+                .into_iter()
+                .map(|g| g.into_iter().map(String::from).collect())
+                .collect(),
+            ..params.clone()
+        };
+        let (field, message) = params.trajectories().unwrap_err();
+        format!("{field}: {message}")
+    };
+    assert_eq!(
+        refused(vec![vec!["a.csv"]]),
+        "repeats[0]: expected at least two tables that record one trajectory"
+    );
+    assert_eq!(
+        refused(vec![vec!["a.csv", "b.csv"], vec!["c.csv", "x@1/b.csv"]]),
+        "repeats[1]: `x@1/b.csv` is already in repeats[0]: a table records one trajectory"
+    );
+    assert!(
+        refused(vec![vec!["a.csv", "e.csv"]])
+            .starts_with("repeats[0]: `e.csv` is none of the tables (`x@1/a.csv`, `x@1/b.csv`")
+    );
+}

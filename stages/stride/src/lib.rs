@@ -9,8 +9,9 @@
 //! (f64) for the union of the scenes' variables (null where a scene lacks one).
 //!
 //! The `by-trajectory` split holds whole trajectories out: a scene's run is
-//! one trajectory, or, where its scene record says which table each run
-//! came from (`run_tables`, the ingest stage's), the runs of one table are.
+//! one trajectory, or, where its scene record says which trajectory each
+//! run records (`run_trajectories`, the ingest stage's: a table's, or the
+//! group's of tables that repeat one), the runs of one trajectory are.
 //! The trajectories are dealt into `fold.of` folds in order (the i-th into
 //! fold i mod `fold.of`), and fold `fold.index` is tested: a run's
 //! replicates, one a fold, test each trajectory once.
@@ -186,19 +187,19 @@ pub fn run(
     let mut pairs = Vec::new();
     let mut trajectories: Vec<(usize, u32)> = Vec::new();
     for (scene_index, scene) in log.scenes.iter().enumerate() {
-        let run_tables =
-            run_tables(&log, &scene.layout.scene).map_err(|e| Error::bad_file(trajectory, e))?;
+        let recorded = run_trajectories(&log, &scene.layout.scene)
+            .map_err(|e| Error::bad_file(trajectory, e))?;
         for window in scene.frames.windows(2) {
             let (x, y) = (&window[0], &window[1]);
             let taken = u64::from(x.frame) % params.n.0 == params.offset;
             if taken && y.run == x.run && y.frame == x.frame + 1 {
-                let id = match &run_tables {
-                    Some(tables) => *tables.get(x.run as usize).ok_or_else(|| {
+                let id = match &recorded {
+                    Some(ids) => *ids.get(x.run as usize).ok_or_else(|| {
                         Error::bad_file(
                             trajectory,
                             format!(
-                                "scene `{}`: run {} has no table in its scene record's \
-                                 run_tables",
+                                "scene `{}`: run {} has no trajectory in its scene record's \
+                                 run_trajectories",
                                 scene.layout.scene, x.run
                             ),
                         )
@@ -295,19 +296,22 @@ pub fn run(
     )
 }
 
-/// Which table each run of `scene` came from, where its scene record says
-/// (`run_tables`: one table index a run, comma-separated).
-fn run_tables(log: &StateLog, scene: &str) -> std::result::Result<Option<Vec<u32>>, String> {
+/// Which trajectory each run of `scene` records, where its scene record
+/// says (`run_trajectories`: one index a run, comma-separated).
+fn run_trajectories(log: &StateLog, scene: &str) -> std::result::Result<Option<Vec<u32>>, String> {
     let record = log
         .records(SCENE_RECORD)
         .find(|r| r.get("scene").is_some_and(|s| s == scene));
-    let Some(list) = record.and_then(|r| r.get("run_tables")) else {
+    let Some(list) = record.and_then(|r| r.get("run_trajectories")) else {
         return Ok(None);
     };
     list.split(',')
         .map(|t| {
             t.parse().map_err(|_| {
-                format!("scene `{scene}`: run_tables `{list}` is not a list of table indices")
+                format!(
+                    "scene `{scene}`: run_trajectories `{list}` is not a list of trajectory \
+                     indices"
+                )
             })
         })
         .collect::<std::result::Result<_, _>>()
