@@ -224,6 +224,31 @@ fn every_first_screen_table_agrees_with_its_replicates() {
             rows[0][gap]
         );
         assert!(checked >= 5, "{name}: {checked} figures checked");
+        // The most accurate of every model one frame ahead is the table's
+        // row of lowest error (reports rendered before the abstract said
+        // so have no such sentence).
+        if let Some(rest) = abstract_
+            .split(" Of every model, the most accurate one frame ahead is ")
+            .nth(1)
+        {
+            let (model, rest) = rest.split_once(" at ").unwrap();
+            let cell = rest.split(" levels").next().unwrap();
+            let label = model.strip_prefix("the ").unwrap_or(model);
+            let row = rows
+                .iter()
+                .find(|r| r[0] == label)
+                .unwrap_or_else(|| panic!("{name}: {label} is not in the results table"));
+            assert_eq!(row[error], cell, "{name}: the most accurate, {label}");
+            let least = rows
+                .iter()
+                .map(|r| numbers(&r[error])[0].0)
+                .fold(f64::INFINITY, f64::min);
+            assert_eq!(
+                numbers(cell)[0].0,
+                least,
+                "{name}: {label} is not the most accurate"
+            );
+        }
         if screen.contains("Planning with it") {
             continue;
         }

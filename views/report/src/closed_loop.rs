@@ -65,6 +65,20 @@ fn per_replicate(v: &Loaded, model: ModelId, step: u16) -> Option<Vec<f64>> {
     }
 }
 
+/// Each model's closed-loop error after the last step, per replicate.
+pub(super) type AtHorizon = Vec<(ModelId, Vec<f64>)>;
+
+/// Every model's closed-loop errors in `v` after its last step, per
+/// replicate: the step, and each model with its figures.
+pub(super) fn at_horizon(v: &Loaded) -> Option<(u16, AtHorizon)> {
+    let horizon = steps(v).last().copied()?;
+    let errors: AtHorizon = models(v)
+        .into_iter()
+        .filter_map(|m| Some((m, per_replicate(v, m, horizon)?)))
+        .collect();
+    (!errors.is_empty()).then_some((horizon, errors))
+}
+
 /// The mean of `values`, with its 95% interval when there are several.
 fn point(step: u16, values: &[f64]) -> Point {
     match Interval::of(values).filter(|_| values.len() > 1) {

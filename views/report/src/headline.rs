@@ -385,8 +385,9 @@ pub(super) fn first_screen(
     Ok(())
 }
 
-/// Three sentences: what was measured, the best ALN's standing, and its
-/// speed — or, where it planned, how it planned within real time.
+/// Four sentences: what was measured, the best ALN's standing, the most
+/// accurate of every model one frame and (closed loop) several ahead, and
+/// the ALN's speed — or, where it planned, how it planned within real time.
 fn abstract_(
     md: &mut String,
     run: &RunInfo,
@@ -495,6 +496,7 @@ fn abstract_(
         }
     }
     md.push('.');
+    most_accurate(md, best.variant, entries, variants);
     if let Some((variant, phrases)) = planning {
         let _ = write!(
             md,
@@ -574,6 +576,115 @@ fn abstract_(
         );
     }
     md.push_str("\n\n");
+}
+
+/// A sentence naming the most accurate model on the first screen one frame
+/// ahead (of `v`'s, the best ALN's variant, or of every variant's where
+/// they ran on the same rows) and, where `v` rolled out, after its last
+/// closed-loop step, each against the next best, paired replicate by
+/// replicate: the answer to "which model predicts best", whatever wins.
+fn most_accurate(md: &mut String, v: &Loaded, entries: &[Entry], variants: &[Loaded]) {
+    let count = variants.len();
+    let same = same_data(variants);
+    let name = |e: &Entry| match e.model {
+        ModelId::Aln => format!("the {}", e.label(count)),
+        _ => e.label(count),
+    };
+    // A model's error per replicate (the first replicate's alone where its
+    // variant has one).
+    let per_replicate = |u: &Loaded, model: ModelId| -> Vec<f64> {
+        match u.replicates.len() > 1 {
+            true => u
+                .replicates
+                .iter()
+                .map(|f| f.mean_of(model))
+                .collect::<Option<Vec<f64>>>()
+                .unwrap_or_default(),
+            false => overall(u.judged().0, model).map_or(vec![], |(m, _)| vec![m]),
+        }
+    };
+    let one_step: Vec<(String, Vec<f64>, String)> = entries
+        .iter()
+        .filter(|e| same || std::ptr::eq(e.variant, v))
+        .map(|e| {
+            let speed = match (e.single, e.batched) {
+                (Some(t), _) => format!(" in {} a state one at a time", t.spread()),
+                (None, Some(t)) => format!(" in {} a state all at once", t.spread()),
+                (None, None) => String::new(),
+            };
+            (name(e), per_replicate(e.variant, e.model), speed)
+        })
+        .collect();
+    let one_step = ranked(one_step);
+    if one_step.len() < 2 {
+        return;
+    }
+    let _ = write!(
+        md,
+        " Of every model, the most accurate one frame ahead is {}",
+        lead(&one_step)
+    );
+    if let Some((horizon, errors)) = super::closed_loop::at_horizon(v) {
+        let label = |model: ModelId| match model {
+            ModelId::Aln => "the ALN".to_string(),
+            model => model.to_string(),
+        };
+        let errors = errors
+            .into_iter()
+            .map(|(m, e)| (label(m), e, String::new()))
+            .collect();
+        let errors = ranked(errors);
+        if errors.len() > 1 {
+            let aln = errors
+                .iter()
+                .skip(1)
+                .find(|(m, _, _)| m == "the ALN")
+                .and_then(|(_, e, _)| Estimate::across_seeds(e).filter(|_| e.len() > 1))
+                .map_or(String::new(), |e| format!("; the ALN errs {}", e.cell()));
+            let _ = write!(
+                md,
+                "; {horizon} frames ahead, each fed its own predictions, {}{aln}",
+                lead(&errors)
+            );
+        }
+    }
+    md.push('.');
+}
+
+/// `errors` (a model's name, its error per replicate, and its speed) by
+/// their mean, those without figures left out.
+fn ranked(mut errors: Vec<(String, Vec<f64>, String)>) -> Vec<(String, Vec<f64>, String)> {
+    errors.retain(|(_, e, _)| !e.is_empty());
+    errors.sort_by(|a, b| mean(&a.1).total_cmp(&mean(&b.1)));
+    errors
+}
+
+/// The first of `ranked` with its error and speed, against the second:
+/// paired across replicates where there are several.
+fn lead(ranked: &[(String, Vec<f64>, String)]) -> String {
+    let (model, values, speed) = &ranked[0];
+    let cell = match Estimate::across_seeds(values).filter(|_| values.len() > 1) {
+        Some(e) => e.cell(),
+        None => sig3(values[0]),
+    };
+    let (next, others, _) = &ranked[1];
+    let d: Vec<f64> = values.iter().zip(others).map(|(a, b)| a - b).collect();
+    match Estimate::across_seeds(&d).filter(|_| d.len() > 1 && others.len() == values.len()) {
+        Some(e) => format!(
+            "{model} at {cell} levels{speed}, {} {next}, the next ({})",
+            e.verdict.unwrap_or("against"),
+            e.difference_cell()
+        ),
+        None => format!(
+            "{model} at {cell} levels{speed} (the next, {next}, at {})",
+            sig3(mean(others))
+        ),
+    }
+}
+
+/// The mean of `values`.
+fn mean(values: &[f64]) -> f64 {
+    values.iter().sum::<f64>() / values.len() as f64
 }
 
 /// The main figure: every entry's difference from persistence (its
