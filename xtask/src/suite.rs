@@ -73,6 +73,10 @@ const ROBOT_LANE: &[Step] = &[
          the implicit runs against Pinocchio",
         hard_cases,
     ),
+    (
+        "a real arm's URDF against its recordings: kuka-lwr4's torques, joint by joint",
+        real_arm_physics,
+    ),
 ];
 
 /// What one lane did: each step's name and wall time, and the first
@@ -326,6 +330,29 @@ fn python_package(suite: &Suite) -> Result<(), String> {
 /// and each implicit run agrees with Pinocchio; prints the table.
 fn hard_cases(suite: &Suite) -> Result<(), String> {
     robot_script(suite, "tests/hard_cases.py", "hard-cases").map(|_| ())
+}
+
+/// Pinocchio's inverse dynamics of the KUKA LWR 4+'s URDF against the
+/// archived recordings' torques (`experiments/kuka-lwr4-physics.py`): the
+/// table the experiment's notes quote, as committed.
+fn real_arm_physics(suite: &Suite) -> Result<(), String> {
+    let made = suite.work.join("kuka-lwr4-physics.md");
+    suite.run(
+        Command::new(&suite.python)
+            .arg("experiments/kuka-lwr4-physics.py")
+            .arg("--markdown")
+            .arg(&made),
+    )?;
+    let committed = "experiments/kuka-lwr4-physics.md";
+    let read = |p: &Path| std::fs::read_to_string(p).map_err(|e| format!("{}: {e}", p.display()));
+    match read(&made)? == read(&root().join(committed))? {
+        true => Ok(()),
+        false => Err(format!(
+            "{} is not {committed}: the URDF, the recordings or the script changed; run it again \
+             and mend the notes of experiments/kuka-lwr4.toml that quote it",
+            made.display()
+        )),
+    }
 }
 
 /// Runs a robot-checking `script` on the binary the suite built, in a
