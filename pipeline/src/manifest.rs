@@ -60,6 +60,12 @@ pub struct Experiment {
     /// report under the computed findings.
     #[serde(default)]
     pub notes: String,
+    /// The experimenter's answer to the experiment's question in a few
+    /// sentences (Markdown), printed on the report's first screen under the
+    /// results table, labelled as theirs: what the figures cannot say by
+    /// themselves (why a model stands where it does).
+    #[serde(default)]
+    pub answer: String,
     /// Every variant runs this many times, each replicate with its own seed
     /// ([`replicate_seed`]): simulation, split and trees all re-drawn (with
     /// an archived dataset, what comes after the data). The report gives

@@ -122,6 +122,7 @@ pub fn render(record: &RunRecord, dir: &Path) -> Result<PathBuf> {
         compare_with_paper: record.compare_with_paper,
         description: record.description.clone(),
         notes: record.notes.clone(),
+        answer: record.answer.clone(),
         dataset: record
             .dataset
             .as_ref()

@@ -261,6 +261,7 @@ pub fn run(manifest: &Manifest, options: &RunOptions) -> Result<RunRecord> {
         compare_with_paper: manifest.experiment.compare_with_paper,
         description: manifest.experiment.description.clone(),
         notes: manifest.experiment.notes.clone(),
+        answer: manifest.experiment.answer.clone(),
         dataset: dataset.as_ref().map(|entry| DatasetRef {
             dataset: entry.label(),
             sha256: entry.sha256.clone(),

@@ -71,6 +71,9 @@ pub struct RunRecord {
     /// The manifest's notes on the results.
     #[serde(default)]
     pub notes: String,
+    /// The manifest's answer, for the report's first screen.
+    #[serde(default, skip_serializing_if = "String::is_empty")]
+    pub answer: String,
     /// The archived dataset the data came from, if any.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub dataset: Option<DatasetRef>,

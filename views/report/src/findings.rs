@@ -196,6 +196,17 @@ pub(super) fn difference(i: &Interval) -> String {
 
 /// The verdict word of the ALN against another model, from the interval of
 /// their paired difference in error.
+/// The label of a variant whose models read the current accelerations.
+pub(super) fn reads_more(variant: &str) -> String {
+    format!(
+        "**Reads more than a controller knows:** `{variant}` learns the accelerations (`qdd`), so \
+         its learned models and hybrids' corrections can read the frame's own, which the torque \
+         being applied produces; a controller choosing that torque does not know them, so as \
+         they stand these are not forward models a planner can use (`[quantize] never_learned = \
+         [\"qdd\"]` makes one)."
+    )
+}
+
 pub(super) fn accuracy_word(i: &Interval) -> &'static str {
     match i.verdict() {
         Verdict::Lower => "better than",
@@ -360,6 +371,9 @@ fn variant_findings(md: &mut String, v: &Loaded) {
     md.push_str(&sentence);
     super::replicates::finding(md, v);
     let _ = writeln!(md, "  - Model: {}.", v.description);
+    if v.reads_accelerations() {
+        let _ = writeln!(md, "  - {}", reads_more(&v.info.name));
+    }
 
     let batched = v.all_at_once(ModelId::Aln);
     let single = v.aln_single();

@@ -360,6 +360,23 @@ pub(super) fn first_screen(
             ""
         },
     );
+    if !run.answer.trim().is_empty() {
+        let _ = writeln!(
+            md,
+            "**The experimenter's answer** (their reading, not computed by the run; the notes in \
+             the appendix give its grounds): {}\n",
+            run.answer.trim()
+        );
+    }
+    // Whose models read the current accelerations, labelled so.
+    let mut shown: Vec<&str> = Vec::new();
+    for e in &entries {
+        let name = e.variant.info.name.as_str();
+        if e.variant.reads_accelerations() && !shown.contains(&name) {
+            shown.push(name);
+            let _ = writeln!(md, "{}\n", super::findings::reads_more(name));
+        }
+    }
     super::plan::at_real_time(md, variants);
     for v in variants {
         if let (Some(routed), Some(circuit)) = (&v.fpga, &v.circuit) {

@@ -64,6 +64,8 @@ pub struct RunInfo {
     pub description: String,
     /// The experimenter's reading of the results (Markdown), if any.
     pub notes: String,
+    /// The experimenter's answer (Markdown) for the first screen, if any.
+    pub answer: String,
     /// The archived dataset the data came from (`name@version`, sha256).
     pub dataset: Option<(String, String)>,
     /// The recording the data came from (its path as the manifest names
@@ -306,6 +308,14 @@ impl Loaded<'_> {
 
     /// The rows findings are about: the held-out ones, or all when the run
     /// has none held out.
+    /// Whether the variant's models read the current accelerations (its
+    /// `qdd` group is learned, so every model reads the frame's own): the
+    /// torque being applied produces them, so a controller choosing that
+    /// torque does not know them.
+    fn reads_accelerations(&self) -> bool {
+        self.summary.iter().any(|r| r.group == "qdd")
+    }
+
     fn judged(&self) -> (&[SummaryRow], Rows) {
         if self.held_out.is_empty() {
             (&self.summary, Rows::All)
