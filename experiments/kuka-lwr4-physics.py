@@ -7,11 +7,13 @@ of the arm's URDF (`robots/kuka_lwr4/kuka_lwr4.urdf`) at the recorded
 positions and velocities and the accelerations the ingest stage takes (the
 central difference of the recorded velocities) gives the torque the URDF
 says the joint needs; the joint torque sensor says what it had. Per joint:
-the recorded torque's RMS, the URDF's residual (recorded minus URDF), and
-the residual left on the other trajectory once the grey-box a practitioner
+the recorded torque's RMS, the URDF's residual (recorded minus URDF), the
+residual left on the other trajectory once the grey-box a practitioner
 fits first — a torque gain on the URDF's torque, viscous and Coulomb
 friction and an offset, by least squares on one trajectory — is fitted on
-the other (each trajectory held out in turn, as the experiment's folds).
+the other (each trajectory held out in turn, as the experiment's folds),
+and what the URDF's forward dynamics make of the recorded torques: its
+accelerations' error, which the simulator of the experiment integrates.
 
     python experiments/kuka-lwr4-physics.py [--markdown FILE]
 
@@ -44,8 +46,9 @@ def tables():
 
 
 def samples(table, model, data):
-    """q, q̇, q̈ (central differences of q̇ over the recorded times), the
-    recorded torque and the URDF's, for one table."""
+    """q̇, the recorded torque, the URDF's torque (inverse dynamics), q̈
+    (central differences of q̇ over the recorded times) and the URDF's q̈
+    under the recorded torque (forward dynamics), for one table."""
     t = table.column("time").to_numpy()
     column = lambda j, quantity: table.column(f"{j}.{quantity}").to_numpy()
     q = np.column_stack([column(j, "position") for j in JOINTS])
@@ -53,7 +56,8 @@ def samples(table, model, data):
     tau = np.column_stack([column(j, "effort") for j in JOINTS])
     qdd = np.gradient(qd, t, axis=0)
     urdf = np.array([pin.rnea(model, data, q[k], qd[k], qdd[k]).copy() for k in range(len(t))])
-    return qd, tau, urdf
+    forward = np.array([pin.aba(model, data, q[k], qd[k], tau[k]).copy() for k in range(len(t))])
+    return qd, tau, urdf, qdd, forward
 
 
 def features(urdf, qd, j):
@@ -78,37 +82,37 @@ def main():
     per_trajectory = []
     for names in TRAJECTORIES:
         parts = [samples(read[n], model, data) for n in names]
-        per_trajectory.append(tuple(np.vstack([p[k] for p in parts]) for k in range(3)))
-    qd = np.vstack([p[0] for p in per_trajectory])
-    tau = np.vstack([p[1] for p in per_trajectory])
-    urdf = np.vstack([p[2] for p in per_trajectory])
+        per_trajectory.append(tuple(np.vstack([p[k] for p in parts]) for k in range(5)))
+    qd, tau, urdf, qdd, forward = (np.vstack([p[k] for p in per_trajectory]) for k in range(5))
 
     lines = [
         "| joint | recorded torque RMS (N m) | URDF residual RMS | grey-box residual RMS, held out "
         "(trajectory 1 / 2) | torque gain fitted (1 / 2) | viscous (N m s/rad) | Coulomb (N m) "
-        "| offset (N m) |",
-        "|---|---:|---:|---:|---:|---:|---:|---:|",
+        "| offset (N m) | recorded q̈ RMS (rad/s²) | URDF's q̈ error RMS |",
+        "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
     ]
     for j, name in enumerate(JOINTS):
         held, fitted = [], []
         for test in range(2):
             train = 1 - test
-            qd_a, tau_a, urdf_a = per_trajectory[train]
+            qd_a, tau_a, urdf_a = per_trajectory[train][:3]
             w, *_ = np.linalg.lstsq(features(urdf_a, qd_a, j), tau_a[:, j], rcond=None)
-            qd_b, tau_b, urdf_b = per_trajectory[test]
+            qd_b, tau_b, urdf_b = per_trajectory[test][:3]
             held.append(rms(tau_b[:, j] - features(urdf_b, qd_b, j) @ w))
             fitted.append(w)
         w = np.mean(fitted, axis=0)
         lines.append(
             f"| {name} | {rms(tau[:, j]):.2f} | {rms(tau[:, j] - urdf[:, j]):.2f} "
             f"| {held[0]:.2f} / {held[1]:.2f} | {fitted[1][0]:.3f} / {fitted[0][0]:.3f} "
-            f"| {w[1]:.2f} | {w[2]:.2f} | {w[3]:.2f} |"
+            f"| {w[1]:.2f} | {w[2]:.2f} | {w[3]:.2f} "
+            f"| {rms(qdd[:, j]):.2f} | {rms(forward[:, j] - qdd[:, j]):.2f} |"
         )
     lines.append("")
     lines.append(
         "Trajectory 1 is tables 1 and 2 (one trajectory recorded twice), 2 is table 3; a held-out "
         "figure is fitted on the other trajectory. Gains and friction: the fit on trajectory 2 / on "
-        "trajectory 1 for the gain, their mean for the rest."
+        "trajectory 1 for the gain, their mean for the rest. The URDF's q̈: forward dynamics under "
+        "the recorded torques, against the recorded velocities' central differences."
     )
     text = "\n".join(lines)
     print(text)
