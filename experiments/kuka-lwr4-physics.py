@@ -13,7 +13,9 @@ fits first — a torque gain on the URDF's torque, viscous and Coulomb
 friction and an offset, by least squares on one trajectory — is fitted on
 the other (each trajectory held out in turn, as the experiment's folds),
 and what the URDF's forward dynamics make of the recorded torques: its
-accelerations' error, which the simulator of the experiment integrates.
+accelerations' error, which the simulator of the experiment integrates —
+alone, and with per-joint friction (viscous, Coulomb, offset) fitted on
+the other trajectory taken off the recorded torques.
 
     python experiments/kuka-lwr4-physics.py [--markdown FILE]
 
@@ -46,7 +48,7 @@ def tables():
 
 
 def samples(table, model, data):
-    """q̇, the recorded torque, the URDF's torque (inverse dynamics), q̈
+    """q, q̇, the recorded torque, the URDF's torque (inverse dynamics), q̈
     (central differences of q̇ over the recorded times) and the URDF's q̈
     under the recorded torque (forward dynamics), for one table."""
     t = table.column("time").to_numpy()
@@ -57,7 +59,12 @@ def samples(table, model, data):
     qdd = np.gradient(qd, t, axis=0)
     urdf = np.array([pin.rnea(model, data, q[k], qd[k], qdd[k]).copy() for k in range(len(t))])
     forward = np.array([pin.aba(model, data, q[k], qd[k], tau[k]).copy() for k in range(len(t))])
-    return qd, tau, urdf, qdd, forward
+    return q, qd, tau, urdf, qdd, forward
+
+
+def friction(qd, j):
+    """Friction's regressors for joint j: viscous, Coulomb, an offset."""
+    return np.column_stack([qd[:, j], np.sign(qd[:, j]), np.ones(len(qd))])
 
 
 def features(urdf, qd, j):
@@ -82,22 +89,40 @@ def main():
     per_trajectory = []
     for names in TRAJECTORIES:
         parts = [samples(read[n], model, data) for n in names]
-        per_trajectory.append(tuple(np.vstack([p[k] for p in parts]) for k in range(5)))
-    qd, tau, urdf, qdd, forward = (np.vstack([p[k] for p in per_trajectory]) for k in range(5))
+        per_trajectory.append(tuple(np.vstack([p[k] for p in parts]) for k in range(6)))
+    _, qd, tau, urdf, qdd, forward = (np.vstack([p[k] for p in per_trajectory]) for k in range(6))
+    # The URDF plus per-joint friction fitted on the other trajectory (the
+    # residual torque's least squares), under the recorded torques: its
+    # accelerations' error on each held-out trajectory.
+    friction_error = []
+    for test in range(2):
+        q_a, qd_a, tau_a, urdf_a = per_trajectory[1 - test][:4]
+        q_b, qd_b, tau_b, _, qdd_b, _ = per_trajectory[test]
+        fitted = np.column_stack([
+            friction(qd_b, j)
+            @ np.linalg.lstsq(friction(qd_a, j), tau_a[:, j] - urdf_a[:, j], rcond=None)[0]
+            for j in range(len(JOINTS))
+        ])
+        applied = tau_b - fitted
+        accelerations = np.array(
+            [pin.aba(model, data, q_b[k], qd_b[k], applied[k]).copy() for k in range(len(q_b))]
+        )
+        friction_error.append(accelerations - qdd_b)
 
     lines = [
         "| joint | recorded torque RMS (N m) | URDF residual RMS | grey-box residual RMS, held out "
         "(trajectory 1 / 2) | torque gain fitted (1 / 2) | viscous (N m s/rad) | Coulomb (N m) "
-        "| offset (N m) | recorded q̈ RMS (rad/s²) | URDF's q̈ error RMS |",
-        "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
+        "| offset (N m) | recorded q̈ RMS (rad/s²) | URDF's q̈ error RMS | URDF + friction's q̈ "
+        "error RMS, held out (1 / 2) |",
+        "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
     ]
     for j, name in enumerate(JOINTS):
         held, fitted = [], []
         for test in range(2):
             train = 1 - test
-            qd_a, tau_a, urdf_a = per_trajectory[train][:3]
+            qd_a, tau_a, urdf_a = per_trajectory[train][1:4]
             w, *_ = np.linalg.lstsq(features(urdf_a, qd_a, j), tau_a[:, j], rcond=None)
-            qd_b, tau_b, urdf_b = per_trajectory[test][:3]
+            qd_b, tau_b, urdf_b = per_trajectory[test][1:4]
             held.append(rms(tau_b[:, j] - features(urdf_b, qd_b, j) @ w))
             fitted.append(w)
         w = np.mean(fitted, axis=0)
@@ -105,7 +130,8 @@ def main():
             f"| {name} | {rms(tau[:, j]):.2f} | {rms(tau[:, j] - urdf[:, j]):.2f} "
             f"| {held[0]:.2f} / {held[1]:.2f} | {fitted[1][0]:.3f} / {fitted[0][0]:.3f} "
             f"| {w[1]:.2f} | {w[2]:.2f} | {w[3]:.2f} "
-            f"| {rms(qdd[:, j]):.2f} | {rms(forward[:, j] - qdd[:, j]):.2f} |"
+            f"| {rms(qdd[:, j]):.2f} | {rms(forward[:, j] - qdd[:, j]):.2f} "
+            f"| {rms(friction_error[0][:, j]):.2f} / {rms(friction_error[1][:, j]):.2f} |"
         )
     lines.append("")
     lines.append(
