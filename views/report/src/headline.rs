@@ -365,7 +365,8 @@ pub(super) fn first_screen(
             md,
             "**The experimenter's answer** (their reading, not computed by the run; the notes in \
              the appendix give its grounds): {}\n",
-            run.answer.trim()
+            // One paragraph, however the manifest wraps it.
+            run.answer.split_whitespace().collect::<Vec<_>>().join(" ")
         );
     }
     // Whose models read the current accelerations, labelled so.
