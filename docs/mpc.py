@@ -72,7 +72,9 @@ def main() -> int:
             states = np.repeat(state[None, :], len(candidates), axis=0)
             total = np.zeros(len(candidates))
             for h in range(candidates.shape[1]):
-                states, read = scene.step(states, candidates[:, h], steps=steps, threads=args.threads)
+                states, read = scene.step(
+                    states, candidates[:, h], steps=steps, threads=args.threads, allow_nan=True
+                )
                 total += cost(read[:, scene_pitch])
             # A candidate that blew up costs the most.
             return np.nan_to_num(total, nan=np.inf)

@@ -20,15 +20,18 @@ What is here:
   ``Model(model_path, codebook_path)`` loads the files themselves.
 - ``Model``: its ``state_names`` (D) and ``control_names`` (U) give the
   columns; ``ranges`` each variable's range and levels. ``predict`` and
-  ``rollout`` take float64 arrays in the variables' own units and return the
-  same (or their levels, uint16, with ``levels=True``), computed by the
-  stages' own code with the GIL released, on all threads or ``threads=n``.
+  ``rollout`` take any array-like of real numbers in the variables' own
+  units (float32, ints, bools and lists cast to float64; one state, without
+  the batch dimension, gives one result) and return float64 (or levels,
+  uint16, with ``levels=True``), computed by the stages' own code with the
+  GIL released, on all threads or ``threads=n``.
 - ``scene(run, variant=, plant=)``: the run's scene rebuilt from its
   trajectory log — the model as written, or the plant it was simulated as
-  where it declares one. ``Scene.step(states, controls, frames=1,
+  where it declares one. ``Scene.step(states, controls, *, frames=1,
   steps=None)`` advances B generalized states (``state_names``, S) under
   B×U torques held over the frames and returns the states and their
-  variables (``variable_names``, V: the names a model's columns use);
+  variables (``variable_names``, V: the names a model's columns use), a
+  state the simulator cannot step an ``InputError``;
   ``logged()`` gives the log's own frames.
 - ``runs(out=)``: every run recorded under ``out``, one row per variant and
   replicate, with parameters (``param.<key>``) and headline metrics

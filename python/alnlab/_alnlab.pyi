@@ -1,6 +1,7 @@
 """Type stubs of alnlab's native core (python/src)."""
 
 import os
+from typing import SupportsIndex
 
 import numpy as np
 import numpy.typing as npt
@@ -35,25 +36,28 @@ class Model:
         """The controls' names (U)."""
     @property
     def ranges(self) -> list[tuple[str, tuple[float, float, int]]]:
-        """Each learned variable's (min, max, levels)."""
+        """Each variable's ``(name, (min, max, levels))``, the controls' too, in the codebook's order."""
     def predict(
         self,
-        states: npt.NDArray[np.float64],
-        controls: npt.NDArray[np.float64],
+        states: npt.ArrayLike,
+        controls: npt.ArrayLike,
         *,
         levels: bool = False,
-        threads: int | None = None,
+        threads: SupportsIndex | None = None,
     ) -> npt.NDArray[np.float64] | npt.NDArray[np.uint16]:
-        """The next states (B×D) from ``states`` (B×D) under ``controls`` (B×U)."""
+        """The next states (B×D) from ``states`` (B×D) under ``controls`` (B×U);
+        any array-like of real numbers (cast to float64); one state (D) and
+        its controls (U) give one next state (D)."""
     def rollout(
         self,
-        x0: npt.NDArray[np.float64],
-        controls: npt.NDArray[np.float64],
+        x0: npt.ArrayLike,
+        controls: npt.ArrayLike,
         *,
         levels: bool = False,
-        threads: int | None = None,
+        threads: SupportsIndex | None = None,
     ) -> npt.NDArray[np.float64] | npt.NDArray[np.uint16]:
-        """The states over H frames (B×(H+1)×D) from ``x0`` (B×D) under ``controls`` (B×H×U)."""
+        """The states over H frames (B×(H+1)×D) from ``x0`` (B×D) under ``controls`` (B×H×U);
+        one state (D) under H×U controls gives one path ((H+1)×D)."""
 
 class Scene:
     """A scene of a run, rebuilt from its trajectory log, ready to step."""
@@ -88,14 +92,19 @@ class Scene:
         """The log's frames: (runs F, frames F, states F×S, variables F×V)."""
     def step(
         self,
-        states: npt.NDArray[np.float64],
-        controls: npt.NDArray[np.float64],
+        states: npt.ArrayLike,
+        controls: npt.ArrayLike,
         *,
-        frames: int = 1,
-        steps: int | None = None,
-        threads: int | None = None,
+        frames: SupportsIndex | None = None,
+        steps: SupportsIndex | None = None,
+        threads: SupportsIndex | None = None,
+        allow_nan: bool = False,
     ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
-        """Each state (B×S) advanced under its controls (B×U): the states (B×S) and variables (B×V) after."""
+        """Each state (B×S) advanced ``frames`` frames (1 by default) under its
+        controls (B×U): the states (B×S) and variables (B×V) after; one state
+        (S) gives one of each. A row that is no state, or a state that leaves
+        the finite numbers, raises ``InputError`` (with ``allow_nan``, the
+        latter comes back as NaN: a planner's candidate that blew up)."""
 
 def reference_rollout_ns(
     model: Model,

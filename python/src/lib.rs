@@ -5,6 +5,7 @@
 //! (`python/alnlab/__init__.py`) finds a run's files and documents the API;
 //! everything that predicts is here, on the same code paths as the stages.
 
+mod arrays;
 mod model;
 mod runs;
 mod scene;

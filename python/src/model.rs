@@ -19,11 +19,11 @@ use alnlab_codes::Entry;
 use alnlab_codes::codebook::{Quantizer, is_control};
 use alnlab_common::Error;
 use numpy::ndarray::{Array2, Array3, ArrayView2, ArrayView3, Axis};
-use numpy::{IntoPyArray, PyReadonlyArray2, PyReadonlyArray3};
+use numpy::{IntoPyArray, PyReadonlyArray2, PyReadonlyArray3, PyReadonlyArrayDyn};
 use pyo3::prelude::*;
 use rayon::prelude::*;
 
-use crate::{invalid, raise, threads};
+use crate::{arrays, invalid, raise, threads};
 
 /// What predicts, borrowing the trained model it is made from.
 enum Predicts<'a> {
@@ -159,7 +159,6 @@ impl Model {
         horizon: usize,
         threads: Option<usize>,
     ) -> PyResult<Vec<f64>> {
-        threads::check(threads)?;
         let (d, u) = (self.state.len(), self.controls.len());
         let rows = x0.len().checked_div(d).unwrap_or(0);
         let mut out = vec![0.0; rows * (horizon + 1) * d];
@@ -538,8 +537,9 @@ impl Model {
             .collect()
     }
 
-    /// Each learned variable's range and levels: `{name: (min, max,
-    /// levels)}`; level k stands for min + (max − min)·k/(levels − 1).
+    /// Each variable's range and levels, the controls' too: a list of
+    /// `(name, (min, max, levels))` in the codebook's order; level k
+    /// stands for min + (max − min)·k/(levels − 1).
     #[getter]
     fn ranges(&self) -> Vec<(String, (f64, f64, usize))> {
         self.names
@@ -560,58 +560,110 @@ impl Model {
     }
 
     /// The next states (B×D) from `states` (B×D) under `controls` (B×U),
-    /// as values or, with `levels`, their levels (uint16).
+    /// as values or, with `levels`, their levels (uint16); any array-like
+    /// of real numbers, one state (D) and its controls (U) giving one next
+    /// state (D).
     #[pyo3(signature = (states, controls, *, levels = false, threads = None))]
     fn predict<'py>(
         &self,
         py: Python<'py>,
-        states: PyReadonlyArray2<'py, f64>,
-        controls: PyReadonlyArray2<'py, f64>,
+        states: &Bound<'py, PyAny>,
+        controls: &Bound<'py, PyAny>,
         levels: bool,
-        threads: Option<usize>,
+        threads: Option<&Bound<'py, PyAny>>,
     ) -> PyResult<Bound<'py, PyAny>> {
-        let x0 = states.as_array();
+        let d = self.state.len();
+        let states = arrays::floats(states, "states", 2, &format!("(B, {d})"))?;
+        let controls = arrays::floats(
+            controls,
+            "controls",
+            2,
+            &format!("(B, {})", self.controls.len()),
+        )?;
+        let threads = thread_count(threads)?;
+        let x0 = two(&states.array)?;
         // One frame of controls: B×1×U.
-        let c3 = controls.as_array().insert_axis(Axis(1));
+        let c3 = two(&controls.array)?.insert_axis(Axis(1));
         self.check(&x0, &c3, false)?;
         let x0: Vec<f64> = x0.iter().copied().collect();
         let c: Vec<f64> = c3.iter().copied().collect();
-        let d = self.state.len();
         let rolled = py.detach(|| self.roll(&x0, &c, 1, threads))?;
         let next: Vec<f64> = rolled
             .chunks(2 * d.max(1))
             .flat_map(|r| &r[d..])
             .copied()
             .collect();
-        array(py, self, next, &[x0.len() / d.max(1), d], levels)
+        let out = array(py, self, next, &[x0.len() / d.max(1), d], levels)?;
+        unbatched(out, states.single)
     }
 
     /// The states over `H` frames (B×(H+1)×D, the first `x0`) from `x0`
     /// (B×D) under `controls` (B×H×U), each frame predicted from the last
-    /// prediction; as values or, with `levels`, their levels (uint16).
+    /// prediction; as values or, with `levels`, their levels (uint16). One
+    /// state (D) under H frames of controls (H×U) gives one path
+    /// ((H+1)×D).
     #[pyo3(signature = (x0, controls, *, levels = false, threads = None))]
     fn rollout<'py>(
         &self,
         py: Python<'py>,
-        x0: PyReadonlyArray2<'py, f64>,
-        controls: PyReadonlyArray3<'py, f64>,
+        x0: &Bound<'py, PyAny>,
+        controls: &Bound<'py, PyAny>,
         levels: bool,
-        threads: Option<usize>,
+        threads: Option<&Bound<'py, PyAny>>,
     ) -> PyResult<Bound<'py, PyAny>> {
-        let (x0, c) = (x0.as_array(), controls.as_array());
+        let x0 = arrays::floats(x0, "x0", 2, &format!("(B, {})", self.state.len()))?;
+        let controls = arrays::floats(
+            controls,
+            "controls",
+            3,
+            &format!("(B, H, {})", self.controls.len()),
+        )?;
+        let threads = thread_count(threads)?;
+        let single = x0.single;
+        let (x0, c) = (two(&x0.array)?, three(&controls.array)?);
         self.check(&x0, &c, true)?;
         let (b, horizon, _) = c.dim();
         let x0: Vec<f64> = x0.iter().copied().collect();
         let c: Vec<f64> = c.iter().copied().collect();
         let rolled = py.detach(|| self.roll(&x0, &c, horizon, threads))?;
-        array(
+        let out = array(
             py,
             self,
             rolled,
             &[b, horizon + 1, self.state.len()],
             levels,
-        )
+        )?;
+        unbatched(out, single)
     }
+}
+
+/// A converted argument's two dimensions.
+fn two<'a>(a: &'a PyReadonlyArrayDyn<'_, f64>) -> PyResult<ArrayView2<'a, f64>> {
+    a.as_array()
+        .into_dimensionality()
+        .map_err(|e| invalid(format!("internal shape error: {e}")))
+}
+
+/// A converted argument's three dimensions.
+fn three<'a>(a: &'a PyReadonlyArrayDyn<'_, f64>) -> PyResult<ArrayView3<'a, f64>> {
+    a.as_array()
+        .into_dimensionality()
+        .map_err(|e| invalid(format!("internal shape error: {e}")))
+}
+
+/// `out`'s one item where the call was given one item, not a batch.
+pub(crate) fn unbatched<'py>(out: Bound<'py, PyAny>, single: bool) -> PyResult<Bound<'py, PyAny>> {
+    match single {
+        true => out.get_item(0),
+        false => Ok(out),
+    }
+}
+
+/// `threads`: a whole number of at least 1, or `None` for all.
+pub(crate) fn thread_count(threads: Option<&Bound<'_, PyAny>>) -> PyResult<Option<usize>> {
+    arrays::count(threads, "threads", 1)?
+        .map(|n| usize::try_from(n).map_err(|_| invalid(format!("threads: {n} is too many"))))
+        .transpose()
 }
 
 /// The Rust batched path a rollout is measured against: the piecewise

@@ -29,9 +29,14 @@ pub fn find_artifacts(
     run: &str,
     roles: Vec<String>,
     variant: Option<&str>,
-    replicate: Option<u32>,
+    replicate: Option<&Bound<'_, PyAny>>,
     verify: bool,
 ) -> PyResult<Found> {
+    let replicate = crate::arrays::count(replicate, "replicate", 1)?
+        .map(|r| {
+            u32::try_from(r).map_err(|_| crate::invalid(format!("replicate: {r} is too many")))
+        })
+        .transpose()?;
     let (stored, named) = records::find(&out, run).map_err(raise)?;
     let variant = match (variant, named.as_deref()) {
         (Some(a), Some(b)) if a != b => {

@@ -13,11 +13,12 @@ use alnlab_physics::runner::Control;
 use alnlab_physics::{Prepared, Runner, state_from_generalized};
 use nalgebra::Vector3;
 use numpy::ndarray::{Array1, Array2, ArrayView2};
-use numpy::{IntoPyArray, PyArray1, PyArray2, PyReadonlyArray2};
+use numpy::{IntoPyArray, PyArray1, PyArray2};
 use pyo3::prelude::*;
 use rayon::prelude::*;
 
-use crate::{invalid, raise, threads};
+use crate::model::{thread_count, unbatched};
+use crate::{arrays, invalid, raise, threads};
 
 /// States a parallel task of [`Scene::step`] takes.
 const TASK_ROWS: usize = 16;
@@ -261,25 +262,39 @@ impl Scene {
     /// Each of `states` (B×S) advanced `frames` frames under `controls`
     /// (B×U, held), at `steps` integration steps a frame (the scene's own
     /// by default; fewer is a cheaper simulator): the states (B×S) and
-    /// their variables (B×V) after. A state that leaves the finite
-    /// numbers comes back as NaN. Each state steps on its own, as the
+    /// their variables (B×V) after; one state (S) and its controls (U)
+    /// give one of each. Any array-like of real numbers. A row that is not
+    /// a state (not finite, or an orientation that is no unit quaternion)
+    /// is an `InputError` naming it; so is a state that leaves the finite
+    /// numbers, unless `allow_nan` (a planner's candidate that blew up
+    /// comes back as NaN). Each state steps on its own, as the
     /// test stage's simulator does, from rest of whatever the scene tracks
     /// besides the state (a plant's actuators' lag and delay start at rest,
     /// so a plant stepped from mid-run does not reproduce its run); the
     /// states are split among threads.
-    #[pyo3(signature = (states, controls, *, frames = 1, steps = None, threads = None))]
-    #[allow(clippy::type_complexity)]
+    #[pyo3(signature = (states, controls, *, frames = None, steps = None, threads = None, allow_nan = false))]
+    #[allow(clippy::too_many_arguments)]
     fn step<'py>(
         &self,
         py: Python<'py>,
-        states: PyReadonlyArray2<'py, f64>,
-        controls: PyReadonlyArray2<'py, f64>,
-        frames: u32,
-        steps: Option<u64>,
-        threads: Option<usize>,
-    ) -> PyResult<(Bound<'py, PyArray2<f64>>, Bound<'py, PyArray2<f64>>)> {
-        let (x, c) = (states.as_array(), controls.as_array());
+        states: &Bound<'py, PyAny>,
+        controls: &Bound<'py, PyAny>,
+        frames: Option<&Bound<'py, PyAny>>,
+        steps: Option<&Bound<'py, PyAny>>,
+        threads: Option<&Bound<'py, PyAny>>,
+        allow_nan: bool,
+    ) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyAny>)> {
         let (s, u) = (self.state_width(), self.controls.len());
+        let states = arrays::floats(states, "states", 2, &format!("(B, {s})"))?;
+        let controls = arrays::floats(controls, "controls", 2, &format!("(B, {u})"))?;
+        let frames = match arrays::count(frames, "frames", 1)? {
+            None => 1,
+            Some(n) => u32::try_from(n).map_err(|_| invalid(format!("frames: {n} is too many")))?,
+        };
+        let steps = arrays::count(steps, "steps", 1)?;
+        let threads = thread_count(threads)?;
+        let single = states.single;
+        let (x, c) = (two(&states.array)?, two(&controls.array)?);
         let b = x.nrows();
         if x.ncols() != s {
             return Err(invalid(format!(
@@ -296,16 +311,29 @@ impl Scene {
             )));
         }
         let steps = steps.unwrap_or_else(|| self.steps_per_frame());
-        if steps == 0 {
-            return Err(invalid("steps: expected at least 1 a frame"));
-        }
         let (x, c) = (Rows::of(&x), Rows::of(&c));
         for r in 0..b {
             let row = x.row(r);
-            if row.iter().any(|v| !v.is_finite())
-                || state_from_generalized(&self.prepared.model, row).is_none()
-            {
+            let state = match row.iter().all(|v| v.is_finite()) {
+                true => state_from_generalized(&self.prepared.model, row),
+                false => None,
+            };
+            let Some(state) = state else {
                 return Err(invalid(format!("states: row {r} is not a finite state")));
+            };
+            // Loose enough for a float32 state of unit quaternions.
+            if let Some((i, q)) = state
+                .orient
+                .iter()
+                .enumerate()
+                .find(|(_, q)| (q.as_ref().norm() - 1.0).abs() > 1e-3)
+            {
+                return Err(invalid(format!(
+                    "states: row {r} is not a state: link {}'s orientation is no unit quaternion \
+                     (norm {:.3e})",
+                    i + 1,
+                    q.as_ref().norm()
+                )));
             }
             if let Some(k) = c.row(r).iter().position(|v| !v.is_finite()) {
                 return Err(invalid(format!(
@@ -316,7 +344,6 @@ impl Scene {
         }
         let v = self.prepared.layout.variables.len();
         let (mut out_states, mut out_variables) = (vec![0.0; b * s], vec![0.0; b * v]);
-        threads::check(threads)?;
         py.detach(|| {
             threads::run(threads, || {
                 // Tasks of a fixed size, each with a runner of its own,
@@ -348,14 +375,34 @@ impl Scene {
                     });
             })
         })?;
+        // A result that is not a number is an error, not a value.
+        let left = out_states
+            .chunks(s.max(1))
+            .zip(out_variables.chunks(v.max(1)))
+            .position(|(x, y)| x.iter().chain(y).any(|z| !z.is_finite()));
+        if let Some(r) = left.filter(|_| !allow_nan) {
+            return Err(invalid(format!(
+                "states: row {r} left the finite numbers within {frames} frame(s): the simulator \
+                 cannot step it (a state far outside what the scene can reach, or controls too \
+                 large for its step; allow_nan=True returns NaN instead)"
+            )));
+        }
         let shaped = |e: numpy::ndarray::ShapeError| invalid(format!("internal shape error: {e}"));
-        Ok((
-            Array2::from_shape_vec((b, s), out_states)
-                .map_err(shaped)?
-                .into_pyarray(py),
-            Array2::from_shape_vec((b, v), out_variables)
-                .map_err(shaped)?
-                .into_pyarray(py),
-        ))
+        let states = Array2::from_shape_vec((b, s), out_states)
+            .map_err(shaped)?
+            .into_pyarray(py)
+            .into_any();
+        let variables = Array2::from_shape_vec((b, v), out_variables)
+            .map_err(shaped)?
+            .into_pyarray(py)
+            .into_any();
+        Ok((unbatched(states, single)?, unbatched(variables, single)?))
     }
+}
+
+/// A converted argument's two dimensions.
+fn two<'a>(a: &'a numpy::PyReadonlyArrayDyn<'_, f64>) -> PyResult<ArrayView2<'a, f64>> {
+    a.as_array()
+        .into_dimensionality()
+        .map_err(|e| invalid(format!("internal shape error: {e}")))
 }

@@ -33,14 +33,6 @@ pub fn run<T: Send>(threads: Option<usize>, work: impl FnOnce() -> T + Send) -> 
     Ok(pool.install(work))
 }
 
-/// Refuses a thread count of 0.
-pub fn check(threads: Option<usize>) -> PyResult<()> {
-    match threads {
-        Some(0) => Err(invalid("threads: expected at least 1 (or None for all)")),
-        _ => Ok(()),
-    }
-}
-
 /// How many rows each parallel task takes on `threads` threads (all of
 /// rayon's by default): whole blocks of the batched predictor (32 rows),
 /// a task for every thread.

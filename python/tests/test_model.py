@@ -190,8 +190,45 @@ def test_bad_arrays_are_refused_with_the_expected_shape(artifacts):
     bad[3, 2] = np.nan
     with pytest.raises(alnlab.InputError, match=rf"states: not a finite number at index \[3, 2\] \(`{model.state_names[2]}`\)"):
         model.predict(bad, np.zeros((5, u)))
-    with pytest.raises(alnlab.InputError, match="threads: expected at least 1"):
-        model.predict(x0, np.zeros((5, u)), threads=0)
+    for threads in [0, -1, 1.5, "2", True]:
+        with pytest.raises(alnlab.InputError, match="threads: expected a whole number of at least 1, got "):
+            model.predict(x0, np.zeros((5, u)), threads=threads)
+    for name, call in [
+        ("states", lambda: model.predict("fast", np.zeros((5, u)))),
+        ("states", lambda: model.predict(np.zeros((5, d), dtype=complex), np.zeros((5, u)))),
+        ("states", lambda: model.predict([[1.0, 2.0], [3.0]], np.zeros((5, u)))),
+        ("states", lambda: model.predict(np.zeros((2, 5, d)), np.zeros((5, u)))),
+        ("controls", lambda: model.predict(x0, None)),
+        ("x0", lambda: model.rollout(np.zeros(()), np.zeros((5, 3, u)))),
+    ]:
+        with pytest.raises(alnlab.InputError, match=rf"^{name}: expected an array of real numbers of shape \("):
+            call()
+
+
+def test_any_array_like_of_real_numbers_predicts_as_float64(artifacts):
+    """float32 (gymnasium's spaces, torch), ints, bools, lists, a single
+    state: each cast to float64, the same predictions as float64 arrays."""
+    model = load(artifacts, "piecewise")
+    pairs = pq.read_table(artifacts("piecewise")["pairs"])
+    x = np.column_stack([pairs.column(f"x.{n}").to_numpy() for n in model.state_names])[:8]
+    u = np.column_stack([pairs.column(f"x.{n}").to_numpy() for n in model.control_names])[:8]
+    want = model.predict(x, u, threads=1)
+    x32, u32 = x.astype(np.float32), u.astype(np.float32)
+    np.testing.assert_array_equal(model.predict(x32, u32), model.predict(x32.astype(np.float64), u32.astype(np.float64)))
+    np.testing.assert_array_equal(model.predict(x.tolist(), u.tolist()), want)
+    np.testing.assert_array_equal(model.predict(np.asfortranarray(x), np.repeat(u, 2, axis=0)[::2]), want)
+    ints = np.rint(x).astype(np.int64)
+    np.testing.assert_array_equal(model.predict(ints, u), model.predict(ints.astype(np.float64), u))
+    np.testing.assert_array_equal(model.predict(x > 0, u), model.predict((x > 0).astype(np.float64), u))
+    # One state and its controls give one next state.
+    one = model.predict(x[3], u[3])
+    assert one.shape == (len(model.state_names),)
+    np.testing.assert_array_equal(one, want[3])
+    path = model.rollout(x[3], np.repeat(u[3][None, :], 4, axis=0))
+    assert path.shape == (5, len(model.state_names))
+    np.testing.assert_array_equal(path, model.rollout(x[3:4], np.repeat(u[3:4, None, :], 4, axis=1))[0])
+    # Any Python int for a count, NumPy's too.
+    np.testing.assert_array_equal(model.predict(x, u, threads=np.int64(2)), want)
 
 
 def test_every_public_name_is_documented_and_stubbed():

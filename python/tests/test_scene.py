@@ -79,8 +79,24 @@ def test_bad_steps_are_refused(runs, worm):
     bad[1, 0] = np.inf
     with pytest.raises(alnlab.InputError, match="states: row 1 is not a finite state"):
         worm.step(bad, np.zeros((3, u)))
-    with pytest.raises(alnlab.InputError, match="steps: expected at least 1"):
-        worm.step(states[:1], np.zeros((1, u)), steps=0)
+    for steps in [0, -3]:
+        with pytest.raises(alnlab.InputError, match="steps: expected a whole number of at least 1, got "):
+            worm.step(states[:1], np.zeros((1, u)), steps=steps)
+    with pytest.raises(alnlab.InputError, match="frames: expected a whole number of at least 1, got -1"):
+        worm.step(states[:1], np.zeros((1, u)), frames=-1)
+    with pytest.raises(alnlab.InputError, match="threads: expected a whole number of at least 1, got -2"):
+        worm.step(states[:1], np.zeros((1, u)), threads=-2)
+    # A state the simulator cannot step is an error, not NaN.
+    with pytest.raises(alnlab.InputError, match="states: row 0 is not a state: link 1's orientation is no unit quaternion"):
+        worm.step(np.zeros((1, s)), np.zeros((1, u)))
+    # One state (float32, as a gymnasium space gives) steps as a batch of one.
+    one, variables = worm.step(states[5].astype(np.float32), np.zeros(u, dtype=np.float32))
+    batch, _ = worm.step(states[5:6].astype(np.float32).astype(np.float64), np.zeros((1, u)))
+    # A strided (not contiguous) batch is taken too.
+    strided, _ = worm.step(states[:10:2], np.zeros((5, u)))
+    np.testing.assert_array_equal(strided, worm.step(np.ascontiguousarray(states[:10:2]), np.zeros((5, u)))[0])
+    assert one.shape == (s,) and variables.shape == (len(worm.variable_names),)
+    np.testing.assert_array_equal(one, batch[0])
     with pytest.raises(alnlab.InputError, match="scene `worm` declares no plant"):
         alnlab.scene("quickstart", variant="walk", out=runs, plant=True)
     with pytest.raises(alnlab.InputError, match="has no scene `arm`; it has worm"):

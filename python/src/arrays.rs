@@ -1,0 +1,123 @@
+//! Arguments as Python code passes them: any array-like of real numbers —
+//! float32 (what gymnasium's spaces and torch give), ints, bools, nested
+//! lists — cast to C-contiguous float64, a single item one dimension short
+//! taken as a batch of one; whole-number arguments of any Python int. A
+//! bad one is an `InputError` naming the argument, with the shape and
+//! dtype expected.
+
+use numpy::{PyArrayDyn, PyArrayMethods, PyReadonlyArrayDyn, PyUntypedArrayMethods};
+use pyo3::exceptions::{PyTypeError, PyValueError};
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+
+use crate::invalid;
+
+/// An argument as float64, and whether it was a single item (one
+/// dimension short of a batch), which a result gives back unbatched.
+pub struct Floats<'py> {
+    pub array: PyReadonlyArrayDyn<'py, f64>,
+    pub single: bool,
+}
+
+/// `value` as a C-contiguous float64 array of `ndim` dimensions, the first
+/// a batch (`shape` says what is expected, as `(B, D)`); a single item of
+/// `ndim - 1` dimensions becomes a batch of one.
+pub fn floats<'py>(
+    value: &Bound<'py, PyAny>,
+    argument: &str,
+    ndim: usize,
+    shape: &str,
+) -> PyResult<Floats<'py>> {
+    // The common case, a C-contiguous float64 batch, as it is.
+    if let Ok(array) = value.cast::<PyArrayDyn<f64>>()
+        && array.ndim() == ndim
+        && array.is_c_contiguous()
+    {
+        return Ok(Floats {
+            array: array.try_readonly()?,
+            single: false,
+        });
+    }
+    let py = value.py();
+    let numpy = py.import("numpy")?;
+    let expected = format!("an array of real numbers of shape {shape} (cast to float64)");
+    let array = numpy.call_method1("asarray", (value,)).map_err(|e| {
+        if e.is_instance_of::<PyValueError>(py) || e.is_instance_of::<PyTypeError>(py) {
+            invalid(format!(
+                "{argument}: expected {expected}, got {} that NumPy cannot make an array of: {e}",
+                type_name(value)
+            ))
+        } else {
+            e
+        }
+    })?;
+    let dtype = array.getattr("dtype")?;
+    let kind: String = dtype.getattr("kind")?.extract()?;
+    if !matches!(kind.as_str(), "b" | "i" | "u" | "f") {
+        return Err(invalid(format!(
+            "{argument}: expected {expected}, got dtype {}",
+            dtype.str()?
+        )));
+    }
+    let given: usize = array.getattr("ndim")?.extract()?;
+    let single = given + 1 == ndim;
+    if given != ndim && !single {
+        let found: Vec<usize> = array.getattr("shape")?.extract()?;
+        return Err(invalid(format!(
+            "{argument}: expected {expected} (or one item of it, one dimension fewer), got shape \
+             {found:?}"
+        )));
+    }
+    let kwargs = PyDict::new(py);
+    kwargs.set_item("dtype", numpy.getattr("float64")?)?;
+    let mut array = numpy.call_method("ascontiguousarray", (array,), Some(&kwargs))?;
+    if single {
+        array = numpy.call_method1("expand_dims", (array, 0))?;
+    }
+    Ok(Floats {
+        array: array.extract()?,
+        single,
+    })
+}
+
+/// A whole-number argument of at least `least` (`None` stays `None`): any
+/// Python int (or NumPy integer); anything else, or less, an `InputError`
+/// naming it.
+pub fn count(
+    value: Option<&Bound<'_, PyAny>>,
+    argument: &str,
+    least: u64,
+) -> PyResult<Option<u64>> {
+    let Some(value) = value.filter(|v| !v.is_none()) else {
+        return Ok(None);
+    };
+    let refused = || {
+        invalid(format!(
+            "{argument}: expected a whole number of at least {least}, got {}",
+            value
+                .repr()
+                .map_or_else(|_| type_name(value), |r| r.to_string())
+        ))
+    };
+    let py = value.py();
+    let numpy_bool = py.import("numpy")?.getattr("bool_")?;
+    if value.is_instance_of::<pyo3::types::PyBool>() || value.is_instance(&numpy_bool)? {
+        return Err(refused());
+    }
+    let index = py
+        .import("operator")?
+        .call_method1("index", (value,))
+        .map_err(|_| refused())?;
+    match index.extract::<i128>() {
+        Ok(n) if n >= i128::from(least) => u64::try_from(n).map(Some).map_err(|_| refused()),
+        _ => Err(refused()),
+    }
+}
+
+/// The name of `value`'s type, for messages.
+fn type_name(value: &Bound<'_, PyAny>) -> String {
+    value
+        .get_type()
+        .name()
+        .map_or_else(|_| "a value".into(), |n| format!("a {n}"))
+}
