@@ -37,7 +37,7 @@ pub fn find_artifacts(
             u32::try_from(r).map_err(|_| crate::invalid(format!("replicate: {r} is too many")))
         })
         .transpose()?;
-    let (stored, named) = records::find(&out, run).map_err(raise)?;
+    let (stored, named) = records::find(&out, run, records::Spelling::Python).map_err(raise)?;
     let variant = match (variant, named.as_deref()) {
         (Some(a), Some(b)) if a != b => {
             return Err(raise(Error::Invalid(format!(
@@ -60,6 +60,7 @@ pub fn find_artifacts(
         replicate,
         &wanted,
         run_dir,
+        records::Spelling::Python,
     )
     .map_err(raise)?;
     let mut files = BTreeMap::new();
@@ -125,6 +126,6 @@ pub fn run_records(out: PathBuf) -> PyResult<Listed> {
 /// JSON (the record's own).
 #[pyfunction]
 pub fn run_record(out: PathBuf, run: &str) -> PyResult<String> {
-    let (stored, _) = records::find(&out, run).map_err(raise)?;
+    let (stored, _) = records::find(&out, run, records::Spelling::Python).map_err(raise)?;
     Ok(serde_json::to_string(&stored.record).expect("records serialize"))
 }

@@ -74,7 +74,14 @@ def test_runs_errors_are_the_cli_messages(runs, alnlab_bin):
         [alnlab_bin, "runs", "show", "no-such-experiment", "--out", runs], capture_output=True, text=True
     )
     assert cli.returncode == 2 == raised.value.exit_code
-    assert f"error: {raised.value}" in cli.stderr.splitlines()
+    # The CLI's message, spelled for Python: what lists the runs is
+    # `alnlab.runs(out=…)`, not the command.
+    python = f'`alnlab.runs(out="{runs}")`'
+    assert python in str(raised.value)
+    spelled = str(raised.value).replace(python, f"`alnlab runs list --out {runs}`")
+    assert f"error: {spelled}" in cli.stderr.splitlines()
+    with pytest.raises(alnlab.InputError, match="differ; choose one with variant= and replicate= "):
+        alnlab.load("quickstart", out=runs)
     with pytest.raises(alnlab.InputError, match="has no variant `nope`; it has: walk, gray, piecewise"):
         alnlab.load("quickstart:nope", out=runs)
     with pytest.raises(alnlab.InputError, match="no `model.aln` artifact; it has .*predictions"):

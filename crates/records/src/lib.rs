@@ -365,10 +365,37 @@ pub fn all(out: &Path) -> Result<(Vec<Stored>, Vec<Unreadable>)> {
     Ok((found, damaged))
 }
 
+/// How a message names what the user can give to choose: the command
+/// line's flags, or the Python package's keywords.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Spelling {
+    Cli,
+    Python,
+}
+
+impl Spelling {
+    /// The arguments that choose a variant's replicate.
+    fn choose(self) -> &'static str {
+        match self {
+            Spelling::Cli => "--variant and --replicate",
+            Spelling::Python => "variant= and replicate=",
+        }
+    }
+
+    /// What lists the runs under `out`.
+    fn list_runs(self, out: &Path) -> String {
+        match self {
+            Spelling::Cli => format!("`alnlab runs list --out {}`", out.display()),
+            Spelling::Python => format!("`alnlab.runs(out=\"{}\")`", out.display()),
+        }
+    }
+}
+
 /// A run, and optionally one of its variants, as the command line names
 /// it: `RUN[:VARIANT]`, RUN an id, a unique prefix of one, an experiment's
-/// name (its latest run) or `NAME~N` (N runs before its latest).
-pub fn find(out: &Path, reference: &str) -> Result<(Stored, Option<String>)> {
+/// name (its latest run) or `NAME~N` (N runs before its latest); messages
+/// spelled for the caller.
+pub fn find(out: &Path, reference: &str, spelling: Spelling) -> Result<(Stored, Option<String>)> {
     let (run, variant) = match reference.rsplit_once(':') {
         Some((run, variant)) => (run, Some(variant.to_string())),
         None => (reference, None),
@@ -430,10 +457,10 @@ pub fn find(out: &Path, reference: &str) -> Result<(Stored, Option<String>)> {
                     ),
                 };
                 return Err(Error::Invalid(format!(
-                    "no run `{run}` under {}: give a run id (see `alnlab runs list --out {}`) \
-                     or an experiment's name ({}){unreadable}",
+                    "no run `{run}` under {}: give a run id (see {}) or an experiment's name \
+                     ({}){unreadable}",
                     out.display(),
-                    out.display(),
+                    spelling.list_runs(out),
                     if experiments.is_empty() {
                         "none recorded".to_string()
                     } else {
@@ -483,6 +510,7 @@ pub fn pick_variant<'a>(
     replicate: Option<u32>,
     roles: &[&str],
     run_dir: &Path,
+    spelling: Spelling,
 ) -> Result<&'a VariantRecord> {
     let run_has = || {
         format!(
@@ -528,9 +556,10 @@ pub fn pick_variant<'a>(
         )),
         [first, rest @ ..] if rest.iter().all(|v| data(v) == data(first)) => Ok(first),
         _ => Err(Error::Invalid(format!(
-            "{}: the data of {} differ; choose one with --variant and --replicate ({})",
+            "{}: the data of {} differ; choose one with {} ({})",
             run_dir.display(),
             describe(&chosen),
+            spelling.choose(),
             run_has()
         ))),
     }

@@ -565,7 +565,14 @@ fn run_artifacts<const N: usize>(
 ) -> Result<(String, [PathBuf; N])> {
     let record = crate::records::read_record(run_dir)?;
     // A variant's first replicate stands for it, as in the report.
-    let chosen = crate::records::pick_variant(&record.variants, variant, Some(1), &roles, run_dir)?;
+    let chosen = crate::records::pick_variant(
+        &record.variants,
+        variant,
+        Some(1),
+        &roles,
+        run_dir,
+        crate::records::Spelling::Cli,
+    )?;
     let mut paths = Vec::with_capacity(N);
     for role in roles {
         let path = chosen

@@ -247,7 +247,14 @@ fn archive_run(
     } else {
         BASE_ROLES.to_vec()
     };
-    let chosen = pick_variant(&record.variants, variant, replicate, &roles, run_dir)?;
+    let chosen = pick_variant(
+        &record.variants,
+        variant,
+        replicate,
+        &roles,
+        run_dir,
+        crate::records::Spelling::Cli,
+    )?;
     let mut sources = Vec::new();
     for &role in &roles {
         let artifact = chosen.artifacts.get(role).ok_or_else(|| {

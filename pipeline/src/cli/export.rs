@@ -207,7 +207,7 @@ fn export_mlflow(
     experiment: Option<String>,
     timeout: Duration,
 ) -> Result<()> {
-    let (stored, _) = records::find(out, reference)?;
+    let (stored, _) = records::find(out, reference, records::Spelling::Cli)?;
     let record = &stored.record;
     let client = mlflow::Client::new(tracking_uri, timeout)?;
     let staging = tempfile::tempdir().map_err(|e| Error::io(&std::env::temp_dir(), e))?;

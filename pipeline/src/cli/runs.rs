@@ -247,7 +247,7 @@ fn signed(x: f64) -> String {
 
 /// `alnlab runs show`.
 fn show(out: &Path, reference: &str, as_json: bool) -> Result<()> {
-    let (stored, variant) = records::find(out, reference)?;
+    let (stored, variant) = records::find(out, reference, records::Spelling::Cli)?;
     let record = &stored.record;
     let variants: Vec<VariantRun> = match &variant {
         Some(name) => vec![VariantRun::of(out, record, name)],
@@ -365,8 +365,8 @@ impl Shown {
 
 /// `alnlab runs diff`.
 fn diff(out: &Path, a: &str, b: &str, shown: Shown, as_json: bool) -> Result<()> {
-    let (sa, va) = records::find(out, a)?;
-    let (sb, vb) = records::find(out, b)?;
+    let (sa, va) = records::find(out, a, records::Spelling::Cli)?;
+    let (sb, vb) = records::find(out, b, records::Spelling::Cli)?;
     let pairs = runs::pairs(
         out,
         (&sa.record, va.as_deref()),
