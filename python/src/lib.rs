@@ -16,21 +16,21 @@ use pyo3::exceptions::PyException;
 use pyo3::prelude::*;
 
 create_exception!(
-    _alnlab,
+    alnlab._alnlab,
     AlnlabError,
     PyException,
     "An error of alnlab's, with the message its CLI prints after `error: `; \
      `exit_code` is the CLI's exit code for it."
 );
 create_exception!(
-    _alnlab,
+    alnlab._alnlab,
     InputError,
     AlnlabError,
     "Input the user can correct: a missing or wrong file, a bad argument \
      (the CLI's exit code 2)."
 );
 create_exception!(
-    _alnlab,
+    alnlab._alnlab,
     DamagedError,
     AlnlabError,
     "Damaged or corrupt stored data: a file failing its own checks (the \

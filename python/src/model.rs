@@ -77,6 +77,7 @@ self_cell::self_cell!(
 pub struct Model {
     loaded: Loaded,
     model_path: PathBuf,
+    codebook_path: PathBuf,
     /// The learned variables' names and quantizers, in the codebook's order.
     names: Vec<String>,
     quantizers: Vec<Quantizer>,
@@ -506,6 +507,7 @@ impl Model {
         Ok(Model {
             loaded,
             model_path,
+            codebook_path,
             names,
             quantizers,
             state,
@@ -547,6 +549,19 @@ impl Model {
             .zip(&self.quantizers)
             .map(|(n, q)| (n.clone(), (q.min, q.max, q.levels)))
             .collect()
+    }
+
+    /// Pickled as its files' paths, loaded again (and checked) on
+    /// unpickling: a model moves between processes on one machine, or
+    /// wherever the same files are.
+    fn __reduce__<'py>(
+        slf: &Bound<'py, Self>,
+    ) -> PyResult<(Bound<'py, PyAny>, (PathBuf, PathBuf))> {
+        let model = slf.get();
+        Ok((
+            slf.get_type().into_any(),
+            (model.model_path.clone(), model.codebook_path.clone()),
+        ))
     }
 
     fn __repr__(&self) -> String {

@@ -3,6 +3,7 @@ roll out as chained predictions, on any thread count, and fail as the CLI
 fails."""
 
 import ast
+import pickle
 import shutil
 import subprocess
 import threading
@@ -203,6 +204,19 @@ def test_bad_arrays_are_refused_with_the_expected_shape(artifacts):
     ]:
         with pytest.raises(alnlab.InputError, match=rf"^{name}: expected an array of real numbers of shape \("):
             call()
+
+
+def test_models_and_errors_pickle(artifacts, tmp_path):
+    model = load(artifacts, "piecewise")
+    again = pickle.loads(pickle.dumps(model))
+    assert repr(again) == repr(model) and again.state_names == model.state_names
+    x = np.zeros((2, len(model.state_names)))
+    u = np.zeros((2, len(model.control_names)))
+    np.testing.assert_array_equal(again.predict(x, u), model.predict(x, u))
+    with pytest.raises(alnlab.InputError) as raised:
+        model.predict(x, u, threads=0)
+    back = pickle.loads(pickle.dumps(raised.value))
+    assert type(back) is alnlab.InputError and str(back) == str(raised.value) and back.exit_code == 2
 
 
 def test_any_array_like_of_real_numbers_predicts_as_float64(artifacts):
