@@ -136,8 +136,8 @@ def main():
     lines.append("")
     lines.append(
         "Trajectory 1 is tables 1 and 2 (one trajectory recorded twice), 2 is table 3; a held-out "
-        "figure is fitted on the other trajectory. Gains and friction: the fit on trajectory 2 / on "
-        "trajectory 1 for the gain, their mean for the rest. The URDF's q̈: forward dynamics under "
+        "figure is fitted on the other trajectory. Gains and friction: the fit on trajectory 1 / on "
+        "trajectory 2 for the gain, their mean for the rest. The URDF's q̈: forward dynamics under "
         "the recorded torques, against the recorded velocities' central differences."
     )
     text = "\n".join(lines)
