@@ -94,8 +94,11 @@ pub fn render(record: &RunRecord, dir: &Path) -> Result<PathBuf> {
     // split here).
     let archived_pairs = record.dataset.is_some() && record.tables.is_empty();
     let mut splits: Vec<(&str, &str)> = Vec::new();
+    let mut folds = false;
     for v in record.variants.iter().filter(|v| v.replicate == 0) {
-        splits.push((&v.name, resolved(v)?.stride.split.describe()));
+        let split = resolved(v)?.stride.split;
+        folds |= split == alnlab_stride::Split::ByTrajectory;
+        splits.push((&v.name, split.describe()));
     }
     let split = match splits.as_slice() {
         _ if archived_pairs => None,
@@ -137,6 +140,7 @@ pub fn render(record: &RunRecord, dir: &Path) -> Result<PathBuf> {
             .map(|t| (t.file.clone(), t.sha256.clone()))
             .collect(),
         split,
+        folds: folds && !archived_pairs,
     };
     report::render(&run, dir)
 }

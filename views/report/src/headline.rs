@@ -310,7 +310,7 @@ pub(super) fn first_screen(
     let _ = writeln!(
         md,
         "Errors: mean over a model's variables of its mean error in levels on the {held_out} \
-         held-out test rows (of {test}{also}); {intervals}; a difference is paired — the same \
+         held-out test rows{first_fold} (of {test}{also}); {intervals}; a difference is paired — the same \
          rows and variables, {paired}.{baselines} Models: persistence predicts no change; \
          linear is a robust linear fit of the change{others}; simulator@k/frame re-steps each \
          frame from its logged state with k integration steps (exact at the scene's own step \
@@ -345,6 +345,11 @@ pub(super) fn first_screen(
         nominal = if best.variant.info.plant {
             "; here the data come from a plant, and the simulator is the scene as written — the \
              nominal model a user has — which knows nothing of how the plant departs from it"
+        } else {
+            ""
+        },
+        first_fold = if run.folds {
+            " of the first fold (each fold tests its own trajectories)"
         } else {
             ""
         },
@@ -426,6 +431,10 @@ fn abstract_(
         if replicates == 1 { "" } else { "s" },
         if variants.len() == 1 { "" } else { " each" },
         match (&run.dataset, &run.recording) {
+            _ if run.folds => {
+                "each tests one fold of the trajectories, trained on the others, with a new seed \
+                 for the model; the folds' test rows differ in number"
+            }
             (Some(_), _) if !run.tables.is_empty() => {
                 "the same archived recordings; a new seed for the model and, where it is drawn at \
                  random, the split"
@@ -568,9 +577,10 @@ fn abstract_(
     if let Some(all) = batched {
         let _ = write!(
             md,
-            " All {} test states at once, it takes {} a state (no simulator was timed all at \
+            " All {} test states at once{}, it takes {} a state (no simulator was timed all at \
              once).",
             all.states,
+            if run.folds { " (the first fold's)" } else { "" },
             all.spread()
         );
     }

@@ -77,6 +77,9 @@ pub struct RunInfo {
     /// How the rows were held out of training, in words (none for an
     /// archived dataset, whose record does not say).
     pub split: Option<String>,
+    /// Whether the replicates are folds of held-out trajectories (each
+    /// tests its own rows), not re-draws of one split.
+    pub folds: bool,
 }
 
 /// The paper's §4.6 results table (Armstrong, Supynuk & Green, "Adaptive
