@@ -197,10 +197,17 @@ pub(super) fn difference(i: &Interval) -> String {
 /// The verdict word of the ALN against another model, from the interval of
 /// their paired difference in error.
 /// The label of a variant whose models read the current accelerations.
-pub(super) fn reads_more(variant: &str) -> String {
+pub(super) fn reads_more(variants: &[&str]) -> String {
+    let named: Vec<String> = variants.iter().map(|v| format!("`{v}`")).collect();
+    let (who, learn, their) = match named.as_slice() {
+        [rest @ .., last] if !rest.is_empty() => {
+            (format!("{} and {last}", rest.join(", ")), "learn", "their")
+        }
+        _ => (named.concat(), "learns", "its"),
+    };
     format!(
-        "**Reads more than a controller knows:** `{variant}` learns the accelerations (`qdd`), so \
-         its learned models and hybrids' corrections can read the frame's own, which the torque \
+        "**Reads more than a controller knows:** {who} {learn} the accelerations (`qdd`), so \
+         {their} learned models and hybrids' corrections can read the frame's own, which the torque \
          being applied produces; a controller choosing that torque does not know them, so as \
          they stand these are not forward models a planner can use (`[quantize] never_learned = \
          [\"qdd\"]` makes one)."
@@ -372,7 +379,7 @@ fn variant_findings(md: &mut String, v: &Loaded) {
     super::replicates::finding(md, v);
     let _ = writeln!(md, "  - Model: {}.", v.description);
     if v.reads_accelerations() {
-        let _ = writeln!(md, "  - {}", reads_more(&v.info.name));
+        let _ = writeln!(md, "  - {}", reads_more(&[&v.info.name]));
     }
 
     let batched = v.all_at_once(ModelId::Aln);

@@ -380,8 +380,10 @@ pub(super) fn first_screen(
         let name = e.variant.info.name.as_str();
         if e.variant.reads_accelerations() && !shown.contains(&name) {
             shown.push(name);
-            let _ = writeln!(md, "{}\n", super::findings::reads_more(name));
         }
+    }
+    if !shown.is_empty() {
+        let _ = writeln!(md, "{}\n", super::findings::reads_more(&shown));
     }
     super::plan::at_real_time(md, variants);
     for v in variants {
