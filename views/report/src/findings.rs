@@ -207,10 +207,10 @@ pub(super) fn reads_more(variants: &[&str]) -> String {
     };
     format!(
         "**Reads more than a controller knows:** {who} {learn} the accelerations (`qdd`), so \
-         {their} learned models and hybrids' corrections can read the frame's own, which the torque \
-         being applied produces; a controller choosing that torque does not know them, so as \
-         they stand these are not forward models a planner can use (`[quantize] never_learned = \
-         [\"qdd\"]` makes one)."
+         {their} one-step figures come from models that can read the frame's own, which the \
+         torque being applied produces — more than a controller choosing that torque knows; a \
+         planner must feed them its own last prediction instead, and they err more so \
+         (`[quantize] never_learned = [\"qdd\"]` makes models that read none)."
     )
 }
 

@@ -310,7 +310,7 @@ pub(super) fn first_screen(
     let _ = writeln!(
         md,
         "Errors: mean over a model's variables of its mean error in levels on the {held_out} \
-         held-out test rows{first_fold} (of {test}{also}); {intervals}; a difference is paired — the same \
+         held-out test rows (of {test}{also}){first_fold}; {intervals}; a difference is paired — the same \
          rows and variables, {paired}.{baselines} Models: persistence predicts no change; \
          linear is a robust linear fit of the change{others}; simulator@k/frame re-steps each \
          frame from its logged state with k integration steps (exact at the scene's own step \
@@ -349,7 +349,7 @@ pub(super) fn first_screen(
             ""
         },
         first_fold = if run.folds {
-            " of the first fold (each fold tests its own trajectories)"
+            " of the first fold, each fold testing its own trajectories"
         } else {
             ""
         },
