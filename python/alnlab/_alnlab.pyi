@@ -1,10 +1,24 @@
 """Type stubs of alnlab's native core (python/src)."""
 
 import os
-from typing import SupportsIndex
+from typing import SupportsIndex, final
+
+from typing_extensions import Self
 
 import numpy as np
 import numpy.typing as npt
+
+__all__ = [
+    "AlnlabError",
+    "InputError",
+    "DamagedError",
+    "Model",
+    "Scene",
+    "reference_rollout_ns",
+    "find_artifacts",
+    "run_record",
+    "run_records",
+]
 
 class AlnlabError(Exception):
     """An error of alnlab's, with the message its CLI prints after ``error: ``."""
@@ -17,13 +31,14 @@ class InputError(AlnlabError):
 class DamagedError(AlnlabError):
     """Damaged or corrupt stored data (the CLI's exit code 1)."""
 
+@final
 class Model:
     """A trained model of a run: predicts the next frame of its state
     variables from the current one and the controls held over the frame.
     ``model_path`` is a run's ``model.aln``, or its test stage's baselines
     ``linear.aln`` and ``boosted.parquet``."""
 
-    def __init__(self, model_path: str | os.PathLike[str], codebook_path: str | os.PathLike[str]) -> None: ...
+    def __new__(cls, model_path: str | os.PathLike[str], codebook_path: str | os.PathLike[str]) -> Self: ...
     @property
     def kind(self) -> str:
         """``piecewise-linear`` (the robust linear fit is one, of one piece
@@ -59,12 +74,13 @@ class Model:
         """The states over H frames (B×(H+1)×D) from ``x0`` (B×D) under ``controls`` (B×H×U);
         one state (D) under H×U controls gives one path ((H+1)×D)."""
 
+@final
 class Scene:
     """A scene of a run, rebuilt from its trajectory log, ready to step."""
 
-    def __init__(
-        self, trajectory_path: str | os.PathLike[str], scene: str | None = None, *, plant: bool = False
-    ) -> None: ...
+    def __new__(
+        cls, trajectory_path: str | os.PathLike[str], scene: str | None = None, *, plant: bool = False
+    ) -> Self: ...
     @property
     def name(self) -> str:
         """The scene's name."""

@@ -39,8 +39,9 @@ const QUICKSTART_LANE: &[Step] = &[
         quickstart_interop,
     ),
     (
-        "the Python package: built into the suite's environment, tested by pytest on the \
-         quickstart's models, its rollout benchmark and MPC example run once",
+        "the Python package: built into the suite's environment, its stubs checked by mypy's \
+         stubtest, tested by pytest on the quickstart's models, its rollout benchmark and MPC \
+         example run once",
         python_package,
     ),
     (
@@ -301,6 +302,13 @@ fn python_package(suite: &Suite) -> Result<(), String> {
             .env("ALNLAB_BIN", alnlab_bin());
         suite.run(command)
     };
+    // The stubs say what the native module is; mypy's cache kept out of
+    // the checkout.
+    suite.run(
+        Command::new(&suite.python)
+            .args(["-m", "mypy.stubtest", "alnlab._alnlab"])
+            .env("MYPY_CACHE_DIR", suite.work.join("mypy-cache")),
+    )?;
     python(Command::new(&suite.python).args([
         "-m",
         "pytest",
