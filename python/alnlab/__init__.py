@@ -40,6 +40,9 @@ What is here:
   (``predictions``, ``summary``, ``pairs``, …), its bytes checked against
   the record. Tables need pyarrow (``pip install alnlab[tables]``);
   ``pandas=True`` gives a pandas DataFrame.
+- ``alnlab.envs`` (``pip install alnlab[gym]``): ``SceneEnv`` and
+  ``ModelEnv``, the run's scene and its model as gymnasium environments of
+  one observation and action space, so a control loop runs on either.
 - ``AlnlabError`` and its kinds ``InputError`` (what the user can correct:
   the CLI's exit code 2) and ``DamagedError`` (damaged data: exit code 1),
   whose messages are the CLI's.
