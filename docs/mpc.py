@@ -30,23 +30,47 @@ import alnlab
 TARGETS = {"pitch.2": 0.6, "pitch.3": -0.6}
 
 
+def at_least(least: int):
+    """An argparse type: a whole number of at least `least`."""
+
+    def whole(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected a whole number, got {text!r}") from None
+        if value < least:
+            raise argparse.ArgumentTypeError(f"expected at least {least}, got {value}")
+        return value
+
+    return whole
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--run", default="quickstart", help="a run holding the worm (default: quickstart)")
     parser.add_argument("--out", default="runs", help="its runs folder (default: runs)")
     parser.add_argument("--variant", default="piecewise", help="the model's variant (default: piecewise)")
-    parser.add_argument("--candidates", type=int, default=256, help="sequences a decision (default: 256)")
-    parser.add_argument("--horizon", type=int, default=10, help="frames a sequence (default: 10)")
-    parser.add_argument("--decisions", type=int, default=100, help="frames of closed loop (default: 100)")
-    parser.add_argument("--threads", type=int, default=1, help="threads, the same for both (default: 1)")
+    parser.add_argument("--candidates", type=at_least(1), default=256, help="sequences a decision (default: 256)")
+    parser.add_argument("--horizon", type=at_least(1), default=10, help="frames a sequence (default: 10)")
+    parser.add_argument("--decisions", type=at_least(1), default=100, help="frames of closed loop (default: 100)")
+    parser.add_argument("--threads", type=at_least(1), default=1, help="threads, the same for both (default: 1)")
     parser.add_argument("--seed", type=int, default=0, help="the candidates' random seed (default: 0)")
     parser.add_argument(
         "--coarse", default="2", help="fewer steps a frame for the simulator too, comma-separated (default: 2)"
     )
     args = parser.parse_args()
+    try:
+        coarse = [int(k) for k in args.coarse.split(",") if k.strip()]
+    except ValueError:
+        parser.error(f"--coarse: expected whole numbers, comma-separated, got {args.coarse!r}")
+    if any(k < 1 for k in coarse):
+        parser.error(f"--coarse: expected steps of at least 1 a frame, got {args.coarse!r}")
+    try:
+        model = alnlab.load(args.run, variant=args.variant, out=args.out)
+        scene = alnlab.scene(args.run, variant=args.variant, out=args.out)
+    except alnlab.AlnlabError as e:
+        parser.error(str(e))
 
-    model = alnlab.load(args.run, variant=args.variant, out=args.out)
-    scene = alnlab.scene(args.run, variant=args.variant, out=args.out)
     if model.control_names != scene.control_names:
         parser.error(f"the model's controls {model.control_names} are not the scene's {scene.control_names}")
     ranges = dict(model.ranges)
@@ -88,7 +112,7 @@ def main() -> int:
         f"({scene.steps_per_frame} steps a frame), bend, random shooting of {args.candidates} x "
         f"{args.horizon} frames, {args.decisions} decisions, {args.threads} thread(s)"
     )
-    steps = [scene.steps_per_frame] + [int(k) for k in args.coarse.split(",") if k]
+    steps = [scene.steps_per_frame] + coarse
     forwards = [("aln", aln)] + [(f"simulator@{k}", simulator(k)) for k in steps] + [("zero", None)]
     for name, forward in forwards:
         rng = np.random.default_rng(args.seed)
