@@ -39,7 +39,7 @@ What is here:
   ``table(run, name)``: a stage's table by its artifact name
   (``predictions``, ``summary``, ``pairs``, …), its bytes checked against
   the record. Tables need pyarrow (``pip install alnlab[tables]``);
-  ``pandas=True`` gives a pandas DataFrame.
+  ``pandas=True`` gives a pandas DataFrame (``pip install alnlab[pandas]``).
 - ``alnlab.envs`` (``pip install alnlab[gym]``): ``SceneEnv`` and
   ``ModelEnv``, the run's scene and its model as gymnasium environments of
   one observation and action space, so a control loop runs on either.

@@ -115,6 +115,15 @@ def _pyarrow():
     return pyarrow
 
 
+def _as_pandas(table: pyarrow.Table) -> pandas.DataFrame:
+    """`table` as a pandas DataFrame; a clear error where pandas is missing."""
+    try:
+        import pandas  # noqa: F401
+    except ImportError as e:
+        raise ImportError("pandas=True needs pandas: pip install 'alnlab[pandas]'") from e
+    return table.to_pandas()
+
+
 def runs(out: PathLike = "runs", *, pandas: bool = False) -> pyarrow.Table | pandas.DataFrame:
     """Every run recorded under ``out``, oldest first: a row per variant and
     replicate with the run's ``id``, ``experiment``, ``started``,
@@ -156,7 +165,7 @@ def runs(out: PathLike = "runs", *, pandas: bool = False) -> pyarrow.Table | pan
 
     # Every row with every column, null where a run lacks it.
     found = pa.table({c: pa.array([row.get(c) for row in rows], type=type_of(c)) for c in columns})
-    return found.to_pandas() if pandas else found
+    return _as_pandas(found) if pandas else found
 
 
 def table(
@@ -191,4 +200,4 @@ def table(
     if not path.endswith(".parquet"):
         raise InputError(f"{path}: `{name}` is not a table (Parquet); open it with its own reader")
     found = pa.parquet.read_table(path)
-    return found.to_pandas() if pandas else found
+    return _as_pandas(found) if pandas else found
