@@ -59,10 +59,13 @@ class Model:
         *,
         levels: bool = False,
         threads: SupportsIndex | None = None,
+        out: npt.NDArray[np.float64] | npt.NDArray[np.uint16] | None = None,
     ) -> npt.NDArray[np.float64] | npt.NDArray[np.uint16]:
         """The next states (B×D) from ``states`` (B×D) under ``controls`` (B×U);
         any array-like of real numbers (cast to float64); one state (D) and
-        its controls (U) give one next state (D)."""
+        its controls (U) give one next state (D). With ``out`` (a writeable
+        C-contiguous array of the result's shape and dtype) the result is
+        written there, no array allocated, and ``out`` returned."""
     def rollout(
         self,
         x0: npt.ArrayLike,
@@ -70,6 +73,7 @@ class Model:
         *,
         levels: bool = False,
         threads: SupportsIndex | None = None,
+        out: npt.NDArray[np.float64] | npt.NDArray[np.uint16] | None = None,
     ) -> npt.NDArray[np.float64] | npt.NDArray[np.uint16]:
         """The states over H frames (B×(H+1)×D) from ``x0`` (B×D) under ``controls`` (B×H×U);
         one state (D) under H×U controls gives one path ((H+1)×D)."""

@@ -19,7 +19,10 @@ use alnlab_codes::Entry;
 use alnlab_codes::codebook::{Quantizer, is_control};
 use alnlab_common::Error;
 use numpy::ndarray::{Array2, Array3, ArrayView2, ArrayView3, Axis};
-use numpy::{IntoPyArray, PyReadonlyArray2, PyReadonlyArray3, PyReadonlyArrayDyn};
+use numpy::{
+    IntoPyArray, PyArrayMethods, PyReadonlyArray2, PyReadonlyArray3, PyReadonlyArrayDyn,
+    PyUntypedArrayMethods,
+};
 use pyo3::prelude::*;
 use rayon::prelude::*;
 
@@ -195,6 +198,56 @@ impl Model {
     }
 
     /// `values` (state variables last) as their levels.
+    /// Writes `values` (of `shape`, its first dimension dropped where the
+    /// call was given one item) into `out` — a writeable C-contiguous
+    /// array of that shape, float64 or, with `levels`, uint16 — and
+    /// returns it; an `InputError` naming `out` otherwise.
+    fn fill<'py>(
+        &self,
+        out: &Bound<'py, PyAny>,
+        values: &[f64],
+        shape: &[usize],
+        single: bool,
+        levels: bool,
+    ) -> PyResult<Bound<'py, PyAny>> {
+        let shape = if single { &shape[1..] } else { shape };
+        let refused = |got: String| {
+            invalid(format!(
+                "out: expected a writeable C-contiguous {} array of shape {shape:?}, got {got}",
+                if levels { "uint16" } else { "float64" }
+            ))
+        };
+        let described = || {
+            let dtype = out.getattr("dtype").and_then(|d| Ok(d.str()?.to_string()));
+            let found = out.getattr("shape").and_then(|s| Ok(s.str()?.to_string()));
+            match (dtype, found) {
+                (Ok(d), Ok(s)) => format!("dtype {d}, shape {s}"),
+                _ => out
+                    .get_type()
+                    .name()
+                    .map_or("a value".into(), |n| format!("a {n}")),
+            }
+        };
+        macro_rules! write {
+            ($t:ty, $items:expr) => {{
+                let array = out
+                    .cast::<numpy::PyArrayDyn<$t>>()
+                    .map_err(|_| refused(described()))?;
+                if array.shape() != shape || !array.is_c_contiguous() {
+                    return Err(refused(described()));
+                }
+                let mut view = array.try_readwrite().map_err(|_| refused(described()))?;
+                let slice = view.as_slice_mut().map_err(|_| refused(described()))?;
+                slice.copy_from_slice($items);
+            }};
+        }
+        match levels {
+            true => write!(u16, &self.levels(values)),
+            false => write!(f64, values),
+        }
+        Ok(out.clone())
+    }
+
     fn levels(&self, values: &[f64]) -> Vec<u16> {
         let d = self.state.len();
         values
@@ -578,7 +631,8 @@ impl Model {
     /// as values or, with `levels`, their levels (uint16); any array-like
     /// of real numbers, one state (D) and its controls (U) giving one next
     /// state (D).
-    #[pyo3(signature = (states, controls, *, levels = false, threads = None))]
+    #[pyo3(signature = (states, controls, *, levels = false, threads = None, out = None))]
+    #[allow(clippy::too_many_arguments)]
     fn predict<'py>(
         &self,
         py: Python<'py>,
@@ -586,6 +640,7 @@ impl Model {
         controls: &Bound<'py, PyAny>,
         levels: bool,
         threads: Option<&Bound<'py, PyAny>>,
+        out: Option<&Bound<'py, PyAny>>,
     ) -> PyResult<Bound<'py, PyAny>> {
         let d = self.state.len();
         let states = arrays::floats(states, "states", 2, &format!("(B, {d})"))?;
@@ -608,8 +663,11 @@ impl Model {
             .flat_map(|r| &r[d..])
             .copied()
             .collect();
-        let out = array(py, self, next, &[x0.len() / d.max(1), d], levels)?;
-        unbatched(out, states.single)
+        let shape = [x0.len() / d.max(1), d];
+        match out {
+            Some(out) => self.fill(out, &next, &shape, states.single, levels),
+            None => unbatched(array(py, self, next, &shape, levels)?, states.single),
+        }
     }
 
     /// The states over `H` frames (B×(H+1)×D, the first `x0`) from `x0`
@@ -617,7 +675,8 @@ impl Model {
     /// prediction; as values or, with `levels`, their levels (uint16). One
     /// state (D) under H frames of controls (H×U) gives one path
     /// ((H+1)×D).
-    #[pyo3(signature = (x0, controls, *, levels = false, threads = None))]
+    #[pyo3(signature = (x0, controls, *, levels = false, threads = None, out = None))]
+    #[allow(clippy::too_many_arguments)]
     fn rollout<'py>(
         &self,
         py: Python<'py>,
@@ -625,6 +684,7 @@ impl Model {
         controls: &Bound<'py, PyAny>,
         levels: bool,
         threads: Option<&Bound<'py, PyAny>>,
+        out: Option<&Bound<'py, PyAny>>,
     ) -> PyResult<Bound<'py, PyAny>> {
         let x0 = arrays::floats(x0, "x0", 2, &format!("(B, {})", self.state.len()))?;
         let controls = arrays::floats(
@@ -641,14 +701,11 @@ impl Model {
         let x0: Vec<f64> = x0.iter().copied().collect();
         let c: Vec<f64> = c.iter().copied().collect();
         let rolled = py.detach(|| self.roll(&x0, &c, horizon, threads))?;
-        let out = array(
-            py,
-            self,
-            rolled,
-            &[b, horizon + 1, self.state.len()],
-            levels,
-        )?;
-        unbatched(out, single)
+        let shape = [b, horizon + 1, self.state.len()];
+        match out {
+            Some(out) => self.fill(out, &rolled, &shape, single, levels),
+            None => unbatched(array(py, self, rolled, &shape, levels)?, single),
+        }
     }
 }
 

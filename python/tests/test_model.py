@@ -241,6 +241,21 @@ def test_any_array_like_of_real_numbers_predicts_as_float64(artifacts):
     path = model.rollout(x[3], np.repeat(u[3][None, :], 4, axis=0))
     assert path.shape == (5, len(model.state_names))
     np.testing.assert_array_equal(path, model.rollout(x[3:4], np.repeat(u[3:4, None, :], 4, axis=1))[0])
+    # Into the caller's arrays, allocating none.
+    out = np.empty_like(want)
+    assert model.predict(x, u, threads=1, out=out) is out
+    np.testing.assert_array_equal(out, want)
+    one_out = np.empty(len(model.state_names))
+    model.predict(x[3], u[3], out=one_out)
+    np.testing.assert_array_equal(one_out, want[3])
+    levels = np.empty(want.shape, dtype=np.uint16)
+    np.testing.assert_array_equal(model.predict(x, u, levels=True, out=levels), model.predict(x, u, levels=True))
+    paths = np.empty((8, 4, len(model.state_names)))
+    controls = np.repeat(u[:, None, :], 3, axis=1)
+    np.testing.assert_array_equal(model.rollout(x, controls, out=paths), model.rollout(x, controls))
+    for bad in [np.empty((8, 2)), np.empty(want.shape, dtype=np.float32), np.empty(want.shape)[:, ::-1], [0.0] * 8]:
+        with pytest.raises(alnlab.InputError, match=r"^out: expected a writeable C-contiguous float64 array of shape \[8, "):
+            model.predict(x, u, out=bad)
     # Any Python int for a count, NumPy's too.
     np.testing.assert_array_equal(model.predict(x, u, threads=np.int64(2)), want)
 
