@@ -5,7 +5,9 @@ use std::path::Path;
 
 use alnlab::records::RunRecord;
 
-use crate::common::{MANIFEST, alnlab, run_ok, stderr, write_manifest};
+use crate::common::{
+    MANIFEST, UR5_JOINTS, alnlab, run_ok, stderr, ur5_table_header, write_manifest,
+};
 
 /// [`MANIFEST`] with its simulate and stride tables replaced by `[data]`.
 fn from_dataset(reference: &str, keep_quantize: bool) -> String {
@@ -393,23 +395,10 @@ fn the_committed_dataset_verifies_and_runs() {
     );
 }
 
-/// The UR5's joints, as its URDF names them.
-const UR5_JOINTS: [&str; 6] = [
-    "shoulder_pan_joint",
-    "shoulder_lift_joint",
-    "elbow_joint",
-    "wrist_1_joint",
-    "wrist_2_joint",
-    "wrist_3_joint",
-];
-
 /// A CSV table of `seconds` of the UR5 at 100 Hz: a slow swing of every
 /// joint (phase `phase`), its efforts constant.
 fn swing(path: &Path, seconds: f64, phase: f64) {
-    let mut text = String::from("t");
-    for j in UR5_JOINTS {
-        text += &format!(",{j}.position,{j}.velocity,{j}.effort");
-    }
+    let mut text = ur5_table_header();
     for k in 0..(seconds * 100.0) as usize {
         let t = k as f64 * 0.01;
         text += &format!("\n{t}");

@@ -13,17 +13,9 @@ use std::path::Path;
 
 use mcap::records::MessageHeader;
 
-use crate::common::{alnlab, case, check_all, stderr, write_manifest};
-
-/// The UR5's moving joints, as its URDF names them.
-const JOINTS: [&str; 6] = [
-    "shoulder_pan_joint",
-    "shoulder_lift_joint",
-    "elbow_joint",
-    "wrist_1_joint",
-    "wrist_2_joint",
-    "wrist_3_joint",
-];
+use crate::common::{
+    UR5_JOINTS as JOINTS, alnlab, case, check_all, stderr, ur5_table_header, write_manifest,
+};
 
 /// One JointState message: its stamp (ns) and joint names.
 struct Message {
@@ -114,11 +106,7 @@ fn steady(seconds: f64) -> Vec<Message> {
 /// `messages` as a CSV table: a time column `t` (s from the first), then
 /// each joint's `<joint>.position`, `.velocity` and `.effort`.
 fn table(path: &Path, messages: &[Message]) {
-    let mut text = String::from("t");
-    for j in JOINTS {
-        text += &format!(",{j}.position,{j}.velocity,{j}.effort");
-    }
-    text += "\n";
+    let mut text = ur5_table_header() + "\n";
     for m in messages {
         text += &format!("{}", (m.stamp_ns - messages[0].stamp_ns) as f64 * 1e-9);
         for j in 0..JOINTS.len() {

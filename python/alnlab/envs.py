@@ -90,9 +90,11 @@ class _Env(gymnasium.Env[npt.NDArray[np.float64], npt.NDArray[np.float64]]):
         self.max_steps = max_steps
         self._reward = reward
         self._steps = 0
-        self._frame = 0
+        self._observation = self._logged_observations[0].copy()
 
-    def _start(self, seed: int | None, options: dict[str, Any] | None) -> int:
+    def reset(
+        self, *, seed: int | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[npt.NDArray[np.float64], dict[str, Any]]:
         super().reset(seed=seed)
         frames = len(self._logged_observations)
         frame = (options or {}).get("frame")
@@ -101,8 +103,12 @@ class _Env(gymnasium.Env[npt.NDArray[np.float64], npt.NDArray[np.float64]]):
         elif isinstance(frame, bool) or not isinstance(frame, (int, np.integer)) or not 0 <= frame < frames:
             raise InputError(f"options['frame']: expected a logged frame, 0 to {frames - 1}, got {frame!r}")
         self._steps = 0
-        self._frame = int(frame)
-        return self._frame
+        self._observation = self._logged_observations[frame].copy()
+        self._begin(int(frame))
+        return self._observation.copy(), {"frame": int(frame)}
+
+    def _begin(self, frame: int) -> None:
+        """What else an environment starts from at a logged frame."""
 
     def _action(self, action: npt.ArrayLike) -> npt.NDArray[np.float64]:
         a = np.asarray(action, dtype=np.float64)
@@ -138,15 +144,9 @@ class SceneEnv(_Env):
         if plant:
             self._scene = scene(run, variant=variant, replicate=replicate, out=out, plant=True)
         self._state = self._logged_states[0].copy()
-        self._observation = self._logged_observations[0].copy()
 
-    def reset(
-        self, *, seed: int | None = None, options: dict[str, Any] | None = None
-    ) -> tuple[npt.NDArray[np.float64], dict[str, Any]]:
-        frame = self._start(seed, options)
+    def _begin(self, frame: int) -> None:
         self._state = self._logged_states[frame].copy()
-        self._observation = self._logged_observations[frame].copy()
-        return self._observation.copy(), {"frame": frame}
 
     def step(
         self, action: npt.ArrayLike
@@ -174,14 +174,6 @@ class ModelEnv(_Env):
         reward: Reward | None = None,
     ) -> None:
         super().__init__(run, variant=variant, replicate=replicate, out=out, max_steps=max_steps, reward=reward)
-        self._observation = self._logged_observations[0].copy()
-
-    def reset(
-        self, *, seed: int | None = None, options: dict[str, Any] | None = None
-    ) -> tuple[npt.NDArray[np.float64], dict[str, Any]]:
-        frame = self._start(seed, options)
-        self._observation = self._logged_observations[frame].copy()
-        return self._observation.copy(), {"frame": frame}
 
     def step(
         self, action: npt.ArrayLike

@@ -5,6 +5,7 @@
 //! bad one is an `InputError` naming the argument, with the shape and
 //! dtype expected.
 
+use numpy::ndarray::{ArrayView, Dimension};
 use numpy::{PyArrayDyn, PyArrayMethods, PyReadonlyArrayDyn, PyUntypedArrayMethods};
 use pyo3::exceptions::{PyTypeError, PyValueError};
 use pyo3::prelude::*;
@@ -78,6 +79,15 @@ pub fn floats<'py>(
         array: array.extract()?,
         single,
     })
+}
+
+/// A converted argument's `D` dimensions (checked by [`floats`]).
+pub fn view<'a, D: Dimension>(
+    a: &'a PyReadonlyArrayDyn<'_, f64>,
+) -> PyResult<ArrayView<'a, f64, D>> {
+    a.as_array()
+        .into_dimensionality()
+        .map_err(|e| invalid(format!("internal shape error: {e}")))
 }
 
 /// A whole-number argument of at least `least` (`None` stays `None`): any

@@ -18,10 +18,9 @@ use alnlab_aln::runtime::{Runtime, Trained};
 use alnlab_codes::Entry;
 use alnlab_codes::codebook::{Quantizer, is_control};
 use alnlab_common::Error;
-use numpy::ndarray::{Array2, Array3, ArrayView2, ArrayView3, Axis};
+use numpy::ndarray::{Array2, Array3, ArrayView2, ArrayView3, Axis, Ix2, Ix3};
 use numpy::{
-    IntoPyArray, PyArrayMethods, PyReadonlyArray2, PyReadonlyArray3, PyReadonlyArrayDyn,
-    PyUntypedArrayMethods,
+    IntoPyArray, PyArrayMethods, PyReadonlyArray2, PyReadonlyArray3, PyUntypedArrayMethods,
 };
 use pyo3::prelude::*;
 use rayon::prelude::*;
@@ -651,9 +650,9 @@ impl Model {
             &format!("(B, {})", self.controls.len()),
         )?;
         let threads = thread_count(threads)?;
-        let x0 = two(&states.array)?;
+        let x0 = arrays::view::<Ix2>(&states.array)?;
         // One frame of controls: B×1×U.
-        let c3 = two(&controls.array)?.insert_axis(Axis(1));
+        let c3 = arrays::view::<Ix2>(&controls.array)?.insert_axis(Axis(1));
         self.check(&x0, &c3, false)?;
         let x0: Vec<f64> = x0.iter().copied().collect();
         let c: Vec<f64> = c3.iter().copied().collect();
@@ -695,7 +694,10 @@ impl Model {
         )?;
         let threads = thread_count(threads)?;
         let single = x0.single;
-        let (x0, c) = (two(&x0.array)?, three(&controls.array)?);
+        let (x0, c) = (
+            arrays::view::<Ix2>(&x0.array)?,
+            arrays::view::<Ix3>(&controls.array)?,
+        );
         self.check(&x0, &c, true)?;
         let (b, horizon, _) = c.dim();
         let x0: Vec<f64> = x0.iter().copied().collect();
@@ -707,20 +709,6 @@ impl Model {
             None => unbatched(array(py, self, rolled, &shape, levels)?, single),
         }
     }
-}
-
-/// A converted argument's two dimensions.
-fn two<'a>(a: &'a PyReadonlyArrayDyn<'_, f64>) -> PyResult<ArrayView2<'a, f64>> {
-    a.as_array()
-        .into_dimensionality()
-        .map_err(|e| invalid(format!("internal shape error: {e}")))
-}
-
-/// A converted argument's three dimensions.
-fn three<'a>(a: &'a PyReadonlyArrayDyn<'_, f64>) -> PyResult<ArrayView3<'a, f64>> {
-    a.as_array()
-        .into_dimensionality()
-        .map_err(|e| invalid(format!("internal shape error: {e}")))
 }
 
 /// `out`'s one item where the call was given one item, not a batch.

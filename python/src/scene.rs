@@ -12,7 +12,7 @@ use alnlab_physics::replay::SceneReplay;
 use alnlab_physics::runner::Control;
 use alnlab_physics::{Prepared, Runner, state_from_generalized};
 use nalgebra::Vector3;
-use numpy::ndarray::{Array1, Array2, ArrayView2};
+use numpy::ndarray::{Array1, Array2, ArrayView2, Ix2};
 use numpy::{IntoPyArray, PyArray1, PyArray2};
 use pyo3::prelude::*;
 use rayon::prelude::*;
@@ -294,7 +294,10 @@ impl Scene {
         let steps = arrays::count(steps, "steps", 1)?;
         let threads = thread_count(threads)?;
         let single = states.single;
-        let (x, c) = (two(&states.array)?, two(&controls.array)?);
+        let (x, c) = (
+            arrays::view::<Ix2>(&states.array)?,
+            arrays::view::<Ix2>(&controls.array)?,
+        );
         let b = x.nrows();
         if x.ncols() != s {
             return Err(invalid(format!(
@@ -398,11 +401,4 @@ impl Scene {
             .into_any();
         Ok((unbatched(states, single)?, unbatched(variables, single)?))
     }
-}
-
-/// A converted argument's two dimensions.
-fn two<'a>(a: &'a numpy::PyReadonlyArrayDyn<'_, f64>) -> PyResult<ArrayView2<'a, f64>> {
-    a.as_array()
-        .into_dimensionality()
-        .map_err(|e| invalid(format!("internal shape error: {e}")))
 }

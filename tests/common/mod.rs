@@ -67,6 +67,27 @@ epochs = 2
 run_seconds = 0.000001
 "#;
 
+/// The UR5's moving joints, as its URDF names them.
+pub const UR5_JOINTS: [&str; 6] = [
+    "shoulder_pan_joint",
+    "shoulder_lift_joint",
+    "elbow_joint",
+    "wrist_1_joint",
+    "wrist_2_joint",
+    "wrist_3_joint",
+];
+
+/// The header of a CSV table of the UR5's samples: a time column `t`,
+/// then each joint's position, velocity and effort (the table source's
+/// default columns).
+pub fn ur5_table_header() -> String {
+    let mut text = String::from("t");
+    for j in UR5_JOINTS {
+        text += &format!(",{j}.position,{j}.velocity,{j}.effort");
+    }
+    text
+}
+
 pub fn alnlab(dir: &Path, args: &[&str]) -> Output {
     Command::new(env!("CARGO_BIN_EXE_alnlab"))
         .current_dir(dir)
