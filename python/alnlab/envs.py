@@ -32,7 +32,7 @@ import numpy.typing as npt
 from alnlab._alnlab import InputError, Model, Scene
 from alnlab._runs import PathLike, load, scene
 
-__all__ = ["ModelEnv", "SceneEnv", "observation_columns"]
+__all__ = ["ModelEnv", "SceneEnv", "observation_columns", "scene_state"]
 
 Reward = Callable[[npt.NDArray[np.float64], npt.NDArray[np.float64], npt.NDArray[np.float64]], float]
 
@@ -40,7 +40,8 @@ Reward = Callable[[npt.NDArray[np.float64], npt.NDArray[np.float64], npt.NDArray
 def observation_columns(scene: Scene, model: Model) -> npt.NDArray[np.intp]:
     """Where each of the model's state variables sits among the scene's
     variables: ``variables[..., observation_columns(scene, model)]`` is a
-    scene's step (or logged frame) in the model's columns."""
+    scene's step (or logged frame) in the model's columns; ``scene_state``
+    goes back."""
     names = scene.variable_names
     missing = [n for n in model.state_names if n not in names]
     if missing:
@@ -54,6 +55,50 @@ def observation_columns(scene: Scene, model: Model) -> npt.NDArray[np.intp]:
             f"({', '.join(scene.control_names)})"
         )
     return np.array([names.index(n) for n in model.state_names], dtype=np.intp)
+
+
+def scene_state(
+    scene: Scene,
+    model: Model,
+    observations: npt.ArrayLike,
+    *,
+    like: npt.ArrayLike | None = None,
+) -> npt.NDArray[np.float64]:
+    """The scene's generalized states (…×S, ``scene.state_names``) from
+    observations in the model's columns (…×D): each joint's angle and rate
+    from the model's ``q.<joint>`` and ``qd.<joint>``; every other component
+    (a fixed base's position) from ``like``, a scene state (the log's first
+    by default, where that component never changes in the log). A component
+    the model does not give and the log varies (a free-floating root, a
+    ball joint) is an ``InputError`` naming it, unless ``like`` gives it."""
+    obs = np.asarray(observations, dtype=np.float64)
+    d = len(model.state_names)
+    if obs.shape[-1:] != (d,):
+        raise InputError(f"observations: expected shape (..., {d}) in the model's columns, got {obs.shape}")
+    _, _, logged, _ = scene.logged()
+    if like is None:
+        base = logged[0]
+        given = False
+    else:
+        base = np.asarray(like, dtype=np.float64)
+        if base.shape != (len(scene.state_names),):
+            raise InputError(f"like: expected one scene state of shape ({len(scene.state_names)},), got {base.shape}")
+        given = True
+    columns = {n: k for k, n in enumerate(model.state_names)}
+    out = np.broadcast_to(base, obs.shape[:-1] + base.shape).copy()
+    for k, name in enumerate(scene.state_names):
+        parts = name.split(".")
+        source = None
+        if len(parts) == 3 and parts[0] == "joint" and parts[2] in ("q", "qd"):
+            source = columns.get(f"{parts[2]}.{parts[1]}")
+        if source is not None:
+            out[..., k] = obs[..., source]
+        elif not given and np.ptp(logged[:, k]) != 0.0:
+            raise InputError(
+                f"the scene's `{name}` is not among the model's columns and changes in the log: "
+                "give like= a scene state to take it from"
+            )
+    return out
 
 
 class _Env(gymnasium.Env[npt.NDArray[np.float64], npt.NDArray[np.float64]]):

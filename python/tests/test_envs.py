@@ -7,7 +7,7 @@ import pytest
 from gymnasium.utils.env_checker import check_env
 
 import alnlab
-from alnlab.envs import ModelEnv, SceneEnv, observation_columns
+from alnlab.envs import ModelEnv, SceneEnv, observation_columns, scene_state
 
 
 def mpc(world, model_env, *, decisions=3, candidates=16, horizon=3, seed=0):
@@ -60,6 +60,18 @@ def test_one_mpc_loop_runs_on_the_simulator_and_on_the_model(runs):
         obs, costs = mpc(world, learned)
         assert obs.shape == world.observation_space.shape and np.isfinite(obs).all()
         assert len(costs) == 3 and all(np.isfinite(costs))
+
+
+def test_a_free_root_is_not_guessed_back_from_the_models_columns(runs):
+    scene = alnlab.scene("quickstart", variant="piecewise", out=runs)
+    model = alnlab.load("quickstart", variant="piecewise", out=runs)
+    _, _, states, variables = scene.logged()
+    observations = variables[:, observation_columns(scene, model)]
+    with pytest.raises(alnlab.InputError, match=r"the scene's `root\.p\.x` is not among the model's columns and changes"):
+        scene_state(scene, model, observations)
+    # Given a state to take them from, the rest comes from it.
+    back = scene_state(scene, model, observations[3], like=states[3])
+    np.testing.assert_array_equal(back, states[3])
 
 
 def test_bad_environment_arguments_are_refused_by_name(runs):

@@ -8,8 +8,10 @@ from pathlib import Path
 
 import numpy as np
 import pyarrow.parquet as pq
+import pytest
 
 import alnlab
+from alnlab.envs import observation_columns, scene_state
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -73,3 +75,15 @@ def test_the_real_arms_model_predicts_from_python_in_the_recordings_units(alnlab
         nxt = model.predict(x, u)
         step = np.abs(nxt[:, column["q.lwr_1_joint"]] - x[:, column["q.lwr_1_joint"]])
         assert np.median(step) < 0.05
+    # A scene's states to the model's columns and back: the arm's joints
+    # from q and qd; what else the recorded scene carries (each joint's
+    # passive torque) from a state given, never guessed.
+    scene = alnlab.scene("kuka-lwr4", out=runs)
+    _, _, states, variables = scene.logged()
+    observations = variables[:, observation_columns(scene, model)]
+    with pytest.raises(alnlab.InputError, match=r"the scene's `joint\.lwr_0_joint\.passive` is not among"):
+        scene_state(scene, model, observations)
+    back = scene_state(scene, model, observations[5], like=states[0])
+    joints = [k for k, n in enumerate(scene.state_names) if n.endswith((".q", ".qd"))]
+    assert len(joints) == 14
+    np.testing.assert_array_equal(back[joints], states[5][joints])
