@@ -340,9 +340,10 @@ fn hard_cases(suite: &Suite) -> Result<(), String> {
     robot_script(suite, "tests/hard_cases.py", "hard-cases").map(|_| ())
 }
 
-/// Pinocchio's inverse dynamics of the KUKA LWR 4+'s URDF against the
-/// archived recordings' torques (`experiments/kuka-lwr4-physics.py`): the
-/// table the experiment's notes quote, as committed.
+/// Pinocchio's inverse and forward dynamics of the KUKA LWR 4+'s URDF
+/// against the archived recordings' torques and accelerations
+/// (`experiments/kuka-lwr4-physics.py`): the table the experiment's notes
+/// quote, as committed.
 fn real_arm_physics(suite: &Suite) -> Result<(), String> {
     let made = suite.work.join("kuka-lwr4-physics.md");
     suite.run(

@@ -194,9 +194,7 @@ pub(super) fn difference(i: &Interval) -> String {
     interval(i.mean, i.low, i.high)
 }
 
-/// The verdict word of the ALN against another model, from the interval of
-/// their paired difference in error.
-/// The label of a variant whose models read the current accelerations.
+/// The label of the variants whose models read the current accelerations.
 pub(super) fn reads_more(variants: &[&str]) -> String {
     let named: Vec<String> = variants.iter().map(|v| format!("`{v}`")).collect();
     let (who, learn, their) = match named.as_slice() {
@@ -214,6 +212,8 @@ pub(super) fn reads_more(variants: &[&str]) -> String {
     )
 }
 
+/// The verdict word of the ALN against another model, from the interval of
+/// their paired difference in error.
 pub(super) fn accuracy_word(i: &Interval) -> &'static str {
     match i.verdict() {
         Verdict::Lower => "better than",

@@ -1,4 +1,4 @@
-//! The report's first screen: an abstract of three sentences, one figure —
+//! The report's first screen: an abstract of four sentences, one figure —
 //! every model's difference from persistence against its time per state —
 //! and one results table of at most eight rows. Everything after it is the
 //! appendix.
@@ -368,8 +368,11 @@ pub(super) fn first_screen(
     if !run.answer.trim().is_empty() {
         let _ = writeln!(
             md,
-            "**The experimenter's answer** (their reading, not computed by the run; the notes in \
-             the appendix give its grounds): {}\n",
+            "**The experimenter's answer** (their reading, not computed by the run{}): {}\n",
+            match run.notes.trim().is_empty() {
+                true => "",
+                false => "; the notes in the appendix give its grounds",
+            },
             // One paragraph, however the manifest wraps it.
             run.answer.split_whitespace().collect::<Vec<_>>().join(" ")
         );
@@ -435,7 +438,7 @@ fn abstract_(
         match (&run.dataset, &run.recording) {
             _ if run.folds => {
                 "each tests one fold of the trajectories, trained on the others, with a new seed \
-                 for the model; the folds' test rows differ in number"
+                 for the model"
             }
             (Some(_), _) if !run.tables.is_empty() => {
                 "the same archived recordings; a new seed for the model and, where it is drawn at \

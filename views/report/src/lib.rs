@@ -309,8 +309,6 @@ impl Loaded<'_> {
             .find(|t| t.model == ModelId::Aln && t.path == "batched" && t.threads > 1)
     }
 
-    /// The rows findings are about: the held-out ones, or all when the run
-    /// has none held out.
     /// Whether the variant's models read the current accelerations (its
     /// `qdd` group is learned, so every model reads the frame's own): the
     /// torque being applied produces them, so a controller choosing that
@@ -319,6 +317,8 @@ impl Loaded<'_> {
         self.summary.iter().any(|r| r.group == "qdd")
     }
 
+    /// The rows findings are about: the held-out ones, or all when the run
+    /// has none held out.
     fn judged(&self) -> (&[SummaryRow], Rows) {
         if self.held_out.is_empty() {
             (&self.summary, Rows::All)
