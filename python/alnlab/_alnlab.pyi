@@ -64,8 +64,8 @@ class Model:
         """The next states (B×D) from ``states`` (B×D) under ``controls`` (B×U);
         any array-like of real numbers (cast to float64); one state (D) and
         its controls (U) give one next state (D). With ``out`` (a writeable
-        C-contiguous array of the result's shape and dtype) the result is
-        written there, no array allocated, and ``out`` returned."""
+        C-contiguous array of the result's shape and dtype, the inputs' own
+        too) the result is written there and ``out`` returned."""
     def rollout(
         self,
         x0: npt.ArrayLike,

@@ -196,15 +196,15 @@ impl Model {
         })
     }
 
-    /// `values` (state variables last) as their levels.
     /// Writes `values` (of `shape`, its first dimension dropped where the
     /// call was given one item) into `out` — a writeable C-contiguous
     /// array of that shape, float64 or, with `levels`, uint16 — and
-    /// returns it; an `InputError` naming `out` otherwise.
+    /// returns it; an `InputError` naming `out` otherwise. Without
+    /// `values`, only checks `out`, before the work.
     fn fill<'py>(
         &self,
         out: &Bound<'py, PyAny>,
-        values: &[f64],
+        values: Option<&[f64]>,
         shape: &[usize],
         single: bool,
         levels: bool,
@@ -237,16 +237,19 @@ impl Model {
                 }
                 let mut view = array.try_readwrite().map_err(|_| refused(described()))?;
                 let slice = view.as_slice_mut().map_err(|_| refused(described()))?;
-                slice.copy_from_slice($items);
+                if let Some(items) = $items {
+                    slice.copy_from_slice(items);
+                }
             }};
         }
         match levels {
-            true => write!(u16, &self.levels(values)),
+            true => write!(u16, values.map(|v| self.levels(v)).as_deref()),
             false => write!(f64, values),
         }
         Ok(out.clone())
     }
 
+    /// `values` (state variables last) as their levels.
     fn levels(&self, values: &[f64]) -> Vec<u16> {
         let d = self.state.len();
         values
@@ -489,6 +492,9 @@ impl Model {
     /// error names the file that does not fit.
     #[new]
     fn new(model_path: PathBuf, codebook_path: PathBuf) -> PyResult<Model> {
+        // Absolute, so that a pickled model loads from any folder.
+        let absolute = |p: PathBuf| std::fs::canonicalize(&p).unwrap_or(p);
+        let (model_path, codebook_path) = (absolute(model_path), absolute(codebook_path));
         let files = match is_parquet(&model_path)? {
             true => Files::Boosted(Kept::read(&model_path, &codebook_path).map_err(raise)?),
             false => Files::Aln(Box::new(
@@ -603,9 +609,9 @@ impl Model {
             .collect()
     }
 
-    /// Pickled as its files' paths, loaded again (and checked) on
-    /// unpickling: a model moves between processes on one machine, or
-    /// wherever the same files are.
+    /// Pickled as its files' absolute paths, loaded again (their formats
+    /// checked, as at any load) on unpickling: a model moves between
+    /// processes on one machine, or wherever the same files are.
     fn __reduce__<'py>(
         slf: &Bound<'py, Self>,
     ) -> PyResult<(Bound<'py, PyAny>, (PathBuf, PathBuf))> {
@@ -650,22 +656,32 @@ impl Model {
             &format!("(B, {})", self.controls.len()),
         )?;
         let threads = thread_count(threads)?;
-        let x0 = arrays::view::<Ix2>(&states.array)?;
-        // One frame of controls: B×1×U.
-        let c3 = arrays::view::<Ix2>(&controls.array)?.insert_axis(Axis(1));
-        self.check(&x0, &c3, false)?;
-        let x0: Vec<f64> = x0.iter().copied().collect();
-        let c: Vec<f64> = c3.iter().copied().collect();
+        let single = states.single;
+        let (x0, c) = {
+            let x0 = arrays::view::<Ix2>(&states.array)?;
+            // One frame of controls: B×1×U.
+            let c3 = arrays::view::<Ix2>(&controls.array)?.insert_axis(Axis(1));
+            self.check(&x0, &c3, false)?;
+            (
+                x0.iter().copied().collect::<Vec<f64>>(),
+                c3.iter().copied().collect::<Vec<f64>>(),
+            )
+        };
+        // The inputs copied, their borrows end: `out` may be one of them.
+        drop((states, controls));
+        let shape = [x0.len() / d.max(1), d];
+        if let Some(out) = out {
+            self.fill(out, None, &shape, single, levels)?;
+        }
         let rolled = py.detach(|| self.roll(&x0, &c, 1, threads))?;
         let next: Vec<f64> = rolled
             .chunks(2 * d.max(1))
             .flat_map(|r| &r[d..])
             .copied()
             .collect();
-        let shape = [x0.len() / d.max(1), d];
         match out {
-            Some(out) => self.fill(out, &next, &shape, states.single, levels),
-            None => unbatched(array(py, self, next, &shape, levels)?, states.single),
+            Some(out) => self.fill(out, Some(&next), &shape, single, levels),
+            None => unbatched(array(py, self, next, &shape, levels)?, single),
         }
     }
 
@@ -694,18 +710,25 @@ impl Model {
         )?;
         let threads = thread_count(threads)?;
         let single = x0.single;
-        let (x0, c) = (
-            arrays::view::<Ix2>(&x0.array)?,
-            arrays::view::<Ix3>(&controls.array)?,
-        );
-        self.check(&x0, &c, true)?;
-        let (b, horizon, _) = c.dim();
-        let x0: Vec<f64> = x0.iter().copied().collect();
-        let c: Vec<f64> = c.iter().copied().collect();
-        let rolled = py.detach(|| self.roll(&x0, &c, horizon, threads))?;
+        let (b, horizon, x, c) = {
+            let (x, c) = (
+                arrays::view::<Ix2>(&x0.array)?,
+                arrays::view::<Ix3>(&controls.array)?,
+            );
+            self.check(&x, &c, true)?;
+            let (b, horizon, _) = c.dim();
+            let x: Vec<f64> = x.iter().copied().collect();
+            (b, horizon, x, c.iter().copied().collect::<Vec<f64>>())
+        };
+        // The inputs copied, their borrows end: `out` may be one of them.
+        drop((x0, controls));
         let shape = [b, horizon + 1, self.state.len()];
+        if let Some(out) = out {
+            self.fill(out, None, &shape, single, levels)?;
+        }
+        let rolled = py.detach(|| self.roll(&x, &c, horizon, threads))?;
         match out {
-            Some(out) => self.fill(out, &rolled, &shape, single, levels),
+            Some(out) => self.fill(out, Some(&rolled), &shape, single, levels),
             None => unbatched(array(py, self, rolled, &shape, levels)?, single),
         }
     }

@@ -110,7 +110,7 @@ type Listed = (Vec<String>, Vec<(String, String)>);
 /// records' own), and the files that could not be read with why.
 #[pyfunction]
 pub fn run_records(out: PathBuf) -> PyResult<Listed> {
-    let (found, unreadable) = records::all(&out).map_err(raise)?;
+    let (found, unreadable) = records::all(&out, records::Spelling::Python).map_err(raise)?;
     let json = found
         .iter()
         .map(|s| serde_json::to_string(&s.record).expect("records serialize"))

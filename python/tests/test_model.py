@@ -245,6 +245,9 @@ def test_any_array_like_of_real_numbers_predicts_as_float64(artifacts):
     out = np.empty_like(want)
     assert model.predict(x, u, threads=1, out=out) is out
     np.testing.assert_array_equal(out, want)
+    inplace = x.copy()
+    assert model.predict(inplace, u, threads=1, out=inplace) is inplace
+    np.testing.assert_array_equal(inplace, want)
     one_out = np.empty(len(model.state_names))
     model.predict(x[3], u[3], out=one_out)
     np.testing.assert_array_equal(one_out, want[3])
