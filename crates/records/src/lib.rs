@@ -309,16 +309,18 @@ pub type Unreadable = (PathBuf, Error);
 /// Every run recorded under `out`, oldest first (by start, then id): each
 /// experiment folder's `records/`, and its `run.json` when that is a
 /// format-1 record no file of `records/` holds. Files that cannot be read
-/// are returned beside, each with its error, for the caller to report.
-pub fn all(out: &Path) -> Result<(Vec<Stored>, Vec<Unreadable>)> {
+/// are returned beside, each with its error, for the caller to report;
+/// messages spelled for the caller.
+pub fn all(out: &Path, spelling: Spelling) -> Result<(Vec<Stored>, Vec<Unreadable>)> {
     let mut found = Vec::new();
     let mut damaged = Vec::new();
     let folders = match std::fs::read_dir(out) {
         Ok(entries) => entries,
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
             return Err(Error::Invalid(format!(
-                "{}: no such output folder (where `alnlab run --out` writes)",
-                out.display()
+                "{}: no such output folder (where {} writes)",
+                out.display(),
+                spelling.writes_runs()
             )));
         }
         Err(e) => return Err(Error::io(out, e)),
@@ -382,6 +384,14 @@ impl Spelling {
         }
     }
 
+    /// What writes runs into an output folder.
+    fn writes_runs(self) -> &'static str {
+        match self {
+            Spelling::Cli => "`alnlab run --out`",
+            Spelling::Python => "`alnlab run --out`, read here with `out=`",
+        }
+    }
+
     /// What lists the runs under `out`.
     fn list_runs(self, out: &Path) -> String {
         match self {
@@ -400,7 +410,7 @@ pub fn find(out: &Path, reference: &str, spelling: Spelling) -> Result<(Stored, 
         Some((run, variant)) => (run, Some(variant.to_string())),
         None => (reference, None),
     };
-    let (runs, damaged) = all(out)?;
+    let (runs, damaged) = all(out, spelling)?;
     let (name, back) = match run.rsplit_once('~') {
         Some((name, n)) => {
             let n: usize = n.parse().map_err(|_| {

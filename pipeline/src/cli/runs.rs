@@ -123,7 +123,7 @@ pub fn execute(args: RunsArgs) -> Result<()> {
 
 /// Reads every record under `out`, naming on stderr the files it skips.
 fn read_all(out: &Path) -> Result<Vec<Stored>> {
-    let (runs, damaged) = records::all(out)?;
+    let (runs, damaged) = records::all(out, records::Spelling::Cli)?;
     for (_, error) in damaged {
         eprintln!("warning: skipped {error}");
     }
