@@ -167,6 +167,20 @@ pub fn run(manifest: &Manifest, options: &RunOptions) -> Result<RunRecord> {
         }
         other => (other, None),
     };
+    // The archived tables' trajectories (`[ingest] repeats` names them),
+    // checked once a variant before anything runs.
+    if let Some(tables) = &archived_tables {
+        for variant in &variants {
+            let mut ingest = variant.stages.ingest.clone();
+            ingest.tables = tables.clone();
+            ingest.trajectories().map_err(|(field, message)| {
+                Error::Invalid(format!(
+                    "{}: `ingest.{field}`: {message}",
+                    manifest.path.display()
+                ))
+            })?;
+        }
+    }
     let stood_for = dataset.as_ref().filter(|_| archived_tables.is_none());
     let _lock = OutLock::acquire(&options.out)?;
     let cache = Cache::new(&options.out);
@@ -181,16 +195,6 @@ pub fn run(manifest: &Manifest, options: &RunOptions) -> Result<RunRecord> {
             let mut variant = variant.for_replicate(replicate);
             if let Some(tables) = &archived_tables {
                 variant.stages.ingest.tables = tables.clone();
-                variant
-                    .stages
-                    .ingest
-                    .trajectories()
-                    .map_err(|(field, message)| {
-                        Error::Invalid(format!(
-                            "{}: `ingest.{field}`: {message}",
-                            manifest.path.display()
-                        ))
-                    })?;
             }
             let variant = &variant;
             let seed = replicate_seed(manifest.experiment.seed, replicate);

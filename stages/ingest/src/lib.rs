@@ -148,6 +148,14 @@ impl Params {
                     .into(),
             ));
         }
+        if !self.repeats.is_empty() {
+            return Err((
+                "repeats".into(),
+                "groups tables that record one trajectory: a recording is one file (remove \
+                 repeats, or give [data] tables)"
+                    .into(),
+            ));
+        }
         self.read_robot(dir)
     }
 
