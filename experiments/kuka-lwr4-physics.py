@@ -32,8 +32,6 @@ import pyarrow.parquet as pq
 
 ROOT = Path(__file__).resolve().parent.parent
 JOINTS = [f"lwr_{j}_joint" for j in range(7)]
-# The trajectories, as kuka-lwr4.toml's [ingest] repeats groups the tables.
-TRAJECTORIES = [["measurements_1.parquet", "measurements_2.parquet"], ["measurements_3.parquet"]]
 
 
 def tables():
@@ -69,8 +67,8 @@ def friction(qd, j):
 
 def features(urdf, qd, j):
     """The grey-box's regressors for joint j: the URDF's torque (its gain),
-    viscous and Coulomb friction, an offset."""
-    return np.column_stack([urdf[:, j], qd[:, j], np.sign(qd[:, j]), np.ones(len(qd))])
+    then friction's."""
+    return np.column_stack([urdf[:, j], friction(qd, j)])
 
 
 def rms(x):
@@ -86,8 +84,14 @@ def main():
     if [model.names[i] for i in range(1, model.njoints)] != JOINTS:
         sys.exit(f"the URDF's joints are {list(model.names)[1:]}, not {JOINTS}")
     read = tables()
+    # The trajectories as kuka-lwr4.toml groups its tables: a repeat with
+    # its twin, every other table alone.
+    manifest = tomllib.loads((ROOT / "experiments/kuka-lwr4.toml").read_text())
+    repeats = manifest["ingest"].get("repeats", [])
+    grouped = {name for group in repeats for name in group}
+    trajectories = repeats + [[n] for n in sorted(read) if n not in grouped]
     per_trajectory = []
-    for names in TRAJECTORIES:
+    for names in trajectories:
         parts = [samples(read[n], model, data) for n in names]
         per_trajectory.append(tuple(np.vstack([p[k] for p in parts]) for k in range(6)))
     _, qd, tau, urdf, qdd, forward = (np.vstack([p[k] for p in per_trajectory]) for k in range(6))
