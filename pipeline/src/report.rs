@@ -82,6 +82,10 @@ pub fn render(record: &RunRecord, dir: &Path) -> Result<PathBuf> {
                 plant: record.dataset.is_none()
                     && record.recording.is_none()
                     && stages.simulate.scene.iter().any(|s| s.plant.is_some()),
+                // An archived run's data carry their own split, which the
+                // record does not say.
+                folds: stages.stride.split == alnlab_stride::Split::ByTrajectory
+                    && !(record.dataset.is_some() && record.tables.is_empty()),
                 circuit: v.artifacts.get("circuit").map(|a| PathBuf::from(&a.path)),
                 fpga: v.artifacts.get("fpga").map(|a| PathBuf::from(&a.path)),
                 fixed: v.artifacts.get("fixed").map(|a| PathBuf::from(&a.path)),
@@ -94,11 +98,8 @@ pub fn render(record: &RunRecord, dir: &Path) -> Result<PathBuf> {
     // split here).
     let archived_pairs = record.dataset.is_some() && record.tables.is_empty();
     let mut splits: Vec<(&str, &str)> = Vec::new();
-    let mut folds = false;
     for v in record.variants.iter().filter(|v| v.replicate == 0) {
-        let split = resolved(v)?.stride.split;
-        folds |= split == alnlab_stride::Split::ByTrajectory;
-        splits.push((&v.name, split.describe()));
+        splits.push((&v.name, resolved(v)?.stride.split.describe()));
     }
     let split = match splits.as_slice() {
         _ if archived_pairs => None,
@@ -140,7 +141,6 @@ pub fn render(record: &RunRecord, dir: &Path) -> Result<PathBuf> {
             .map(|t| (t.file.clone(), t.sha256.clone()))
             .collect(),
         split,
-        folds: folds && !archived_pairs,
     };
     report::render(&run, dir)
 }

@@ -75,15 +75,16 @@ def scene_state(
     d = len(model.state_names)
     if obs.shape[-1:] != (d,):
         raise InputError(f"observations: expected shape (..., {d}) in the model's columns, got {obs.shape}")
-    _, _, logged, _ = scene.logged()
+    # The log, read only where no state is given: its first state, and
+    # which components it varies.
+    logged: npt.NDArray[np.float64] | None = None
     if like is None:
+        _, _, logged, _ = scene.logged()
         base = logged[0]
-        given = False
     else:
         base = np.asarray(like, dtype=np.float64)
         if base.shape != (len(scene.state_names),):
             raise InputError(f"like: expected one scene state of shape ({len(scene.state_names)},), got {base.shape}")
-        given = True
     columns = {n: k for k, n in enumerate(model.state_names)}
     out = np.broadcast_to(base, obs.shape[:-1] + base.shape).copy()
     for k, name in enumerate(scene.state_names):
@@ -93,7 +94,7 @@ def scene_state(
             source = columns.get(f"{parts[2]}.{parts[1]}")
         if source is not None:
             out[..., k] = obs[..., source]
-        elif not given and np.ptp(logged[:, k]) != 0.0:
+        elif logged is not None and np.ptp(logged[:, k]) != 0.0:
             raise InputError(
                 f"the scene's `{name}` is not among the model's columns and changes in the log: "
                 "give like= a scene state to take it from"
@@ -116,13 +117,14 @@ class _Env(gymnasium.Env[npt.NDArray[np.float64], npt.NDArray[np.float64]]):
         out: PathLike,
         max_steps: int,
         reward: Reward | None,
+        plant: bool = False,
     ) -> None:
         if isinstance(max_steps, bool) or not isinstance(max_steps, int) or max_steps < 1:
             raise InputError(f"max_steps: expected a whole number of at least 1, got {max_steps!r}")
         if reward is not None and not callable(reward):
             raise InputError(f"reward: expected a function (observation, action, next) -> float, got {reward!r}")
         self.model = load(run, variant=variant, replicate=replicate, out=out)
-        self._scene = scene(run, variant=variant, replicate=replicate, out=out)
+        self._scene = scene(run, variant=variant, replicate=replicate, out=out, plant=plant)
         self._columns = observation_columns(self._scene, self.model)
         _, _, self._logged_states, variables = self._scene.logged()
         self._logged_observations = np.ascontiguousarray(variables[:, self._columns])
@@ -185,9 +187,9 @@ class SceneEnv(_Env):
         max_steps: int = 200,
         reward: Reward | None = None,
     ) -> None:
-        super().__init__(run, variant=variant, replicate=replicate, out=out, max_steps=max_steps, reward=reward)
-        if plant:
-            self._scene = scene(run, variant=variant, replicate=replicate, out=out, plant=True)
+        super().__init__(
+            run, variant=variant, replicate=replicate, out=out, max_steps=max_steps, reward=reward, plant=plant
+        )
         self._state = self._logged_states[0].copy()
 
     def _begin(self, frame: int) -> None:

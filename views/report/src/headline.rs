@@ -348,7 +348,7 @@ pub(super) fn first_screen(
         } else {
             ""
         },
-        first_fold = if run.folds {
+        first_fold = if best.variant.info.folds {
             " of the first fold, each fold testing its own trajectories"
         } else {
             ""
@@ -436,7 +436,7 @@ fn abstract_(
         if replicates == 1 { "" } else { "s" },
         if variants.len() == 1 { "" } else { " each" },
         match (&run.dataset, &run.recording) {
-            _ if run.folds => {
+            _ if best.variant.info.folds => {
                 "each tests one fold of the trajectories, trained on the others, with a new seed \
                  for the model"
             }
@@ -585,7 +585,11 @@ fn abstract_(
             " All {} test states at once{}, it takes {} a state (no simulator was timed all at \
              once).",
             all.states,
-            if run.folds { " (the first fold's)" } else { "" },
+            if aln.info.folds {
+                " (the first fold's)"
+            } else {
+                ""
+            },
             all.spread()
         );
     }
@@ -688,7 +692,7 @@ fn most_accurate(md: &mut String, v: &Loaded, entries: &[Entry], variants: &[Loa
 /// their mean, those without figures left out.
 fn ranked(mut errors: Vec<(String, Vec<f64>, String)>) -> Vec<(String, Vec<f64>, String)> {
     errors.retain(|(_, e, _)| !e.is_empty());
-    errors.sort_by(|a, b| mean(&a.1).total_cmp(&mean(&b.1)));
+    errors.sort_by(|a, b| super::plan::mean(&a.1).total_cmp(&super::plan::mean(&b.1)));
     errors
 }
 
@@ -710,14 +714,9 @@ fn lead(ranked: &[(String, Vec<f64>, String)]) -> String {
         ),
         None => format!(
             "{model} at {cell} levels{speed} (the next, {next}, at {})",
-            sig3(mean(others))
+            sig3(super::plan::mean(others))
         ),
     }
-}
-
-/// The mean of `values`.
-fn mean(values: &[f64]) -> f64 {
-    values.iter().sum::<f64>() / values.len() as f64
 }
 
 /// The main figure: every entry's difference from persistence (its

@@ -77,9 +77,6 @@ pub struct RunInfo {
     /// How the rows were held out of training, in words (none for an
     /// archived dataset, whose record does not say).
     pub split: Option<String>,
-    /// Whether the replicates are folds of held-out trajectories (each
-    /// tests its own rows), not re-draws of one split.
-    pub folds: bool,
 }
 
 /// The paper's §4.6 results table (Armstrong, Supynuk & Green, "Adaptive
@@ -109,6 +106,9 @@ pub struct VariantInfo {
     /// Whether the data come from a plant that departs from its scene:
     /// the simulator baselines are then its nominal model.
     pub plant: bool,
+    /// Whether the replicates are folds of held-out trajectories (each
+    /// tests its own rows), not re-draws of one split.
+    pub folds: bool,
     /// The circuit stage's figures, if the run had them.
     pub circuit: Option<PathBuf>,
     /// The circuit stage's place-and-route figures, if the run had them.

@@ -635,7 +635,8 @@ impl Contender {
     }
 }
 
-fn mean(x: &[f64]) -> f64 {
+/// The mean of `x` (0 for none).
+pub(super) fn mean(x: &[f64]) -> f64 {
     x.iter().sum::<f64>() / x.len().max(1) as f64
 }
 
