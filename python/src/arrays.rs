@@ -5,7 +5,7 @@
 //! bad one is an `InputError` naming the argument, with the shape and
 //! dtype expected.
 
-use numpy::ndarray::{ArrayView, Dimension};
+use numpy::ndarray::{ArrayView, Dimension, IxDyn};
 use numpy::{PyArrayDyn, PyArrayMethods, PyReadonlyArrayDyn, PyUntypedArrayMethods};
 use pyo3::exceptions::{PyTypeError, PyValueError};
 use pyo3::prelude::*;
@@ -29,15 +29,26 @@ pub fn floats<'py>(
     ndim: usize,
     shape: &str,
 ) -> PyResult<Floats<'py>> {
-    // The common case, a C-contiguous float64 batch, as it is.
+    // The common cases, a C-contiguous float64 batch or single item, as
+    // they are (a single item viewed as a batch of one).
     if let Ok(array) = value.cast::<PyArrayDyn<f64>>()
-        && array.ndim() == ndim
         && array.is_c_contiguous()
     {
-        return Ok(Floats {
-            array: array.try_readonly()?,
-            single: false,
-        });
+        if array.ndim() == ndim {
+            return Ok(Floats {
+                array: array.try_readonly()?,
+                single: false,
+            });
+        }
+        if array.ndim() + 1 == ndim {
+            let shape: Vec<usize> = std::iter::once(1)
+                .chain(array.shape().iter().copied())
+                .collect();
+            return Ok(Floats {
+                array: array.reshape(IxDyn(&shape))?.try_readonly()?,
+                single: true,
+            });
+        }
     }
     let py = value.py();
     let numpy = py.import("numpy")?;
@@ -109,9 +120,19 @@ pub fn count(
                 .map_or_else(|_| type_name(value), |r| r.to_string())
         ))
     };
+    if value.is_instance_of::<pyo3::types::PyBool>() {
+        return Err(refused());
+    }
+    // A Python int, the common case, without a call into Python.
+    if value.is_instance_of::<pyo3::types::PyInt>() {
+        return match value.extract::<i128>() {
+            Ok(n) if n >= i128::from(least) => u64::try_from(n).map(Some).map_err(|_| refused()),
+            _ => Err(refused()),
+        };
+    }
     let py = value.py();
     let numpy_bool = py.import("numpy")?.getattr("bool_")?;
-    if value.is_instance_of::<pyo3::types::PyBool>() || value.is_instance(&numpy_bool)? {
+    if value.is_instance(&numpy_bool)? {
         return Err(refused());
     }
     let index = py
