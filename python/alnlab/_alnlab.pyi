@@ -15,6 +15,7 @@ __all__ = [
     "Model",
     "Scene",
     "reference_rollout_ns",
+    "reference_predict_ns",
     "find_artifacts",
     "run_record",
     "run_records",
@@ -133,6 +134,15 @@ def reference_rollout_ns(
     repeats: int = 7,
 ) -> list[float]:
     """The Rust batched path's nanoseconds per state, one thread, per repeat."""
+
+def reference_predict_ns(
+    model: Model,
+    state: npt.NDArray[np.float64],
+    controls: npt.NDArray[np.float64],
+    calls: int = 2000,
+    repeats: int = 7,
+) -> list[float]:
+    """The Rust one-row path's nanoseconds a call, one thread, per repeat."""
 
 def find_artifacts(
     out: str | os.PathLike[str],

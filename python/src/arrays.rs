@@ -5,7 +5,7 @@
 //! bad one is an `InputError` naming the argument, with the shape and
 //! dtype expected.
 
-use numpy::ndarray::{ArrayView, Dimension, IxDyn};
+use numpy::ndarray::{ArrayView, Axis, Dimension};
 use numpy::{PyArrayDyn, PyArrayMethods, PyReadonlyArrayDyn, PyUntypedArrayMethods};
 use pyo3::exceptions::{PyTypeError, PyValueError};
 use pyo3::prelude::*;
@@ -13,46 +13,62 @@ use pyo3::types::PyDict;
 
 use crate::invalid;
 
-/// An argument as float64, and whether it was a single item (one
-/// dimension short of a batch), which a result gives back unbatched.
+/// An argument as C-contiguous float64, and whether it was a single item
+/// (one dimension short of a batch), which a result gives back unbatched.
 pub struct Floats<'py> {
-    pub array: PyReadonlyArrayDyn<'py, f64>,
+    array: PyReadonlyArrayDyn<'py, f64>,
     pub single: bool,
 }
 
+impl Floats<'_> {
+    /// The argument as a batch of `D` dimensions (a single item as a batch
+    /// of one).
+    pub fn view<D: Dimension>(&self) -> PyResult<ArrayView<'_, f64, D>> {
+        let array = self.array.as_array();
+        let array = match self.single {
+            true => array.insert_axis(Axis(0)),
+            false => array,
+        };
+        array
+            .into_dimensionality()
+            .map_err(|e| invalid(format!("internal shape error: {e}")))
+    }
+
+    /// The argument's values in row-major order.
+    pub fn values(&self) -> PyResult<&[f64]> {
+        self.array
+            .as_slice()
+            .map_err(|e| invalid(format!("internal layout error: {e}")))
+    }
+}
+
 /// `value` as a C-contiguous float64 array of `ndim` dimensions, the first
-/// a batch (`shape` says what is expected, as `(B, D)`); a single item of
-/// `ndim - 1` dimensions becomes a batch of one.
+/// a batch (`shape` says what is expected, as `(B, D)`, asked only for a
+/// message); a single item of `ndim - 1` dimensions is taken as a batch of
+/// one.
 pub fn floats<'py>(
     value: &Bound<'py, PyAny>,
     argument: &str,
     ndim: usize,
-    shape: &str,
+    shape: impl Fn() -> String,
 ) -> PyResult<Floats<'py>> {
-    // The common cases, a C-contiguous float64 batch or single item, as
-    // they are (a single item viewed as a batch of one).
+    // The common case, a C-contiguous float64 batch or single item, as it
+    // is.
     if let Ok(array) = value.cast::<PyArrayDyn<f64>>()
         && array.is_c_contiguous()
+        && (array.ndim() == ndim || array.ndim() + 1 == ndim)
     {
-        if array.ndim() == ndim {
-            return Ok(Floats {
-                array: array.try_readonly()?,
-                single: false,
-            });
-        }
-        if array.ndim() + 1 == ndim {
-            let shape: Vec<usize> = std::iter::once(1)
-                .chain(array.shape().iter().copied())
-                .collect();
-            return Ok(Floats {
-                array: array.reshape(IxDyn(&shape))?.try_readonly()?,
-                single: true,
-            });
-        }
+        return Ok(Floats {
+            single: array.ndim() < ndim,
+            array: array.try_readonly()?,
+        });
     }
     let py = value.py();
     let numpy = py.import("numpy")?;
-    let expected = format!("an array of real numbers of shape {shape} (cast to float64)");
+    let expected = format!(
+        "an array of real numbers of shape {} (cast to float64)",
+        shape()
+    );
     let array = numpy.call_method1("asarray", (value,)).map_err(|e| {
         if e.is_instance_of::<PyValueError>(py) || e.is_instance_of::<PyTypeError>(py) {
             invalid(format!(
@@ -82,23 +98,11 @@ pub fn floats<'py>(
     }
     let kwargs = PyDict::new(py);
     kwargs.set_item("dtype", numpy.getattr("float64")?)?;
-    let mut array = numpy.call_method("ascontiguousarray", (array,), Some(&kwargs))?;
-    if single {
-        array = numpy.call_method1("expand_dims", (array, 0))?;
-    }
+    let array = numpy.call_method("ascontiguousarray", (array,), Some(&kwargs))?;
     Ok(Floats {
         array: array.extract()?,
         single,
     })
-}
-
-/// A converted argument's `D` dimensions (checked by [`floats`]).
-pub fn view<'a, D: Dimension>(
-    a: &'a PyReadonlyArrayDyn<'_, f64>,
-) -> PyResult<ArrayView<'a, f64, D>> {
-    a.as_array()
-        .into_dimensionality()
-        .map_err(|e| invalid(format!("internal shape error: {e}")))
 }
 
 /// A whole-number argument of at least `least` (`None` stays `None`): any
@@ -142,6 +146,24 @@ pub fn count(
     match index.extract::<i128>() {
         Ok(n) if n >= i128::from(least) => u64::try_from(n).map(Some).map_err(|_| refused()),
         _ => Err(refused()),
+    }
+}
+
+/// `shape` (or an index) as Python writes a tuple — `(5, 3)`, `(3,)` —
+/// without its first dimension where the caller gave one item, not a
+/// batch.
+pub fn tuple(shape: &[usize], single: bool) -> String {
+    let kept = if single {
+        &shape[1.min(shape.len())..]
+    } else {
+        shape
+    };
+    match kept {
+        [one] => format!("({one},)"),
+        kept => {
+            let items: Vec<String> = kept.iter().map(usize::to_string).collect();
+            format!("({})", items.join(", "))
+        }
     }
 }
 

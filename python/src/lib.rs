@@ -62,6 +62,7 @@ fn _alnlab(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<model::Model>()?;
     m.add_class::<scene::Scene>()?;
     m.add_function(wrap_pyfunction!(model::reference_rollout_ns, m)?)?;
+    m.add_function(wrap_pyfunction!(model::reference_predict_ns, m)?)?;
     m.add_function(wrap_pyfunction!(runs::find_artifacts, m)?)?;
     m.add_function(wrap_pyfunction!(runs::run_record, m)?)?;
     m.add_function(wrap_pyfunction!(runs::run_records, m)?)?;

@@ -18,9 +18,10 @@ use alnlab_aln::runtime::{Runtime, Trained};
 use alnlab_codes::Entry;
 use alnlab_codes::codebook::{Quantizer, is_control};
 use alnlab_common::Error;
-use numpy::ndarray::{Array2, Array3, ArrayView2, ArrayView3, Axis, Ix2, Ix3};
+use numpy::ndarray::{ArrayView2, ArrayView3, Axis, Ix2, Ix3, IxDyn};
 use numpy::{
-    IntoPyArray, PyArrayMethods, PyReadonlyArray2, PyReadonlyArray3, PyUntypedArrayMethods,
+    PyArrayDyn, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArray3,
+    PyUntypedArrayMethods,
 };
 use pyo3::prelude::*;
 use rayon::prelude::*;
@@ -57,11 +58,11 @@ impl Files {
     }
 }
 
-/// What predicts, and a piecewise-linear predictor's buffers kept between
-/// calls: making them costs more than predicting one state.
+/// What predicts, and the buffers of earlier calls kept for the next:
+/// making them costs as much as predicting one state.
 struct Ready<'a> {
     predicts: Predicts<'a>,
-    spare: Mutex<Vec<Scratch<'a>>>,
+    spare: Mutex<Vec<Work<'a>>>,
 }
 
 self_cell::self_cell!(
@@ -98,12 +99,15 @@ impl Model {
     }
 
     /// Checks that `x0` is B×D and `controls` B×H×U and finite; `frames`
-    /// says whether the caller gave H (a rollout) or one frame, B×U.
+    /// says whether the caller gave H (a rollout) or one frame, B×U, and
+    /// `single` whether it gave one item (shapes and indices are then
+    /// reported without the batch dimension, as the caller wrote them).
     fn check(
         &self,
         x0: &ArrayView2<f64>,
         controls: &ArrayView3<f64>,
         frames: bool,
+        single: bool,
     ) -> PyResult<()> {
         let (d, u) = (self.state.len(), self.controls.len());
         let names = |of: &[usize]| {
@@ -112,26 +116,42 @@ impl Model {
                 .collect::<Vec<_>>()
                 .join(", ")
         };
+        // A shape or index as the caller wrote it: without the batch where
+        // one item was given, without H where one frame was.
+        let shown = |index: &[usize], frame_axis: bool| {
+            let mut index = index.to_vec();
+            if frame_axis && !frames {
+                index.remove(1);
+            }
+            arrays::tuple(&index, single)
+        };
+        // The argument's name: rollout's is `x0`, predict's `states`.
+        let states = if frames { "x0" } else { "states" };
         if x0.ncols() != d {
+            let expected = if single {
+                format!("({d},)")
+            } else {
+                format!("(B, {d})")
+            };
             return Err(invalid(format!(
-                "states: expected shape (B, {d}), one column per state variable ({}), got {:?}",
+                "{states}: expected shape {expected}, one value per state variable ({}), got {}",
                 names(&self.state),
-                x0.shape()
+                shown(x0.shape(), false)
             )));
         }
         let (b, h, given) = controls.dim();
-        let shown = |index: [usize; 3]| match frames {
-            true => format!("{index:?}"),
-            false => format!("{:?}", [index[0], index[2]]),
-        };
         if b != x0.nrows() || given != u {
+            let expected = match (single, frames) {
+                (true, true) => format!("(H, {u})"),
+                (true, false) => format!("({u},)"),
+                (false, true) => format!("({}, H, {u})", x0.nrows()),
+                (false, false) => format!("({}, {u})", x0.nrows()),
+            };
             return Err(invalid(format!(
-                "controls: expected shape ({}, {}{u}) — a row per state, a column per control \
-                 ({}) — got {}",
-                x0.nrows(),
-                if frames { "H, " } else { "" },
+                "controls: expected shape {expected} — {}a value per control ({}) — got {}",
+                if single { "" } else { "a row per state, " },
                 names(&self.controls),
-                shown([b, h, given])
+                shown(&[b, h, given], true)
             )));
         }
         let bad = |what: &str, index: String, name: &str| {
@@ -139,112 +159,160 @@ impl Model {
                 "{what}: not a finite number at index {index} (`{name}`)"
             ))
         };
+        // The indexed search only where a value is not finite: it is slow.
+        let finite = |a: &[f64]| a.iter().all(|x| x.is_finite());
+        if x0.as_slice().is_some_and(finite) && controls.as_slice().is_some_and(finite) {
+            return Ok(());
+        }
         if let Some(((r, s), _)) = x0.indexed_iter().find(|(_, x)| !x.is_finite()) {
-            let index = format!("{:?}", [r, s]);
-            return Err(bad("states", index, &self.names[self.state[s]]));
+            return Err(bad(
+                states,
+                shown(&[r, s], false),
+                &self.names[self.state[s]],
+            ));
         }
         if let Some(((r, f, c), _)) = controls.indexed_iter().find(|(_, x)| !x.is_finite()) {
             return Err(bad(
                 "controls",
-                shown([r, f, c]),
+                shown(&[r, f, c], true),
                 &self.names[self.controls[c]],
             ));
         }
         Ok(())
     }
 
-    /// The states from `x0` (B×D) under `controls` (B×H×U): B×(H+1)×D
-    /// values, row-major, the first frame `x0`'s; on `threads` threads.
+    /// The states from `x0` (B×D) under `controls` (B×H×U) into `out`:
+    /// B×(H+1)×D values, row-major, the first frame `x0`'s — or, without
+    /// `first`, B×H×D, the predicted frames only; on `threads` threads.
     fn roll(
         &self,
         x0: &[f64],
         controls: &[f64],
         horizon: usize,
+        first: bool,
         threads: Option<usize>,
-    ) -> PyResult<Vec<f64>> {
+        out: &mut [f64],
+    ) -> PyResult<()> {
         let (d, u) = (self.state.len(), self.controls.len());
         let rows = x0.len().checked_div(d).unwrap_or(0);
-        let mut out = vec![0.0; rows * (horizon + 1) * d];
+        let frames = horizon + usize::from(first);
         if rows == 0 {
-            return Ok(out);
+            return Ok(());
         }
         let chunk = threads::chunk_rows(rows, threads);
         self.loaded.with_dependent(|_, ready| {
-            let task = |first: usize, n: usize, out: &mut [f64]| {
-                let x0 = &x0[first * d..(first + n) * d];
-                let controls = &controls[first * horizon * u..(first + n) * horizon * u];
-                let mut work = Work::new(self, ready, n);
-                work.roll(self, ready, x0, controls, horizon, out);
+            let task = |at: usize, n: usize, out: &mut [f64]| {
+                let x0 = &x0[at * d..(at + n) * d];
+                let controls = &controls[at * horizon * u..(at + n) * horizon * u];
+                let mut work = Work::take(self, ready, n);
+                work.roll(self, ready, x0, controls, horizon, first, out);
                 work.finish(ready);
             };
             match ready.predicts {
                 // One task: no thread pool to hand it to and wait on.
                 Predicts::Piecewise(_) | Predicts::Boosted(..) if chunk >= rows => {
-                    task(0, rows, &mut out)
+                    task(0, rows, out)
                 }
                 Predicts::Piecewise(_) | Predicts::Boosted(..) => threads::run(threads, || {
-                    out.par_chunks_mut(chunk * (horizon + 1) * d)
+                    out.par_chunks_mut(chunk * frames * d)
                         .enumerate()
                         .for_each(|(k, out)| task(k * chunk, chunk.min(rows - k * chunk), out));
                 })?,
                 // One row at a time, on this thread.
-                Predicts::Levels(_) if rows < ONE_ROW_BELOW => task(0, rows, &mut out),
+                Predicts::Levels(_) if rows < ONE_ROW_BELOW => task(0, rows, out),
                 // The runtime spreads its own work over the threads.
-                Predicts::Levels(_) => threads::run(threads, || task(0, rows, &mut out))?,
+                Predicts::Levels(_) => threads::run(threads, || task(0, rows, out))?,
             }
-            Ok(out)
+            Ok(())
         })
     }
 
-    /// Writes `values` (of `shape`, its first dimension dropped where the
-    /// call was given one item) into `out` — a writeable C-contiguous
-    /// array of that shape, float64 or, with `levels`, uint16 — and
-    /// returns it; an `InputError` naming `out` otherwise. Without
-    /// `values`, only checks `out`, before the work.
+    /// The values of `x` (B×D) rolled out under `c` (B×H×U), as
+    /// [`Model::roll`] gives them, in an array of `shape` (the batch
+    /// dimension left out where the caller gave one item): a new one, or
+    /// `out`, checked before the work (see [`Model::fill`]); as levels
+    /// (uint16) on request. `x` and `c` must not be `out`'s memory.
+    #[allow(clippy::too_many_arguments)]
+    fn answer<'py>(
+        &self,
+        py: Python<'py>,
+        (x, c): (&[f64], &[f64]),
+        horizon: usize,
+        first: bool,
+        threads: Option<usize>,
+        shape: &[usize],
+        levels: bool,
+        out: Option<&Bound<'py, PyAny>>,
+    ) -> PyResult<Bound<'py, PyAny>> {
+        let layout = |e: numpy::AsSliceError| invalid(format!("internal layout error: {e}"));
+        if levels {
+            let array = match out {
+                Some(out) => self.fill(out, shape, true)?,
+                None => PyArrayDyn::<u16>::zeros(py, IxDyn(shape), false).into_any(),
+            };
+            let mut values = vec![0.0; shape.iter().product()];
+            py.detach(|| self.roll(x, c, horizon, first, threads, &mut values))?;
+            let levels = self.levels(&values);
+            let mut written = array.cast::<PyArrayDyn<u16>>()?.try_readwrite()?;
+            written
+                .as_slice_mut()
+                .map_err(layout)?
+                .copy_from_slice(&levels);
+            drop(written);
+            return Ok(array);
+        }
+        // The values written where they are returned, not copied there.
+        let array = match out {
+            Some(out) => self.fill(out, shape, false)?,
+            None => PyArrayDyn::<f64>::zeros(py, IxDyn(shape), false).into_any(),
+        };
+        let mut written = array.cast::<PyArrayDyn<f64>>()?.try_readwrite()?;
+        let values = written.as_slice_mut().map_err(layout)?;
+        py.detach(|| self.roll(x, c, horizon, first, threads, values))?;
+        drop(written);
+        Ok(array)
+    }
+
+    /// Checks that `out` is a writeable C-contiguous array of `shape`
+    /// (the caller's: without the batch where one item was given),
+    /// float64 or, with `levels`, uint16, and returns it; an `InputError`
+    /// naming `out` otherwise.
     fn fill<'py>(
         &self,
         out: &Bound<'py, PyAny>,
-        values: Option<&[f64]>,
         shape: &[usize],
-        single: bool,
         levels: bool,
     ) -> PyResult<Bound<'py, PyAny>> {
-        let shape = if single { &shape[1..] } else { shape };
-        let refused = |got: String| {
-            invalid(format!(
-                "out: expected a writeable C-contiguous {} array of shape {shape:?}, got {got}",
-                if levels { "uint16" } else { "float64" }
-            ))
-        };
-        let described = || {
+        let refused = || {
             let dtype = out.getattr("dtype").and_then(|d| Ok(d.str()?.to_string()));
             let found = out.getattr("shape").and_then(|s| Ok(s.str()?.to_string()));
-            match (dtype, found) {
+            let got = match (dtype, found) {
                 (Ok(d), Ok(s)) => format!("dtype {d}, shape {s}"),
                 _ => out
                     .get_type()
                     .name()
                     .map_or("a value".into(), |n| format!("a {n}")),
-            }
+            };
+            invalid(format!(
+                "out: expected a writeable C-contiguous {} array of shape {}, got {got}",
+                if levels { "uint16" } else { "float64" },
+                arrays::tuple(shape, false)
+            ))
         };
-        macro_rules! write {
-            ($t:ty, $items:expr) => {{
-                let array = out
-                    .cast::<numpy::PyArrayDyn<$t>>()
-                    .map_err(|_| refused(described()))?;
+        macro_rules! check {
+            ($t:ty) => {{
+                let array = out.cast::<PyArrayDyn<$t>>().map_err(|_| refused())?;
                 if array.shape() != shape || !array.is_c_contiguous() {
-                    return Err(refused(described()));
+                    return Err(refused());
                 }
-                let mut view = array.try_readwrite().map_err(|_| refused(described()))?;
-                let slice = view.as_slice_mut().map_err(|_| refused(described()))?;
-                if let Some(items) = $items {
-                    slice.copy_from_slice(items);
-                }
+                // Writeable and not borrowed: an input's own array is
+                // copied before `out` is written.
+                array.try_readwrite().map_err(|_| refused())?;
             }};
         }
         match levels {
-            true => write!(u16, values.map(|v| self.levels(v)).as_deref()),
-            false => write!(f64, values),
+            true => check!(u16),
+            false => check!(f64),
         }
         Ok(out.clone())
     }
@@ -297,33 +365,43 @@ struct Work<'m> {
 }
 
 impl<'m> Work<'m> {
-    fn new(model: &Model, ready: &Ready<'m>, rows: usize) -> Work<'m> {
-        let scratch = match &ready.predicts {
-            Predicts::Piecewise(p) => Some(spare(ready).pop().unwrap_or_else(|| p.scratch())),
-            Predicts::Levels(_) | Predicts::Boosted(..) => None,
-        };
-        let outputs = model.writes.len();
+    /// Buffers for `rows` rows: an earlier call's, or new ones.
+    fn take(model: &Model, ready: &Ready<'m>, rows: usize) -> Work<'m> {
+        let mut work = spare(ready).pop().unwrap_or_else(|| {
+            let outputs = model.writes.len();
+            Work {
+                columns: Vec::new(),
+                rows: 0,
+                scratch: match &ready.predicts {
+                    Predicts::Piecewise(p) => Some(p.scratch()),
+                    Predicts::Levels(_) | Predicts::Boosted(..) => None,
+                },
+                next: vec![Vec::new(); outputs],
+                row: vec![0.0; model.names.len()],
+                row_next: vec![0.0; outputs],
+                features: match ready.predicts {
+                    Predicts::Boosted(..) => vec![0.0; model.names.len()],
+                    _ => Vec::new(),
+                },
+            }
+        });
         let batched =
             matches!(ready.predicts, Predicts::Piecewise(_)) && rows >= PIECEWISE_ONE_ROW_BELOW;
-        Work {
-            columns: vec![0.0; model.names.len() * rows],
-            rows,
-            scratch,
-            next: vec![vec![0.0; if batched { rows } else { 0 }]; outputs],
-            row: vec![0.0; model.names.len()],
-            row_next: vec![0.0; outputs],
-            features: match ready.predicts {
-                Predicts::Boosted(..) => vec![0.0; model.names.len()],
-                _ => Vec::new(),
-            },
+        work.rows = rows;
+        // Zeroed: a learned variable that is neither state nor control is
+        // read as 0, whatever the last call left.
+        work.columns.clear();
+        work.columns.resize(model.names.len() * rows, 0.0);
+        for next in &mut work.next {
+            next.clear();
+            next.resize(if batched { rows } else { 0 }, 0.0);
         }
+        work
     }
 
-    /// Gives the predictor's buffers back for the next call.
+    /// Gives the buffers back for the next call.
     fn finish(self, ready: &Ready<'m>) {
-        if let Some(scratch) = self.scratch {
-            spare(ready).push(scratch);
-        }
+        spare(ready).push(self);
     }
 
     fn column_mut(&mut self, v: usize) -> &mut [f64] {
@@ -417,7 +495,9 @@ impl<'m> Work<'m> {
     }
 
     /// Rolls these rows out: `x0` (rows×D) under `controls` (rows×H×U)
-    /// into `out` (rows×(H+1)×D).
+    /// into `out`: rows×(H+1)×D, the first frame `x0`'s, or without
+    /// `first` rows×H×D.
+    #[allow(clippy::too_many_arguments)]
     fn roll(
         &mut self,
         model: &Model,
@@ -425,20 +505,26 @@ impl<'m> Work<'m> {
         x0: &[f64],
         controls: &[f64],
         horizon: usize,
+        first: bool,
         out: &mut [f64],
     ) {
         let (d, u) = (model.state.len(), model.controls.len());
+        let (frames, at) = (horizon + usize::from(first), usize::from(first));
         self.set(&model.state, x0, d, 0);
-        for (r, row) in x0.chunks(d).enumerate() {
-            out[r * (horizon + 1) * d..][..d].copy_from_slice(row);
+        if first {
+            for (r, row) in x0.chunks(d).enumerate() {
+                out[r * frames * d..][..d].copy_from_slice(row);
+            }
         }
         for h in 0..horizon {
             self.set(&model.controls, controls, horizon * u, h * u);
             self.step(model, ready);
-            for (k, &v) in model.state.iter().enumerate() {
-                let column = &self.columns[v * self.rows..(v + 1) * self.rows];
-                for (r, &x) in column.iter().enumerate() {
-                    out[(r * (horizon + 1) + h + 1) * d + k] = x;
+            // Row by row: each row's frame is contiguous in `out`.
+            let rows = self.rows;
+            for r in 0..rows {
+                let written = &mut out[(r * frames + h + at) * d..][..d];
+                for (x, &v) in written.iter_mut().zip(&model.state) {
+                    *x = self.columns[v * rows + r];
                 }
             }
         }
@@ -447,41 +533,11 @@ impl<'m> Work<'m> {
 
 /// The spare buffers, whatever a panicking thread left them as (each is
 /// overwritten before it is read).
-fn spare<'r, 'm>(ready: &'r Ready<'m>) -> std::sync::MutexGuard<'r, Vec<Scratch<'m>>> {
+fn spare<'r, 'm>(ready: &'r Ready<'m>) -> std::sync::MutexGuard<'r, Vec<Work<'m>>> {
     ready
         .spare
         .lock()
         .unwrap_or_else(|poisoned| poisoned.into_inner())
-}
-
-/// A NumPy array of `shape` from `values`, as levels on request.
-fn array<'py>(
-    py: Python<'py>,
-    model: &Model,
-    values: Vec<f64>,
-    shape: &[usize],
-    levels: bool,
-) -> PyResult<Bound<'py, PyAny>> {
-    let shaped = |e: numpy::ndarray::ShapeError| invalid(format!("internal shape error: {e}"));
-    Ok(match (levels, shape) {
-        (false, &[b, d]) => Array2::from_shape_vec((b, d), values)
-            .map_err(shaped)?
-            .into_pyarray(py)
-            .into_any(),
-        (false, &[b, h, d]) => Array3::from_shape_vec((b, h, d), values)
-            .map_err(shaped)?
-            .into_pyarray(py)
-            .into_any(),
-        (true, &[b, d]) => Array2::from_shape_vec((b, d), model.levels(&values))
-            .map_err(shaped)?
-            .into_pyarray(py)
-            .into_any(),
-        (true, &[b, h, d]) => Array3::from_shape_vec((b, h, d), model.levels(&values))
-            .map_err(shaped)?
-            .into_pyarray(py)
-            .into_any(),
-        _ => unreachable!("two or three dimensions"),
-    })
 }
 
 #[pymethods]
@@ -648,40 +704,26 @@ impl Model {
         out: Option<&Bound<'py, PyAny>>,
     ) -> PyResult<Bound<'py, PyAny>> {
         let d = self.state.len();
-        let states = arrays::floats(states, "states", 2, &format!("(B, {d})"))?;
-        let controls = arrays::floats(
-            controls,
-            "controls",
-            2,
-            &format!("(B, {})", self.controls.len()),
-        )?;
+        let states = arrays::floats(states, "states", 2, || format!("(B, {d})"))?;
+        let controls = arrays::floats(controls, "controls", 2, || {
+            format!("(B, {})", self.controls.len())
+        })?;
         let threads = thread_count(threads)?;
         let single = states.single;
-        let (x0, c) = {
-            let x0 = arrays::view::<Ix2>(&states.array)?;
-            // One frame of controls: B×1×U.
-            let c3 = arrays::view::<Ix2>(&controls.array)?.insert_axis(Axis(1));
-            self.check(&x0, &c3, false)?;
-            (
-                x0.iter().copied().collect::<Vec<f64>>(),
-                c3.iter().copied().collect::<Vec<f64>>(),
-            )
-        };
-        // The inputs copied, their borrows end: `out` may be one of them.
-        drop((states, controls));
-        let shape = [x0.len() / d.max(1), d];
-        if let Some(out) = out {
-            self.fill(out, None, &shape, single, levels)?;
-        }
-        let rolled = py.detach(|| self.roll(&x0, &c, 1, threads))?;
-        let next: Vec<f64> = rolled
-            .chunks(2 * d.max(1))
-            .flat_map(|r| &r[d..])
-            .copied()
-            .collect();
+        let (x0, c) = (states.view::<Ix2>()?, controls.view::<Ix2>()?);
+        // One frame of controls: B×1×U.
+        self.check(&x0, &c.insert_axis(Axis(1)), false, single)?;
+        let shape: &[usize] = &[x0.nrows(), d][usize::from(single)..];
+        let inputs = (states.values()?, controls.values()?);
         match out {
-            Some(out) => self.fill(out, Some(&next), &shape, single, levels),
-            None => unbatched(array(py, self, next, &shape, levels)?, single),
+            // The inputs copied and their borrows ended: `out` may be one.
+            Some(_) => {
+                let copied = (inputs.0.to_vec(), inputs.1.to_vec());
+                drop((states, controls));
+                let inputs = (&copied.0[..], &copied.1[..]);
+                self.answer(py, inputs, 1, false, threads, shape, levels, out)
+            }
+            None => self.answer(py, inputs, 1, false, threads, shape, levels, None),
         }
     }
 
@@ -701,44 +743,28 @@ impl Model {
         threads: Option<&Bound<'py, PyAny>>,
         out: Option<&Bound<'py, PyAny>>,
     ) -> PyResult<Bound<'py, PyAny>> {
-        let x0 = arrays::floats(x0, "x0", 2, &format!("(B, {})", self.state.len()))?;
-        let controls = arrays::floats(
-            controls,
-            "controls",
-            3,
-            &format!("(B, H, {})", self.controls.len()),
-        )?;
+        let d = self.state.len();
+        let x0 = arrays::floats(x0, "x0", 2, || format!("(B, {d})"))?;
+        let controls = arrays::floats(controls, "controls", 3, || {
+            format!("(B, H, {})", self.controls.len())
+        })?;
         let threads = thread_count(threads)?;
         let single = x0.single;
-        let (b, horizon, x, c) = {
-            let (x, c) = (
-                arrays::view::<Ix2>(&x0.array)?,
-                arrays::view::<Ix3>(&controls.array)?,
-            );
-            self.check(&x, &c, true)?;
-            let (b, horizon, _) = c.dim();
-            let x: Vec<f64> = x.iter().copied().collect();
-            (b, horizon, x, c.iter().copied().collect::<Vec<f64>>())
-        };
-        // The inputs copied, their borrows end: `out` may be one of them.
-        drop((x0, controls));
-        let shape = [b, horizon + 1, self.state.len()];
-        if let Some(out) = out {
-            self.fill(out, None, &shape, single, levels)?;
-        }
-        let rolled = py.detach(|| self.roll(&x, &c, horizon, threads))?;
+        let (x, c) = (x0.view::<Ix2>()?, controls.view::<Ix3>()?);
+        self.check(&x, &c, true, single)?;
+        let (b, horizon, _) = c.dim();
+        let shape: &[usize] = &[b, horizon + 1, d][usize::from(single)..];
+        let inputs = (x0.values()?, controls.values()?);
         match out {
-            Some(out) => self.fill(out, Some(&rolled), &shape, single, levels),
-            None => unbatched(array(py, self, rolled, &shape, levels)?, single),
+            // The inputs copied and their borrows ended: `out` may be one.
+            Some(_) => {
+                let copied = (inputs.0.to_vec(), inputs.1.to_vec());
+                drop((x0, controls));
+                let inputs = (&copied.0[..], &copied.1[..]);
+                self.answer(py, inputs, horizon, true, threads, shape, levels, out)
+            }
+            None => self.answer(py, inputs, horizon, true, threads, shape, levels, None),
         }
-    }
-}
-
-/// `out`'s one item where the call was given one item, not a batch.
-pub(crate) fn unbatched<'py>(out: Bound<'py, PyAny>, single: bool) -> PyResult<Bound<'py, PyAny>> {
-    match single {
-        true => out.get_item(0),
-        false => Ok(out),
     }
 }
 
@@ -764,7 +790,7 @@ pub fn reference_rollout_ns(
     repeats: usize,
 ) -> PyResult<Vec<f64>> {
     let (x0, c) = (x0.as_array(), controls.as_array());
-    model.check(&x0, &c, true)?;
+    model.check(&x0, &c, true, false)?;
     let (b, horizon, u) = c.dim();
     let d = model.state.len();
     let x0: Vec<f64> = x0.iter().copied().collect();
@@ -805,6 +831,62 @@ pub fn reference_rollout_ns(
                     })
                     .collect()
             })
+        })
+    })
+}
+
+/// The Rust one-row path a one-state `predict` is measured against: the
+/// piecewise model's plain path on one row (every piece; what `predict`
+/// takes below [`PIECEWISE_ONE_ROW_BELOW`] rows), `calls` times on this
+/// thread, `repeats` times. Returns each repeat's nanoseconds a call.
+#[pyfunction]
+#[pyo3(signature = (model, state, controls, calls = 2000, repeats = 7))]
+pub fn reference_predict_ns(
+    py: Python<'_>,
+    model: &Model,
+    state: PyReadonlyArray1<'_, f64>,
+    controls: PyReadonlyArray1<'_, f64>,
+    calls: usize,
+    repeats: usize,
+) -> PyResult<Vec<f64>> {
+    let (state, controls) = (state.as_array(), controls.as_array());
+    let (d, u) = (model.state.len(), model.controls.len());
+    if state.len() != d || controls.len() != u {
+        return Err(invalid(format!(
+            "expected a state of {d} values and {u} controls, got {} and {}",
+            state.len(),
+            controls.len()
+        )));
+    }
+    let mut row = vec![0.0; model.names.len()];
+    for (&v, &x) in model.state.iter().zip(state.iter()) {
+        row[v] = x;
+    }
+    for (&v, &x) in model.controls.iter().zip(controls.iter()) {
+        row[v] = x;
+    }
+    py.detach(|| {
+        model.loaded.with_dependent(|_, ready| {
+            let Predicts::Piecewise(predictor) = &ready.predicts else {
+                return Err(invalid("the reference path is a piecewise-linear model's"));
+            };
+            let mut scratch = predictor.scratch();
+            let mut next = vec![0.0; model.writes.len()];
+            Ok((0..repeats)
+                .map(|_| {
+                    let start = Instant::now();
+                    for _ in 0..calls {
+                        predictor.next_values(
+                            std::hint::black_box(&row),
+                            Path::Plain,
+                            &mut scratch,
+                            &mut next,
+                        );
+                    }
+                    std::hint::black_box(&next);
+                    start.elapsed().as_nanos() as f64 / calls.max(1) as f64
+                })
+                .collect())
         })
     })
 }

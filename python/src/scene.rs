@@ -17,7 +17,7 @@ use numpy::{IntoPyArray, PyArray1, PyArray2};
 use pyo3::prelude::*;
 use rayon::prelude::*;
 
-use crate::model::{thread_count, unbatched};
+use crate::model::thread_count;
 use crate::{arrays, invalid, raise, threads};
 
 /// States a parallel task of [`Scene::step`] takes.
@@ -74,7 +74,7 @@ impl Scene {
         steps: u64,
         out_state: &mut [f64],
         out_variables: &mut [f64],
-    ) {
+    ) -> Result<(), u64> {
         let p = &self.prepared;
         let mut state = state_from_generalized(&p.model, start).expect("checked to fit");
         runner.restart();
@@ -86,10 +86,10 @@ impl Scene {
         let dt = p.scene.step_dt(steps);
         let mut first = 0;
         for _ in 0..frames {
-            if runner.advance(&mut state, first, steps, dt).is_err() {
+            if let Err(step) = runner.advance(&mut state, first, steps, dt) {
                 out_state.fill(f64::NAN);
                 out_variables.fill(f64::NAN);
-                return;
+                return Err(step);
             }
             first += steps;
         }
@@ -97,6 +97,7 @@ impl Scene {
         runner.observe(&state, 0.0, &mut frame);
         out_state.copy_from_slice(&frame.state);
         out_variables.copy_from_slice(&frame.variables);
+        Ok(())
     }
 }
 
@@ -285,8 +286,8 @@ impl Scene {
         allow_nan: bool,
     ) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyAny>)> {
         let (s, u) = (self.state_width(), self.controls.len());
-        let states = arrays::floats(states, "states", 2, &format!("(B, {s})"))?;
-        let controls = arrays::floats(controls, "controls", 2, &format!("(B, {u})"))?;
+        let states = arrays::floats(states, "states", 2, || format!("(B, {s})"))?;
+        let controls = arrays::floats(controls, "controls", 2, || format!("(B, {u})"))?;
         let frames = match arrays::count(frames, "frames", 1)? {
             None => 1,
             Some(n) => u32::try_from(n).map_err(|_| invalid(format!("frames: {n} is too many")))?,
@@ -294,23 +295,33 @@ impl Scene {
         let steps = arrays::count(steps, "steps", 1)?;
         let threads = thread_count(threads)?;
         let single = states.single;
-        let (x, c) = (
-            arrays::view::<Ix2>(&states.array)?,
-            arrays::view::<Ix2>(&controls.array)?,
-        );
+        let (x, c) = (states.view::<Ix2>()?, controls.view::<Ix2>()?);
         let b = x.nrows();
+        // Shapes and rows as the caller wrote them: one item, no batch.
+        let batch = if single {
+            String::new()
+        } else {
+            format!("{b}, ")
+        };
+        let which = |r: usize| match single {
+            true => "the state".to_string(),
+            false => format!("row {r}"),
+        };
         if x.ncols() != s {
             return Err(invalid(format!(
-                "states: expected shape (B, {s}), a column per state component ({}), got {:?}",
+                "states: expected shape ({}{s}{}), a value per state component ({}), got {}",
+                if single { "" } else { "B, " },
+                if single { "," } else { "" },
                 self.prepared.layout.state.join(", "),
-                x.shape()
+                arrays::tuple(x.shape(), single)
             )));
         }
         if c.dim() != (b, u) {
             return Err(invalid(format!(
-                "controls: expected shape ({b}, {u}), a column per control ({}), got {:?}",
+                "controls: expected shape ({batch}{u}{}), a value per control ({}), got {}",
+                if single { "," } else { "" },
                 self.control_names().join(", "),
-                c.shape()
+                arrays::tuple(c.shape(), single)
             )));
         }
         let steps = steps.unwrap_or_else(|| self.steps_per_frame());
@@ -322,7 +333,7 @@ impl Scene {
                 false => None,
             };
             let Some(state) = state else {
-                return Err(invalid(format!("states: row {r} is not a finite state")));
+                return Err(invalid(format!("states: {} is not finite", which(r))));
             };
             // Loose enough for a float32 state of unit quaternions.
             if let Some((i, q)) = state
@@ -332,21 +343,26 @@ impl Scene {
                 .find(|(_, q)| (q.as_ref().norm() - 1.0).abs() > 1e-3)
             {
                 return Err(invalid(format!(
-                    "states: row {r} is not a state: link {}'s orientation is no unit quaternion \
+                    "states: {} is not a state: link {}'s orientation is no unit quaternion \
                      (norm {:.3e})",
+                    which(r),
                     i + 1,
                     q.as_ref().norm()
                 )));
             }
             if let Some(k) = c.row(r).iter().position(|v| !v.is_finite()) {
                 return Err(invalid(format!(
-                    "controls: not a finite number at index [{r}, {k}] (`{}`)",
+                    "controls: not a finite number at index {} (`{}`)",
+                    arrays::tuple(&[r, k], single),
                     self.controls[k].name
                 )));
             }
         }
         let v = self.prepared.layout.variables.len();
         let (mut out_states, mut out_variables) = (vec![0.0; b * s], vec![0.0; b * v]);
+        // Each row's step (counted from the call's first) that left the
+        // finite numbers, if one did.
+        let mut failed: Vec<Option<u64>> = vec![None; b];
         py.detach(|| {
             threads::run(threads, || {
                 // Tasks of a fixed size, each with a runner of its own,
@@ -355,39 +371,54 @@ impl Scene {
                 out_states
                     .par_chunks_mut(s * TASK_ROWS)
                     .zip(out_variables.par_chunks_mut(v * TASK_ROWS))
+                    .zip(failed.par_chunks_mut(TASK_ROWS))
                     .enumerate()
-                    .for_each(|(t, (states, variables))| {
+                    .for_each(|(t, ((states, variables), failed))| {
                         let p = &self.prepared;
                         let mut runner = Runner::new(p, self.seed, self.index, 0);
-                        for (k, (state, variables)) in states
+                        for (k, ((state, variables), failed)) in states
                             .chunks_mut(s)
                             .zip(variables.chunks_mut(v))
+                            .zip(failed.iter_mut())
                             .enumerate()
                         {
                             let r = t * TASK_ROWS + k;
-                            self.step_one(
-                                &mut runner,
-                                x.row(r),
-                                c.row(r),
-                                frames,
-                                steps,
-                                state,
-                                variables,
-                            );
+                            *failed = self
+                                .step_one(
+                                    &mut runner,
+                                    x.row(r),
+                                    c.row(r),
+                                    frames,
+                                    steps,
+                                    state,
+                                    variables,
+                                )
+                                .err();
                         }
                     });
             })
         })?;
-        // A result that is not a number is an error, not a value.
+        // A result that is not a number is an error, not a value: the step
+        // that left the finite numbers where the simulator saw it, else
+        // the observation (an acceleration) that did.
         let left = out_states
             .chunks(s.max(1))
             .zip(out_variables.chunks(v.max(1)))
             .position(|(x, y)| x.iter().chain(y).any(|z| !z.is_finite()));
         if let Some(r) = left.filter(|_| !allow_nan) {
+            let when = match failed[r] {
+                Some(step) => format!(
+                    "at step {} of {} ({steps} a frame)",
+                    step + 1,
+                    u64::from(frames) * steps,
+                ),
+                None => format!("in its observation after {frames} frame(s)"),
+            };
             return Err(invalid(format!(
-                "states: row {r} left the finite numbers within {frames} frame(s): the simulator \
-                 cannot step it (a state far outside what the scene can reach, or controls too \
-                 large for its step; allow_nan=True returns NaN instead)"
+                "states: {} left the finite numbers {when}: the simulator cannot step it (a state \
+                 far outside what the scene can reach, or controls too large for its step; \
+                 allow_nan=True returns NaN instead)",
+                which(r)
             )));
         }
         let shaped = |e: numpy::ndarray::ShapeError| invalid(format!("internal shape error: {e}"));
@@ -400,5 +431,13 @@ impl Scene {
             .into_pyarray(py)
             .into_any();
         Ok((unbatched(states, single)?, unbatched(variables, single)?))
+    }
+}
+
+/// `out`'s one item where the call was given one item, not a batch.
+fn unbatched<'py>(out: Bound<'py, PyAny>, single: bool) -> PyResult<Bound<'py, PyAny>> {
+    match single {
+        true => out.get_item(0),
+        false => Ok(out),
     }
 }

@@ -183,13 +183,20 @@ def test_bad_arrays_are_refused_with_the_expected_shape(artifacts):
     model = load(artifacts, "piecewise")
     d, u = len(model.state_names), len(model.control_names)
     x0 = np.zeros((5, d))
-    with pytest.raises(alnlab.InputError, match=rf"states: expected shape \(B, {d}\).*{model.state_names[0]}.*got \[5, {d + 1}\]"):
+    with pytest.raises(alnlab.InputError, match=rf"states: expected shape \(B, {d}\).*{model.state_names[0]}.*got \(5, {d + 1}\)$"):
         model.predict(np.zeros((5, d + 1)), np.zeros((5, u)))
+    # One state is reported as it was given, without a batch dimension.
+    with pytest.raises(alnlab.InputError, match=rf"states: expected shape \({d},\),.*got \({d + 1},\)$"):
+        model.predict(np.zeros(d + 1), np.zeros(u))
+    with pytest.raises(alnlab.InputError, match=rf"controls: expected shape \({u},\) — a value per control.*got \({u + 1},\)$"):
+        model.predict(np.zeros(d), np.zeros(u + 1))
+    with pytest.raises(alnlab.InputError, match=rf"x0: expected shape \({d},\),.*got \({d - 1},\)$"):
+        model.rollout(np.zeros(d - 1), np.zeros((3, u)))
     with pytest.raises(alnlab.InputError, match=rf"controls: expected shape \(5, H, {u}\).*{model.control_names[0]}"):
         model.rollout(x0, np.zeros((4, 3, u)))
     bad = x0.copy()
     bad[3, 2] = np.nan
-    with pytest.raises(alnlab.InputError, match=rf"states: not a finite number at index \[3, 2\] \(`{model.state_names[2]}`\)"):
+    with pytest.raises(alnlab.InputError, match=rf"states: not a finite number at index \(3, 2\) \(`{model.state_names[2]}`\)"):
         model.predict(bad, np.zeros((5, u)))
     for threads in [0, -1, 1.5, "2", True]:
         with pytest.raises(alnlab.InputError, match="threads: expected a whole number of at least 1, got "):
@@ -257,7 +264,7 @@ def test_any_array_like_of_real_numbers_predicts_as_float64(artifacts):
     controls = np.repeat(u[:, None, :], 3, axis=1)
     np.testing.assert_array_equal(model.rollout(x, controls, out=paths), model.rollout(x, controls))
     for bad in [np.empty((8, 2)), np.empty(want.shape, dtype=np.float32), np.empty(want.shape)[:, ::-1], [0.0] * 8]:
-        with pytest.raises(alnlab.InputError, match=r"^out: expected a writeable C-contiguous float64 array of shape \[8, "):
+        with pytest.raises(alnlab.InputError, match=r"^out: expected a writeable C-contiguous float64 array of shape \(8, "):
             model.predict(x, u, out=bad)
     # Any Python int for a count, NumPy's too.
     np.testing.assert_array_equal(model.predict(x, u, threads=np.int64(2)), want)

@@ -77,7 +77,7 @@ def test_bad_steps_are_refused(runs, worm):
         worm.step(states[:2], np.zeros((2, u + 1)))
     bad = states[:3].copy()
     bad[1, 0] = np.inf
-    with pytest.raises(alnlab.InputError, match="states: row 1 is not a finite state"):
+    with pytest.raises(alnlab.InputError, match="states: row 1 is not finite"):
         worm.step(bad, np.zeros((3, u)))
     for steps in [0, -3]:
         with pytest.raises(alnlab.InputError, match="steps: expected a whole number of at least 1, got "):
@@ -89,6 +89,20 @@ def test_bad_steps_are_refused(runs, worm):
     # A state the simulator cannot step is an error, not NaN.
     with pytest.raises(alnlab.InputError, match="states: row 0 is not a state: link 1's orientation is no unit quaternion"):
         worm.step(np.zeros((1, s)), np.zeros((1, u)))
+    # One state is reported as it was given, without a batch dimension.
+    with pytest.raises(alnlab.InputError, match=rf"states: expected shape \({s},\), .*got \({s + 1},\)$"):
+        worm.step(np.zeros(s + 1), np.zeros(u))
+    with pytest.raises(alnlab.InputError, match="states: the state is not a state: link 1's orientation"):
+        worm.step(np.zeros(s), np.zeros(u))
+    # A step that leaves the finite numbers is an error naming the step, or
+    # NaN on request (a planner's candidate that blew up).
+    spinning = states[5:7].copy()
+    spinning[1, worm.state_names.index("w.1.x")] = 1e300
+    with pytest.raises(alnlab.InputError, match=r"states: row 1 left the finite numbers at step \d+ of 10 \(10 a frame\)"):
+        worm.step(spinning, np.zeros((2, u)))
+    stepped, variables = worm.step(spinning, np.zeros((2, u)), allow_nan=True)
+    assert np.isnan(stepped[1]).all() and np.isnan(variables[1]).all()
+    np.testing.assert_array_equal(stepped[0], worm.step(spinning[:1], np.zeros((1, u)))[0][0])
     # One state (float32, as a gymnasium space gives) steps as a batch of one.
     one, variables = worm.step(states[5].astype(np.float32), np.zeros(u, dtype=np.float32))
     batch, _ = worm.step(states[5:6].astype(np.float32).astype(np.float64), np.zeros((1, u)))
