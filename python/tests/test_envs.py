@@ -2,6 +2,9 @@
 both pass gymnasium's checker, share their spaces, and one random-shooting
 MPC loop, written once, runs on either."""
 
+import importlib.util
+from pathlib import Path
+
 import numpy as np
 import pytest
 from gymnasium.utils.env_checker import check_env
@@ -10,21 +13,13 @@ import alnlab
 from alnlab.envs import ModelEnv, SceneEnv, observation_columns, scene_state
 
 
-def mpc(world, model_env, *, decisions=3, candidates=16, horizon=3, seed=0):
-    """Random shooting: each decision samples candidate action sequences,
-    rolls each out on `model_env` from the world's observation, and applies
-    the first action of the one that moves the observation least."""
-    rng = np.random.default_rng(seed)
-    obs, _ = world.reset(seed=seed)
-    low, high = world.action_space.low, world.action_space.high
-    costs = []
-    for _ in range(decisions):
-        plans = rng.uniform(low, high, size=(candidates, horizon, len(low)))
-        path = model_env.model.rollout(np.repeat(obs[None, :], candidates, axis=0), plans, threads=1)
-        cost = np.square(path[:, 1:] - obs).sum(axis=(1, 2))
-        obs, _, _, _, _ = world.step(plans[int(np.argmin(cost)), 0])
-        costs.append(float(cost.min()))
-    return obs, costs
+def docs_mpc():
+    """`docs/env_mpc.py`, the loop the docs show, as a module."""
+    path = Path(__file__).resolve().parents[2] / "docs" / "env_mpc.py"
+    spec = importlib.util.spec_from_file_location("env_mpc", path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
 
 
 def test_the_scene_and_its_model_are_gymnasium_environments_with_one_space(runs):
@@ -55,11 +50,15 @@ def test_the_scene_and_its_model_are_gymnasium_environments_with_one_space(runs)
 
 
 def test_one_mpc_loop_runs_on_the_simulator_and_on_the_model(runs):
+    docs = docs_mpc()
     learned = ModelEnv("quickstart", variant="piecewise", out=runs)
-    for world in [SceneEnv("quickstart", variant="piecewise", out=runs), learned]:
-        obs, costs = mpc(world, learned)
-        assert obs.shape == world.observation_space.shape and np.isfinite(obs).all()
-        assert len(costs) == 3 and all(np.isfinite(costs))
+    cost = docs.bend_cost(learned.model)
+    losses = {}
+    for name, world in [("scene", SceneEnv("quickstart", variant="piecewise", out=runs)), ("model", learned)]:
+        losses[name], seconds = docs.mpc(world, learned.model, cost, decisions=3, candidates=16, horizon=3, seed=0)
+        assert np.isfinite(losses[name]) and len(seconds) == 3
+    # Only the world differs, and the model is not the simulator.
+    assert losses["scene"] != losses["model"]
 
 
 def test_a_free_root_is_not_guessed_back_from_the_models_columns(runs):

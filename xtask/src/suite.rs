@@ -328,6 +328,12 @@ fn python_package(suite: &Suite) -> Result<(), String> {
             .args(["docs/mpc.py", "--out"])
             .arg(runs(suite))
             .args(["--decisions", "3", "--candidates", "32", "--horizon", "4"]),
+    )?;
+    python(
+        Command::new(&suite.python)
+            .args(["docs/env_mpc.py", "--out"])
+            .arg(runs(suite))
+            .args(["--decisions", "3", "--candidates", "32", "--horizon", "4"]),
     )
 }
 
