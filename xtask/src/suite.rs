@@ -515,6 +515,13 @@ fn interop(suite: &Suite, record: &Path, report: &Path) -> Result<(), String> {
             .arg("tests/interop.py")
             .arg(record)
             .arg(report),
+    )?;
+    // The committed planning reports' control headlines, recomputed from
+    // their replicates.csv.
+    suite.run(
+        Command::new(&suite.python)
+            .arg("tests/plan_headlines.py")
+            .arg("reports"),
     )
 }
 

@@ -669,7 +669,15 @@ pub fn plot(plot: &Plot) -> String {
         ""
     };
     let mut entries: Vec<Entry> = plot.series.iter().map(Entry::Series).collect();
-    entries.extend(plot.rules.iter().map(|r| Entry::Rule(&r.name)));
+    // Rules of one name (a set of deadlines) are one entry.
+    for rule in &plot.rules {
+        if !entries
+            .iter()
+            .any(|e| matches!(e, Entry::Rule(n) if *n == rule.name))
+        {
+            entries.push(Entry::Rule(&rule.name));
+        }
+    }
     if plot.pareto {
         entries.push(Entry::Front);
     }

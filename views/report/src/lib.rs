@@ -18,6 +18,7 @@ mod closed_loop;
 mod findings;
 mod fixed_point;
 pub mod format;
+mod frontier;
 mod glossary;
 mod headline;
 pub mod html;

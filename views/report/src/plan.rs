@@ -13,8 +13,9 @@ use alnlab_common::{PolicyId, Result, atomic};
 use alnlab_plan::planning::Episode;
 
 use super::PlanSetup;
-use super::format::{Align, MdTable, estimate, interval, sig3, signed};
-use crate::charts::{self, Axis, Marker, Plot, Point, Rule, Series, policy_style};
+use super::format::{Align, MdTable, estimate, interval, sig3};
+use super::frontier::Budgeted;
+use crate::charts::{self, Axis, Plot, Point, Rule, Series, policy_style};
 use alnlab_summarize::paired::{Interval, Verdict};
 
 /// A forward model or reference as the planning section names it: the
@@ -28,7 +29,7 @@ pub(super) struct PlanModel {
 
 impl PlanModel {
     /// The model an episode was planned with.
-    fn of(e: &Episode) -> PlanModel {
+    pub(super) fn of(e: &Episode) -> PlanModel {
         PlanModel {
             policy: e.model,
             round: e.round,
@@ -41,7 +42,7 @@ impl PlanModel {
     }
 
     /// ` (round r)` after r rounds, else nothing.
-    fn round_suffix(self) -> String {
+    pub(super) fn round_suffix(self) -> String {
         match self.round {
             0 => String::new(),
             r => format!(" (round {r})"),
@@ -56,21 +57,21 @@ impl std::fmt::Display for PlanModel {
 }
 
 /// One policy's episodes of one task, in episode order.
-struct Policy<'a> {
-    model: PlanModel,
-    planner: &'a str,
-    budget: u32,
-    evaluations: u64,
+pub(super) struct Policy<'a> {
+    pub model: PlanModel,
+    pub planner: &'a str,
+    pub budget: u32,
+    pub evaluations: u64,
     episodes: Vec<&'a Episode>,
 }
 
 impl Policy<'_> {
-    fn costs(&self) -> Vec<f64> {
+    pub(super) fn costs(&self) -> Vec<f64> {
         self.episodes.iter().map(|e| e.cost).collect()
     }
 
     /// The median over episodes of their median decision times.
-    fn ms(&self) -> f64 {
+    pub(super) fn ms(&self) -> f64 {
         let mut ms: Vec<f64> = self.episodes.iter().map(|e| e.ms_per_decision).collect();
         ms.sort_by(f64::total_cmp);
         ms[ms.len() / 2]
@@ -95,7 +96,7 @@ impl Policy<'_> {
     }
 
     /// Whether a planner chose the torques (not a reference).
-    fn planned(&self) -> bool {
+    pub(super) fn planned(&self) -> bool {
         !self.planner.is_empty()
     }
 
@@ -135,7 +136,7 @@ impl Policy<'_> {
 }
 
 /// The policies of `task`, in the stage's order.
-fn policies<'a>(rows: &'a [Episode], task: &str) -> Vec<Policy<'a>> {
+pub(super) fn policies<'a>(rows: &'a [Episode], task: &str) -> Vec<Policy<'a>> {
     let mut out: Vec<Policy> = Vec::new();
     for e in rows.iter().filter(|e| e.task == task) {
         match out
@@ -158,6 +159,41 @@ fn policies<'a>(rows: &'a [Episode], task: &str) -> Vec<Policy<'a>> {
     out
 }
 
+/// Every policy's planning figures across replicates, for
+/// `replicates.csv`: per task and policy of the first replicate (model,
+/// round, planner, budget, or a reference's torques), its mean episode
+/// cost and its median ms a decision in each replicate, named
+/// `plan <task>: <policy> cost` and `… ms`; a replicate without the policy
+/// gives no value.
+pub(super) fn replicate_figures(replicates: &[Vec<Episode>]) -> Vec<(String, Vec<Option<f64>>)> {
+    let Some(first) = replicates.first() else {
+        return Vec::new();
+    };
+    let mut figures = Vec::new();
+    for task in tasks(first) {
+        let each: Vec<Vec<Policy>> = replicates.iter().map(|r| policies(r, task)).collect();
+        for p in &each[0] {
+            let same =
+                |q: &&Policy| q.model == p.model && q.planner == p.planner && q.budget == p.budget;
+            let name = match p.planned() {
+                true => format!("{} {} {}", p.model, p.planner, p.budget),
+                false => format!("{} torques", p.model),
+            };
+            let of = |f: &dyn Fn(&Policy) -> f64| -> Vec<Option<f64>> {
+                each.iter().map(|r| r.iter().find(same).map(f)).collect()
+            };
+            figures.push((
+                format!("plan {task}: {name} cost"),
+                of(&|q| mean(&q.costs())),
+            ));
+            if p.planned() {
+                figures.push((format!("plan {task}: {name} ms"), of(&|q| q.ms())));
+            }
+        }
+    }
+    figures
+}
+
 /// `model` with `planner` at its largest budget whose median decision fits
 /// `limit` ms: a rule fixed before any cost is seen, not the best of its
 /// budgets.
@@ -174,7 +210,7 @@ fn within<'p, 'a>(
 }
 
 /// The tasks of `rows`, in the stage's order.
-fn tasks(rows: &[Episode]) -> Vec<&str> {
+pub(super) fn tasks(rows: &[Episode]) -> Vec<&str> {
     let mut tasks: Vec<&str> = rows.iter().map(|e| e.task.as_str()).collect();
     tasks.dedup();
     tasks
@@ -446,7 +482,8 @@ pub(super) fn section(
         );
         at_equal_time(md, &policies, (zero, random), real_time, words);
 
-        // Cost against time per decision, one curve per model and planner.
+        // Each policy's cost minus zero torques', paired episode by episode,
+        // against time per decision: one curve per model and planner.
         let mut series: Vec<Series> = Vec::new();
         let planned: Vec<&Policy> = policies.iter().filter(|p| p.planned()).collect();
         let xs: Vec<f64> = planned.iter().map(|p| p.ms()).chain([real_time]).collect();
@@ -456,13 +493,12 @@ pub(super) fn section(
             .fold((f64::MAX, 0f64), |(lo, hi), &x| (lo.min(x), hi.max(x)));
         for p in &planned {
             let name = format!("{} {}", p.model, p.planner);
-            let point = {
-                let costs = p.costs();
-                let i = Interval::of(&costs).expect("episodes");
-                Point {
-                    y_range: (costs.len() > 1).then_some((i.low.max(0.0), i.high)),
-                    ..Point::at(p.ms(), i.mean)
-                }
+            let Some(d) = Interval::of(&p.differences(zero)) else {
+                continue;
+            };
+            let point = Point {
+                y_range: d.low.is_finite().then_some((d.low, d.high)),
+                ..Point::at(p.ms(), d.mean)
             };
             match series.iter_mut().find(|s| s.name == name) {
                 Some(s) => s.points.push(point),
@@ -475,32 +511,24 @@ pub(super) fn section(
                 }),
             }
         }
-        let costs: Vec<f64> = policies
-            .iter()
-            .map(|p| Interval::of(&p.costs()).map_or(0.0, |i| i.mean))
-            .collect();
-        for p in policies.iter().filter(|p| !p.planned()) {
-            let mean = Interval::of(&p.costs()).map_or(0.0, |i| i.mean);
+        if let Some(d) = Interval::of(&random.differences(zero)) {
             series.push(Series {
-                name: p.label(),
-                style: policy_style(p.model.policy, p.model.round, 0),
-                points: vec![Point::at(x_lo, mean), Point::at(x_hi, mean)],
+                name: random.label(),
+                style: policy_style(random.model.policy, random.model.round, 0),
+                points: vec![Point::at(x_lo, d.mean), Point::at(x_hi, d.mean)],
                 joined: true,
-                // Hollow means random shooting here: only the square of
-                // zero torques is drawn outlined, as persistence is.
-                hollow: policy_style(p.model.policy, p.model.round, 0).marker == Marker::Square,
+                hollow: false,
             });
         }
-        let rules = if real_time > 0.0 {
+        let mut rules = vec![Rule::horizontal(0.0, "zero torques")];
+        if real_time > 0.0 {
             let name = format!("real time ({} ms a frame)", sig3(real_time));
-            vec![Rule::vertical(real_time, &name)]
-        } else {
-            Vec::new()
-        };
+            rules.push(Rule::vertical(real_time, &name));
+        }
         let chart = charts::plot(&Plot {
-            title: format!("task `{task}`: cost against time per decision"),
+            title: format!("task `{task}`: cost minus zero torques', against time per decision"),
             x: Axis::log("ms per decision, one thread (log)"),
-            y: Axis::error("task cost per episode", costs.iter().copied()),
+            y: Axis::linear("task cost per episode − zero torques' (paired)"),
             series,
             pareto: false,
             rules,
@@ -509,11 +537,13 @@ pub(super) fn section(
         atomic::write_bytes(&dir.join(&file), chart.as_bytes())?;
         let _ = writeln!(
             md,
-            "![task {task}: cost against time per decision]({file})\n\nEach curve is one forward \
-             model with one planner (filled: cross-entropy method; hollow: random shooting), a \
-             point per budget, bars the 95% interval across episodes; the flat lines are zero \
-             torques (black) and the random controller (orange); left of the dashed grey line (real \
-             time) a decision takes less than the frame it plans for.\n"
+            "![task {task}: cost minus zero torques' against time per decision]({file})\n\nEach \
+             curve is one forward model with one planner (filled: cross-entropy method; hollow: \
+             random shooting), a point per budget: its episodes' costs minus zero torques' on \
+             the same episodes, bars the 95% interval of that paired difference over the \
+             episodes; the flat line is the random controller's, the grey level zero torques'; \
+             left of the dashed grey line (real time) a decision takes less than the frame it \
+             plans for.\n"
         );
     }
     Ok(())
@@ -611,27 +641,17 @@ fn at_equal_time(
 
 /// One forward model's plans within real time: its planner at the largest
 /// budget whose median decision fits a frame in replicate 1 (the rule of
-/// the equal-time table), and its episode costs in every replicate.
-struct Contender {
+/// the equal-time table).
+struct Contender<'m> {
     label: String,
     model: PlanModel,
-    ms: f64,
-    /// Forward-model evaluations (states predicted) a decision.
-    evaluations: u64,
-    /// `[replicate][episode]`.
-    costs: Vec<Vec<f64>>,
-    /// Its one-step error on the task's variables in the frames it
-    /// planned, mean over episodes and replicates …
-    one_step: f64,
-    /// … and over the planning horizon, fed its own predictions.
-    horizon: f64,
+    point: &'m Budgeted,
 }
 
-impl Contender {
+impl Contender<'_> {
     /// The mean over replicates of the mean episode cost.
     fn mean(&self) -> f64 {
-        let means: Vec<f64> = self.costs.iter().map(|c| mean(c)).collect();
-        mean(&means)
+        self.point.mean()
     }
 }
 
@@ -652,20 +672,24 @@ pub(super) fn mean(x: &[f64]) -> f64 {
 /// are not the first's (its zero torques cost otherwise) is left out, said
 /// so.
 pub(super) fn at_real_time(md: &mut String, variants: &[super::Loaded]) {
-    let planned: Vec<Planned> = variants
+    at_real_time_of(md, &planned(variants));
+}
+
+/// Each variant's name and planning episodes.
+pub(super) fn planned<'a>(variants: &'a [super::Loaded]) -> Vec<Planned<'a>> {
+    variants
         .iter()
         .map(|v| Planned {
             name: &v.info.name,
             planning: &v.planning,
         })
-        .collect();
-    at_real_time_of(md, &planned);
+        .collect()
 }
 
 /// A variant's name and its replicates' planning episodes.
-struct Planned<'a> {
-    name: &'a str,
-    planning: &'a [Vec<Episode>],
+pub(super) struct Planned<'a> {
+    pub name: &'a str,
+    pub planning: &'a [Vec<Episode>],
 }
 
 /// [`at_real_time`] of the variants' planning.
@@ -677,87 +701,21 @@ fn at_real_time_of(md: &mut String, variants: &[Planned]) {
     let Some(first) = planned.first() else {
         return;
     };
-    let several = planned.len() > 1;
     let replicates = first.planning.len();
     for task in tasks(&first.planning[0]) {
         let limit = real_time(&first.planning[0], task);
-        let zero_costs = |v: &Planned| -> Option<Vec<Vec<f64>>> {
-            v.planning
-                .iter()
-                .map(|rows| {
-                    let policies = policies(rows, task);
-                    Some(
-                        policies
-                            .iter()
-                            .find(|p| p.model.policy == PolicyId::Zero)?
-                            .costs(),
-                    )
+        let (methods, left_out) = super::frontier::methods(&planned, task);
+        let contenders: Vec<Contender> = methods
+            .iter()
+            .filter_map(|m| {
+                let point = m.within(limit)?;
+                Some(Contender {
+                    label: m.at(point),
+                    model: m.model,
+                    point,
                 })
-                .collect()
-        };
-        let reference = zero_costs(first);
-        let mut contenders: Vec<Contender> = Vec::new();
-        let mut left_out: Vec<&str> = Vec::new();
-        for v in &planned {
-            if v.planning.len() != replicates || zero_costs(v) != reference {
-                left_out.push(v.name);
-                continue;
-            }
-            let policies_1 = policies(&v.planning[0], task);
-            let mut methods: Vec<(PlanModel, &str)> = Vec::new();
-            for p in &policies_1 {
-                let method = (p.model, p.planner);
-                let kept = p.model.policy == PolicyId::Aln || std::ptr::eq(*v, *first);
-                if p.planned() && kept && !methods.contains(&method) {
-                    methods.push(method);
-                }
-            }
-            for (model, planner) in methods {
-                let Some(chosen) = within(&policies_1, model, planner, limit) else {
-                    continue;
-                };
-                let costs: Option<Vec<Vec<f64>>> = v
-                    .planning
-                    .iter()
-                    .map(|rows| {
-                        let policies = policies(rows, task);
-                        let p = policies.iter().find(|p| {
-                            p.model == model && p.planner == planner && p.budget == chosen.budget
-                        })?;
-                        Some(p.costs())
-                    })
-                    .collect();
-                let Some(costs) = costs else {
-                    continue;
-                };
-                let name = match (model.policy, several) {
-                    (PolicyId::Aln, true) => format!("ALN{} (`{}`)", model.round_suffix(), v.name),
-                    (PolicyId::Aln, false) => format!("ALN{}", model.round_suffix()),
-                    _ => model.to_string(),
-                };
-                let chosen_episodes = || {
-                    v.planning.iter().flat_map(|rows| {
-                        rows.iter().filter(|e| {
-                            e.task == task
-                                && PlanModel::of(e) == model
-                                && e.planner == planner
-                                && e.budget == chosen.budget
-                        })
-                    })
-                };
-                let one_step: Vec<f64> = chosen_episodes().map(|e| e.prediction_rms).collect();
-                let horizon: Vec<f64> = chosen_episodes().map(|e| e.horizon_rms).collect();
-                contenders.push(Contender {
-                    label: format!("{name}, {planner} ({} sequences)", chosen.budget),
-                    model,
-                    ms: chosen.ms(),
-                    evaluations: chosen.evaluations,
-                    costs,
-                    one_step: mean(&one_step),
-                    horizon: mean(&horizon),
-                });
-            }
-        }
+            })
+            .collect();
         let nominal = contenders
             .iter()
             .filter(|c| matches!(c.model.policy, PolicyId::Simulator { .. }))
@@ -782,26 +740,17 @@ fn at_real_time_of(md: &mut String, variants: &[Planned]) {
         // interval below zero: the question's answer.
         let mut aln_lower: Vec<&str> = Vec::new();
         for c in &order {
-            let means: Vec<f64> = c.costs.iter().map(|r| mean(r)).collect();
+            let means: Vec<f64> = c.point.costs.iter().map(|r| mean(r)).collect();
             let cost = match Interval::of(&means) {
                 Some(i) if replicates > 1 => estimate(i.mean, i.low, i.high),
                 _ => sig3(c.mean()),
             };
-            let pooled: Vec<f64> = c
-                .costs
-                .iter()
-                .zip(&nominal.costs)
-                .flat_map(|(a, b)| a.iter().zip(b).map(|(a, b)| a - b))
-                .collect();
+            let pooled = c.point.pooled_minus(nominal.point);
             let (difference, p) = if std::ptr::eq(*c, nominal) {
                 ("—".to_string(), "—".to_string())
             } else {
                 let per: Vec<f64> = if replicates > 1 {
-                    c.costs
-                        .iter()
-                        .zip(&nominal.costs)
-                        .map(|(a, b)| mean(a) - mean(b))
-                        .collect()
+                    c.point.minus(nominal.point)
                 } else {
                     pooled.clone()
                 };
@@ -813,14 +762,7 @@ fn at_real_time_of(md: &mut String, variants: &[Planned]) {
                     )
                 });
                 // The signed-rank test is of the median: say which way.
-                let mut sorted = pooled.clone();
-                sorted.sort_by(f64::total_cmp);
-                let n = sorted.len();
-                let median = (sorted[(n - 1) / 2] + sorted[n / 2]) / 2.0;
-                let p = alnlab_summarize::signed_rank::test(&pooled)
-                    .map_or("— (every episode tied)".into(), |t| {
-                        format!("{}, median {} ({n})", sig3(t.p), signed(median))
-                    });
+                let p = super::frontier::rank_cell(&pooled);
                 if c.model.policy == PolicyId::Aln {
                     aln_words.push(format!("{}: {difference}, p = {p}", c.label));
                     let lower = Interval::of(&per).is_some_and(|d| d.verdict() == Verdict::Lower);
@@ -837,13 +779,13 @@ fn at_real_time_of(md: &mut String, variants: &[Planned]) {
             };
             table.row(vec![
                 label,
-                sig3(c.ms),
-                sig3(c.ms * 1e3 / c.evaluations.max(1) as f64),
+                sig3(c.point.ms),
+                sig3(c.point.ms * 1e3 / c.point.evaluations.max(1) as f64),
                 cost,
                 difference,
                 p,
-                sig3(c.one_step),
-                sig3(c.horizon),
+                sig3(c.point.one_step),
+                sig3(c.point.horizon),
             ]);
         }
         let best = order[0];

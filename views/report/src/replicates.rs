@@ -315,6 +315,15 @@ pub(super) fn section(md: &mut String, variants: &[Loaded], dir: &Path) -> Resul
         md.push('\n');
     }
     md.push('\n');
+    // In the file only: every planning figure per replicate, from which
+    // each control headline can be recomputed.
+    for v in replicated.iter().copied() {
+        for (figure, values) in super::plan::replicate_figures(&v.planning) {
+            if let Some(i) = across(&values) {
+                csv_line(&mut csv, &v.info.name, &figure, &i, false, &values);
+            }
+        }
+    }
     // Variants against each other, paired by replicate.
     for (i, a) in variants.iter().enumerate() {
         for b in &variants[i + 1..] {

@@ -1,0 +1,144 @@
+"""The control headlines of every committed planning report, recomputed from
+its `replicates.csv` with NumPy and SciPy, apart from the Rust that wrote
+them.
+
+A report that plans states on its first screen, per task, each forward
+model's cost minus the nominal simulator's, paired replicate by replicate,
+as "higher: +2.72 [+1.04, +4.41]" — in the table of plans within real time
+and in the table at each deadline. `replicates.csv` holds each policy's
+mean episode cost in every replicate (`plan <task>: <model> <planner>
+<budget> cost`). This check reads both tables' rows, finds the two
+policies' figures, recomputes the mean difference and its 95% t-interval
+across replicates, and asserts that every number shown is the recomputed
+one to the digits shown, and the verdict word the interval's.
+
+Usage: python tests/plan_headlines.py reports
+"""
+
+import csv
+import math
+import re
+import sys
+from pathlib import Path
+
+import numpy as np
+from scipy import stats
+
+# "ALN (round 2) (`learned-planning`), cem (128 sequences)" or
+# "simulator@1, cem (256 sequences)", with an optional " — …" tail.
+LABEL = re.compile(
+    r"^(?P<model>ALN(?: \(round (?P<round>\d+)\))?(?: \(`(?P<variant>[^`]+)`\))?|[\w@]+(?: \(round \d+\))?)"
+    r", (?P<planner>[\w-]+) \((?P<budget>\d+) sequences\)"
+)
+DIFFERENCE = re.compile(r"^(?P<word>lower|higher|indistinguishable): (?P<mean>\S+) \[(?P<low>\S+), (?P<high>\S+)\]$")
+
+
+def number(text: str) -> float:
+    return float(text.replace("−", "-"))
+
+
+def close(shown: str, value: float) -> bool:
+    """Whether `shown` is `value` to the digits it shows."""
+    text = shown.replace("−", "-").lstrip("+")
+    mantissa = text.split("e")[0]
+    decimals = len(mantissa.split(".")[1]) if "." in mantissa else 0
+    exponent = int(text.split("e")[1]) if "e" in text else 0
+    return abs(float(text) - value) <= 0.5 * 10 ** (exponent - decimals) * (1 + 1e-9)
+
+
+def figures(path: Path) -> dict[tuple[str, str], list[float]]:
+    """(variant, figure) → each replicate's value."""
+    out = {}
+    with path.open() as f:
+        for row in csv.DictReader(f):
+            if row["figure"].startswith("plan "):
+                out[(row["variant"], row["figure"])] = [float(v) for v in row["values"].split(";")]
+    return out
+
+
+def figure_of(label: str, task: str, table: dict, first_variant: str, variants: list[str]) -> list[float]:
+    """The replicates' mean costs of the policy a first-screen label names."""
+    m = LABEL.match(label)
+    assert m, f"a label the check cannot read: {label!r}"
+    model = m["model"]
+    if model.startswith("ALN"):
+        variant = m["variant"] or (variants[0] if len(variants) == 1 else None)
+        assert variant, f"{label!r}: which variant's ALN?"
+        name = "aln" + (f" (round {m['round']})" if m["round"] else "")
+    else:
+        variant, name = first_variant, model
+    key = (variant, f"plan {task}: {name} {m['planner']} {m['budget']} cost")
+    assert key in table, f"{label!r}: no figure {key} in replicates.csv"
+    return table[key]
+
+
+def interval(values: np.ndarray) -> tuple[float, float, float]:
+    n = len(values)
+    mean = float(values.mean())
+    half = stats.t.ppf(0.975, n - 1) * values.std(ddof=1) / math.sqrt(n)
+    return mean, mean - half, mean + half
+
+
+def tables(report: str):
+    """Each first-screen planning table: (task, header, rows as cells)."""
+    lines = report.splitlines()
+    for i, line in enumerate(lines):
+        m = re.match(r"^\*\*(?:Planning `(?P<a>[^`]+)` within real time|`(?P<b>[^`]+)` at each deadline)\*\*", line)
+        if not m:
+            continue
+        start = next(k for k in range(i + 1, len(lines)) if lines[k].startswith("|"))
+        header = [c.strip() for c in lines[start].strip("|").split("|")]
+        rows = []
+        for row in lines[start + 2 :]:
+            if not row.startswith("|"):
+                break
+            rows.append([c.strip() for c in row.strip("|").split("|")])
+        yield m["a"] or m["b"], header, rows
+
+
+def check(report_dir: Path) -> int:
+    table = figures(report_dir / "replicates.csv")
+    if not table:
+        return 0
+    variants = list(dict.fromkeys(v for v, _ in table))
+    first_variant = variants[0]
+    checked = 0
+    for task, header, rows in tables((report_dir / "report.md").read_text()):
+        label_at = 1 if header[0] == "deadline" else 0
+        column = next(k for k, h in enumerate(header) if h.startswith("− "))
+        nominal_of_table = header[column][2:]
+        for k, row in enumerate(rows):
+            cell = row[column]
+            if cell == "—":
+                continue
+            # The deadline table's nominal simulator is the row before the
+            # others of its deadline, the one whose difference is "—".
+            if label_at:
+                nominal = next(r[label_at] for r in rows[: k + 1][::-1] if r[0] == row[0] and r[column] == "—")
+            else:
+                nominal = nominal_of_table
+            label = row[label_at].split(" — ")[0]
+            a = np.array(figure_of(label, task, table, first_variant, variants))
+            b = np.array(figure_of(nominal, task, table, first_variant, variants))
+            mean, low, high = interval(a - b)
+            m = DIFFERENCE.match(cell)
+            assert m, f"{report_dir.name}: a difference the check cannot read: {cell!r}"
+            word = "lower" if high < 0 else "higher" if low > 0 else "indistinguishable"
+            where = f"{report_dir.name}, `{task}`, {label} − {nominal}"
+            assert m["word"] == word, f"{where}: shown {m['word']}, recomputed {word} ({low}, {high})"
+            for shown, value in [(m["mean"], mean), (m["low"], low), (m["high"], high)]:
+                assert close(shown, value), f"{where}: shown {shown}, recomputed {value}"
+            checked += 1
+    print(f"{report_dir.name}: {checked} planning differences recomputed from replicates.csv")
+    return checked
+
+
+def main() -> int:
+    reports = Path(sys.argv[1]) if len(sys.argv) > 1 else Path("reports")
+    total = sum(check(d) for d in sorted(reports.iterdir()) if (d / "replicates.csv").exists())
+    assert total > 0, f"{reports}: no planning difference to recompute"
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,586 @@
+//! The planning frontier (issue 62): every forward model's cost at every
+//! budget it planned with, against its time a decision, on the same
+//! episodes — what a model buys at each deadline, rather than at the one
+//! budget a manifest happened to give it. From it: the verdict at fixed
+//! deadlines, each model at its largest budget whose decisions fit (a rule
+//! of time, never of cost), paired with the nominal simulator there; and
+//! the regret against the plant's own simulator, the true model no user
+//! has, at the same budget and at its best.
+
+use std::fmt::Write as _;
+use std::path::Path;
+
+use alnlab_common::{PolicyId, Result, atomic};
+use alnlab_summarize::paired::{Interval, Verdict};
+
+use super::format::{Align, MdTable, estimate, interval, sig3, signed};
+use super::plan::{PlanModel, Planned, mean, policies, tasks};
+use crate::charts::{self, Axis, Plot, Point, Rule, Series, policy_style};
+
+/// The deadlines a decision is judged at, in ms.
+pub(super) const DEADLINES: [f64; 4] = [1.0, 2.0, 5.0, 10.0];
+
+/// One budget of a forward model: its time and its costs.
+pub(super) struct Budgeted {
+    pub budget: u32,
+    /// Replicate 1's median ms a decision: the time every rule reads.
+    pub ms: f64,
+    /// Forward-model evaluations (states predicted) a decision.
+    pub evaluations: u64,
+    /// `[replicate][episode]` summed task costs.
+    pub costs: Vec<Vec<f64>>,
+    /// The model's one-step error and its error at the horizon on the
+    /// task's variables, mean over every episode.
+    pub one_step: f64,
+    pub horizon: f64,
+}
+
+impl Budgeted {
+    /// The mean over replicates of the mean episode cost.
+    pub fn mean(&self) -> f64 {
+        let means: Vec<f64> = self.costs.iter().map(|c| mean(c)).collect();
+        mean(&means)
+    }
+
+    /// Each replicate's mean cost minus `other`'s (the same episodes).
+    pub fn minus(&self, other: &Budgeted) -> Vec<f64> {
+        self.costs
+            .iter()
+            .zip(&other.costs)
+            .map(|(a, b)| mean(a) - mean(b))
+            .collect()
+    }
+
+    /// Every episode's cost minus `other`'s, all replicates pooled.
+    pub fn pooled_minus(&self, other: &Budgeted) -> Vec<f64> {
+        self.costs
+            .iter()
+            .zip(&other.costs)
+            .flat_map(|(a, b)| a.iter().zip(b).map(|(a, b)| a - b))
+            .collect()
+    }
+}
+
+/// A forward model with one planner: its name on the first screen and a
+/// point per budget, in budget order.
+pub(super) struct Method {
+    pub label: String,
+    pub model: PlanModel,
+    pub planner: String,
+    pub budgets: Vec<Budgeted>,
+}
+
+impl Method {
+    /// The label with its budget: "simulator@1, cem (256 sequences)".
+    pub fn at(&self, b: &Budgeted) -> String {
+        format!("{}, {} ({} sequences)", self.label, self.planner, b.budget)
+    }
+
+    /// Its largest budget whose median decision in replicate 1 fits
+    /// `limit` ms: a rule fixed before any cost is seen.
+    pub fn within(&self, limit: f64) -> Option<&Budgeted> {
+        self.budgets
+            .iter()
+            .filter(|b| b.ms <= limit)
+            .max_by_key(|b| b.budget)
+    }
+
+    /// Its budget of the lowest mean cost: the best it achieves, given any
+    /// time (picked on these episodes; a reference, not a verdict).
+    pub fn saturated(&self) -> Option<&Budgeted> {
+        self.budgets
+            .iter()
+            .min_by(|a, b| a.mean().total_cmp(&b.mean()))
+    }
+}
+
+/// Every forward model of `task` with each planner, on the episodes of the
+/// first variant: each variant's ALN (every round), and the first
+/// variant's other models (the linear fit, the simulators, the plant's
+/// own). A variant whose episodes differ (its zero torques cost otherwise)
+/// is left out and named in the second list.
+pub(super) fn methods<'a>(planned: &[&Planned<'a>], task: &str) -> (Vec<Method>, Vec<&'a str>) {
+    let Some(first) = planned.first() else {
+        return (Vec::new(), Vec::new());
+    };
+    let replicates = first.planning.len();
+    let zero_costs = |v: &Planned| -> Option<Vec<Vec<f64>>> {
+        v.planning
+            .iter()
+            .map(|rows| {
+                let policies = policies(rows, task);
+                let zero = policies.iter().find(|p| p.model.policy == PolicyId::Zero)?;
+                Some(zero.costs())
+            })
+            .collect()
+    };
+    let reference = zero_costs(first);
+    let several = planned.len() > 1;
+    let (mut methods, mut left_out): (Vec<Method>, Vec<&str>) = (Vec::new(), Vec::new());
+    for v in planned {
+        if v.planning.len() != replicates || zero_costs(v) != reference {
+            left_out.push(v.name);
+            continue;
+        }
+        let each: Vec<_> = v.planning.iter().map(|rows| policies(rows, task)).collect();
+        for p in each[0].iter().filter(|p| p.planned()) {
+            if p.model.policy != PolicyId::Aln && !std::ptr::eq(*v, *first) {
+                continue;
+            }
+            let costs: Option<Vec<Vec<f64>>> = each
+                .iter()
+                .map(|r| {
+                    let q = r.iter().find(|q| {
+                        q.model == p.model && q.planner == p.planner && q.budget == p.budget
+                    })?;
+                    Some(q.costs())
+                })
+                .collect();
+            let Some(costs) = costs else {
+                continue;
+            };
+            let chosen = || {
+                v.planning.iter().flat_map(|rows| {
+                    rows.iter().filter(|e| {
+                        e.task == task
+                            && PlanModel::of(e) == p.model
+                            && e.planner == p.planner
+                            && e.budget == p.budget
+                    })
+                })
+            };
+            let one_step: Vec<f64> = chosen().map(|e| e.prediction_rms).collect();
+            let horizon: Vec<f64> = chosen().map(|e| e.horizon_rms).collect();
+            let point = Budgeted {
+                budget: p.budget,
+                ms: p.ms(),
+                evaluations: p.evaluations,
+                costs,
+                one_step: mean(&one_step),
+                horizon: mean(&horizon),
+            };
+            let label = match (p.model.policy, several) {
+                (PolicyId::Aln, true) => format!("ALN{} (`{}`)", p.model.round_suffix(), v.name),
+                (PolicyId::Aln, false) => format!("ALN{}", p.model.round_suffix()),
+                _ => p.model.to_string(),
+            };
+            match methods
+                .iter_mut()
+                .find(|m| m.label == label && m.planner == p.planner)
+            {
+                Some(m) => m.budgets.push(point),
+                None => methods.push(Method {
+                    label,
+                    model: p.model,
+                    planner: p.planner.to_string(),
+                    budgets: vec![point],
+                }),
+            }
+        }
+    }
+    for m in &mut methods {
+        m.budgets.sort_by_key(|b| b.budget);
+    }
+    (methods, left_out)
+}
+
+/// `a` minus `b`, paired: across replicates (each replicate's mean
+/// difference) when there are several, else over the one replicate's
+/// episodes.
+fn paired(a: &Budgeted, b: &Budgeted) -> Option<Interval> {
+    match a.costs.len() {
+        1 => Interval::of(&a.pooled_minus(b)),
+        _ => Interval::of(&a.minus(b)),
+    }
+}
+
+/// The Wilcoxon signed-rank p-value over paired episode differences, with
+/// the median difference it tests and their number: "3.5e-7, median +1.60
+/// (40)".
+pub(super) fn rank_cell(pooled: &[f64]) -> String {
+    let mut sorted = pooled.to_vec();
+    sorted.sort_by(f64::total_cmp);
+    let n = sorted.len();
+    if n == 0 {
+        return "—".into();
+    }
+    let median = (sorted[(n - 1) / 2] + sorted[n / 2]) / 2.0;
+    alnlab_summarize::signed_rank::test(pooled).map_or("— (every episode tied)".into(), |t| {
+        format!("{}, median {} ({n})", sig3(t.p), signed(median))
+    })
+}
+
+/// The true model among `methods`: the plant's own simulator at the most
+/// steps a frame where the data come from a plant, else the scene's own
+/// simulator at the most (the scene as written is then the plant).
+fn truth(methods: &[Method]) -> Option<&Method> {
+    let steps = |m: &&Method| match m.model.policy {
+        PolicyId::Plant { steps } => Some((1, steps)),
+        PolicyId::Simulator { steps } => Some((0, steps)),
+        _ => None,
+    };
+    methods
+        .iter()
+        .filter(|m| m.model.round == 0 && steps(m).is_some())
+        .max_by_key(|m| steps(m))
+}
+
+/// The first screen's frontier of each task: a chart of every forward
+/// model's regret (its cost minus the true model's at its best budget,
+/// paired) against its time a decision, a point per budget; and the
+/// verdict at each of [`DEADLINES`].
+pub(super) fn section(md: &mut String, variants: &[Planned], dir: &Path) -> Result<()> {
+    let planned: Vec<&Planned> = variants
+        .iter()
+        .filter(|v| v.planning.first().is_some_and(|r| !r.is_empty()))
+        .collect();
+    let Some(first) = planned.first() else {
+        return Ok(());
+    };
+    let replicates = first.planning.len();
+    let over = match replicates {
+        1 => "over the episodes of one replicate".to_string(),
+        n => format!("across {n} replicates"),
+    };
+    for task in tasks(&first.planning[0]) {
+        let (methods, _) = methods(&planned, task);
+        let Some(truth) = truth(&methods) else {
+            continue;
+        };
+        let Some(best) = truth.saturated() else {
+            continue;
+        };
+        let truth_name = match truth.model.policy {
+            PolicyId::Plant { .. } => "the plant's own simulator",
+            _ => "the scene's own simulator",
+        };
+        chart(md, &methods, (truth, best), truth_name, task, dir)?;
+        deadlines(md, &methods, truth, task, &over);
+    }
+    Ok(())
+}
+
+/// The frontier chart of one task.
+fn chart(
+    md: &mut String,
+    methods: &[Method],
+    (truth, best): (&Method, &Budgeted),
+    truth_name: &str,
+    task: &str,
+    dir: &Path,
+) -> Result<()> {
+    // One curve per model of its own data (rounds are the table's), each
+    // ALN variant in its own colour.
+    let mut series = Vec::new();
+    let mut alns = 0;
+    for m in methods.iter().filter(|m| m.model.round == 0) {
+        let points: Vec<Point> = m
+            .budgets
+            .iter()
+            .filter_map(|b| {
+                let d = paired(b, best)?;
+                Some(Point {
+                    y_range: d.low.is_finite().then_some((d.low, d.high)),
+                    ..Point::at(b.ms, d.mean)
+                })
+            })
+            .collect();
+        let variant = match m.model.policy {
+            PolicyId::Aln => {
+                alns += 1;
+                alns - 1
+            }
+            _ => 0,
+        };
+        series.push(Series {
+            name: format!("{}, {}", m.label, m.planner),
+            style: policy_style(m.model.policy, 0, variant),
+            points,
+            joined: true,
+            hollow: m.planner == "random-shooting",
+        });
+    }
+    let named = DEADLINES.map(sig3).join(", ");
+    let mut rules: Vec<Rule> = DEADLINES
+        .iter()
+        .map(|&d| Rule::vertical(d, &format!("deadlines: {named} ms")))
+        .collect();
+    rules.push(Rule::horizontal(
+        0.0,
+        &format!("{truth_name} at its best budget"),
+    ));
+    let svg = charts::plot(&Plot {
+        title: format!("task `{task}`: cost above the true model's best, against time a decision"),
+        x: Axis::log("ms a decision, one thread (log)"),
+        y: Axis::linear(&format!(
+            "cost − {} ({} sequences)",
+            truth.label, best.budget
+        )),
+        series,
+        pareto: false,
+        rules,
+    });
+    let file = format!("frontier-{task}.svg");
+    atomic::write_bytes(&dir.join(&file), svg.as_bytes())?;
+    let _ = writeln!(
+        md,
+        "![task {task}: the planning frontier]({file})\n\n**The planning frontier of `{task}`.** \
+         Every forward model at every budget it planned with (a point each, joined by \
+         budget): its task cost minus that of {truth_name} ({}, its lowest-cost budget — the \
+         best a planner achieves with the true model, here {} sequences), paired on the same \
+         episodes, against the median ms a decision of replicate 1 (bars: 95% interval of the \
+         paired difference). Lower is better; a model moves the frontier where its curve \
+         passes below every other's at the same time. The grey verticals are the deadlines \
+         the table below reads.\n",
+        truth.label, best.budget
+    );
+    Ok(())
+}
+
+/// The verdict of one task at each deadline: the nominal simulator and the
+/// ALN of the lowest mean cost, and the true model, each at its largest
+/// budget that fits, with the differences and regrets.
+fn deadlines(md: &mut String, methods: &[Method], truth: &Method, task: &str, over: &str) {
+    let mut table = MdTable::new(&["deadline", "forward model, planner (budget)"])
+        .numbers(&["ms / decision", "cost"])
+        .column("− the nominal simulator", Align::Left)
+        .column("signed-rank p, median difference (episodes)", Align::Left)
+        .column("regret: − the true model, same budget", Align::Left)
+        .column("regret: − the true model at its best", Align::Left);
+    let best_truth = truth.saturated();
+    let lowest = |keep: &dyn Fn(&Method) -> bool, limit: f64| {
+        methods
+            .iter()
+            .filter(|m| keep(m))
+            .filter_map(|m| Some((m, m.within(limit)?)))
+            .min_by(|a, b| a.1.mean().total_cmp(&b.1.mean()))
+    };
+    let mut answers = Vec::new();
+    for &limit in &DEADLINES {
+        let nominal = lowest(
+            &|m| matches!(m.model.policy, PolicyId::Simulator { .. }),
+            limit,
+        );
+        let aln = lowest(&|m| m.model.policy == PolicyId::Aln, limit);
+        let true_now = truth.within(limit).map(|b| (truth, b));
+        let deadline = format!("{} ms", sig3(limit));
+        match (nominal, aln) {
+            (Some((n, nb)), Some((a, ab))) => {
+                let d = paired(ab, nb);
+                // The lowest ALN is picked on these episodes: how many of
+                // them share its verdict says whether the pick carries it.
+                let fitting: Vec<&Budgeted> = methods
+                    .iter()
+                    .filter(|m| m.model.policy == PolicyId::Aln)
+                    .filter_map(|m| m.within(limit))
+                    .collect();
+                let count = |v: Verdict| {
+                    let n = fitting
+                        .iter()
+                        .filter(|b| paired(b, nb).is_some_and(|d| d.verdict() == v))
+                        .count();
+                    format!("{n} {}", v.as_str())
+                };
+                let of = match fitting.len() {
+                    1 => String::new(),
+                    n => format!(
+                        " (the lowest of {n} ALN models that fit: {}, {}, {})",
+                        count(Verdict::Lower),
+                        count(Verdict::Indistinguishable),
+                        count(Verdict::Higher)
+                    ),
+                };
+                answers.push(format!(
+                    "at {deadline}, {}{of} {}",
+                    a.at(ab),
+                    d.map_or("—".into(), |d| format!(
+                        "is {} {} {}: {}",
+                        d.verdict().as_str(),
+                        match d.verdict().as_str() {
+                            "indistinguishable" => "from",
+                            _ => "than",
+                        },
+                        n.at(nb),
+                        interval(d.mean, d.low, d.high)
+                    ))
+                ));
+            }
+            (None, Some((a, ab))) => answers.push(format!(
+                "at {deadline}, {} plans and no nominal simulator fits",
+                a.at(ab)
+            )),
+            _ => {}
+        }
+        for (k, found) in [nominal, aln, true_now].into_iter().enumerate() {
+            let Some((m, b)) = found else {
+                continue;
+            };
+            let against_nominal = match nominal {
+                Some((_, nb)) if k > 0 => paired(b, nb).map_or("—".into(), |d| {
+                    format!(
+                        "{}: {}",
+                        d.verdict().as_str(),
+                        interval(d.mean, d.low, d.high)
+                    )
+                }),
+                _ => "—".into(),
+            };
+            let p = match nominal {
+                Some((_, nb)) if k > 0 => rank_cell(&b.pooled_minus(nb)),
+                _ => "—".into(),
+            };
+            let regret = |t: Option<&Budgeted>| match (k, t) {
+                (2, _) | (_, None) => "—".to_string(),
+                (_, Some(t)) => {
+                    paired(b, t).map_or("—".into(), |d| interval(d.mean, d.low, d.high))
+                }
+            };
+            let same = truth.budgets.iter().find(|t| t.budget == b.budget);
+            let cost = {
+                let means: Vec<f64> = b.costs.iter().map(|c| mean(c)).collect();
+                match Interval::of(&means) {
+                    Some(i) if means.len() > 1 => estimate(i.mean, i.low, i.high),
+                    _ => sig3(b.mean()),
+                }
+            };
+            let label = match k {
+                2 => format!("{} — the true model", m.at(b)),
+                _ => m.at(b),
+            };
+            table.row(vec![
+                deadline.clone(),
+                label,
+                sig3(b.ms),
+                cost,
+                against_nominal,
+                p,
+                regret(same),
+                regret(best_truth),
+            ]);
+        }
+    }
+    if answers.is_empty() {
+        return;
+    }
+    let _ = writeln!(
+        md,
+        "**`{task}` at each deadline** (each model at its largest budget whose median decision \
+         in replicate 1 fits, a rule of time, not of cost; the lowest-cost nominal simulator and \
+         ALN at each; differences paired {over}, the p-value over every paired episode): {}.\n",
+        answers.join("; ")
+    );
+    table.write(md);
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use alnlab_plan::planning::Episode;
+
+    /// Four episodes of `model` at `budget` (0: a reference), costs `base`
+    /// plus `spread` times the episode, each decision `ms` long.
+    fn at(model: &str, budget: u32, base: f64, spread: f64, ms: f64) -> Vec<Episode> {
+        (0..4)
+            .map(|k| Episode {
+                task: "hold".into(),
+                model: model.parse().unwrap(),
+                round: 0,
+                planner: if budget == 0 {
+                    String::new()
+                } else {
+                    "cem".into()
+                },
+                budget,
+                episode: k,
+                evaluations: u64::from(budget) * 10,
+                cost: base + spread * f64::from(k),
+                ms_per_decision: ms,
+                ms_min: ms,
+                ms_max: ms,
+                real_time_ms: 10.0,
+                prediction_rms: 0.1,
+                horizon_rms: 0.4,
+            })
+            .collect()
+    }
+
+    /// A fast ALN that beats the slow simulator at tight deadlines and
+    /// loses to it given time; the plant's own simulator best of all at
+    /// its largest budget.
+    fn replicate(shift: f64) -> Vec<Episode> {
+        [
+            at("zero", 0, 100.0, 1.0, 0.0),
+            at("random", 0, 90.0, 1.0, 0.0),
+            at("aln", 8, 30.0 + shift, 1.2, 0.5),
+            at("aln", 64, 25.0 + shift, 1.2, 1.5),
+            at("simulator@2", 8, 40.0, 1.0, 1.5),
+            at("simulator@2", 64, 20.0, 1.0, 8.0),
+            at("plant@2", 8, 38.0, 1.0, 3.0),
+            at("plant@2", 64, 15.0, 1.0, 20.0),
+        ]
+        .concat()
+    }
+
+    #[test]
+    fn each_model_gathers_its_budgets_and_fits_a_deadline_by_time_alone() {
+        let planning = vec![replicate(0.0), replicate(0.5), replicate(-0.5)];
+        let planned = [Planned {
+            name: "v",
+            planning: &planning,
+        }];
+        let refs: Vec<&Planned> = planned.iter().collect();
+        let (methods, left_out) = methods(&refs, "hold");
+        assert!(left_out.is_empty());
+        let labels: Vec<&str> = methods.iter().map(|m| m.label.as_str()).collect();
+        assert_eq!(labels, ["ALN", "simulator@2", "plant@2"]);
+        let aln = &methods[0];
+        assert_eq!(
+            aln.budgets.iter().map(|b| b.budget).collect::<Vec<_>>(),
+            [8, 64]
+        );
+        // Within 1 ms only budget 8 fits; within 2 ms budget 64, though a
+        // budget's cost never enters the rule.
+        assert_eq!(aln.within(1.0).unwrap().budget, 8);
+        assert_eq!(aln.within(2.0).unwrap().budget, 64);
+        assert!(methods[1].within(1.0).is_none());
+        // The replicates' mean costs: 30 + 1.2 × 1.5 on average.
+        assert!((aln.budgets[0].mean() - 31.8).abs() < 1e-12);
+        assert_eq!(truth(&methods).unwrap().label, "plant@2");
+        assert_eq!(truth(&methods).unwrap().saturated().unwrap().budget, 64);
+    }
+
+    #[test]
+    fn the_deadline_table_pairs_the_alns_with_the_nominal_simulator() {
+        let planning = vec![replicate(0.0), replicate(0.5), replicate(-0.5)];
+        let planned = [Planned {
+            name: "v",
+            planning: &planning,
+        }];
+        let dir = tempfile::tempdir().unwrap();
+        let mut md = String::new();
+        section(&mut md, &planned, dir.path()).unwrap();
+        assert!(dir.path().join("frontier-hold.svg").exists());
+        // At 2 ms the ALN (64 sequences, 26.8 on average) is 14.7 below
+        // the simulator at its 8 (41.5), ± t(2) × 0.5 / √3 across the
+        // replicates' shifts; at 10 ms the simulator plans 64 sequences
+        // (21.5) and costs 5.3 less.
+        assert!(
+            md.contains(
+                "at 2 ms, ALN, cem (64 sequences) is lower than simulator@2, cem (8 sequences): \
+                 -14.7 [-15.9, -13.5]"
+            ),
+            "{md}"
+        );
+        assert!(md.contains("at 10 ms, ALN, cem (64 sequences)"), "{md}");
+        assert!(
+            md.contains("is higher than simulator@2, cem (64 sequences): +5.30"),
+            "{md}"
+        );
+        assert!(md.contains("at 1 ms, ALN, cem (8 sequences) plans and no nominal simulator fits"));
+        // The true model's regret is against itself: no figure.
+        assert!(
+            md.contains("plant@2, cem (8 sequences) — the true model"),
+            "{md}"
+        );
+    }
+}
