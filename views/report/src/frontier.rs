@@ -310,7 +310,7 @@ fn chart(
         &format!("{truth_name} at its best budget"),
     ));
     let svg = charts::plot(&Plot {
-        title: format!("task `{task}`: cost above the true model's best, against time a decision"),
+        title: format!("task `{task}`: cost above the true model's best"),
         x: Axis::log("ms a decision, one thread (log)"),
         y: Axis::linear(&format!(
             "cost − {} ({} sequences)",

@@ -526,9 +526,9 @@ pub(super) fn section(
             rules.push(Rule::vertical(real_time, &name));
         }
         let chart = charts::plot(&Plot {
-            title: format!("task `{task}`: cost minus zero torques', against time per decision"),
+            title: format!("task `{task}`: cost minus zero torques'"),
             x: Axis::log("ms per decision, one thread (log)"),
-            y: Axis::linear("task cost per episode − zero torques' (paired)"),
+            y: Axis::linear("cost − zero torques' (paired)"),
             series,
             pareto: false,
             rules,
