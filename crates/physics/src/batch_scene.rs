@@ -7,10 +7,16 @@
 //! state's own numbers, so they are evaluated lane by lane; the tree's
 //! dynamics, where the time goes, run in SIMD lanes.
 //!
+//! A plant's actuators — their gain, lag and delay — are tracked lane by
+//! lane as [`crate::plant::Actuators`] tracks one state's, updated once an
+//! instant: at each step's start, and when a frame is observed (the next
+//! step from it then takes that update, as a [`crate::Runner`] stepped on
+//! in time does). Their noise is not: a batch predicts the plant's mean.
+//!
 //! Results equal [`crate::Runner`]'s stepping to rounding, not bit for bit
 //! (see [`crate::batch`]).
 
-use nalgebra::{Matrix3, SimdValue, Vector3, Vector6};
+use nalgebra::{Matrix3, SimdPartialOrd, SimdValue, Vector3, Vector6};
 
 use crate::Integrator;
 use crate::batch::{Batch, KinematicsLanes, LANES, LaneForces, Lanes, LoadsLanes, StateLanes};
@@ -35,6 +41,8 @@ pub struct SceneBatch<'a> {
     values: Vec<f64>,
     /// State by state, whether it stayed finite.
     finite: Vec<bool>,
+    /// A plant's actuators, where it has them.
+    actuators: Option<LaneActuators>,
 }
 
 impl<'a> SceneBatch<'a> {
@@ -43,14 +51,14 @@ impl<'a> SceneBatch<'a> {
     /// lanes: Runge–Kutta (a batch steps by semi-implicit Euler, its joints'
     /// slopes taken implicitly under the implicit integrator), coupled
     /// joints (a URDF's mimics, which the batch's algorithm cannot take), a
-    /// plant whose
-    /// actuators produce other than the command (their lag, delay and noise
-    /// are tracked state by state by [`crate::Runner`]), or a variable read
-    /// that a batch does not give (a link's acceleration or external
-    /// force).
+    /// plant whose actuators add noise (a draw per state and step, which
+    /// [`crate::Runner`] takes state by state; a forward model predicts the
+    /// mean, [`Prepared::without_noise`]), or a variable read that a batch
+    /// does not give (a link's acceleration or external force).
     pub fn new(p: &'a Prepared, read: &[usize]) -> Option<SceneBatch<'a>> {
-        let actuators = p.scene.plant.as_ref().is_some_and(|pl| pl.has_actuators());
-        if p.scene.integrator == Integrator::Rk4 || actuators || !p.model.couplings.is_empty() {
+        let plant = p.scene.plant.as_ref().filter(|pl| pl.has_actuators());
+        let noisy = plant.is_some_and(|pl| pl.torque_noise != 0.0);
+        if p.scene.integrator == Integrator::Rk4 || noisy || !p.model.couplings.is_empty() {
             return None;
         }
         let read = read
@@ -67,11 +75,22 @@ impl<'a> SceneBatch<'a> {
                 drive: Vec::new(),
                 damping: Lanes::splat(p.scene.added_damping()),
                 limit: p.scene.controller().torque_limit.get(),
+                actuated: None,
             },
             read,
             accelerations,
             values: Vec::new(),
             finite: Vec::new(),
+            actuators: plant.map(|pl| LaneActuators {
+                gain: pl.actuator_gain,
+                lag: pl.actuator_lag,
+                delay_frames: pl.actuator_delay_frames,
+                follow: None,
+                queue: Vec::new(),
+                head: 0,
+                full: false,
+                fresh: false,
+            }),
         })
     }
 
@@ -91,8 +110,16 @@ impl<'a> SceneBatch<'a> {
                     vec![vec![[DrivePiece::default(); LANES]; model.len()]; batch.states.len()];
                 self.values = vec![0.0; n * self.read.len()];
                 self.finite = vec![true; n];
+                if self.actuators.is_some() {
+                    self.forces.actuated = Some(self.forces.g.clone());
+                }
                 self.batch = Some(batch);
             }
+        }
+        // The actuators at rest, their delay empty, as a restarted runner's.
+        if let (Some(actuators), Some(actuated)) = (&mut self.actuators, &mut self.forces.actuated)
+        {
+            actuators.reset(actuated);
         }
     }
 
@@ -122,18 +149,34 @@ impl<'a> SceneBatch<'a> {
         s.qd[link].replace(k % LANES, qd);
     }
 
-    /// Advances every state `steps` steps of `dt`.
+    /// Advances every state `steps` steps of `dt`: a frame of `steps`
+    /// steps (which a plant's actuator delay is counted in).
     pub fn advance(&mut self, steps: u64, dt: f64) {
         let batch = self.batch.as_mut().expect("started");
         let implicit = self.p.scene.integrator == Integrator::Implicit;
         for _ in 0..steps {
+            if let (Some(actuators), Some(actuated)) =
+                (&mut self.actuators, &mut self.forces.actuated)
+            {
+                actuators.time(dt, steps);
+                actuators.update(&self.forces.g, actuated);
+            }
             batch.step_under(&self.p.model, dt, implicit, &mut self.forces);
+            if let Some(actuators) = &mut self.actuators {
+                actuators.fresh = false;
+            }
         }
     }
 
     /// Reads the variables of every state as it is now, under the torques
     /// driven now.
     pub fn observe(&mut self) {
+        // The actuators updated at this instant, under the torques driven
+        // now, as a runner's observation commits them.
+        if let (Some(actuators), Some(actuated)) = (&mut self.actuators, &mut self.forces.actuated)
+        {
+            actuators.update(&self.forces.g, actuated);
+        }
         let batch = self.batch.as_mut().expect("started");
         let (n, m) = (batch.len, self.read.len());
         for k in 0..n {
@@ -184,6 +227,100 @@ struct BatchForces<'a> {
     damping: Lanes,
     /// The controller's torque limit.
     limit: f64,
+    /// Per group, per link, what a plant's actuators produce, where they
+    /// produce other than the command `g`.
+    actuated: Option<Vec<Vec<Vector3<Lanes>>>>,
+}
+
+impl BatchForces<'_> {
+    /// The effort commanded to the one-DOF joint at `link` of state `j` of
+    /// group `g`: what its actuator produces, within `law`'s limit, where a
+    /// plant's actuators act, else the command.
+    fn commanded(&self, g: usize, link: usize, j: usize, law: &crate::joints::JointLaw) -> f64 {
+        match &self.actuated {
+            Some(actuated) => law.clamp(actuated[g][link].x.extract(j)),
+            None => self.g[g][link].x.extract(j),
+        }
+    }
+}
+
+/// A plant's actuators over a batch's states: [`crate::plant::Actuators`]
+/// lane by lane, without the noise.
+struct LaneActuators {
+    gain: f64,
+    /// The lag's time constant (s) and the delay in frames, as the plant
+    /// gives them …
+    lag: f64,
+    delay_frames: u64,
+    /// … and, for the steps being taken, the lag's weight of the new
+    /// command in one step (`None`: no lag).
+    follow: Option<f64>,
+    /// The commands on their way, one per step of the delay: a ring, the
+    /// oldest at `head` once `full`.
+    queue: Vec<Vec<Vec<Vector3<Lanes>>>>,
+    head: usize,
+    full: bool,
+    /// Whether this instant's update is done (by an observation): the
+    /// step from it takes it, as a runner does.
+    fresh: bool,
+}
+
+impl LaneActuators {
+    /// At rest, their delay empty.
+    fn reset(&mut self, actuated: &mut [Vec<Vector3<Lanes>>]) {
+        let zero = Vector3::from_element(Lanes::splat(0.0));
+        for group in actuated.iter_mut() {
+            group.fill(zero);
+        }
+        (self.head, self.full, self.fresh) = (0, false, false);
+    }
+
+    /// Sets the lag's weight and the delay's length for steps of `dt`,
+    /// `steps` a frame.
+    fn time(&mut self, dt: f64, steps: u64) {
+        self.follow = (self.lag > 0.0).then(|| 1.0 - (-dt / self.lag).exp());
+        let delay = (self.delay_frames * steps) as usize;
+        if self.queue.len() != delay {
+            self.queue = Vec::new();
+            (self.head, self.full) = (0, false);
+            self.queue.resize_with(delay, Vec::new);
+        }
+    }
+
+    /// Once an instant: what the actuators produce under `command`
+    /// (per group, per link), into `actuated`, which holds what they
+    /// produced.
+    fn update(&mut self, command: &[Vec<Vector3<Lanes>>], actuated: &mut [Vec<Vector3<Lanes>>]) {
+        if std::mem::replace(&mut self.fresh, true) {
+            return;
+        }
+        let (gain, follow) = (Lanes::splat(self.gain), self.follow.map(Lanes::splat));
+        let zero = Vector3::from_element(Lanes::splat(0.0));
+        // What arrives: this command, or with a delay the one of `delay`
+        // updates ago (none yet: zero), which this one replaces in the ring.
+        let arrived = match self.queue.is_empty() {
+            true => Some(command),
+            false => self.full.then_some(&self.queue[self.head][..]),
+        };
+        for (g, out) in actuated.iter_mut().enumerate() {
+            for (i, y) in out.iter_mut().enumerate() {
+                let u = arrived.map_or(zero, |a| a[g][i]) * gain;
+                *y = match follow {
+                    Some(f) => *y + (u - *y) * f,
+                    None => u,
+                };
+            }
+        }
+        if !self.queue.is_empty() {
+            let slot = &mut self.queue[self.head];
+            slot.resize_with(command.len(), Vec::new);
+            for (kept, given) in slot.iter_mut().zip(command) {
+                kept.clone_from(given);
+            }
+            self.head = (self.head + 1) % self.queue.len();
+            self.full |= self.head == 0;
+        }
+    }
 }
 
 impl LaneForces for BatchForces<'_> {
@@ -195,8 +332,18 @@ impl LaneForces for BatchForces<'_> {
         kin: &KinematicsLanes,
         loads: &mut LoadsLanes,
     ) {
-        let torques = &self.g[g];
+        let torques = match &self.actuated {
+            // What the actuators produce, capped by the torque limit as the
+            // command is (a one-DOF joint's by its effort limit, below).
+            Some(actuated) => &actuated[g],
+            None => &self.g[g],
+        };
+        let limit = Lanes::splat(self.limit);
         for ((tau, t), w) in loads.tau.iter_mut().zip(torques).zip(&state.rates) {
+            let t = match self.actuated {
+                Some(_) => t.map(|x| x.simd_clamp(-limit, limit)),
+                None => *t,
+            };
             *tau = -t - w * self.damping;
         }
         if model.root == Root::Pinned {
@@ -211,7 +358,7 @@ impl LaneForces for BatchForces<'_> {
             };
             for j in 0..LANES {
                 let (q, qd) = (state.q[i].extract(j), state.qd[i].extract(j));
-                let drive = law.drive_piece(torques[i].x.extract(j), qd);
+                let drive = law.drive_piece(self.commanded(g, i, j, law), qd);
                 self.drive[g][i][j] = drive;
                 let (b, k) = law.slopes(q, qd);
                 loads.effort[i].replace(j, drive.at(qd) + law.passive(q, qd));
@@ -257,7 +404,7 @@ impl LaneForces for BatchForces<'_> {
             for j in 0..LANES {
                 let qd = state.qd[i].extract(j);
                 let now = self.drive[g][i][j];
-                let effort = self.g[g][i].x.extract(j);
+                let effort = self.commanded(g, i, j, &law);
                 let end = law.drive_toward(effort, now, qd + h * qdd[i].extract(j));
                 if end != now {
                     let effort = loads.effort[i].extract(j) + end.at(qd) - now.at(qd);

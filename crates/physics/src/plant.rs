@@ -296,6 +296,19 @@ impl Actuators {
         }
     }
 
+    /// Updates every `dt`, `steps_per_frame` a frame, from now on (a
+    /// simulator stepping the plant coarser than its scene does): the lag's
+    /// weight and the delay's length in updates follow; commands on their
+    /// way are forgotten where the length changes.
+    pub fn pace(&mut self, plant: &Plant, dt: f64, steps_per_frame: u64) {
+        self.follow = (plant.actuator_lag > 0.0).then(|| 1.0 - (-dt / plant.actuator_lag).exp());
+        let delay = (plant.actuator_delay_frames * steps_per_frame) as usize;
+        if delay != self.delay {
+            self.delay = delay;
+            self.queue.clear();
+        }
+    }
+
     /// Forgets every command on its way and the lag's state, as at a run's
     /// start (the noise's stream goes on).
     pub fn reset(&mut self) {

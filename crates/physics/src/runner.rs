@@ -77,6 +77,17 @@ impl Prepared {
         controls
     }
 
+    /// The same scene with its plant's actuator noise taken out: what a
+    /// forward model of the plant predicts, its mean response (a draw of
+    /// the noise would be another plant's; a batch steps none).
+    pub fn without_noise(&self) -> Prepared {
+        let mut scene = self.scene.clone();
+        if let Some(plant) = &mut scene.plant {
+            plant.torque_noise = 0.0;
+        }
+        Prepared::new(&scene)
+    }
+
     /// Builds the model and variable set of a (validated) scene.
     pub fn new(scene: &Scene) -> Prepared {
         let scene = scene.clone().resolve();
@@ -709,6 +720,15 @@ impl<'a> Runner<'a> {
             for c in &self.p.model.couplings {
                 actuated[c.follower] = Vector3::zeros();
             }
+        }
+    }
+
+    /// Steps of `dt`, `steps_per_frame` a frame, from now on, where the
+    /// scene's own are not what this runner takes (a coarser simulator of
+    /// a plant): a plant's actuators lag and wait in those steps.
+    pub fn pace(&mut self, dt: f64, steps_per_frame: u64) {
+        if let (Some(actuators), Some(plant)) = (&mut self.actuators, &self.p.scene.plant) {
+            actuators.pace(plant, dt, steps_per_frame);
         }
     }
 

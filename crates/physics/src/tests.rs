@@ -926,7 +926,25 @@ fn a_scene_batch_steps_each_state_as_a_runner_does() {
         ..crate::plant::Plant::default()
     });
     arm.validate().unwrap();
-    for scene in [Scene::default().resolve(), arm] {
+    // A plant whose actuators lag, lose gain and wait a frame (their noise,
+    // a draw per step, is the runner's alone).
+    let mut actuated = arm.clone();
+    actuated.plant = Some(crate::plant::Plant {
+        actuator_gain: 0.9,
+        actuator_lag: 0.005,
+        actuator_delay_frames: 1,
+        torque_noise: 0.2,
+        ..actuated.plant.clone().unwrap()
+    });
+    actuated.validate().unwrap();
+    let noisy = Prepared::new(&actuated);
+    let read: Vec<usize> = (0..noisy.layout.variables.len()).collect();
+    assert!(
+        SceneBatch::new(&noisy, &read).is_none(),
+        "noise is not batched"
+    );
+    let actuated = noisy.without_noise().scene;
+    for scene in [Scene::default().resolve(), arm, actuated] {
         let p = Prepared::new(&scene);
         let read: Vec<usize> = (0..p.layout.variables.len())
             .filter(|&v| p.variables.lane_variable(v).is_some())
@@ -970,16 +988,22 @@ fn a_scene_batch_steps_each_state_as_a_runner_does() {
         let mut states = vec![start.clone(); n];
         let mut runners: Vec<Runner> = (0..n).map(|_| Runner::new(&p, 0, 0, 0)).collect();
         let mut worst: f64 = 0.0;
+        // Time goes on from frame to frame: a plant's actuators update once
+        // an instant, the observation's instant the next step's.
         for (f, frame_torques) in torques.iter().enumerate() {
+            let first = f as u64 * steps;
             for (k, torques) in frame_torques.iter().enumerate() {
                 batch.drive(k, torques);
                 runners[k].drive(Some(torques));
-                runners[k].advance(&mut states[k], 0, steps, dt).unwrap();
+                runners[k]
+                    .advance(&mut states[k], first, steps, dt)
+                    .unwrap();
             }
             batch.advance(steps, dt);
             batch.observe();
             for k in 0..n {
-                runners[k].observe(&states[k], 0.0, &mut frame);
+                let t = (first + steps) as f64 * dt;
+                runners[k].observe(&states[k], t, &mut frame);
                 let got = batch.values(k).expect("finite");
                 for (&v, g) in read.iter().zip(got) {
                     let e = frame.variables[v];

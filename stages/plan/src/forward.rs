@@ -49,9 +49,9 @@ pub trait Model: Forward {
 
 /// A simulator at `steps` integration steps per frame. It costs a
 /// decision's candidates together, in SIMD lanes ([`SceneBatch`]), where
-/// the scene allows; one at a time otherwise (an RK4 scene, a plant's
-/// actuators, a robot's mimic joints, a task reading a variable the state
-/// alone does not give).
+/// the scene allows — a plant's actuators' gain, lag and delay included;
+/// one at a time otherwise (an RK4 scene, actuator noise, a robot's mimic
+/// joints, a task reading a variable the state alone does not give).
 pub struct Simulator<'a> {
     p: &'a Prepared,
     controls: Controls,
@@ -62,6 +62,9 @@ pub struct Simulator<'a> {
     cost: Cost,
     start: State,
     state: State,
+    /// Frames stepped since the start: time goes on from frame to frame, so
+    /// that a plant's actuators update once an instant.
+    stepped: u64,
     torques: Vec<Vector3<f64>>,
     frame: StateFrame,
     /// The scene's variables, of which the batched path fills the cost's.
@@ -75,15 +78,19 @@ impl<'a> Simulator<'a> {
         let hinges = p.model.len() - 1;
         let rest = State::rest(&p.model, Vector3::zeros());
         let read: Vec<usize> = cost.variables().collect();
+        let steps = steps.max(1);
+        let mut runner = Runner::new(p, 0, 0, 0);
+        runner.pace(p.scene.step_dt(steps), steps);
         Simulator {
             controls: controls.clone(),
-            runner: Runner::new(p, 0, 0, 0),
+            runner,
             lanes: SceneBatch::new(p, &read),
             values: vec![0.0; p.layout.variables.len()],
-            steps: steps.max(1),
+            steps,
             cost,
             start: rest.clone(),
             state: rest,
+            stepped: 0,
             torques: vec![Vector3::zeros(); hinges],
             frame: StateFrame {
                 time: 0.0,
@@ -134,20 +141,30 @@ impl Simulator<'_> {
         true
     }
 
+    /// Starts again from the decision's state, its actuators at rest.
+    fn restart(&mut self) {
+        copy_state(&mut self.state, &self.start);
+        self.runner.restart();
+        self.stepped = 0;
+    }
+
     /// Steps `self.state` one frame under `action`'s torques and observes
     /// the frame reached; false if it blew up.
     fn frame(&mut self, action: &[f64]) -> bool {
         self.controls.set(action, &mut self.torques);
         self.runner.drive(Some(&self.torques));
         let dt = self.p.scene.step_dt(self.steps);
+        let first = self.stepped * self.steps;
         if self
             .runner
-            .advance(&mut self.state, 0, self.steps, dt)
+            .advance(&mut self.state, first, self.steps, dt)
             .is_err()
         {
             return false;
         }
-        self.runner.observe(&self.state, 0.0, &mut self.frame);
+        self.stepped += 1;
+        let t = (first + self.steps) as f64 * dt;
+        self.runner.observe(&self.state, t, &mut self.frame);
         true
     }
 }
@@ -158,8 +175,7 @@ impl Model for Simulator<'_> {
     }
 
     fn predict(&mut self, actions: &[f64], frames: usize, out: &mut [f64]) {
-        copy_state(&mut self.state, &self.start);
-        self.runner.restart();
+        self.restart();
         let d = actions.len() / frames.max(1);
         let reached = actions.chunks(d.max(1)).all(|action| self.frame(action));
         for (o, s) in out.iter_mut().zip(self.cost.variables()) {
@@ -179,8 +195,7 @@ impl Forward for Simulator<'_> {
         }
         let d = self.controls.dims();
         for (sequence, cost) in actions.chunks(horizon * d).zip(costs.iter_mut()) {
-            copy_state(&mut self.state, &self.start);
-            self.runner.restart();
+            self.restart();
             *cost = 0.0;
             for frame in sequence.chunks(d) {
                 if !self.frame(frame) {
@@ -1050,6 +1065,83 @@ mod tests {
                 }
                 assert!(a.iter().any(|&c| c != a[0]), "torques move the costs");
             }
+        }
+    }
+
+    /// The plant's own simulator as forward model costs a decision's
+    /// candidates together in SIMD lanes — its actuators' gain, lag and
+    /// delay tracked lane by lane — equal to stepping each alone, with time
+    /// going on from frame to frame, to rounding; at one step a frame (where
+    /// every step is an observation's instant) and at ten. Its noise is
+    /// taken out first: a noisy plant has no batched path.
+    #[test]
+    fn a_plants_own_candidates_batched_cost_what_each_alone_costs() {
+        use alnlab_physics::SceneKind;
+        use alnlab_physics::controller::Amplitude;
+        use alnlab_physics::plant::Plant;
+        let mut scene = Scene {
+            name: "ur5".into(),
+            kind: SceneKind::Urdf,
+            file: Some("robots/ur5/ur5_robot.urdf".into()),
+            controller: Some(ControllerParams {
+                kind: ControllerKind::Random,
+                amplitude: vec![Amplitude::Axis(60.0)],
+                ..ControllerParams::default()
+            }),
+            velocity_limits: true,
+            plant: Some(Plant {
+                mass_scale: 1.1,
+                coulomb_friction: 1.5,
+                actuator_gain: 0.95,
+                actuator_lag: 0.005,
+                actuator_delay_frames: 1,
+                torque_noise: 0.2,
+                ..Plant::default()
+            }),
+            ..Scene::default()
+        };
+        let workspace = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
+        scene.read_description(&workspace).unwrap();
+        let noisy = Prepared::new(&scene);
+        let task = Task::HoldAngles {
+            name: "raise".into(),
+            targets: BTreeMap::from([
+                ("q.shoulder_lift_joint".into(), -1.2),
+                ("q.elbow_joint".into(), 0.8),
+            ]),
+        };
+        let controls = Controls::of(&noisy).unwrap();
+        let cost = task.over(&noisy.layout.variables, &noisy).unwrap();
+        assert!(
+            Simulator::new(&noisy, &controls, 10, cost.clone())
+                .lanes
+                .is_none()
+        );
+        let p = noisy.without_noise();
+        let start = p
+            .scene
+            .initial_state(&p.model, &mut alnlab_physics::scene::run_rng(3, 0, 0));
+        let (n, horizon, d) = (9, 4, controls.dims());
+        let actions: Vec<f64> = (0..n * horizon * d)
+            .map(|i| ((i as f64 * 0.618_033_988_7).fract() * 2.0 - 1.0) * 60.0)
+            .collect();
+        for steps in [1, 10] {
+            let mut batched = Simulator::new(&p, &controls, steps, cost.clone());
+            let mut alone = Simulator::new(&p, &controls, steps, cost.clone());
+            assert!(batched.lanes.is_some());
+            alone.lanes = None;
+            let (mut a, mut b) = (vec![0.0; n], vec![0.0; n]);
+            for (model, costs) in [(&mut batched, &mut a), (&mut alone, &mut b)] {
+                model.start(&start, &[]);
+                model.costs(&actions, horizon, costs);
+            }
+            for (k, (x, y)) in a.iter().zip(&b).enumerate() {
+                assert!(
+                    (x - y).abs() <= 1e-9 * y.abs().max(1.0),
+                    "{steps} steps, candidate {k}: {x} against {y}"
+                );
+            }
+            assert!(a.iter().any(|&c| c != a[0]), "torques move the costs");
         }
     }
 

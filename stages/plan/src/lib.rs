@@ -83,8 +83,10 @@ use crate::transitions::Transitions;
 /// actuators given each decision's torques from its first step; 8: the
 /// simulator costs a decision's candidates together in SIMD lanes, which
 /// round differently; 9: joint limits sized on what the joint moves; 10:
-/// implicit drives, batched implicitly, mimic joints).
-pub const FORMAT_VERSION: u32 = 10;
+/// implicit drives, batched implicitly, mimic joints; 11: the plant's own
+/// simulator predicts its mean, in SIMD lanes, time going on from frame to
+/// frame).
+pub const FORMAT_VERSION: u32 = 11;
 /// File name of the per-frame table.
 pub const PLAN_FILE: &str = "plan.parquet";
 /// File name of the per-episode table.
@@ -418,6 +420,9 @@ pub fn run(
         // Episodes execute in the plant (where the scene has one); the
         // simulators a user has run the scene as written.
         let (p, nominal) = (replay.simulated(), &replay.prepared);
+        // The plant's own simulator as a forward model predicts its mean
+        // response: a draw of its actuators' noise would be another plant's.
+        let mean_plant = (!params.plant_steps.is_empty()).then(|| p.without_noise());
         let controls = Controls::of(p).map_err(|m| Error::Invalid(format!("[plan]: {m}")))?;
         let bounds = controls.bounds().clone();
         let mut out = Outputs {
@@ -562,10 +567,15 @@ pub fn run(
                     let model = Box::new(Simulator::new(nominal, &controls, steps, cost.clone()));
                     task_run.planned(name, model, &bounds, &mut out)?;
                 }
-                for steps in &params.plant_steps {
-                    let steps = steps.get() as u64;
+                let plant_steps = mean_plant.iter().flat_map(|plant| {
+                    params
+                        .plant_steps
+                        .iter()
+                        .map(move |k| (plant, k.get() as u64))
+                });
+                for (plant, steps) in plant_steps {
                     let name = PolicyId::Plant { steps };
-                    let model = Box::new(Simulator::new(p, &controls, steps, cost.clone()));
+                    let model = Box::new(Simulator::new(plant, &controls, steps, cost.clone()));
                     task_run.planned(name, model, &bounds, &mut out)?;
                 }
             }

@@ -796,10 +796,11 @@ fn at_real_time_of(md: &mut String, variants: &[Planned]) {
              whose median decision fits a frame in replicate 1, on the same episodes; µs / state: \
              the decision's time over the states its model predicted (sequences × horizon), the \
              planner's own work included; every model predicts a decision's candidates \
-             together (a simulator, and a hybrid's nominal step, in SIMD lanes) except three \
-             kinds of simulator, which step one candidate at a time: a plant's own whose \
-             actuators lag, delay or add noise, one of a scene integrated by RK4, and one \
-             costing a task that reads a link's acceleration or external force; cost: the \
+             together (a simulator — the plant's own too, predicting its mean, without its \
+             actuators' noise — and a hybrid's nominal step, in SIMD lanes) except three kinds \
+             of simulator, which step one candidate at a time: one of a scene integrated by \
+             RK4, one of a robot with mimic joints, and one costing a task that reads a link's \
+             acceleration or external force; cost: the \
              task's summed cost, mean {over}; differences from the nominal simulator of the lowest \
              mean cost, paired, {over}, with the Wilcoxon signed-rank p-value over every paired \
              episode (a replicate's episodes share its model, so they are not independent: the \
