@@ -146,14 +146,18 @@ impl Estimate {
         let closed_loop = test.rollout_starts.0 as f64 * test.horizon.0 as f64 * vars;
         let plan = &stages.plan;
         let decisions = plan.task.len() as f64 * plan.episodes.0 as f64 * plan.frames.0 as f64;
-        let sequences: f64 = plan.budgets.iter().map(|b| b.0 as f64).sum();
-        let per_evaluation =
-            plan.models.len() as f64 + plan.simulator_steps.iter().map(|k| k.0 as f64).sum::<f64>();
-        let plan_work = decisions
-            * plan.planners.len() as f64
-            * sequences
-            * plan.horizon.0 as f64
-            * per_evaluation;
+        let sum = |budgets: &[alnlab_common::params::Count]| budgets.iter().map(|b| b.0 as f64).sum::<f64>();
+        let steps_simulated: f64 = plan
+            .simulator_steps
+            .iter()
+            .chain(&plan.plant_steps)
+            .map(|k| k.0 as f64)
+            .sum();
+        // Model evaluations: a learned model's one, a simulator's k steps.
+        let evaluations = plan.models.len() as f64 * sum(&plan.budgets)
+            + steps_simulated * sum(plan.simulator_budgets());
+        let plan_work =
+            decisions * plan.planners.len() as f64 * plan.horizon.0 as f64 * evaluations;
         Estimate {
             steps,
             frames,

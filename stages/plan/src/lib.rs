@@ -131,8 +131,13 @@ pub struct Params {
     /// Frames a plan looks ahead.
     pub horizon: Count,
     /// Candidate sequences per decision, each budget in turn (a decision
-    /// costs budget × horizon model evaluations).
+    /// costs budget × horizon model evaluations): each budget a point of a
+    /// model's frontier of cost against time.
     pub budgets: Vec<Count>,
+    /// The simulators' budgets (`simulator@k`, `plant@k`), where they
+    /// differ from `budgets`: a simulator's decision costs many times a
+    /// learned model's, and its frontier may stop sooner.
+    pub simulator_budgets: Option<Vec<Count>>,
     /// Episodes per task, each from another logged state.
     pub episodes: Count,
     /// Frames per episode (one decision each).
@@ -150,6 +155,13 @@ pub struct Params {
     pub rounds: usize,
 }
 
+impl Params {
+    /// The simulators' budgets: `simulator_budgets`, else `budgets`.
+    pub fn simulator_budgets(&self) -> &[Count] {
+        self.simulator_budgets.as_deref().unwrap_or(&self.budgets)
+    }
+}
+
 /// The most rounds of the planner's own data a manifest may ask for.
 pub const MOST_ROUNDS: usize = 20;
 
@@ -164,6 +176,7 @@ impl Default for Params {
             plant_steps: Vec::new(),
             horizon: Count(10),
             budgets: vec![Count(8), Count(32), Count(128)],
+            simulator_budgets: None,
             episodes: Count(3),
             frames: Count(100),
             cem_iterations: Count(3),
@@ -205,6 +218,12 @@ impl Params {
         }
         if !self.task.is_empty() && self.budgets.is_empty() {
             return Err(("budgets".into(), "expected at least one budget".into()));
+        }
+        if self.simulator_budgets.as_ref().is_some_and(Vec::is_empty) {
+            return Err((
+                "simulator_budgets".into(),
+                "expected at least one budget (leave it out for `budgets`)".into(),
+            ));
         }
         if self.rounds > MOST_ROUNDS {
             return Err((
@@ -468,8 +487,11 @@ pub fn run(
             Predictor::new(&trained.model.pieces, &trained.reads, &inputs, &points)
         });
 
-        let models = params.models.len() + params.simulator_steps.len() + params.plant_steps.len();
-        let per_task = 2 + params.planners.len() * models * params.budgets.len();
+        let simulators = params.simulator_steps.len() + params.plant_steps.len();
+        let per_task = 2
+            + params.planners.len()
+                * (params.models.len() * params.budgets.len()
+                    + simulators * params.simulator_budgets().len());
         progress.start(
             "plan",
             (params.task.len() * per_task * params.episodes.get()) as u64,
@@ -559,13 +581,14 @@ pub fn run(
                             ),
                         ),
                     };
-                    task_run.planned(name, model, &bounds, &mut out)?;
+                    task_run.planned(name, model, &bounds, &params.budgets, &mut out)?;
                 }
+                let budgets = params.simulator_budgets();
                 for steps in &params.simulator_steps {
                     let steps = steps.get() as u64;
                     let name = PolicyId::Simulator { steps };
                     let model = Box::new(Simulator::new(nominal, &controls, steps, cost.clone()));
-                    task_run.planned(name, model, &bounds, &mut out)?;
+                    task_run.planned(name, model, &bounds, budgets, &mut out)?;
                 }
                 let plant_steps = mean_plant.iter().flat_map(|plant| {
                     params
@@ -576,7 +599,7 @@ pub fn run(
                 for (plant, steps) in plant_steps {
                     let name = PolicyId::Plant { steps };
                     let model = Box::new(Simulator::new(plant, &controls, steps, cost.clone()));
-                    task_run.planned(name, model, &bounds, &mut out)?;
+                    task_run.planned(name, model, &bounds, budgets, &mut out)?;
                 }
             }
             Ok(())
@@ -628,12 +651,13 @@ impl TaskRun<'_> {
         Ok(())
     }
 
-    /// Every episode with `model`, for every planner and budget.
+    /// Every episode with `model`, for every planner and each of `budgets`.
     fn planned(
         &self,
         name: PolicyId,
         mut model: Box<dyn Model + '_>,
         bounds: &Bounds,
+        budgets: &[Count],
         out: &mut Outputs,
     ) -> Result<()> {
         let params = self.context.params;
@@ -642,7 +666,7 @@ impl TaskRun<'_> {
             elite: params.cem_elite.get(),
         };
         for &kind in &params.planners {
-            for budget in &params.budgets {
+            for budget in budgets {
                 for e in 0..self.context.starts.len() {
                     let seed = mix_seed(
                         self.context.seed,
