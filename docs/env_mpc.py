@@ -11,8 +11,8 @@ world's observation (`Model.rollout`, all candidates together), and applies
 the first action of the cheapest (random shooting). The script prints, for
 each world, the cost a frame over the closed loop (the squared pitch errors
 summed, rad²) and the median time a decision. The two worlds differ only
-in what plays the robot: the gap between their costs is what the model's
-errors cost the controller.
+in what plays the robot; one closed loop each is an example, not a
+measurement with an interval.
 
 Example:
     python docs/env_mpc.py --out runs --variant piecewise --decisions 50
@@ -47,11 +47,11 @@ def bend_cost(model: Model):
 def mpc(world, model: Model, cost, *, decisions: int, candidates: int, horizon: int, seed: int, frame: int = 0):
     """Random-shooting MPC on `world` (any environment with the model's
     spaces), planning with `model`: returns the cost a frame over the
-    closed loop and each decision's seconds."""
+    closed loop, each decision's seconds and the actions applied."""
     rng = np.random.default_rng(seed)
     observation, _ = world.reset(seed=seed, options={"frame": frame})
     low, high = world.action_space.low, world.action_space.high
-    total, seconds = 0.0, []
+    total, seconds, applied = 0.0, [], []
     for _ in range(decisions):
         start = time.perf_counter()
         plans = rng.uniform(low, high, size=(candidates, horizon, len(low)))
@@ -60,8 +60,9 @@ def mpc(world, model: Model, cost, *, decisions: int, candidates: int, horizon: 
         best = int(np.argmin(cost(paths[:, 1:]).sum(axis=1)))
         seconds.append(time.perf_counter() - start)
         observation, _, _, _, _ = world.step(plans[best, 0])
+        applied.append(plans[best, 0])
         total += float(cost(observation))
-    return total / decisions, seconds
+    return total / decisions, seconds, applied
 
 
 def at_least(least: int):
@@ -100,7 +101,7 @@ def main() -> int:
     print("| the robot played by | cost a frame (rad²) | ms a decision (range) |")
     print("|---|---:|---:|")
     for name, world in worlds.items():
-        loss, seconds = mpc(
+        loss, seconds, _ = mpc(
             world,
             model,
             cost,

@@ -66,7 +66,10 @@ class Model:
         any array-like of real numbers (cast to float64); one state (D) and
         its controls (U) give one next state (D). With ``out`` (a writeable
         C-contiguous array of the result's shape and dtype, the inputs' own
-        too) the result is written there and ``out`` returned."""
+        too) the result is written there and ``out`` returned. A value that
+        is not finite, or further outside its variable's range (``ranges``)
+        than that range is wide, raises ``InputError``: the model would
+        extrapolate unchecked."""
     def rollout(
         self,
         x0: npt.ArrayLike,

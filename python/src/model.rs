@@ -3,8 +3,10 @@
 //! arrays — the stages' own prediction paths (a piecewise-linear model's
 //! batched evaluation, a bit-forest's or threshold model's runtime, the
 //! boosted trees' evaluation), rows split among threads with the GIL
-//! released. The robust linear baseline is a piecewise-linear model of one
-//! piece per output, and loads as one.
+//! released — the arguments read and the result written in place, so
+//! another Python thread must not change them during the call (as with
+//! NumPy's own functions that release it). The robust linear baseline is a
+//! piecewise-linear model of one piece per output, and loads as one.
 
 use std::path::PathBuf;
 use std::sync::Mutex;
@@ -100,14 +102,15 @@ impl Model {
 
     /// Checks that `x0` is B×D and `controls` B×H×U and finite; `frames`
     /// says whether the caller gave H (a rollout) or one frame, B×U, and
-    /// `single` whether it gave one item (shapes and indices are then
-    /// reported without the batch dimension, as the caller wrote them).
+    /// `single` whether it gave one state, and one item of controls (each
+    /// argument's shapes and indices are then reported without the batch
+    /// dimension, as the caller wrote it).
     fn check(
         &self,
         x0: &ArrayView2<f64>,
         controls: &ArrayView3<f64>,
         frames: bool,
-        single: bool,
+        (single, controls_single): (bool, bool),
     ) -> PyResult<()> {
         let (d, u) = (self.state.len(), self.controls.len());
         let names = |of: &[usize]| {
@@ -123,7 +126,7 @@ impl Model {
             if frame_axis && !frames {
                 index.remove(1);
             }
-            arrays::tuple(&index, single)
+            arrays::tuple(&index, if frame_axis { controls_single } else { single })
         };
         // The argument's name: rollout's is `x0`, predict's `states`.
         let states = if frames { "x0" } else { "states" };
@@ -154,28 +157,51 @@ impl Model {
                 shown(&[b, h, given], true)
             )));
         }
-        let bad = |what: &str, index: String, name: &str| {
-            invalid(format!(
-                "{what}: not a finite number at index {index} (`{name}`)"
-            ))
+        // A value the model can take: finite, and within its variable's
+        // reach — no further outside the range the model learned than
+        // that range is wide, beyond which it would extrapolate unchecked.
+        let takes = |x: f64, v: usize| {
+            let q = &self.quantizers[v];
+            let width = q.max - q.min;
+            (q.min - width..=q.max + width).contains(&x)
         };
-        // The indexed search only where a value is not finite: it is slow.
-        let finite = |a: &[f64]| a.iter().all(|x| x.is_finite());
-        if x0.as_slice().is_some_and(finite) && controls.as_slice().is_some_and(finite) {
+        let all_taken = |a: Option<&[f64]>, of: &[usize]| {
+            a.is_some_and(|a| a.iter().zip(of.iter().cycle()).all(|(&x, &v)| takes(x, v)))
+        };
+        // The indexed search only where a value is refused: it is slow.
+        if all_taken(x0.as_slice(), &self.state) && all_taken(controls.as_slice(), &self.controls) {
             return Ok(());
         }
-        if let Some(((r, s), _)) = x0.indexed_iter().find(|(_, x)| !x.is_finite()) {
-            return Err(bad(
-                states,
-                shown(&[r, s], false),
-                &self.names[self.state[s]],
-            ));
+        let refused = |what: &str, index: String, x: f64, v: usize| {
+            let name = &self.names[v];
+            let q = &self.quantizers[v];
+            invalid(match x.is_finite() {
+                false => format!("{what}: not a finite number at index {index} (`{name}`)"),
+                true => format!(
+                    "{what}: `{name}` is {x:e} at index {index}, far outside what the model \
+                     learned ({} to {}): more than that range's width beyond it, where the model \
+                     would extrapolate unchecked",
+                    short(q.min),
+                    short(q.max)
+                ),
+            })
+        };
+        if let Some(((r, k), &x)) = x0
+            .indexed_iter()
+            .find(|(i, x)| !takes(**x, self.state[i.1]))
+        {
+            return Err(refused(states, shown(&[r, k], false), x, self.state[k]));
         }
-        if let Some(((r, f, c), _)) = controls.indexed_iter().find(|(_, x)| !x.is_finite()) {
-            return Err(bad(
+        let control = |i: &(usize, usize, usize)| self.controls[i.2];
+        if let Some(((r, f, c), &x)) = controls
+            .indexed_iter()
+            .find(|(i, x)| !takes(**x, control(i)))
+        {
+            return Err(refused(
                 "controls",
                 shown(&[r, f, c], true),
-                &self.names[self.controls[c]],
+                x,
+                self.controls[c],
             ));
         }
         Ok(())
@@ -227,16 +253,17 @@ impl Model {
         })
     }
 
-    /// The values of `x` (B×D) rolled out under `c` (B×H×U), as
+    /// The states (B×D) rolled out under the controls (B×H×U), as
     /// [`Model::roll`] gives them, in an array of `shape` (the batch
     /// dimension left out where the caller gave one item): a new one, or
-    /// `out`, checked before the work (see [`Model::fill`]); as levels
-    /// (uint16) on request. `x` and `c` must not be `out`'s memory.
+    /// `out`, checked before the work (see [`Model::check_out`]); as levels
+    /// (uint16) on request. The inputs are copied where `out` is given: it
+    /// may be one of them.
     #[allow(clippy::too_many_arguments)]
     fn answer<'py>(
         &self,
         py: Python<'py>,
-        (x, c): (&[f64], &[f64]),
+        inputs: (arrays::Floats<'py>, arrays::Floats<'py>),
         horizon: usize,
         first: bool,
         threads: Option<usize>,
@@ -244,10 +271,46 @@ impl Model {
         levels: bool,
         out: Option<&Bound<'py, PyAny>>,
     ) -> PyResult<Bound<'py, PyAny>> {
+        let asked = Asked {
+            horizon,
+            first,
+            threads,
+            shape,
+            levels,
+        };
+        match out {
+            Some(out) => {
+                let copied = (inputs.0.values()?.to_vec(), inputs.1.values()?.to_vec());
+                drop(inputs);
+                self.write_out(py, (&copied.0, &copied.1), &asked, Some(out))
+            }
+            None => {
+                let (x, c) = (inputs.0.values()?, inputs.1.values()?);
+                self.write_out(py, (x, c), &asked, None)
+            }
+        }
+    }
+
+    /// [`Model::answer`]'s work, from inputs `x` and `c` that are not
+    /// `out`'s memory.
+    fn write_out<'py>(
+        &self,
+        py: Python<'py>,
+        (x, c): (&[f64], &[f64]),
+        asked: &Asked,
+        out: Option<&Bound<'py, PyAny>>,
+    ) -> PyResult<Bound<'py, PyAny>> {
+        let Asked {
+            horizon,
+            first,
+            threads,
+            shape,
+            levels,
+        } = *asked;
         let layout = |e: numpy::AsSliceError| invalid(format!("internal layout error: {e}"));
         if levels {
             let array = match out {
-                Some(out) => self.fill(out, shape, true)?,
+                Some(out) => self.check_out(out, shape, true)?,
                 None => PyArrayDyn::<u16>::zeros(py, IxDyn(shape), false).into_any(),
             };
             let mut values = vec![0.0; shape.iter().product()];
@@ -263,7 +326,7 @@ impl Model {
         }
         // The values written where they are returned, not copied there.
         let array = match out {
-            Some(out) => self.fill(out, shape, false)?,
+            Some(out) => self.check_out(out, shape, false)?,
             None => PyArrayDyn::<f64>::zeros(py, IxDyn(shape), false).into_any(),
         };
         let mut written = array.cast::<PyArrayDyn<f64>>()?.try_readwrite()?;
@@ -277,7 +340,7 @@ impl Model {
     /// (the caller's: without the batch where one item was given),
     /// float64 or, with `levels`, uint16, and returns it; an `InputError`
     /// naming `out` otherwise.
-    fn fill<'py>(
+    fn check_out<'py>(
         &self,
         out: &Bound<'py, PyAny>,
         shape: &[usize],
@@ -339,6 +402,26 @@ fn is_parquet(path: &std::path::Path) -> PyResult<bool> {
     Ok(read == 4 && &magic == b"PAR1")
 }
 
+/// `x` to four decimals, for a message.
+fn short(x: f64) -> String {
+    format!("{}", (x * 1e4).round() / 1e4)
+}
+
+/// What a call asked for, beside its inputs: H frames (from the first, or
+/// after it), on how many threads, the result's shape, values or levels.
+#[derive(Clone, Copy)]
+struct Asked<'a> {
+    horizon: usize,
+    first: bool,
+    threads: Option<usize>,
+    shape: &'a [usize],
+    levels: bool,
+}
+
+/// The most values a call's buffers may hold and still be kept for the
+/// next call (8 MB): a large batch's are freed with it.
+const KEPT_VALUES: usize = 1 << 20;
+
 /// Rows below which a bit-forest or threshold model predicts one row at a
 /// time: a bit-sliced word's.
 const ONE_ROW_BELOW: usize = 64;
@@ -399,9 +482,12 @@ impl<'m> Work<'m> {
         work
     }
 
-    /// Gives the buffers back for the next call.
+    /// Gives the buffers back for the next call, unless a large call left
+    /// them large: the model would hold that memory for its lifetime.
     fn finish(self, ready: &Ready<'m>) {
-        spare(ready).push(self);
+        if self.columns.capacity() <= KEPT_VALUES {
+            spare(ready).push(self);
+        }
     }
 
     fn column_mut(&mut self, v: usize) -> &mut [f64] {
@@ -712,19 +798,15 @@ impl Model {
         let single = states.single;
         let (x0, c) = (states.view::<Ix2>()?, controls.view::<Ix2>()?);
         // One frame of controls: B×1×U.
-        self.check(&x0, &c.insert_axis(Axis(1)), false, single)?;
+        self.check(
+            &x0,
+            &c.insert_axis(Axis(1)),
+            false,
+            (single, controls.single),
+        )?;
         let shape: &[usize] = &[x0.nrows(), d][usize::from(single)..];
-        let inputs = (states.values()?, controls.values()?);
-        match out {
-            // The inputs copied and their borrows ended: `out` may be one.
-            Some(_) => {
-                let copied = (inputs.0.to_vec(), inputs.1.to_vec());
-                drop((states, controls));
-                let inputs = (&copied.0[..], &copied.1[..]);
-                self.answer(py, inputs, 1, false, threads, shape, levels, out)
-            }
-            None => self.answer(py, inputs, 1, false, threads, shape, levels, None),
-        }
+        let inputs = (states, controls);
+        self.answer(py, inputs, 1, false, threads, shape, levels, out)
     }
 
     /// The states over `H` frames (B×(H+1)×D, the first `x0`) from `x0`
@@ -751,20 +833,19 @@ impl Model {
         let threads = thread_count(threads)?;
         let single = x0.single;
         let (x, c) = (x0.view::<Ix2>()?, controls.view::<Ix3>()?);
-        self.check(&x, &c, true, single)?;
+        self.check(&x, &c, true, (single, controls.single))?;
         let (b, horizon, _) = c.dim();
         let shape: &[usize] = &[b, horizon + 1, d][usize::from(single)..];
-        let inputs = (x0.values()?, controls.values()?);
-        match out {
-            // The inputs copied and their borrows ended: `out` may be one.
-            Some(_) => {
-                let copied = (inputs.0.to_vec(), inputs.1.to_vec());
-                drop((x0, controls));
-                let inputs = (&copied.0[..], &copied.1[..]);
-                self.answer(py, inputs, horizon, true, threads, shape, levels, out)
-            }
-            None => self.answer(py, inputs, horizon, true, threads, shape, levels, None),
-        }
+        self.answer(
+            py,
+            (x0, controls),
+            horizon,
+            true,
+            threads,
+            shape,
+            levels,
+            out,
+        )
     }
 }
 
@@ -790,7 +871,7 @@ pub fn reference_rollout_ns(
     repeats: usize,
 ) -> PyResult<Vec<f64>> {
     let (x0, c) = (x0.as_array(), controls.as_array());
-    model.check(&x0, &c, true, false)?;
+    model.check(&x0, &c, true, (false, false))?;
     let (b, horizon, u) = c.dim();
     let d = model.state.len();
     let x0: Vec<f64> = x0.iter().copied().collect();

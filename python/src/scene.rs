@@ -303,10 +303,13 @@ impl Scene {
         } else {
             format!("{b}, ")
         };
-        let which = |r: usize| match single {
-            true => "the state".to_string(),
-            false => format!("row {r}"),
+        // "states: row 3 is not finite", or of one state "states: not
+        // finite".
+        let row_is = |r: usize| match single {
+            true => String::new(),
+            false => format!("row {r} is "),
         };
+        let controls_single = controls.single;
         if x.ncols() != s {
             return Err(invalid(format!(
                 "states: expected shape ({}{s}{}), a value per state component ({}), got {}",
@@ -321,7 +324,7 @@ impl Scene {
                 "controls: expected shape ({batch}{u}{}), a value per control ({}), got {}",
                 if single { "," } else { "" },
                 self.control_names().join(", "),
-                arrays::tuple(c.shape(), single)
+                arrays::tuple(c.shape(), controls_single)
             )));
         }
         let steps = steps.unwrap_or_else(|| self.steps_per_frame());
@@ -333,7 +336,7 @@ impl Scene {
                 false => None,
             };
             let Some(state) = state else {
-                return Err(invalid(format!("states: {} is not finite", which(r))));
+                return Err(invalid(format!("states: {}not finite", row_is(r))));
             };
             // Loose enough for a float32 state of unit quaternions.
             if let Some((i, q)) = state
@@ -343,9 +346,9 @@ impl Scene {
                 .find(|(_, q)| (q.as_ref().norm() - 1.0).abs() > 1e-3)
             {
                 return Err(invalid(format!(
-                    "states: {} is not a state: link {}'s orientation is no unit quaternion \
+                    "states: {}not a state: link {}'s orientation is no unit quaternion \
                      (norm {:.3e})",
-                    which(r),
+                    row_is(r),
                     i + 1,
                     q.as_ref().norm()
                 )));
@@ -353,7 +356,7 @@ impl Scene {
             if let Some(k) = c.row(r).iter().position(|v| !v.is_finite()) {
                 return Err(invalid(format!(
                     "controls: not a finite number at index {} (`{}`)",
-                    arrays::tuple(&[r, k], single),
+                    arrays::tuple(&[r, k], controls_single),
                     self.controls[k].name
                 )));
             }
@@ -406,19 +409,22 @@ impl Scene {
             .zip(out_variables.chunks(v.max(1)))
             .position(|(x, y)| x.iter().chain(y).any(|z| !z.is_finite()));
         if let Some(r) = left.filter(|_| !allow_nan) {
+            // The runner counts steps from 1.
             let when = match failed[r] {
                 Some(step) => format!(
-                    "at step {} of {} ({steps} a frame)",
-                    step + 1,
+                    "at step {step} of {} ({steps} a frame)",
                     u64::from(frames) * steps,
                 ),
                 None => format!("in its observation after {frames} frame(s)"),
             };
             return Err(invalid(format!(
-                "states: {} left the finite numbers {when}: the simulator cannot step it (a state \
+                "states: {}left the finite numbers {when}: the simulator cannot step it (a state \
                  far outside what the scene can reach, or controls too large for its step; \
                  allow_nan=True returns NaN instead)",
-                which(r)
+                match single {
+                    true => String::new(),
+                    false => format!("row {r} "),
+                }
             )));
         }
         let shaped = |e: numpy::ndarray::ShapeError| invalid(format!("internal shape error: {e}"));

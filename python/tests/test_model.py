@@ -198,6 +198,18 @@ def test_bad_arrays_are_refused_with_the_expected_shape(artifacts):
     bad[3, 2] = np.nan
     with pytest.raises(alnlab.InputError, match=rf"states: not a finite number at index \(3, 2\) \(`{model.state_names[2]}`\)"):
         model.predict(bad, np.zeros((5, u)))
+    # Far outside what the model learned it would extrapolate unchecked.
+    far = np.zeros(d)
+    far[0] = 1e300
+    with pytest.raises(alnlab.InputError, match=rf"states: `{model.state_names[0]}` is 1e300 at index \(0,\), far outside what the model learned"):
+        model.predict(far, np.zeros(u))
+    low, high = dict(model.ranges)[model.control_names[1]][:2]
+    pushed = np.zeros((5, 3, u))
+    pushed[2, 1, 1] = high + 1.5 * (high - low)
+    with pytest.raises(alnlab.InputError, match=rf"controls: `{model.control_names[1]}` is .* at index \(2, 1, 1\)"):
+        model.rollout(x0, pushed)
+    pushed[2, 1, 1] = high + 0.5 * (high - low)
+    assert np.isfinite(model.rollout(x0, pushed)).all()
     for threads in [0, -1, 1.5, "2", True]:
         with pytest.raises(alnlab.InputError, match="threads: expected a whole number of at least 1, got "):
             model.predict(x0, np.zeros((5, u)), threads=threads)

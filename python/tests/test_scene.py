@@ -92,13 +92,13 @@ def test_bad_steps_are_refused(runs, worm):
     # One state is reported as it was given, without a batch dimension.
     with pytest.raises(alnlab.InputError, match=rf"states: expected shape \({s},\), .*got \({s + 1},\)$"):
         worm.step(np.zeros(s + 1), np.zeros(u))
-    with pytest.raises(alnlab.InputError, match="states: the state is not a state: link 1's orientation"):
+    with pytest.raises(alnlab.InputError, match="states: not a state: link 1's orientation"):
         worm.step(np.zeros(s), np.zeros(u))
     # A step that leaves the finite numbers is an error naming the step, or
     # NaN on request (a planner's candidate that blew up).
     spinning = states[5:7].copy()
     spinning[1, worm.state_names.index("w.1.x")] = 1e300
-    with pytest.raises(alnlab.InputError, match=r"states: row 1 left the finite numbers at step \d+ of 10 \(10 a frame\)"):
+    with pytest.raises(alnlab.InputError, match=r"states: row 1 left the finite numbers at step 1 of 10 \(10 a frame\)"):
         worm.step(spinning, np.zeros((2, u)))
     stepped, variables = worm.step(spinning, np.zeros((2, u)), allow_nan=True)
     assert np.isnan(stepped[1]).all() and np.isnan(variables[1]).all()
