@@ -146,7 +146,9 @@ impl Estimate {
         let closed_loop = test.rollout_starts.0 as f64 * test.horizon.0 as f64 * vars;
         let plan = &stages.plan;
         let decisions = plan.task.len() as f64 * plan.episodes.0 as f64 * plan.frames.0 as f64;
-        let sum = |budgets: &[alnlab_common::params::Count]| budgets.iter().map(|b| b.0 as f64).sum::<f64>();
+        let sum = |budgets: &[alnlab_common::params::Count]| {
+            budgets.iter().map(|b| b.0 as f64).sum::<f64>()
+        };
         let steps_simulated: f64 = plan
             .simulator_steps
             .iter()

@@ -81,15 +81,20 @@ impl<'a> SceneBatch<'a> {
             accelerations,
             values: Vec::new(),
             finite: Vec::new(),
-            actuators: plant.map(|pl| LaneActuators {
-                gain: pl.actuator_gain,
-                lag: pl.actuator_lag,
-                delay_frames: pl.actuator_delay_frames,
-                follow: None,
-                queue: Vec::new(),
-                head: 0,
-                full: false,
-                fresh: false,
+            actuators: plant.map(|pl| {
+                let mut actuators = LaneActuators {
+                    gain: pl.actuator_gain,
+                    lag: pl.actuator_lag,
+                    delay_frames: pl.actuator_delay_frames,
+                    follow: None,
+                    queue: Vec::new(),
+                    head: 0,
+                    full: false,
+                    fresh: false,
+                };
+                // The scene's own pace until an advance says otherwise.
+                actuators.time(p.scene.dt.get(), p.scene.steps_per_frame());
+                actuators
             }),
         })
     }
@@ -154,11 +159,13 @@ impl<'a> SceneBatch<'a> {
     pub fn advance(&mut self, steps: u64, dt: f64) {
         let batch = self.batch.as_mut().expect("started");
         let implicit = self.p.scene.integrator == Integrator::Implicit;
+        if let Some(actuators) = &mut self.actuators {
+            actuators.time(dt, steps);
+        }
         for _ in 0..steps {
             if let (Some(actuators), Some(actuated)) =
                 (&mut self.actuators, &mut self.forces.actuated)
             {
-                actuators.time(dt, steps);
                 actuators.update(&self.forces.g, actuated);
             }
             batch.step_under(&self.p.model, dt, implicit, &mut self.forces);

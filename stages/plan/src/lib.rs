@@ -488,10 +488,9 @@ pub fn run(
         });
 
         let simulators = params.simulator_steps.len() + params.plant_steps.len();
-        let per_task = 2
-            + params.planners.len()
-                * (params.models.len() * params.budgets.len()
-                    + simulators * params.simulator_budgets().len());
+        let per_task = 2 + params.planners.len()
+            * (params.models.len() * params.budgets.len()
+                + simulators * params.simulator_budgets().len());
         progress.start(
             "plan",
             (params.task.len() * per_task * params.episodes.get()) as u64,
