@@ -389,7 +389,7 @@ pub(super) fn first_screen(
         let _ = writeln!(md, "{}\n", super::findings::reads_more(&shown));
     }
     super::plan::at_real_time(md, variants);
-    super::frontier::section(md, &super::plan::planned(variants), dir)?;
+    super::plan_frontier::section(md, &super::plan::planned(variants), dir)?;
     for v in variants {
         if let (Some(routed), Some(circuit)) = (&v.fpga, &v.circuit) {
             let _ = writeln!(

@@ -14,7 +14,7 @@ use alnlab_plan::planning::Episode;
 
 use super::PlanSetup;
 use super::format::{Align, MdTable, estimate, interval, sig3};
-use super::frontier::Budgeted;
+use super::plan_frontier::Budgeted;
 use crate::charts::{self, Axis, Plot, Point, Rule, Series, policy_style};
 use alnlab_summarize::paired::{Interval, Verdict};
 
@@ -704,7 +704,7 @@ fn at_real_time_of(md: &mut String, variants: &[Planned]) {
     let replicates = first.planning.len();
     for task in tasks(&first.planning[0]) {
         let limit = real_time(&first.planning[0], task);
-        let (methods, left_out) = super::frontier::methods(&planned, task);
+        let (methods, left_out) = super::plan_frontier::methods(&planned, task);
         let contenders: Vec<Contender> = methods
             .iter()
             .filter_map(|m| {
@@ -762,7 +762,7 @@ fn at_real_time_of(md: &mut String, variants: &[Planned]) {
                     )
                 });
                 // The signed-rank test is of the median: say which way.
-                let p = super::frontier::rank_cell(&pooled);
+                let p = super::plan_frontier::rank_cell(&pooled);
                 if c.model.policy == PolicyId::Aln {
                     aln_words.push(format!("{}: {difference}, p = {p}", c.label));
                     let lower = Interval::of(&per).is_some_and(|d| d.verdict() == Verdict::Lower);
