@@ -327,7 +327,7 @@ fn chart(
         .collect();
     rules.push(Rule::horizontal(
         0.0,
-        &format!("{truth_name} at its best budget"),
+        &format!("{}, the true model, at its best budget", truth.label),
     ));
     let svg = charts::plot(&Plot {
         title: format!("task `{task}`: cost above the true model's best"),
