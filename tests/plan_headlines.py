@@ -170,7 +170,7 @@ def check(report_dir: Path) -> int:
                 deadline = float(row[0].removesuffix(" ms"))
                 again = picks(table, task, deadline, variants)
                 assert table[again["nominal"]] == list(b), f"{report_dir.name}, `{task}` at {row[0]}: the nominal simulator shown is not the one the rule picks ({again['nominal']})"
-                if "— the true model" not in row[label_at]:
+                if "— the reference" not in row[label_at]:
                     assert table[again["aln"]] == list(a), f"{report_dir.name}, `{task}` at {row[0]}: the ALN shown is not the one the rule picks ({again['aln']})"
                 a, b = a[1:], b[1:]
             mean, low, high = interval(a - b)

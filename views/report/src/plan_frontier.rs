@@ -327,10 +327,10 @@ fn chart(
         .collect();
     rules.push(Rule::horizontal(
         0.0,
-        &format!("{}, the true model, at its best budget", truth.label),
+        &format!("{}, the reference, at its best budget", truth.label),
     ));
     let svg = charts::plot(&Plot {
-        title: format!("task `{task}`: cost above the true model's best"),
+        title: format!("task `{task}`: cost above the reference's best"),
         x: Axis::log("ms a decision, one thread (log)"),
         y: Axis::linear(&format!(
             "cost − {} ({} sequences)",
@@ -346,13 +346,15 @@ fn chart(
         md,
         "![task {task}: the planning frontier]({file})\n\n**The planning frontier of `{task}`.** \
          Every forward model at every budget it planned with (a point each, joined by \
-         budget): its task cost minus that of {truth_name} ({}, its lowest-cost budget — the \
-         best a planner achieves with the true model, here {} sequences), paired on the same \
+         budget): its task cost minus that of {truth_name} ({}, the reference no user has, at \
+         its lowest-cost budget in replicate 1, here {} sequences), paired on the same \
          episodes, against the median ms a decision of replicate 1 (bars: 95% interval of the \
-         paired difference). The true model's best budget is picked on replicate 1's \
-         episodes. Lower is better; a model moves the frontier where its curve passes below \
-         every other's at the same time. The grey verticals are the deadlines the table below \
-         reads.\n",
+         paired difference). Given budget, a wrong model may match the reference: the task \
+         tells models apart only as far as their errors change the plans. Lower is better; a \
+         model moves the frontier where its curve passes below every other's at the same \
+         time. The grey verticals are the deadlines the table below reads. Where an ALN is \
+         lower, its regret at the same budget says why: a model that costs less a state \
+         searches more sequences in the time, which can outweigh its larger error.\n",
         truth.label, best.budget
     );
     Ok(())
@@ -376,8 +378,8 @@ fn deadlines(md: &mut String, methods: &[Method], truth: &Method, task: &str, re
         .numbers(&["ms / decision", "cost"])
         .column("− the nominal simulator", Align::Left)
         .column("signed-rank p, median difference (episodes)", Align::Left)
-        .column("regret: − the true model, same budget", Align::Left)
-        .column("regret: − the true model at its best", Align::Left);
+        .column("regret: − the reference, same budget", Align::Left)
+        .column("regret: − the reference at its best", Align::Left);
     let best_truth = truth.saturated().map(Budgeted::judged);
     // Among the methods `keep` admits, the one of the lowest mean cost in
     // replicate 1 at its largest budget within `limit`, and how many fit.
@@ -463,7 +465,7 @@ fn deadlines(md: &mut String, methods: &[Method], truth: &Method, task: &str, re
             let cost =
                 Interval::of(&means).map_or("—".into(), |i| estimate(i.mean, i.low, i.high));
             let label = match k {
-                2 => format!("{} — the true model", m.at(b)),
+                2 => format!("{} — the reference", m.at(b)),
                 _ => m.at(b),
             };
             table.row(vec![
@@ -604,7 +606,7 @@ mod tests {
         assert!(md.contains("judged on the other 4 replicates"), "{md}");
         // The true model's regret is against itself: no figure.
         assert!(
-            md.contains("plant@2, cem (8 sequences) — the true model"),
+            md.contains("plant@2, cem (8 sequences) — the reference"),
             "{md}"
         );
         // Too few replicates to pick on one and judge on the others.
