@@ -889,6 +889,27 @@ mod tests {
         (p, entries)
     }
 
+    /// The repository's UR5 as `scene` otherwise gives it (its plant, its
+    /// drives), under a random controller of ±60 N·m.
+    fn ur5(scene: Scene) -> Prepared {
+        use alnlab_physics::SceneKind;
+        use alnlab_physics::controller::Amplitude;
+        let mut scene = Scene {
+            name: "ur5".into(),
+            kind: SceneKind::Urdf,
+            file: Some("robots/ur5/ur5_robot.urdf".into()),
+            controller: Some(ControllerParams {
+                kind: ControllerKind::Random,
+                amplitude: vec![Amplitude::Axis(60.0)],
+                ..ControllerParams::default()
+            }),
+            ..scene
+        };
+        let workspace = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
+        scene.read_description(&workspace).unwrap();
+        Prepared::new(&scene)
+    }
+
     /// pitch.2 (learned variable 0) moves by g.2.y's level − 10 per frame.
     struct Nudge;
 
@@ -1076,18 +1097,8 @@ mod tests {
     /// taken out first: a noisy plant has no batched path.
     #[test]
     fn a_plants_own_candidates_batched_cost_what_each_alone_costs() {
-        use alnlab_physics::SceneKind;
-        use alnlab_physics::controller::Amplitude;
         use alnlab_physics::plant::Plant;
-        let mut scene = Scene {
-            name: "ur5".into(),
-            kind: SceneKind::Urdf,
-            file: Some("robots/ur5/ur5_robot.urdf".into()),
-            controller: Some(ControllerParams {
-                kind: ControllerKind::Random,
-                amplitude: vec![Amplitude::Axis(60.0)],
-                ..ControllerParams::default()
-            }),
+        let noisy = ur5(Scene {
             velocity_limits: true,
             plant: Some(Plant {
                 mass_scale: 1.1,
@@ -1099,10 +1110,7 @@ mod tests {
                 ..Plant::default()
             }),
             ..Scene::default()
-        };
-        let workspace = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
-        scene.read_description(&workspace).unwrap();
-        let noisy = Prepared::new(&scene);
+        });
         let task = Task::HoldAngles {
             name: "raise".into(),
             targets: BTreeMap::from([
@@ -1154,22 +1162,7 @@ mod tests {
     fn hybrid_candidates_batched_cost_what_each_alone_costs() {
         use alnlab_aln::model::Reads;
         use alnlab_aln::pwl::Tree;
-        use alnlab_physics::SceneKind;
-        use alnlab_physics::controller::Amplitude;
-        let mut scene = Scene {
-            name: "ur5".into(),
-            kind: SceneKind::Urdf,
-            file: Some("robots/ur5/ur5_robot.urdf".into()),
-            controller: Some(ControllerParams {
-                kind: ControllerKind::Random,
-                amplitude: vec![Amplitude::Axis(60.0)],
-                ..ControllerParams::default()
-            }),
-            ..Scene::default()
-        };
-        let workspace = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
-        scene.read_description(&workspace).unwrap();
-        let p = Prepared::new(&scene);
+        let p = ur5(Scene::default());
         let entries: Vec<Entry> = p
             .layout
             .variables
