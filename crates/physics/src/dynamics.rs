@@ -827,6 +827,86 @@ pub(crate) mod tests {
         eprintln!("mixed joints: worst relative error over 150 random trees: {worst:e}");
     }
 
+    /// The holding efforts hold a tree of one-DOF joints still against
+    /// gravity (its accelerations zero, within rounding of gravity's), a
+    /// coupled one's leaders carrying their followers; each joint's mass
+    /// matrix entry is twice the kinetic energy of a unit velocity of that
+    /// joint alone (its leader's, with its followers, where coupled).
+    #[test]
+    fn holding_efforts_hold_a_tree_still_and_its_inertias_are_its_energy() {
+        use crate::joint_space::holding_efforts;
+        use crate::model::Coupling;
+        let mut rng = ChaCha8Rng::seed_from_u64(62);
+        for case in 0..80 {
+            let n = 2 + case % 9;
+            let (mut model, mut state) = random_mixed(&mut rng, n, Root::Fixed);
+            for i in 1..n {
+                if model.links[i].joint == Joint::Ball {
+                    let axis = vec3(&mut rng, 1.0).normalize();
+                    let origin = Matrix3::identity();
+                    model.links[i].joint = Joint::Revolute { origin, axis };
+                    state.orient[i] = UnitQuaternion::identity();
+                    state.rates[i] = Vector3::zeros();
+                }
+            }
+            if case % 2 == 1 && n >= 3 {
+                model.couplings.push(Coupling {
+                    follower: n - 1,
+                    leader: 1,
+                    multiplier: rng.random_range(-2.0..2.0),
+                    offset: rng.random_range(-0.5..0.5),
+                });
+                model.impose_couplings(&mut state);
+            }
+            state.qd.fill(0.0);
+            let held = holding_efforts(&model, &state);
+            assert_eq!(held[0], None);
+            let mut loads = Loads::zeros(&model);
+            for (i, &h) in held.iter().enumerate().skip(1) {
+                match (h, model.coupling(i)) {
+                    (Some((effort, _)), None) => loads.effort[i] = effort,
+                    (None, Some(_)) => {}
+                    other => panic!("case {case}, link {i}: {other:?}"),
+                }
+            }
+            let (_, still) = articulated(&model, &state, &loads);
+            let scale = model.gravity.norm();
+            for i in 1..n {
+                assert!(
+                    still.qd[i].abs() <= 1e-9 * scale,
+                    "case {case}, link {i}: held, it accelerates at {}",
+                    still.qd[i]
+                );
+            }
+            let kinetic = |qd: &[f64]| {
+                let mut moving = State {
+                    qd: qd.to_vec(),
+                    ..state.clone()
+                };
+                model.impose_couplings(&mut moving);
+                let mut kin = Kinematics::new(&model);
+                kin.update(&model, &moving);
+                (0..n)
+                    .map(|i| {
+                        let v = kin.vel[i];
+                        0.5 * v.dot(&(model.links[i].spatial_inertia() * v))
+                    })
+                    .sum::<f64>()
+            };
+            for (i, h) in held.iter().enumerate() {
+                if let Some((_, inertia)) = h {
+                    let mut unit = vec![0.0; n];
+                    unit[i] = 1.0;
+                    let expected = 2.0 * kinetic(&unit);
+                    assert!(
+                        (inertia - expected).abs() <= 1e-9 * expected.max(1.0),
+                        "case {case}, link {i}: {inertia} against {expected}"
+                    );
+                }
+            }
+        }
+    }
+
     /// Issue 45, precision at speed: the joints' accelerations do not
     /// depend on a uniform velocity of the whole robot (Galilean
     /// invariance), so a free-based tree falling at 100 m/s should give the

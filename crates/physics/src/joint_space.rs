@@ -4,7 +4,8 @@
 //! the accelerations by solving M q̈ = τ − C densely. The simulator uses it
 //! for a model whose joints are coupled ([`coupled_accelerations`]), which
 //! the articulated-body algorithm cannot take; the tests check that
-//! algorithm against it.
+//! algorithm against it. A planner's PD baseline reads its holding efforts
+//! and mass matrix diagonal ([`holding_efforts`]).
 
 use nalgebra::{DMatrix, DVector, Vector3, Vector6};
 
@@ -131,27 +132,8 @@ fn mass_and_forces(
     let dof = model.dof();
     let at = offsets(model);
     let bias = inverse_dynamics(model, state, kin, &DVector::zeros(dof), &loads.f_ext);
-    let mut mass = DMatrix::zeros(dof, dof);
-    // M e_k = ID(e_k) − ID(0) with velocity-dependent terms cancelling.
-    let still = State {
-        root_v: Vector3::zeros(),
-        rates: vec![Vector3::zeros(); model.len()],
-        qd: vec![0.0; model.len()],
-        ..state.clone()
-    };
-    let mut kin_still = kin.clone();
-    kin_still.update(model, &still);
-    let no_force = vec![Vector6::zeros(); model.len()];
-    let g0 = Model {
-        gravity: Vector3::zeros(),
-        ..model.clone()
-    };
-    for k in 0..dof {
-        let mut e = DVector::zeros(dof);
-        e[k] = 1.0;
-        let column = inverse_dynamics(&g0, &still, &kin_still, &e, &no_force);
-        mass.set_column(k, &column);
-    }
+    let (still, kin_still) = at_rest(model, state, kin);
+    let mut mass = mass_matrix(model, &still, &kin_still);
     let mut applied = DVector::zeros(dof);
     for (i, &(start, width)) in at.iter().enumerate() {
         match width {
@@ -164,6 +146,98 @@ fn mass_and_forces(
         }
     }
     (mass, applied - bias)
+}
+
+/// `state` with every velocity zero, and its kinematics.
+fn at_rest(model: &Model, state: &State, kin: &Kinematics) -> (State, Kinematics) {
+    let still = State {
+        root_v: Vector3::zeros(),
+        rates: vec![Vector3::zeros(); model.len()],
+        qd: vec![0.0; model.len()],
+        ..state.clone()
+    };
+    let mut kin_still = kin.clone();
+    kin_still.update(model, &still);
+    (still, kin_still)
+}
+
+/// The mass matrix M of a state at rest (`still`, its kinematics
+/// `kin_still`): M e_k = ID(e_k) with no gravity, no velocity and no load.
+fn mass_matrix(model: &Model, still: &State, kin_still: &Kinematics) -> DMatrix<f64> {
+    let dof = model.dof();
+    let no_force = vec![Vector6::zeros(); model.len()];
+    let g0 = Model {
+        gravity: Vector3::zeros(),
+        ..model.clone()
+    };
+    let mut mass = DMatrix::zeros(dof, dof);
+    for k in 0..dof {
+        let mut e = DVector::zeros(dof);
+        e[k] = 1.0;
+        mass.set_column(k, &inverse_dynamics(&g0, still, kin_still, &e, &no_force));
+    }
+    mass
+}
+
+/// G, the map from the coordinates that remain once every follower's is
+/// tied to its leader's ([`Model::couplings`]) to all (q̇ = G q̇ᵣ), and for
+/// each generalized coordinate its column of G if it remains.
+fn reduction(model: &Model) -> (DMatrix<f64>, Vec<Option<usize>>) {
+    let at = offsets(model);
+    let dof = model.dof();
+    let mut column = vec![None; dof];
+    let mut reduced = 0;
+    for (i, &(start, width)) in at.iter().enumerate() {
+        if model.coupling(i).is_none() {
+            for slot in &mut column[start..start + width] {
+                *slot = Some(reduced);
+                reduced += 1;
+            }
+        }
+    }
+    let mut g = DMatrix::zeros(dof, reduced);
+    for (i, &(start, width)) in at.iter().enumerate() {
+        match model.coupling(i) {
+            Some(c) => {
+                let leader = column[at[c.leader].0].expect("a leader follows none");
+                g[(start, leader)] = c.multiplier;
+            }
+            None => {
+                for k in start..start + width {
+                    g[(k, column[k].expect("remains"))] = 1.0;
+                }
+            }
+        }
+    }
+    (g, column)
+}
+
+/// What a controls engineer's gravity-compensated PD loop is built from,
+/// per link, in `state`'s configuration: for a one-DOF joint that follows
+/// no other, the effort that holds the tree still there against gravity
+/// (recursive Newton–Euler with no velocity and no acceleration; a leader
+/// carries its followers' share, Gᵀ g) and its diagonal entry of the
+/// (reduced) mass matrix Gᵀ M G, the inertia its own gains are sized on.
+/// None for the root, a ball hinge and a follower.
+pub fn holding_efforts(model: &Model, state: &State) -> Vec<Option<(f64, f64)>> {
+    let mut kin = Kinematics::new(model);
+    kin.update(model, state);
+    let (still, kin_still) = at_rest(model, state, &kin);
+    let dof = model.dof();
+    let no_force = vec![Vector6::zeros(); model.len()];
+    let gravity = inverse_dynamics(model, &still, &kin_still, &DVector::zeros(dof), &no_force);
+    let mass = mass_matrix(model, &still, &kin_still);
+    let (g, column) = reduction(model);
+    let (gravity, mass) = (g.transpose() * gravity, g.transpose() * mass * &g);
+    offsets(model)
+        .iter()
+        .enumerate()
+        .map(|(i, &(start, width))| {
+            let joint = i > 0 && width == 1 && model.coupling(i).is_none();
+            let k = column[start].filter(|_| joint)?;
+            Some((gravity[k], mass[(k, k)]))
+        })
+        .collect()
 }
 
 /// Generalized accelerations by (M + diag(armature)) q̈ = τ − C, solved
@@ -194,33 +268,8 @@ pub fn coupled_accelerations(
     loads: &Loads,
 ) -> DVector<f64> {
     let (mass, forces) = mass_and_forces(model, state, kin, loads);
-    let at = offsets(model);
-    let dof = model.dof();
-    // The reduced column of each generalized coordinate that remains.
-    let mut column = vec![None; dof];
-    let mut reduced = 0;
-    for (i, &(start, width)) in at.iter().enumerate() {
-        if model.coupling(i).is_none() {
-            for slot in &mut column[start..start + width] {
-                *slot = Some(reduced);
-                reduced += 1;
-            }
-        }
-    }
-    let mut g = DMatrix::zeros(dof, reduced);
-    for (i, &(start, width)) in at.iter().enumerate() {
-        match model.coupling(i) {
-            Some(c) => {
-                let leader = column[at[c.leader].0].expect("a leader follows none");
-                g[(start, leader)] = c.multiplier;
-            }
-            None => {
-                for k in start..start + width {
-                    g[(k, column[k].expect("remains"))] = 1.0;
-                }
-            }
-        }
-    }
+    let (g, _) = reduction(model);
+    let reduced = g.ncols();
     let reduced_mass = g.transpose() * &mass * &g;
     let reduced_forces = g.transpose() * forces;
     let qdd = match reduced_mass.clone().cholesky() {

@@ -8,6 +8,10 @@
 //!   (ball hinges and one-DOF joints, couplings between them), the
 //!   articulated-body algorithm (O(n); a coupled model's dynamics by the
 //!   dense joint-space formulation), energy and momenta.
+//! - [`joint_space`]: that formulation (the mass matrix, the bias, a
+//!   coupled model's accelerations), and the efforts that hold a robot
+//!   still against gravity beside its mass matrix's diagonal, which a PD
+//!   loop on gravity compensation is built from.
 //! - [`integrate`]: the implicit integrator (the default: semi-implicit
 //!   Euler with the joints' damping, friction, limits and drives taken
 //!   implicitly), semi-implicit Euler and RK4 over a reusable [`Stepper`].
@@ -35,7 +39,7 @@ pub mod controller;
 pub mod dynamics;
 pub mod foxglove;
 pub mod integrate;
-mod joint_space;
+pub mod joint_space;
 pub mod joints;
 pub mod model;
 pub mod plant;
