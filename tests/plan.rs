@@ -333,3 +333,114 @@ fn rounds_of_the_planners_own_data_join_the_training_rows_deterministically() {
         );
     }
 }
+
+/// The controls engineer's baseline on a robot (`[plan] pd_frequencies`):
+/// the UR5 under a payload its description lacks, held by the nominal
+/// model's gravity effort plus PD, its frequency tuned on episodes of its
+/// own, beside a planner on the same episodes; every episode's outcome in
+/// the task's unit. On the worm, which has no joints of one degree of
+/// freedom to drive, the manifest is refused by the field's name.
+#[test]
+fn a_robots_pd_loop_is_tuned_apart_and_its_episodes_pair_with_the_planners() {
+    let dir = tempfile::tempdir().unwrap();
+    let urdf = Path::new(env!("CARGO_MANIFEST_DIR")).join("robots/ur5/ur5_robot.urdf");
+    let manifest = format!(
+        r#"
+[experiment]
+name = "planned"
+seed = 5
+
+[[simulate.scene]]
+name = "ur5"
+kind = "urdf"
+file = "{}"
+runs = 2
+duration = 2.0
+dt = 0.001
+frame_dt = 0.01
+controller = {{ kind = "random", amplitude = [40.0, 60.0, 30.0, 8.0, 8.0, 2.0], hold = 0.25 }}
+
+[simulate.scene.plant]
+mass_scale = 1.1
+payload = {{ link = "tool0", mass = 1.5, offset = [0.0, 0.0, 0.05] }}
+
+[stride]
+n = 3
+test_fraction = 0.5
+
+[quantize]
+levels = 16
+code = "gray"
+
+[train]
+leaves = 64
+epochs = 1
+
+[plan]
+episodes = 2
+frames = 30
+horizon = 3
+budgets = [4]
+models = []
+planners = ["cem"]
+simulator_steps = [1]
+pd_frequencies = [5.0, 20.0]
+tuning_episodes = 3
+
+[[plan.task]]
+kind = "hold-angles"
+name = "raise"
+targets = {{ "q.shoulder_lift_joint" = -1.2, "q.elbow_joint" = 1.0 }}
+tolerance = 0.1
+"#,
+        urdf.display()
+    );
+    write_manifest(dir.path(), "planned.toml", &manifest);
+    let [_, planning, _] = planned(dir.path(), &[]);
+    let episodes = alnlab_plan::planning::read(&planning).unwrap();
+    let models: Vec<String> = episodes.iter().map(|e| e.model.to_string()).collect();
+    assert_eq!(
+        models,
+        [
+            "zero",
+            "zero",
+            "random",
+            "random",
+            "gravity-pd",
+            "gravity-pd"
+        ]
+        .into_iter()
+        .chain(["simulator@1"; 2])
+        .collect::<Vec<_>>()
+    );
+    for e in &episodes {
+        assert!(
+            e.final_error.is_finite() && e.final_error >= 0.0,
+            "{e:?}: the largest angle to go, rad"
+        );
+        assert!((0.0..=1.0).contains(&e.within_tolerance), "{e:?}");
+        assert!(e.settle_s > 0.0, "{e:?}");
+        match e.model {
+            // The stiffer loop holds the heavier arm closer: tuned to it.
+            alnlab_common::PolicyId::GravityPd => assert_eq!(e.pd_frequency, 20.0, "{e:?}"),
+            _ => assert!(e.pd_frequency.is_nan(), "{e:?}"),
+        }
+    }
+    let report = std::fs::read_to_string(dir.path().join("runs/planned/report/report.md")).unwrap();
+    assert!(
+        report.contains("gravity-pd, the controls engineer's first try")
+            && report.contains("ω = 20 rad/s, the lowest mean cost among 5, 20 rad/s over 3")
+            && report.contains("tolerance (0.100 rad here)"),
+        "{report}"
+    );
+
+    let worm = PLANNED.replace("budgets = [4, 8]", "budgets = [4]\npd_frequencies = [5.0]");
+    write_manifest(dir.path(), "worm.toml", &worm);
+    let out = alnlab(dir.path(), &["-q", "run", "worm.toml"]);
+    assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
+    let message = stderr(&out);
+    assert!(
+        message.contains("pd_frequencies") && message.contains("is no robot"),
+        "{message}"
+    );
+}

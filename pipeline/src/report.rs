@@ -179,6 +179,8 @@ fn plan_setup(plan: &alnlab_plan::Params) -> Option<PlanSetup> {
             name: task.name().to_string(),
             definition: task.describe(),
             unit: task.cost_unit().to_string(),
+            error_unit: task.error_unit().to_string(),
+            tolerance: task.tolerance(),
         })
         .collect();
     Some(PlanSetup {
@@ -186,5 +188,7 @@ fn plan_setup(plan: &alnlab_plan::Params) -> Option<PlanSetup> {
         horizon: u32::try_from(plan.horizon.0).ok()?,
         frames: u32::try_from(plan.frames.0).ok()?,
         episodes: u32::try_from(plan.episodes.0).ok()?,
+        pd_frequencies: plan.pd_frequencies.clone(),
+        tuning_episodes: u32::try_from(plan.tuning_episodes.unwrap_or(plan.episodes).0).ok()?,
     })
 }

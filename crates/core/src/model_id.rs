@@ -154,15 +154,19 @@ pub enum PolicyId {
     Zero,
     /// The scene's random controller: `random`.
     Random,
+    /// A PD loop on the nominal model's gravity compensation, the controls
+    /// engineer's first try: `gravity-pd`.
+    GravityPd,
 }
 
 impl PolicyId {
     /// Every policy whose name takes no number.
-    pub const FIXED: [PolicyId; 4] = [
+    pub const FIXED: [PolicyId; 5] = [
         PolicyId::Aln,
         PolicyId::Linear,
         PolicyId::Zero,
         PolicyId::Random,
+        PolicyId::GravityPd,
     ];
 
     /// The policy that plans with the test stage's `model`, where the
@@ -189,6 +193,7 @@ impl fmt::Display for PolicyId {
             PolicyId::Plant { steps } => write!(f, "plant@{steps}"),
             PolicyId::Zero => f.write_str("zero"),
             PolicyId::Random => f.write_str("random"),
+            PolicyId::GravityPd => f.write_str("gravity-pd"),
         }
     }
 }

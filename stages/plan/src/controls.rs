@@ -65,6 +65,11 @@ impl Controls {
         self.components.len()
     }
 
+    /// The link each component drives (a ball hinge's three share it).
+    pub fn links(&self) -> impl Iterator<Item = usize> + '_ {
+        self.components.iter().map(|&(hinge, _)| hinge + 1)
+    }
+
     /// The variable that logs each component.
     pub fn names(&self) -> &[String] {
         &self.names

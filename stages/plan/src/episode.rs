@@ -4,8 +4,9 @@
 //! for one frame at its own step, and the task's cost of the frame reached
 //! is added up.
 //!
-//! Policies: zero torques and the scene's random controller (references),
-//! or a planner with a forward model and a budget (sequences per decision).
+//! Policies: zero torques, the scene's random controller and a PD loop on
+//! the nominal model's gravity compensation (references), or a planner with
+//! a forward model and a budget (sequences per decision).
 
 use std::time::Instant;
 
@@ -16,6 +17,7 @@ use alnlab_physics::{Prepared, Runner};
 use nalgebra::Vector3;
 
 use crate::controls::Controls;
+use crate::feedback::GravityPd;
 use crate::forward::Model;
 use crate::planner::Planner;
 use crate::task::Cost;
@@ -27,6 +29,8 @@ pub enum Policy<'m> {
     /// The scene's random controller: torques uniform in ±amplitude, held
     /// for `hold` seconds, seeded by the episode.
     Random,
+    /// A PD loop with the nominal model's gravity compensation.
+    Feedback(GravityPd<'m>),
     /// A planner searching `sequences` sequences per decision with `model`.
     Plan {
         planner: &'m mut Planner,
@@ -43,8 +47,10 @@ pub struct Step {
     /// The controls executed on the way to it (as clamped; in the order of
     /// [`Controls::names`]).
     pub torques: Vec<f64>,
-    /// The task's cost of the frame reached.
+    /// The task's cost of the frame reached …
     pub cost: f64,
+    /// … and its error in the task's unit ([`Cost::error`]).
+    pub error: f64,
     /// The planner's predicted cost of the sequence it chose (summed over
     /// its horizon; NaN for the references).
     pub predicted: f64,
@@ -74,6 +80,42 @@ pub struct Outcome {
     /// planner visited. +∞ if a prediction blew up; NaN for the references
     /// and episodes shorter than the horizon.
     pub horizon_rms: f64,
+    /// The steady-state error: the mean of the frames' errors
+    /// ([`Cost::error`]) over the episode's last quarter (at least its last
+    /// frame), in the task's unit.
+    pub final_error: f64,
+    /// When the error came within the task's tolerance for good: the time
+    /// (s) of the first frame from which every frame is within it; +∞ if
+    /// the last frame is not.
+    pub settle_s: f64,
+    /// The fraction of the frames within the tolerance.
+    pub within: f64,
+}
+
+impl Outcome {
+    /// The physical outcomes of an episode whose frames, `frame_dt` (s)
+    /// apart, had `errors`, against `tolerance`; cost and horizon error
+    /// left to the caller.
+    fn of_errors(errors: &[f64], tolerance: f64, frame_dt: f64) -> Outcome {
+        let n = errors.len();
+        let last = (n / 4).max(1).min(n);
+        let final_error = errors[n - last..].iter().sum::<f64>() / last as f64;
+        let within = |e: f64| e <= tolerance;
+        let settled = errors.iter().rposition(|&e| !within(e));
+        let settle_s = match settled {
+            None => frame_dt,
+            Some(k) if k + 1 < n => (k + 2) as f64 * frame_dt,
+            Some(_) => f64::INFINITY,
+        };
+        let within = errors.iter().filter(|&&e| within(e)).count() as f64 / n as f64;
+        Outcome {
+            cost: 0.0,
+            horizon_rms: f64::NAN,
+            final_error,
+            settle_s,
+            within,
+        }
+    }
 }
 
 /// Runs `frames` frames of scene `p` (with its plant, if any) from `start`
@@ -119,6 +161,7 @@ pub fn run(
         frame: 0,
         torques: vec![0.0; controls.dims()],
         cost: 0.0,
+        error: 0.0,
         predicted: f64::NAN,
         spread: f64::NAN,
         seconds: 0.0,
@@ -130,6 +173,10 @@ pub fn run(
     let planned = matches!(policy, Policy::Plan { .. });
     let mut visited: Vec<(State, Vec<f64>)> = Vec::new();
     let mut chosen: Vec<f64> = Vec::new();
+    let mut errors = Vec::with_capacity(frames as usize);
+    if let Policy::Feedback(pd) = policy {
+        pd.begin(start);
+    }
     if planned {
         visited.push((state.clone(), frame.variables.clone()));
     }
@@ -141,6 +188,11 @@ pub fn run(
                 runner.drive(Some(&torques));
             }
             Policy::Random => runner.drive(None),
+            Policy::Feedback(pd) => {
+                pd.act(&state, &mut action);
+                controls.set(&action, &mut torques);
+                runner.drive(Some(&torques));
+            }
             Policy::Plan {
                 planner,
                 model,
@@ -172,6 +224,8 @@ pub fn run(
         runner.preview(&state, t, &mut frame);
         step.frame = f + 1;
         step.cost = cost.of(&frame.variables);
+        step.error = cost.error(&frame.variables);
+        errors.push(step.error);
         for (r, s) in step.reached.iter_mut().zip(cost.variables()) {
             *r = frame.variables[s];
         }
@@ -187,9 +241,13 @@ pub fn run(
         }
         _ => f64::NAN,
     };
+    if errors.is_empty() {
+        return Err(Error::Invalid("an episode of no frames".into()));
+    }
     Ok(Outcome {
         cost: total,
         horizon_rms,
+        ..Outcome::of_errors(&errors, cost.tolerance(), p.scene.frame_dt.get())
     })
 }
 
@@ -236,6 +294,30 @@ mod tests {
     use crate::planner::{CemSettings, PlannerKind};
     use crate::task::Task;
 
+    /// The steady-state error is the last quarter's mean error; an
+    /// episode settles at the first frame from which it stays within
+    /// tolerance, never if its last frame is out.
+    #[test]
+    fn an_episodes_outcomes_are_read_from_its_frames_errors() {
+        let errors = [0.9, 0.5, 0.04, 0.2, 0.03, 0.01, 0.02, 0.01];
+        let o = Outcome::of_errors(&errors, 0.05, 0.01);
+        assert!((o.final_error - 0.015).abs() < 1e-15, "{o:?}");
+        // Frame 5 (the fifth frame reached, at 0.05 s) is the first of the
+        // run within tolerance to the end.
+        assert!((o.settle_s - 0.05).abs() < 1e-15, "{o:?}");
+        assert_eq!(o.within, 5.0 / 8.0);
+        let never = Outcome::of_errors(&[0.01, 0.01, 0.3], 0.05, 0.01);
+        assert_eq!(never.settle_s, f64::INFINITY);
+        let always = Outcome::of_errors(&[0.01], 0.05, 0.01);
+        assert_eq!(
+            (always.settle_s, always.within, always.final_error),
+            (0.01, 1.0, 0.01)
+        );
+        // A NaN error is not within tolerance.
+        let lost = Outcome::of_errors(&[0.01, f64::NAN], 0.05, 0.01);
+        assert_eq!((lost.settle_s, lost.within), (f64::INFINITY, 0.5));
+    }
+
     /// Every step's prediction is the frame then reached, to 1e-9.
     fn predicted_as_reached(steps: &[Step]) {
         for s in steps {
@@ -272,6 +354,7 @@ mod tests {
     fn planning_with_the_simulator_beats_zero_and_random_torques() {
         let p = worm();
         let task = Task::HoldAngles {
+            tolerance: None,
             name: "bend".into(),
             targets: BTreeMap::from([("pitch.2".into(), 0.6), ("pitch.3".into(), -0.6)]),
         };
@@ -356,6 +439,7 @@ mod tests {
             ..Default::default()
         }));
         let task = Task::HoldAngles {
+            tolerance: None,
             name: "bend".into(),
             targets: BTreeMap::from([("pitch.2".into(), 0.6)]),
         };

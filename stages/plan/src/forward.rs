@@ -845,7 +845,7 @@ impl Forward for Hybrid<'_> {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use std::collections::BTreeMap;
 
     use alnlab_codes::Code;
@@ -891,7 +891,7 @@ mod tests {
 
     /// The repository's UR5 as `scene` otherwise gives it (its plant, its
     /// drives), under a random controller of ±60 N·m.
-    fn ur5(scene: Scene) -> Prepared {
+    pub(crate) fn ur5(scene: Scene) -> Prepared {
         use alnlab_physics::SceneKind;
         use alnlab_physics::controller::Amplitude;
         let mut scene = Scene {
@@ -928,6 +928,7 @@ mod tests {
     fn learned_models_take_torques_as_levels_and_cost_their_predictions() {
         let (p, entries) = worm_pitch_and_torque();
         let task = Task::HoldAngles {
+            tolerance: None,
             name: "hold".into(),
             targets: BTreeMap::from([("pitch.2".into(), 0.5)]),
         };
@@ -959,6 +960,7 @@ mod tests {
 
         // A task variable the model does not learn is refused by name.
         let other = Task::HoldAngles {
+            tolerance: None,
             name: "h".into(),
             targets: BTreeMap::from([("roll.3".into(), 0.0)]),
         };
@@ -999,6 +1001,7 @@ mod tests {
         let box_points = [-1.0, -5.0, 1.0, 5.0];
         let predictor = Predictor::new(&trees, &reads, &learned, &box_points);
         let task = Task::HoldAngles {
+            tolerance: None,
             name: "hold".into(),
             targets: BTreeMap::from([("pitch.2".into(), 0.5)]),
         };
@@ -1052,10 +1055,12 @@ mod tests {
         let controls = Controls::of(&p).unwrap();
         let tasks = [
             Task::HoldAngles {
+                tolerance: None,
                 name: "bend".into(),
                 targets: BTreeMap::from([("pitch.2".into(), 0.6), ("pitch.3".into(), -0.6)]),
             },
             Task::Spin {
+                tolerance: None,
                 name: "spin".into(),
                 variable: "omega.3.x".into(),
                 rate: 2.0,
@@ -1112,6 +1117,7 @@ mod tests {
             ..Scene::default()
         });
         let task = Task::HoldAngles {
+            tolerance: None,
             name: "raise".into(),
             targets: BTreeMap::from([
                 ("q.shoulder_lift_joint".into(), -1.2),
@@ -1191,6 +1197,7 @@ mod tests {
         let points = vec![0.0; 2 * width];
         let predictor = Predictor::new(&trees, &reads, &inputs, &points);
         let task = Task::HoldAngles {
+            tolerance: None,
             name: "raise".into(),
             targets: BTreeMap::from([
                 ("q.shoulder_lift_joint".into(), -1.2),

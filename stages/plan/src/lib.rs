@@ -10,7 +10,10 @@
 //! frame, or a plant's own simulator), the scene's own simulator — its
 //! plant, where it has one — executes the first frame's controls, and the
 //! task's cost ([`task`]) of the frame reached is added up ([`episode`]).
-//! Zero torques and the scene's random controller are the references.
+//! Zero torques and the scene's random controller are the references, and
+//! for a robot, the controls engineer's first try: a PD loop on the nominal
+//! model's gravity compensation, its frequency tuned on episodes of its own
+//! ([`feedback`]).
 //!
 //! For every task, model, planner and budget (sequences per decision), the
 //! same episodes — the same start states, taken from the trajectory log —
@@ -25,8 +28,10 @@
 //!   summed cost, the evaluations per decision, the decision time in ms
 //!   (median and range over the episode's decisions — measured, the one
 //!   thing that differs between equal runs) and real time (the simulated
-//!   time a decision stands for: one frame), and the model's one-step
-//!   error on the task's variables over the episode;
+//!   time a decision stands for: one frame), the model's one-step error on
+//!   the task's variables over the episode, and what the episode came to in
+//!   the task's physical unit (steady-state error, time to settle, fraction
+//!   of frames within the task's tolerance);
 //! - `transitions.parquet` and `transitions-nominal.parquet`: every frame
 //!   the ALN's planners executed, as training pairs, and the scene as
 //!   written's prediction of each ([`transitions`]) — a next round's data;
@@ -37,6 +42,7 @@
 
 pub mod controls;
 pub mod episode;
+pub mod feedback;
 pub mod forward;
 pub mod planner;
 pub mod planning;
@@ -71,6 +77,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::controls::Controls;
 use crate::episode::Policy;
+use crate::feedback::GravityPd;
 use crate::forward::{Hybrid, Learned, LinearStep, Model, Piecewise, Simulator};
 use crate::planner::{Bounds, CemSettings, Planner, PlannerKind};
 use crate::task::{Cost, Task};
@@ -85,8 +92,9 @@ use crate::transitions::Transitions;
 /// round differently; 9: joint limits sized on what the joint moves; 10:
 /// implicit drives, batched implicitly, mimic joints; 11: the plant's own
 /// simulator predicts its mean, in SIMD lanes, time going on from frame to
-/// frame).
-pub const FORMAT_VERSION: u32 = 11;
+/// frame; 12: each episode's steady-state error, time to settle and frames
+/// within tolerance, and the PD loop on gravity compensation).
+pub const FORMAT_VERSION: u32 = 12;
 /// File name of the per-frame table.
 pub const PLAN_FILE: &str = "plan.parquet";
 /// File name of the per-episode table.
@@ -153,6 +161,17 @@ pub struct Params {
     /// learned models are trained again and plan the same episodes (the
     /// pipeline runs them; 0: none).
     pub rounds: usize,
+    /// The PD loop on the nominal model's gravity compensation
+    /// (`gravity-pd`, a reference for a robot's hold-angles tasks) at the
+    /// one of these natural frequencies (rad/s) with the lowest mean cost
+    /// over the tuning episodes; none: no such loop.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub pd_frequencies: Vec<f64>,
+    /// Episodes per task the PD loop's frequency is tuned on, each from a
+    /// logged state none of the judged episodes starts from (default:
+    /// `episodes`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub tuning_episodes: Option<Count>,
 }
 
 impl Params {
@@ -183,6 +202,8 @@ impl Default for Params {
             cem_elite: Fraction(0.1),
             view_episodes: 1,
             rounds: 0,
+            pd_frequencies: Vec::new(),
+            tuning_episodes: None,
         }
     }
 }
@@ -224,6 +245,32 @@ impl Params {
                 "simulator_budgets".into(),
                 "expected at least one budget (leave it out for `budgets`)".into(),
             ));
+        }
+        if let Some(w) = self
+            .pd_frequencies
+            .iter()
+            .find(|w| !(w.is_finite() && **w > 0.0))
+        {
+            return Err((
+                "pd_frequencies".into(),
+                format!("expected natural frequencies > 0 (rad/s), found {w}"),
+            ));
+        }
+        if self.pd_frequencies.is_empty() && self.tuning_episodes.is_some() {
+            return Err((
+                "tuning_episodes".into(),
+                "tunes the PD loop, which `pd_frequencies` asks for: give both or neither".into(),
+            ));
+        }
+        if let Some(p) = prepared
+            .as_ref()
+            .filter(|_| !self.pd_frequencies.is_empty())
+        {
+            let controls = Controls::of(p).map_err(|m| ("pd_frequencies".to_string(), m))?;
+            for task in &self.task {
+                GravityPd::new(p, &controls, task)
+                    .map_err(|m| ("pd_frequencies".to_string(), m))?;
+            }
         }
         if self.rounds > MOST_ROUNDS {
             return Err((
@@ -456,7 +503,29 @@ pub fn run(
             .find(|s| s.layout.scene == scene_name)
             .expect("a replay per logged scene")
             .frames;
-        let starts = start_states(p, logged, params, seed, trajectory_path)?;
+        let (starts, taken) = start_states(
+            p,
+            logged,
+            params.episodes.get(),
+            (seed, EPISODE_STARTS),
+            &[],
+            trajectory_path,
+        )?;
+        let tuning = match params.pd_frequencies.is_empty() {
+            true => Vec::new(),
+            false => {
+                let count = params.tuning_episodes.unwrap_or(params.episodes).get();
+                start_states(
+                    p,
+                    logged,
+                    count,
+                    (seed, TUNING_STARTS),
+                    &taken,
+                    trajectory_path,
+                )?
+                .0
+            }
+        };
         let trained = Trained::read(model_path, codebook_path)?;
         let levels = Levels::read(levels_path, codebook_path)?;
         let learned: Vec<_> = trained.codebook.learned().collect();
@@ -488,12 +557,15 @@ pub fn run(
         });
 
         let simulators = params.simulator_steps.len() + params.plant_steps.len();
-        let per_task = 2 + params.planners.len()
-            * (params.models.len() * params.budgets.len()
-                + simulators * params.simulator_budgets().len());
+        let per_task = 2
+            + usize::from(!params.pd_frequencies.is_empty())
+            + params.planners.len()
+                * (params.models.len() * params.budgets.len()
+                    + simulators * params.simulator_budgets().len());
+        let tuned = params.pd_frequencies.len() * tuning.len();
         progress.start(
             "plan",
-            (params.task.len() * per_task * params.episodes.get()) as u64,
+            (params.task.len() * (per_task * params.episodes.get() + tuned)) as u64,
             "episodes",
         );
         // One thread: decision times are one thread's, whatever the machine.
@@ -524,6 +596,11 @@ pub fn run(
                 };
                 task_run.reference(PolicyId::Zero, &mut Policy::Zero, &mut out)?;
                 task_run.reference(PolicyId::Random, &mut Policy::Random, &mut out)?;
+                if !params.pd_frequencies.is_empty() {
+                    let pd = GravityPd::new(nominal, &controls, task)
+                        .map_err(|m| Error::Invalid(format!("[plan] pd_frequencies: {m}")))?;
+                    task_run.feedback(pd, &tuning, &mut out)?;
+                }
                 for &kind in &params.models {
                     let (name, model): (PolicyId, Box<dyn Model>) = match kind {
                         LearnedKind::Aln => (
@@ -646,6 +723,51 @@ impl TaskRun<'_> {
     fn reference(&self, name: PolicyId, policy: &mut Policy, out: &mut Outputs) -> Result<()> {
         for e in 0..self.context.starts.len() {
             self.episode(name, "", 0, e, policy, out)?;
+        }
+        Ok(())
+    }
+
+    /// The PD loop's frequency picked by the lowest mean cost over the
+    /// `tuning` episodes (a frequency whose episode blows up is not
+    /// picked), then every episode with it.
+    fn feedback(&self, mut pd: GravityPd, tuning: &[State], out: &mut Outputs) -> Result<()> {
+        let c = self.context;
+        let mut best: Option<(f64, f64)> = None;
+        for &omega in &c.params.pd_frequencies {
+            pd.tune(omega);
+            let mut policy = Policy::Feedback(pd.clone());
+            let mut total = 0.0;
+            for (e, start) in tuning.iter().enumerate() {
+                let seed = mix_seed(c.seed, TUNING_STARTS ^ e as u64);
+                let frames = c.params.frames.get() as u32;
+                let ran = episode::run(
+                    c.p,
+                    c.controls,
+                    start,
+                    frames,
+                    0,
+                    self.cost,
+                    &mut policy,
+                    seed,
+                    |_, _, _, _| Ok(()),
+                );
+                c.progress.advance(1);
+                match ran {
+                    Ok(outcome) => total += outcome.cost,
+                    Err(Error::Diverged(_)) => total = f64::INFINITY,
+                    Err(e) => return Err(e),
+                }
+            }
+            let mean = total / tuning.len() as f64;
+            if best.is_none_or(|(lowest, _)| mean < lowest) {
+                best = Some((mean, omega));
+            }
+        }
+        let (_, omega) = best.expect("validated: at least one frequency");
+        pd.tune(omega);
+        let mut policy = Policy::Feedback(pd);
+        for e in 0..c.starts.len() {
+            self.episode(PolicyId::GravityPd, "", 0, e, &mut policy, out)?;
         }
         Ok(())
     }
@@ -787,6 +909,10 @@ impl TaskRun<'_> {
             t => (t[t.len() / 2], t[0], t[t.len() - 1]),
         };
         let frames_run = c.params.frames.get() as f64;
+        let pd_frequency = match policy {
+            Policy::Feedback(pd) => pd.omega(),
+            _ => f64::NAN,
+        };
         out.episodes.push(planning::Episode {
             task: self.task.to_string(),
             model,
@@ -802,31 +928,65 @@ impl TaskRun<'_> {
             real_time_ms: c.p.scene.frame_dt.get() * 1e3,
             prediction_rms: (squared_error / frames_run).sqrt(),
             horizon_rms: outcome.horizon_rms,
+            final_error: outcome.final_error,
+            settle_s: outcome.settle_s,
+            within_tolerance: outcome.within,
+            pd_frequency,
         });
         c.progress.advance(1);
         Ok(())
     }
 }
 
-/// The episodes' start states: logged frames drawn (seeded) from the runs
-/// of the scene, each far enough from its run's end to matter not.
+/// The stream of random numbers the judged episodes' start states are
+/// drawn from …
+const EPISODE_STARTS: u64 = 0x504C_414E;
+/// … and the PD loop's tuning episodes'.
+const TUNING_STARTS: u64 = 0x5455_4E45 << 32;
+
+/// `count` episodes' start states, and the indices of the logged frames
+/// they are: frames drawn from the scene's runs with the random numbers of
+/// `(seed, stream)`, none of them one of `excluded`.
 fn start_states(
     p: &Prepared,
     logged: &[StateFrame],
-    params: &Params,
-    seed: u64,
+    count: usize,
+    (seed, stream): (u64, u64),
+    excluded: &[usize],
     path: &Path,
-) -> Result<Vec<State>> {
+) -> Result<(Vec<State>, Vec<usize>)> {
     if logged.is_empty() {
         return Err(Error::bad_file(
             path,
             format!("scene `{}` has no frames", p.scene.name),
         ));
     }
-    let mut rng = ChaCha8Rng::seed_from_u64(mix_seed(seed, 0x504C_414E));
-    (0..params.episodes.get())
-        .map(|_| {
-            let frame = &logged[rng.random_range(0..logged.len())];
+    let mut distinct = excluded.to_vec();
+    distinct.sort_unstable();
+    distinct.dedup();
+    if distinct.len() >= logged.len() {
+        return Err(Error::bad_file(
+            path,
+            format!(
+                "scene `{}` has {} frames, and every one starts a judged episode: none is left \
+                 to start another from",
+                p.scene.name,
+                logged.len(),
+            ),
+        ));
+    }
+    let mut rng = ChaCha8Rng::seed_from_u64(mix_seed(seed, stream));
+    let mut taken = Vec::with_capacity(count);
+    while taken.len() < count {
+        let index = rng.random_range(0..logged.len());
+        if distinct.binary_search(&index).is_err() {
+            taken.push(index);
+        }
+    }
+    let states = taken
+        .iter()
+        .map(|&index| {
+            let frame = &logged[index];
             state_from_generalized(&p.model, &frame.state).ok_or_else(|| {
                 Error::bad_file(
                     path,
@@ -837,7 +997,8 @@ fn start_states(
                 )
             })
         })
-        .collect()
+        .collect::<Result<_>>()?;
+    Ok((states, taken))
 }
 
 fn write_frames(path: &Path, rows: &FrameRows, provenance: &Provenance) -> Result<()> {

@@ -4,7 +4,9 @@
 //! time in ms (median and range over the episode's decisions), real time
 //! (the simulated time a decision stands for: one frame), and the model's
 //! one-step error on the task's variables over the episode, and its error
-//! over the planning horizon fed its own predictions.
+//! over the planning horizon fed its own predictions; what the episode came
+//! to in the task's physical unit (steady-state error, time to settle,
+//! fraction of frames within tolerance); the PD loop's frequency.
 
 use std::path::Path;
 use std::sync::Arc;
@@ -18,7 +20,7 @@ use arrow_array::{Array, Float64Array, StringArray, UInt32Array, UInt64Array};
 pub struct Episode {
     pub task: String,
     /// The forward model (`aln`, `linear`, `simulator@k`, `plant@k`) or a
-    /// reference (`zero`, `random`).
+    /// reference (`zero`, `random`, `gravity-pd`).
     pub model: PolicyId,
     /// The round of the planner's own data (`[plan] rounds`) whose table
     /// the episode was read from: 0 for the first plan stage's, r for the
@@ -48,6 +50,18 @@ pub struct Episode {
     /// executed ([`crate::episode::Outcome::horizon_rms`]); NaN for a
     /// reference.
     pub horizon_rms: f64,
+    /// The steady-state error: the mean error (the task's unit: rad, rad/s
+    /// or m) over the episode's last quarter of frames
+    /// ([`crate::episode::Outcome::final_error`]).
+    pub final_error: f64,
+    /// Seconds until the error stayed within the task's tolerance; +∞ if it
+    /// did not by the last frame.
+    pub settle_s: f64,
+    /// The fraction of frames within the task's tolerance.
+    pub within_tolerance: f64,
+    /// The PD loop's natural frequency (rad/s) as tuned; NaN for every
+    /// other policy.
+    pub pd_frequency: f64,
 }
 
 /// Writes `rows` to `path`.
@@ -85,6 +99,10 @@ pub fn write(path: &Path, rows: &[Episode], provenance: &Provenance) -> Result<(
         ("real_time_ms", real(|r| r.real_time_ms)),
         ("prediction_rms", real(|r| r.prediction_rms)),
         ("horizon_rms", real(|r| r.horizon_rms)),
+        ("final_error", real(|r| r.final_error)),
+        ("settle_s", real(|r| r.settle_s)),
+        ("within_tolerance", real(|r| r.within_tolerance)),
+        ("pd_frequency", real(|r| r.pd_frequency)),
     ]);
     table::write_parquet(path, &batch, provenance)
 }
@@ -101,11 +119,17 @@ pub fn read(path: &Path) -> Result<Vec<Episode>> {
     let (cost, ms) = (real("cost")?, real("ms_per_decision")?);
     let (ms_min, ms_max) = (real("ms_min")?, real("ms_max")?);
     let (real_time, rms) = (real("real_time_ms")?, real("prediction_rms")?);
-    // Tables written before the column (plan format 5) read as NaN.
-    let horizon_rms = match t.batch.column_by_name("horizon_rms") {
-        Some(_) => Some(real("horizon_rms")?),
-        None => None,
+    // Tables written before a column (plan format 5 for the horizon's
+    // error, 12 for the physical outcomes) read as NaN.
+    let optional = |name: &str| match t.batch.column_by_name(name) {
+        Some(_) => real(name).map(|c| Some(&c[..])),
+        None => Ok(None),
     };
+    let horizon_rms = optional("horizon_rms")?;
+    let (final_error, settle_s) = (optional("final_error")?, optional("settle_s")?);
+    let within = optional("within_tolerance")?;
+    let pd_frequency = optional("pd_frequency")?;
+    let or_nan = |c: Option<&[f64]>, i: usize| c.map_or(f64::NAN, |c| c[i]);
     Ok((0..t.num_rows())
         .map(|i| Episode {
             task: task[i].clone(),
@@ -121,7 +145,11 @@ pub fn read(path: &Path) -> Result<Vec<Episode>> {
             ms_max: ms_max[i],
             real_time_ms: real_time[i],
             prediction_rms: rms[i],
-            horizon_rms: horizon_rms.map_or(f64::NAN, |h| h[i]),
+            horizon_rms: or_nan(horizon_rms, i),
+            final_error: or_nan(final_error, i),
+            settle_s: or_nan(settle_s, i),
+            within_tolerance: or_nan(within, i),
+            pd_frequency: or_nan(pd_frequency, i),
         })
         .collect())
 }
@@ -147,6 +175,10 @@ mod tests {
             real_time_ms: 10.0,
             prediction_rms: 0.03,
             horizon_rms: 0.25,
+            final_error: 0.04,
+            settle_s: f64::INFINITY,
+            within_tolerance: 0.5,
+            pd_frequency: f64::NAN,
         }];
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("planning.parquet");
@@ -156,6 +188,15 @@ mod tests {
             inputs: Default::default(),
         };
         write(&path, &rows, &provenance).unwrap();
-        assert_eq!(read(&path).unwrap(), rows);
+        let back = read(&path).unwrap();
+        assert!(back[0].pd_frequency.is_nan());
+        let same = |e: &Episode| Episode {
+            pd_frequency: 0.0,
+            ..e.clone()
+        };
+        assert_eq!(
+            back.iter().map(same).collect::<Vec<_>>(),
+            rows.iter().map(same).collect::<Vec<_>>()
+        );
     }
 }

@@ -15,6 +15,12 @@
 //!   distance still to go. The frame is placed from the positions of the
 //!   joints between it and the robot's welded base, so each of those must
 //!   be a variable.
+//!
+//! Beside the cost, each frame has an error in the task's physical unit
+//! ([`Cost::error`]: the largest angle still to go, rad; the rate's miss,
+//! rad/s; the distance, m), and each task a `tolerance` within which a frame
+//! counts as there: an episode's steady-state error, time to settle and
+//! fraction of frames within it are read from those ([`crate::episode`]).
 
 use std::collections::BTreeMap;
 use std::f64::consts::{PI, TAU};
@@ -36,6 +42,10 @@ pub enum Task {
         /// Target angle (rad) per `roll.N`, `pitch.N` or `q.<joint>`
         /// variable.
         targets: BTreeMap<String, f64>,
+        /// Within this error a frame counts as there ([`Task::tolerance`]'s
+        /// default where not given).
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        tolerance: Option<f64>,
     },
     /// Spin at a rate.
     Spin {
@@ -44,6 +54,10 @@ pub enum Task {
         variable: String,
         /// Target rate (rad/s).
         rate: f64,
+        /// Within this error a frame counts as there ([`Task::tolerance`]'s
+        /// default where not given).
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        tolerance: Option<f64>,
     },
     /// Bring a robot's URDF frame to a point.
     ReachPoint {
@@ -52,6 +66,10 @@ pub enum Task {
         frame: String,
         /// The point (m, world frame).
         target: [f64; 3],
+        /// Within this error a frame counts as there ([`Task::tolerance`]'s
+        /// default where not given).
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        tolerance: Option<f64>,
     },
 }
 
@@ -93,6 +111,26 @@ impl Task {
         }
     }
 
+    /// The error within which a frame counts as there, in
+    /// [`Task::error_unit`]: as given, else 0.05 rad (about 3°) for
+    /// angles, 0.2 rad/s for a rate, 2 cm for a point.
+    pub fn tolerance(&self) -> f64 {
+        match self {
+            Task::HoldAngles { tolerance, .. } => tolerance.unwrap_or(0.05),
+            Task::Spin { tolerance, .. } => tolerance.unwrap_or(0.2),
+            Task::ReachPoint { tolerance, .. } => tolerance.unwrap_or(0.02),
+        }
+    }
+
+    /// The unit of a frame's error ([`Cost::error`]) and of the tolerance.
+    pub fn error_unit(&self) -> &'static str {
+        match self {
+            Task::HoldAngles { .. } => "rad",
+            Task::Spin { .. } => "rad/s",
+            Task::ReachPoint { .. } => "m",
+        }
+    }
+
     /// The unit of a frame's cost, and so of an episode's.
     pub fn cost_unit(&self) -> &'static str {
         match self {
@@ -105,6 +143,20 @@ impl Task {
     /// Checks the task on its own: targets named as angles, finite numbers.
     /// On error, the field and the message.
     pub fn validate(&self) -> Result<(), (&'static str, String)> {
+        let tolerance = match self {
+            Task::HoldAngles { tolerance, .. }
+            | Task::Spin { tolerance, .. }
+            | Task::ReachPoint { tolerance, .. } => tolerance,
+        };
+        if let Some(t) = tolerance.filter(|t| !(t.is_finite() && *t > 0.0)) {
+            return Err((
+                "tolerance",
+                format!(
+                    "expected a positive error in {}, found {t}",
+                    self.error_unit()
+                ),
+            ));
+        }
         match self {
             Task::HoldAngles { targets, .. } => {
                 if targets.is_empty() {
@@ -217,7 +269,11 @@ impl Task {
                 (terms, Some((chain, Vector3::from(*target))))
             }
         };
-        Ok(Cost { terms, reach })
+        Ok(Cost {
+            terms,
+            reach,
+            tolerance: self.tolerance(),
+        })
     }
 }
 
@@ -299,6 +355,8 @@ pub struct Cost {
     /// The point to reach and its target (m), placed from the terms'
     /// variables in order.
     reach: Option<(ChainPoint, Vector3<f64>)>,
+    /// The task's [`Task::tolerance`].
+    tolerance: f64,
 }
 
 impl Cost {
@@ -318,6 +376,27 @@ impl Cost {
                 d * d
             })
             .sum()
+    }
+
+    /// A frame's error in the task's physical unit ([`Task::error_unit`]):
+    /// the largest of its angles still to go (on the circle) or its rate's
+    /// miss; for a point to reach, the distance still to go.
+    pub fn error(&self, values: &[f64]) -> f64 {
+        if self.reach.is_some() {
+            return self.of(values).sqrt();
+        }
+        self.terms
+            .iter()
+            .map(|&(i, target, angle)| {
+                let d = values[i] - target;
+                if angle { on_circle(d) } else { d }.abs()
+            })
+            .fold(0.0, f64::max)
+    }
+
+    /// The error within which a frame counts as there.
+    pub fn tolerance(&self) -> f64 {
+        self.tolerance
     }
 
     /// The variables the cost reads.
@@ -358,6 +437,7 @@ mod tests {
     #[test]
     fn a_task_says_what_it_asks_and_in_what_unit_it_costs() {
         let bend = Task::HoldAngles {
+            tolerance: None,
             name: "bend".into(),
             targets: BTreeMap::from([("pitch.2".into(), 0.6), ("pitch.3".into(), -0.6)]),
         };
@@ -368,6 +448,7 @@ mod tests {
         );
         assert_eq!(bend.cost_unit(), "rad²");
         let spin = Task::Spin {
+            tolerance: None,
             name: "spin".into(),
             variable: "omega.3.x".into(),
             rate: 2.0,
@@ -402,6 +483,7 @@ mod tests {
 
     fn reach(frame: &str, target: [f64; 3]) -> Task {
         Task::ReachPoint {
+            tolerance: None,
             name: "reach".into(),
             frame: frame.into(),
             target,
@@ -463,6 +545,7 @@ mod tests {
     #[test]
     fn hold_angles_costs_squared_angles_on_the_circle() {
         let task = Task::HoldAngles {
+            tolerance: None,
             name: "hold".into(),
             targets: BTreeMap::from([("roll.2".into(), 0.5), ("pitch.2".into(), 3.0)]),
         };
@@ -473,6 +556,12 @@ mod tests {
         let short = TAU - 6.0;
         assert!((c - short * short).abs() < 1e-12, "{c}");
         assert!((cost.of(&[0.0, 0.7, 3.0, 0.0]) - 0.04).abs() < 1e-12);
+        // Its error is the largest angle still to go, in rad; within the
+        // default tolerance of 0.05 rad a frame counts as there.
+        assert!((cost.error(&[9.0, 0.5, -3.0, 1.0]) - short).abs() < 1e-12);
+        assert!((cost.error(&[0.0, 0.7, 3.0, 0.0]) - 0.2).abs() < 1e-12);
+        assert_eq!((task.tolerance(), task.error_unit()), (0.05, "rad"));
+        assert_eq!(cost.tolerance(), 0.05);
         assert_eq!(
             cost.variables().collect::<Vec<_>>(),
             [2, 1],
@@ -483,6 +572,7 @@ mod tests {
     #[test]
     fn spin_costs_the_squared_rate_error() {
         let task = Task::Spin {
+            tolerance: None,
             name: "spin".into(),
             variable: "omega.1.x".into(),
             rate: 3.0,
@@ -495,11 +585,13 @@ mod tests {
     #[test]
     fn bad_tasks_are_named() {
         let wrong = Task::HoldAngles {
+            tolerance: None,
             name: "h".into(),
             targets: BTreeMap::from([("v.1.x".into(), 0.0)]),
         };
         assert_eq!(wrong.validate().unwrap_err().0, "targets");
         let missing = Task::Spin {
+            tolerance: None,
             name: "s".into(),
             variable: "omega.4.x".into(),
             rate: 1.0,
@@ -510,5 +602,32 @@ mod tests {
             toml::from_str("kind = \"spin\"\nname = \"s\"\nvariable = \"omega.1.x\"\nrate = 2.0")
                 .unwrap();
         assert_eq!(parsed.name(), "s");
+        assert_eq!(parsed.tolerance(), 0.2);
+        let given: Task = toml::from_str(
+            "kind = \"spin\"\nname = \"s\"\nvariable = \"omega.1.x\"\nrate = 2.0\n\
+             tolerance = 0.5",
+        )
+        .unwrap();
+        assert_eq!(given.tolerance(), 0.5);
+        let Task::Spin {
+            name,
+            variable,
+            rate,
+            ..
+        } = given
+        else {
+            unreachable!("parsed as a spin")
+        };
+        for bad in [0.0, -1.0, f64::INFINITY] {
+            let task = Task::Spin {
+                name: name.clone(),
+                variable: variable.clone(),
+                rate,
+                tolerance: Some(bad),
+            };
+            let (field, message) = task.validate().unwrap_err();
+            assert_eq!(field, "tolerance");
+            assert!(message.contains("rad/s"), "{message}");
+        }
     }
 }

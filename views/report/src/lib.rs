@@ -146,6 +146,10 @@ pub struct PlanTask {
     pub definition: String,
     /// The unit of its cost (`rad²`).
     pub unit: String,
+    /// The unit of a frame's error (`rad`) and the tolerance within which
+    /// a frame counts as there.
+    pub error_unit: String,
+    pub tolerance: f64,
 }
 
 /// What the plan stage was asked, defined beside its figures.
@@ -157,6 +161,10 @@ pub struct PlanSetup {
     pub frames: u32,
     /// Episodes per task and replicate.
     pub episodes: u32,
+    /// The PD loop's natural frequencies (rad/s) its tuning chose among
+    /// (none: no loop), and its tuning episodes per task.
+    pub pd_frequencies: Vec<f64>,
+    pub tuning_episodes: u32,
 }
 
 /// One stage of a variant in the run.

@@ -95,6 +95,49 @@ impl Policy<'_> {
         sum / self.episodes.len() as f64
     }
 
+    /// The mean over episodes of the steady-state error (the task's unit);
+    /// NaN for tables written before the column.
+    pub(super) fn final_error(&self) -> f64 {
+        let errors: Vec<f64> = self.episodes.iter().map(|e| e.final_error).collect();
+        mean(&errors)
+    }
+
+    /// What the episodes came to against the task's tolerance, as table
+    /// cells: the steady-state error (mean over episodes), the episodes
+    /// that settled within the tolerance and their median time to settle,
+    /// and the mean fraction of frames within it; "—" for tables written
+    /// before the columns.
+    fn outcome_cells(&self) -> [String; 3] {
+        let error = self.final_error();
+        if error.is_nan() {
+            return ["—".into(), "—".into(), "—".into()];
+        }
+        let mut settled: Vec<f64> = self
+            .episodes
+            .iter()
+            .map(|e| e.settle_s)
+            .filter(|s| s.is_finite())
+            .collect();
+        settled.sort_by(f64::total_cmp);
+        let n = self.episodes.len();
+        let settle = match settled.len() {
+            0 => format!("0 of {n}"),
+            k => format!("{k} of {n}, in {} s", sig3(settled[(k - 1) / 2])),
+        };
+        let within: Vec<f64> = self.episodes.iter().map(|e| e.within_tolerance).collect();
+        [
+            sig3(error),
+            settle,
+            format!("{:.0}%", 100.0 * mean(&within)),
+        ]
+    }
+
+    /// The PD loop's frequency as tuned (rad/s), where the policy is one.
+    pub(super) fn pd_frequency(&self) -> Option<f64> {
+        let w = self.episodes.first()?.pd_frequency;
+        w.is_finite().then_some(w)
+    }
+
     /// Whether a planner chose the torques (not a reference).
     pub(super) fn planned(&self) -> bool {
         !self.planner.is_empty()
@@ -127,10 +170,10 @@ impl Policy<'_> {
     }
 
     fn label(&self) -> String {
-        if self.planner.is_empty() {
-            format!("{} torques", self.model)
-        } else {
-            format!("{} {}", self.model, self.planner)
+        match (self.planned(), self.pd_frequency()) {
+            (true, _) => format!("{} {}", self.model, self.planner),
+            (false, Some(w)) => format!("{} (ω {} rad/s)", self.model, sig3(w)),
+            (false, None) => format!("{} torques", self.model),
         }
     }
 }
@@ -186,6 +229,12 @@ pub(super) fn replicate_figures(replicates: &[Vec<Episode>]) -> Vec<(String, Vec
                 format!("plan {task}: {name} cost"),
                 of(&|q| mean(&q.costs())),
             ));
+            if !p.final_error().is_nan() {
+                figures.push((
+                    format!("plan {task}: {name} final error"),
+                    of(&|q| q.final_error()),
+                ));
+            }
             if p.planned() {
                 figures.push((format!("plan {task}: {name} ms"), of(&|q| q.ms())));
             }
@@ -426,17 +475,41 @@ pub(super) fn section(
                 sig3(real_time)
             );
         }
+        if let (Some(setup), Some(pd)) = (
+            setup.filter(|s| !s.pd_frequencies.is_empty()),
+            policies
+                .iter()
+                .find(|p| p.model.policy == PolicyId::GravityPd),
+        ) {
+            let grid: Vec<String> = setup.pd_frequencies.iter().map(|w| sig3(*w)).collect();
+            let _ = writeln!(
+                md,
+                "gravity-pd, the controls engineer's first try: each driven joint's effort is \
+                 the nominal model's gravity effort plus a PD loop, Kp = M_ii ω², Kd = 2 M_ii ω \
+                 on the nominal mass matrix's diagonal (each joint alone critically damped), to \
+                 the task's targets (the other joints held where the episode started), clamped \
+                 to the planners' box; ω = {} rad/s, the lowest mean cost among {} rad/s over {} \
+                 tuning episodes from other logged states.\n",
+                pd.pd_frequency().map_or("—".into(), sig3),
+                grid.join(", "),
+                setup.tuning_episodes
+            );
+        }
         let mut table = MdTable::new(&["model", "planner", "budget"])
             .numbers(&[
                 "evaluations / decision",
                 "cost",
                 "ms / decision",
                 "one-step error",
+                "steady-state error",
             ])
+            .column("settled", Align::Left)
+            .numbers(&["frames within tolerance"])
             .column("against zero torques", Align::Left)
             .column("against random torques", Align::Left);
         for p in &policies {
             let cost = p.cost_cell();
+            let [error, settled, within] = p.outcome_cells();
             let against = |reference: &Policy| {
                 if p.model == reference.model {
                     "—".to_string()
@@ -469,16 +542,29 @@ pub(super) fn section(
                 } else {
                     "—".into()
                 },
+                error,
+                settled,
+                within,
                 against(zero),
                 against(random),
             ]);
         }
         table.write(md);
+        let tolerance = setup
+            .and_then(|s| s.tasks.iter().find(|t| t.name == task))
+            .map_or(String::new(), |t| {
+                format!(" ({} {} here)", sig3(t.tolerance), t.error_unit)
+            });
         let _ = writeln!(
             md,
             "One-step error: the RMS over frames (mean over episodes) of the model's prediction \
              of the task's variables one frame ahead under the torques chosen, against what the \
-             simulator then did, in the variables' units (angles on the circle).\n"
+             simulator then did, in the variables' units (angles on the circle). A frame's error \
+             is the largest of the task's angles still to go (rad; a rate's miss, rad/s; a \
+             point's distance, m); steady-state error: its mean over an episode's last quarter \
+             (mean over episodes); settled: the episodes whose error came within the task's \
+             tolerance{tolerance} and stayed there to the end, and their median time to get \
+             there; frames within tolerance: mean over episodes.\n"
         );
         at_equal_time(md, &policies, (zero, random), real_time, words);
 
@@ -511,10 +597,16 @@ pub(super) fn section(
                 }),
             }
         }
-        if let Some(d) = Interval::of(&random.differences(zero)) {
+        let feedback = policies
+            .iter()
+            .find(|p| p.model.policy == PolicyId::GravityPd);
+        for reference in [Some(random), feedback].into_iter().flatten() {
+            let Some(d) = Interval::of(&reference.differences(zero)) else {
+                continue;
+            };
             series.push(Series {
-                name: random.label(),
-                style: policy_style(random.model.policy, random.model.round, 0),
+                name: reference.label(),
+                style: policy_style(reference.model.policy, reference.model.round, 0),
                 points: vec![Point::at(x_lo, d.mean), Point::at(x_hi, d.mean)],
                 joined: true,
                 hollow: false,
@@ -541,7 +633,8 @@ pub(super) fn section(
              curve is one forward model with one planner (filled: cross-entropy method; hollow: \
              random shooting), a point per budget: its episodes' costs minus zero torques' on \
              the same episodes, bars the 95% interval of that paired difference over the \
-             episodes; the flat line is the random controller's, the grey level zero torques'; \
+             episodes; the flat lines are the random controller's and, where it ran, the PD \
+             loop's on the nominal model's gravity compensation, the grey level zero torques'; \
              left of the dashed grey line (real time) a decision takes less than the frame it \
              plans for.\n"
         );
@@ -891,6 +984,14 @@ mod tests {
                 real_time_ms: 10.0,
                 prediction_rms: 0.1,
                 horizon_rms: 0.4,
+                final_error: 0.01 * base,
+                settle_s: if k == 0 {
+                    f64::INFINITY
+                } else {
+                    0.1 * f64::from(k)
+                },
+                within_tolerance: 0.5,
+                pd_frequency: if model == "gravity-pd" { 8.0 } else { f64::NAN },
             })
             .collect()
     }

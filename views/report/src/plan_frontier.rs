@@ -33,6 +33,9 @@ pub(super) struct Budgeted {
     /// task's variables, mean over every episode.
     pub one_step: f64,
     pub horizon: f64,
+    /// The steady-state error in the task's unit, mean over every episode
+    /// (NaN for tables written before the column).
+    pub final_error: f64,
 }
 
 impl Budgeted {
@@ -166,6 +169,7 @@ pub(super) fn methods<'a>(planned: &[&Planned<'a>], task: &str) -> (Vec<Method>,
             };
             let one_step: Vec<f64> = chosen().map(|e| e.prediction_rms).collect();
             let horizon: Vec<f64> = chosen().map(|e| e.horizon_rms).collect();
+            let final_error: Vec<f64> = chosen().map(|e| e.final_error).collect();
             let point = Budgeted {
                 budget: p.budget,
                 ms: p.ms(),
@@ -173,6 +177,7 @@ pub(super) fn methods<'a>(planned: &[&Planned<'a>], task: &str) -> (Vec<Method>,
                 costs,
                 one_step: mean(&one_step),
                 horizon: mean(&horizon),
+                final_error: mean(&final_error),
             };
             let label = match (p.model.policy, several) {
                 (PolicyId::Aln, true) => format!("ALN{} (`{}`)", p.model.round_suffix(), v.name),
@@ -275,9 +280,38 @@ pub(super) fn section(md: &mut String, variants: &[Planned], dir: &Path) -> Resu
                 left_out.join(", ")
             );
         }
-        deadlines(md, &methods, truth, task, replicates);
+        let feedback = feedback(first, task);
+        deadlines(md, &methods, truth, feedback.as_ref(), task, replicates);
     }
     Ok(())
+}
+
+/// The PD loop on the nominal model's gravity compensation in `task`, as a
+/// point to compare picks with (budget and time 0: it plans nothing), and
+/// its frequency as tuned in each replicate; `None` where it did not run
+/// in every replicate.
+fn feedback(v: &Planned, task: &str) -> Option<(Budgeted, Vec<f64>)> {
+    let mut costs = Vec::new();
+    let (mut omegas, mut errors) = (Vec::new(), Vec::new());
+    for rows in v.planning {
+        let policies = policies(rows, task);
+        let pd = policies
+            .iter()
+            .find(|p| p.model.policy == PolicyId::GravityPd)?;
+        costs.push(pd.costs());
+        omegas.push(pd.pd_frequency()?);
+        errors.push(pd.final_error());
+    }
+    let point = Budgeted {
+        budget: 0,
+        ms: 0.0,
+        evaluations: 0,
+        costs,
+        one_step: f64::NAN,
+        horizon: f64::NAN,
+        final_error: mean(&errors),
+    };
+    Some((point, omegas))
 }
 
 /// The frontier chart of one task.
@@ -364,7 +398,14 @@ fn chart(
 /// ALN of the lowest mean cost in replicate 1 among those whose largest
 /// budget that fits, and the true model, judged on the other replicates:
 /// the differences and the regrets.
-fn deadlines(md: &mut String, methods: &[Method], truth: &Method, task: &str, replicates: usize) {
+fn deadlines(
+    md: &mut String,
+    methods: &[Method],
+    truth: &Method,
+    feedback: Option<&(Budgeted, Vec<f64>)>,
+    task: &str,
+    replicates: usize,
+) {
     if replicates < 3 {
         let _ = writeln!(
             md,
@@ -375,7 +416,7 @@ fn deadlines(md: &mut String, methods: &[Method], truth: &Method, task: &str, re
     }
     let judged = replicates - 1;
     let mut table = MdTable::new(&["deadline", "forward model, planner (budget)"])
-        .numbers(&["ms / decision", "cost"])
+        .numbers(&["ms / decision", "cost", "steady-state error"])
         .column("− the nominal simulator", Align::Left)
         .column("signed-rank p, median difference (episodes)", Align::Left)
         .column("regret: − the reference, same budget", Align::Left)
@@ -396,6 +437,8 @@ fn deadlines(md: &mut String, methods: &[Method], truth: &Method, task: &str, re
         pick.map(|(m, b)| (m, b.judged(), n))
     };
     let mut answers = Vec::new();
+    // The deadline picks' standing against the PD loop, judged alike.
+    let mut against_feedback = Vec::new();
     for &limit in &DEADLINES {
         let nominal = lowest(
             &|m| matches!(m.model.policy, PolicyId::Simulator { .. }),
@@ -431,6 +474,25 @@ fn deadlines(md: &mut String, methods: &[Method], truth: &Method, task: &str, re
                 a.at(ab)
             )),
             _ => {}
+        }
+        if let Some((pd, _)) = feedback {
+            let pd = pd.judged();
+            let each: Vec<String> = [&nominal, &aln]
+                .into_iter()
+                .flatten()
+                .filter_map(|(m, b, _)| {
+                    let d = paired(b, &pd)?;
+                    Some(format!(
+                        "{} {}: {}",
+                        m.at(b),
+                        d.verdict().as_str(),
+                        interval(d.mean, d.low, d.high)
+                    ))
+                })
+                .collect();
+            if !each.is_empty() {
+                against_feedback.push(format!("at {deadline}, {}", each.join("; ")));
+            }
         }
         for (k, found) in [nominal.as_ref(), aln.as_ref(), true_now.as_ref()]
             .into_iter()
@@ -473,6 +535,10 @@ fn deadlines(md: &mut String, methods: &[Method], truth: &Method, task: &str, re
                 label,
                 sig3(b.ms),
                 cost,
+                match b.final_error.is_nan() {
+                    true => "—".into(),
+                    false => sig3(b.final_error),
+                },
                 against_nominal,
                 p,
                 regret(same.as_ref()),
@@ -494,6 +560,26 @@ fn deadlines(md: &mut String, methods: &[Method], truth: &Method, task: &str, re
         answers.join("; ")
     );
     table.write(md);
+    if let Some((pd, omegas)) = feedback {
+        let judged_pd = pd.judged();
+        let means: Vec<f64> = judged_pd.costs.iter().map(|c| mean(c)).collect();
+        let cost = Interval::of(&means).map_or("—".into(), |i| estimate(i.mean, i.low, i.high));
+        let tuned: Vec<String> = omegas.iter().map(|w| sig3(*w)).collect();
+        let _ = writeln!(
+            md,
+            "**Against the controls engineer's first try**, the PD loop on the nominal model's \
+             gravity compensation (gravity-pd; ω tuned on episodes of its own, per replicate: {} \
+             rad/s), which \
+             plans nothing and costs {cost} on the same {judged} replicates (steady-state error \
+             {}): the picks above, each minus it, across those replicates — {}.\n",
+            tuned.join(", "),
+            sig3(pd.final_error),
+            match against_feedback.is_empty() {
+                true => "none fits a deadline".to_string(),
+                false => against_feedback.join("; "),
+            }
+        );
+    }
 }
 
 #[cfg(test)]
@@ -524,6 +610,10 @@ mod tests {
                 real_time_ms: 10.0,
                 prediction_rms: 0.1,
                 horizon_rms: 0.4,
+                final_error: 0.01 * base,
+                settle_s: 0.2,
+                within_tolerance: 0.5,
+                pd_frequency: if model == "gravity-pd" { 8.0 } else { f64::NAN },
             })
             .collect()
     }
@@ -535,6 +625,7 @@ mod tests {
         [
             at("zero", 0, 100.0, 1.0, 0.0),
             at("random", 0, 90.0, 1.0, 0.0),
+            at("gravity-pd", 0, 35.0, 1.0, 0.0),
             at("aln", 8, 30.0 + shift, 1.2, 0.5),
             at("aln", 64, 25.0 + shift, 1.2, 1.5),
             at("simulator@2", 8, 40.0, 1.0, 1.5),
@@ -603,6 +694,22 @@ mod tests {
             "{md}"
         );
         assert!(md.contains("at 1 ms, ALN, cem (8 sequences) plans and no nominal simulator fits"));
+        // The PD loop (36.5 a replicate) against the same picks: at 2 ms
+        // the ALN's 26.8 + shift is 9.7 lower, the simulator's 41.5 5.0
+        // higher (the same in every replicate: no interval to speak of).
+        assert!(
+            md.contains("ω tuned on episodes of its own, per replicate: 8, 8, 8, 8, 8"),
+            "{md}"
+        );
+        assert!(
+            md.contains(
+                "at 2 ms, simulator@2, cem (8 sequences) higher: +5.00 [+5.00, +5.00]; ALN, cem \
+                 (64 sequences) lower: -9.70 [-9.99, -9.41]"
+            ),
+            "{md}"
+        );
+        // The steady-state error beside each pick's cost (0.01 × base).
+        assert!(md.contains("| 26.8 [26.5, 27.1] | 0.250 |"), "{md}");
         assert!(md.contains("judged on the other 4 replicates"), "{md}");
         // The true model's regret is against itself: no figure.
         assert!(
