@@ -334,14 +334,15 @@ fn rounds_of_the_planners_own_data_join_the_training_rows_deterministically() {
     }
 }
 
-/// The controls engineer's baseline on a robot (`[plan] pd_frequencies`):
-/// the UR5 under a payload its description lacks, held by the nominal
-/// model's gravity effort plus PD, its frequency tuned on episodes of its
-/// own, beside a planner on the same episodes; every episode's outcome in
-/// the task's unit. On the worm, which has no joints of one degree of
-/// freedom to drive, the manifest is refused by the field's name.
+/// The controls engineer's baselines on a robot (`[plan]
+/// feedback_frequencies`): the UR5 under a payload its description lacks,
+/// held by the nominal model's gravity effort plus PD or PID, each loop's
+/// frequency tuned on episodes of its own, beside a planner on the same
+/// episodes; every episode's outcome in the task's unit. On the worm, which
+/// has no joints of one degree of freedom to drive, the manifest is refused
+/// by the field's name.
 #[test]
-fn a_robots_pd_loop_is_tuned_apart_and_its_episodes_pair_with_the_planners() {
+fn a_robots_feedback_loops_are_tuned_apart_and_their_episodes_pair_with_the_planners() {
     let dir = tempfile::tempdir().unwrap();
     let urdf = Path::new(env!("CARGO_MANIFEST_DIR")).join("robots/ur5/ur5_robot.urdf");
     let manifest = format!(
@@ -384,7 +385,7 @@ budgets = [4]
 models = []
 planners = ["cem"]
 simulator_steps = [1]
-pd_frequencies = [5.0, 20.0]
+feedback_frequencies = [5.0, 20.0]
 tuning_episodes = 3
 
 [[plan.task]]
@@ -401,17 +402,11 @@ tolerance = 0.1
     let models: Vec<String> = episodes.iter().map(|e| e.model.to_string()).collect();
     assert_eq!(
         models,
-        [
-            "zero",
-            "zero",
-            "random",
-            "random",
-            "gravity-pd",
-            "gravity-pd"
-        ]
-        .into_iter()
-        .chain(["simulator@1"; 2])
-        .collect::<Vec<_>>()
+        ["zero", "random", "gravity-pd", "gravity-pid"]
+            .into_iter()
+            .flat_map(|m| [m, m])
+            .chain(["simulator@1"; 2])
+            .collect::<Vec<_>>()
     );
     for e in &episodes {
         assert!(
@@ -421,26 +416,32 @@ tolerance = 0.1
         assert!((0.0..=1.0).contains(&e.within_tolerance), "{e:?}");
         assert!(e.settle_s > 0.0, "{e:?}");
         match e.model {
-            // The stiffer loop holds the heavier arm closer: tuned to it.
-            alnlab_common::PolicyId::GravityPd => assert_eq!(e.pd_frequency, 20.0, "{e:?}"),
-            _ => assert!(e.pd_frequency.is_nan(), "{e:?}"),
+            alnlab_common::PolicyId::GravityPd | alnlab_common::PolicyId::GravityPid => {
+                assert!([5.0, 20.0].contains(&e.feedback_frequency), "{e:?}")
+            }
+            _ => assert!(e.feedback_frequency.is_nan(), "{e:?}"),
         }
     }
     let report = std::fs::read_to_string(dir.path().join("runs/planned/report/report.md")).unwrap();
     assert!(
-        report.contains("gravity-pd, the controls engineer's first try")
-            && report.contains("ω = 20 rad/s, the lowest mean cost among 5, 20 rad/s over 3")
+        report.contains("gravity-pd and gravity-pid, the controls engineer's first tries")
+            && report.contains("lowest mean cost among 5, 20 rad/s over 3 tuning episodes")
             && report.contains("tolerance (0.100 rad here)"),
         "{report}"
     );
 
-    let worm = PLANNED.replace("budgets = [4, 8]", "budgets = [4]\npd_frequencies = [5.0]");
+    let worm = PLANNED.replace(
+        "budgets = [4, 8]",
+        "budgets = [4]\nfeedback_frequencies = [5.0]",
+    );
     write_manifest(dir.path(), "worm.toml", &worm);
     let out = alnlab(dir.path(), &["-q", "run", "worm.toml"]);
     assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
     let message = stderr(&out);
     assert!(
-        message.contains("pd_frequencies") && message.contains("is no robot"),
+        message.contains("feedback_frequencies")
+            && message.contains("no task takes a feedback loop")
+            && message.contains("is no robot"),
         "{message}"
     );
 }

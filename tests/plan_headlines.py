@@ -15,7 +15,10 @@ and asserts that every number shown is the recomputed one to the digits
 shown, and the verdict word the interval's; at each deadline it also
 makes the picks again — each model at its largest budget whose replicate-1
 median fits, the lowest replicate-1 cost among the simulators and among
-the ALNs — and asserts the table shows those. A report with planning
+the ALNs — and asserts the table shows those. Where a feedback loop
+on gravity compensation ran, the deadline picks are set against it in a
+paragraph; the loop of the lower replicate-1 cost is made again and each
+difference recomputed alike. A report with planning
 tables but no figures is named as not checked (rendered before the figures
 were written); the check fails unless some report is checked.
 
@@ -132,6 +135,50 @@ def tables(report: str):
         yield m["a"] or m["b"], header, rows
 
 
+FEEDBACK = re.compile(
+    r"^\*\*Against the controls engineer's first try\*\*, the PI?D loop on the nominal model's "
+    r"gravity compensation \((?P<loop>gravity-pi?d), .*? across those replicates — (?P<picks>.*)\.$"
+)
+PICK = re.compile(r"^(?:at (?P<deadline>[\d.]+) ms, )?(?P<label>.+?) (?P<word>lower|higher|indistinguishable): (?P<interval>.+)$")
+
+
+def check_feedback(report_dir: Path, report: str, table: dict, first_variant: str, variants: list[str]) -> int:
+    """The deadline picks set against the feedback loop: the loop of the
+    lower replicate-1 cost made again, and each pick's difference from it
+    across replicates 2 on recomputed."""
+    checked = 0
+    task = None
+    for line in report.splitlines():
+        m = re.match(r"^\*\*`(?P<task>[^`]+)` at each deadline\*\*", line)
+        if m:
+            task = m["task"]
+        m = FEEDBACK.match(line)
+        if not m:
+            continue
+        assert task, f"{report_dir.name}: a feedback paragraph before any deadline table"
+        loops = {name: table.get((first_variant, f"plan {task}: {name} cost")) for name in ["gravity-pd", "gravity-pid"]}
+        ran = {name: values for name, values in loops.items() if values}
+        assert ran, f"{report_dir.name}, `{task}`: a feedback paragraph but no loop's figures in replicates.csv"
+        picked = min(ran, key=lambda name: ran[name][0])
+        assert picked == m["loop"], f"{report_dir.name}, `{task}`: the loop shown is {m['loop']}, the lower in replicate 1 is {picked}"
+        held = np.array(ran[picked])[1:]
+        if m["picks"] == "none fits a deadline":
+            continue
+        for part in m["picks"].split("; "):
+            p = PICK.match(part)
+            assert p, f"{report_dir.name}: a pick the check cannot read: {part!r}"
+            a = np.array(figure_of(p["label"], task, table, first_variant, variants))[1:]
+            mean, low, high = interval(a - held)
+            d = DIFFERENCE.match(f"{p['word']}: {p['interval']}")
+            word = "lower" if high < 0 else "higher" if low > 0 else "indistinguishable"
+            where = f"{report_dir.name}, `{task}`, {p['label']} − {picked}"
+            assert d["word"] == word, f"{where}: shown {d['word']}, recomputed {word}"
+            for shown, value in [(d["mean"], mean), (d["low"], low), (d["high"], high)]:
+                assert close(shown, value), f"{where}: shown {shown}, recomputed {value}"
+            checked += 1
+    return checked
+
+
 def check(report_dir: Path) -> int:
     csv_path = report_dir / "replicates.csv"
     table = figures(csv_path) if csv_path.exists() else {}
@@ -184,6 +231,7 @@ def check(report_dir: Path) -> int:
             checked += 1
             in_table += 1
         assert in_table > 0, f"{report_dir.name}, `{task}`: a planning table with no difference to check"
+    checked += check_feedback(report_dir, (report_dir / "report.md").read_text(), table, first_variant, variants)
     if checked:
         print(f"{report_dir.name}: {checked} planning differences recomputed from replicates.csv")
     return checked

@@ -188,7 +188,7 @@ fn plan_setup(plan: &alnlab_plan::Params) -> Option<PlanSetup> {
         horizon: u32::try_from(plan.horizon.0).ok()?,
         frames: u32::try_from(plan.frames.0).ok()?,
         episodes: u32::try_from(plan.episodes.0).ok()?,
-        pd_frequencies: plan.pd_frequencies.clone(),
+        feedback_frequencies: plan.feedback_frequencies.clone(),
         tuning_episodes: u32::try_from(plan.tuning_episodes.unwrap_or(plan.episodes).0).ok()?,
     })
 }

@@ -157,16 +157,19 @@ pub enum PolicyId {
     /// A PD loop on the nominal model's gravity compensation, the controls
     /// engineer's first try: `gravity-pd`.
     GravityPd,
+    /// The same with an integral: `gravity-pid`.
+    GravityPid,
 }
 
 impl PolicyId {
     /// Every policy whose name takes no number.
-    pub const FIXED: [PolicyId; 5] = [
+    pub const FIXED: [PolicyId; 6] = [
         PolicyId::Aln,
         PolicyId::Linear,
         PolicyId::Zero,
         PolicyId::Random,
         PolicyId::GravityPd,
+        PolicyId::GravityPid,
     ];
 
     /// The policy that plans with the test stage's `model`, where the
@@ -194,6 +197,7 @@ impl fmt::Display for PolicyId {
             PolicyId::Zero => f.write_str("zero"),
             PolicyId::Random => f.write_str("random"),
             PolicyId::GravityPd => f.write_str("gravity-pd"),
+            PolicyId::GravityPid => f.write_str("gravity-pid"),
         }
     }
 }

@@ -864,7 +864,7 @@ pub(crate) mod tests {
             let mut loads = Loads::zeros(&model);
             for (i, &h) in held.iter().enumerate().skip(1) {
                 match (h, model.coupling(i)) {
-                    (Some((effort, _)), None) => loads.effort[i] = effort,
+                    (Some(hold), None) => loads.effort[i] = hold.effort,
                     (None, Some(_)) => {}
                     other => panic!("case {case}, link {i}: {other:?}"),
                 }
@@ -894,7 +894,7 @@ pub(crate) mod tests {
                     .sum::<f64>()
             };
             for (i, h) in held.iter().enumerate() {
-                if let Some((_, inertia)) = h {
+                if let Some(crate::joint_space::Holding { inertia, .. }) = h {
                     let mut unit = vec![0.0; n];
                     unit[i] = 1.0;
                     let expected = 2.0 * kinetic(&unit);

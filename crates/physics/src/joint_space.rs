@@ -212,14 +212,24 @@ fn reduction(model: &Model) -> (DMatrix<f64>, Vec<Option<usize>>) {
     (g, column)
 }
 
-/// What a controls engineer's gravity-compensated PD loop is built from,
-/// per link, in `state`'s configuration: for a one-DOF joint that follows
-/// no other, the effort that holds the tree still there against gravity
-/// (recursive Newton–Euler with no velocity and no acceleration; a leader
-/// carries its followers' share, Gᵀ g) and its diagonal entry of the
-/// (reduced) mass matrix Gᵀ M G, the inertia its own gains are sized on.
-/// None for the root, a ball hinge and a follower.
-pub fn holding_efforts(model: &Model, state: &State) -> Vec<Option<(f64, f64)>> {
+/// What a one-DOF joint's gravity-compensated feedback loop is built from.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Holding {
+    /// The effort (N m or N) that holds the tree still against gravity.
+    pub effort: f64,
+    /// The joint's diagonal entry of the mass matrix (kg m² or kg): the
+    /// inertia its own gains are sized on.
+    pub inertia: f64,
+}
+
+/// Per link, in `state`'s configuration, for a one-DOF joint that follows
+/// no other: the effort that holds the tree still there against gravity
+/// (recursive Newton–Euler with no velocity and no acceleration, the root
+/// held where it is, so for a free or pinned root what the joints need
+/// while something holds the base; a leader carries its followers' share,
+/// Gᵀ g) and its diagonal entry of the (reduced) mass matrix Gᵀ M G. None
+/// for the root, a ball hinge and a follower.
+pub fn holding_efforts(model: &Model, state: &State) -> Vec<Option<Holding>> {
     let mut kin = Kinematics::new(model);
     kin.update(model, state);
     let (still, kin_still) = at_rest(model, state, &kin);
@@ -235,7 +245,10 @@ pub fn holding_efforts(model: &Model, state: &State) -> Vec<Option<(f64, f64)>> 
         .map(|(i, &(start, width))| {
             let joint = i > 0 && width == 1 && model.coupling(i).is_none();
             let k = column[start].filter(|_| joint)?;
-            Some((gravity[k], mass[(k, k)]))
+            Some(Holding {
+                effort: gravity[k],
+                inertia: mass[(k, k)],
+            })
         })
         .collect()
 }

@@ -4,9 +4,9 @@
 //! for one frame at its own step, and the task's cost of the frame reached
 //! is added up.
 //!
-//! Policies: zero torques, the scene's random controller and a PD loop on
-//! the nominal model's gravity compensation (references), or a planner with
-//! a forward model and a budget (sequences per decision).
+//! Policies: zero torques, the scene's random controller and PD or PID
+//! loops on the nominal model's gravity compensation (references), or a
+//! planner with a forward model and a budget (sequences per decision).
 
 use std::time::Instant;
 
@@ -17,7 +17,7 @@ use alnlab_physics::{Prepared, Runner};
 use nalgebra::Vector3;
 
 use crate::controls::Controls;
-use crate::feedback::GravityPd;
+use crate::feedback::Feedback;
 use crate::forward::Model;
 use crate::planner::Planner;
 use crate::task::Cost;
@@ -29,8 +29,8 @@ pub enum Policy<'m> {
     /// The scene's random controller: torques uniform in ±amplitude, held
     /// for `hold` seconds, seeded by the episode.
     Random,
-    /// A PD loop with the nominal model's gravity compensation.
-    Feedback(GravityPd<'m>),
+    /// A PD or PID loop on the nominal model's gravity compensation.
+    Feedback(Feedback<'m>),
     /// A planner searching `sequences` sequences per decision with `model`.
     Plan {
         planner: &'m mut Planner,
@@ -85,8 +85,9 @@ pub struct Outcome {
     /// frame), in the task's unit.
     pub final_error: f64,
     /// When the error came within the task's tolerance for good: the time
-    /// (s) of the first frame from which every frame is within it; +∞ if
-    /// the last frame is not.
+    /// (s) of the first frame reached from which every frame is within it
+    /// (the first frame reached is at one frame's time; the start state is
+    /// not counted); +∞ if the last frame is not.
     pub settle_s: f64,
     /// The fraction of the frames within the tolerance.
     pub within: f64,
@@ -100,14 +101,14 @@ impl Outcome {
         let n = errors.len();
         let last = (n / 4).max(1).min(n);
         let final_error = errors[n - last..].iter().sum::<f64>() / last as f64;
-        let within = |e: f64| e <= tolerance;
-        let settled = errors.iter().rposition(|&e| !within(e));
+        let inside = |e: f64| e <= tolerance;
+        let settled = errors.iter().rposition(|&e| !inside(e));
         let settle_s = match settled {
             None => frame_dt,
             Some(k) if k + 1 < n => (k + 2) as f64 * frame_dt,
             Some(_) => f64::INFINITY,
         };
-        let within = errors.iter().filter(|&&e| within(e)).count() as f64 / n as f64;
+        let within = errors.iter().filter(|&&e| inside(e)).count() as f64 / n as f64;
         Outcome {
             cost: 0.0,
             horizon_rms: f64::NAN,
@@ -292,7 +293,7 @@ mod tests {
     use super::*;
     use crate::forward::Simulator;
     use crate::planner::{CemSettings, PlannerKind};
-    use crate::task::Task;
+    use crate::task::{HoldStart, Task};
 
     /// The steady-state error is the last quarter's mean error; an
     /// episode settles at the first frame from which it stays within
@@ -355,6 +356,8 @@ mod tests {
         let p = worm();
         let task = Task::HoldAngles {
             tolerance: None,
+            start: HoldStart::Logged,
+            velocity_weight: None,
             name: "bend".into(),
             targets: BTreeMap::from([("pitch.2".into(), 0.6), ("pitch.3".into(), -0.6)]),
         };
@@ -440,6 +443,8 @@ mod tests {
         }));
         let task = Task::HoldAngles {
             tolerance: None,
+            start: HoldStart::Logged,
+            velocity_weight: None,
             name: "bend".into(),
             targets: BTreeMap::from([("pitch.2".into(), 0.6)]),
         };

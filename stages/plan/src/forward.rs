@@ -854,7 +854,7 @@ pub(crate) mod tests {
     use alnlab_physics::controller::{ControllerKind, ControllerParams};
 
     use super::*;
-    use crate::task::Task;
+    use crate::task::{HoldStart, Task};
 
     fn entry(variable: &str, min: f64, max: f64, levels: usize) -> Entry {
         Entry {
@@ -929,6 +929,8 @@ pub(crate) mod tests {
         let (p, entries) = worm_pitch_and_torque();
         let task = Task::HoldAngles {
             tolerance: None,
+            start: HoldStart::Logged,
+            velocity_weight: None,
             name: "hold".into(),
             targets: BTreeMap::from([("pitch.2".into(), 0.5)]),
         };
@@ -961,6 +963,8 @@ pub(crate) mod tests {
         // A task variable the model does not learn is refused by name.
         let other = Task::HoldAngles {
             tolerance: None,
+            start: HoldStart::Logged,
+            velocity_weight: None,
             name: "h".into(),
             targets: BTreeMap::from([("roll.3".into(), 0.0)]),
         };
@@ -1002,6 +1006,8 @@ pub(crate) mod tests {
         let predictor = Predictor::new(&trees, &reads, &learned, &box_points);
         let task = Task::HoldAngles {
             tolerance: None,
+            start: HoldStart::Logged,
+            velocity_weight: None,
             name: "hold".into(),
             targets: BTreeMap::from([("pitch.2".into(), 0.5)]),
         };
@@ -1056,6 +1062,8 @@ pub(crate) mod tests {
         let tasks = [
             Task::HoldAngles {
                 tolerance: None,
+                start: HoldStart::Logged,
+                velocity_weight: None,
                 name: "bend".into(),
                 targets: BTreeMap::from([("pitch.2".into(), 0.6), ("pitch.3".into(), -0.6)]),
             },
@@ -1118,6 +1126,8 @@ pub(crate) mod tests {
         });
         let task = Task::HoldAngles {
             tolerance: None,
+            start: HoldStart::Logged,
+            velocity_weight: None,
             name: "raise".into(),
             targets: BTreeMap::from([
                 ("q.shoulder_lift_joint".into(), -1.2),
@@ -1198,6 +1208,8 @@ pub(crate) mod tests {
         let predictor = Predictor::new(&trees, &reads, &inputs, &points);
         let task = Task::HoldAngles {
             tolerance: None,
+            start: HoldStart::Logged,
+            velocity_weight: None,
             name: "raise".into(),
             targets: BTreeMap::from([
                 ("q.shoulder_lift_joint".into(), -1.2),

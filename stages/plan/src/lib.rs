@@ -77,7 +77,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::controls::Controls;
 use crate::episode::Policy;
-use crate::feedback::GravityPd;
+use crate::feedback::{Feedback, Law};
 use crate::forward::{Hybrid, Learned, LinearStep, Model, Piecewise, Simulator};
 use crate::planner::{Bounds, CemSettings, Planner, PlannerKind};
 use crate::task::{Cost, Task};
@@ -161,15 +161,16 @@ pub struct Params {
     /// learned models are trained again and plan the same episodes (the
     /// pipeline runs them; 0: none).
     pub rounds: usize,
-    /// The PD loop on the nominal model's gravity compensation
-    /// (`gravity-pd`, a reference for a robot's hold-angles tasks) at the
-    /// one of these natural frequencies (rad/s) with the lowest mean cost
-    /// over the tuning episodes; none: no such loop.
+    /// The PD and PID loops on the nominal model's gravity compensation
+    /// (`gravity-pd`, `gravity-pid`: references for a robot's hold-angles
+    /// tasks, [`feedback`]), each at the one of these natural frequencies
+    /// (rad/s) of the lowest mean cost over the tuning episodes; none: no
+    /// loops.
     #[serde(skip_serializing_if = "Vec::is_empty")]
-    pub pd_frequencies: Vec<f64>,
-    /// Episodes per task the PD loop's frequency is tuned on, each from a
-    /// logged state none of the judged episodes starts from (default:
-    /// `episodes`).
+    pub feedback_frequencies: Vec<f64>,
+    /// Episodes per task the loops' frequencies are tuned on, each from a
+    /// logged state no judged episode's start is within an episode's frames
+    /// of, in the same run (default: `episodes`).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub tuning_episodes: Option<Count>,
 }
@@ -202,7 +203,7 @@ impl Default for Params {
             cem_elite: Fraction(0.1),
             view_episodes: 1,
             rounds: 0,
-            pd_frequencies: Vec::new(),
+            feedback_frequencies: Vec::new(),
             tuning_episodes: None,
         }
     }
@@ -246,30 +247,40 @@ impl Params {
                 "expected at least one budget (leave it out for `budgets`)".into(),
             ));
         }
+        let field = || "feedback_frequencies".to_string();
         if let Some(w) = self
-            .pd_frequencies
+            .feedback_frequencies
             .iter()
             .find(|w| !(w.is_finite() && **w > 0.0))
         {
             return Err((
-                "pd_frequencies".into(),
+                field(),
                 format!("expected natural frequencies > 0 (rad/s), found {w}"),
             ));
         }
-        if self.pd_frequencies.is_empty() && self.tuning_episodes.is_some() {
+        if self.feedback_frequencies.is_empty() && self.tuning_episodes.is_some() {
             return Err((
                 "tuning_episodes".into(),
-                "tunes the PD loop, which `pd_frequencies` asks for: give both or neither".into(),
+                "tunes the feedback loops, which `feedback_frequencies` asks for: give both or \
+                 neither"
+                    .into(),
             ));
         }
+        // A loop holds a hold-angles task of a robot's joints: at least one
+        // task must be one (the others run without loops).
         if let Some(p) = prepared
             .as_ref()
-            .filter(|_| !self.pd_frequencies.is_empty())
+            .filter(|_| !self.feedback_frequencies.is_empty())
         {
-            let controls = Controls::of(p).map_err(|m| ("pd_frequencies".to_string(), m))?;
-            for task in &self.task {
-                GravityPd::new(p, &controls, task)
-                    .map_err(|m| ("pd_frequencies".to_string(), m))?;
+            let controls = Controls::of(p).map_err(|m| (field(), m))?;
+            let built: Vec<_> = self
+                .task
+                .iter()
+                .map(|task| Feedback::new(p, &controls, task, Law::Pd))
+                .collect();
+            if !built.iter().any(Result::is_ok) {
+                let why = built.into_iter().find_map(Result::err).unwrap_or_default();
+                return Err((field(), format!("no task takes a feedback loop: {why}")));
             }
         }
         if self.rounds > MOST_ROUNDS {
@@ -508,22 +519,19 @@ pub fn run(
             logged,
             params.episodes.get(),
             (seed, EPISODE_STARTS),
-            &[],
+            None,
             trajectory_path,
         )?;
-        let tuning = match params.pd_frequencies.is_empty() {
+        let tuning = match params.feedback_frequencies.is_empty() {
             true => Vec::new(),
             false => {
                 let count = params.tuning_episodes.unwrap_or(params.episodes).get();
-                start_states(
-                    p,
-                    logged,
-                    count,
-                    (seed, TUNING_STARTS),
-                    &taken,
-                    trajectory_path,
-                )?
-                .0
+                let apart = Apart {
+                    taken: &taken,
+                    frames: params.frames.get() as u32,
+                };
+                let seed = (seed, TUNING_STARTS);
+                start_states(p, logged, count, seed, Some(apart), trajectory_path)?.0
             }
         };
         let trained = Trained::read(model_path, codebook_path)?;
@@ -557,15 +565,24 @@ pub fn run(
         });
 
         let simulators = params.simulator_steps.len() + params.plant_steps.len();
-        let per_task = 2
-            + usize::from(!params.pd_frequencies.is_empty())
-            + params.planners.len()
-                * (params.models.len() * params.budgets.len()
-                    + simulators * params.simulator_budgets().len());
-        let tuned = params.pd_frequencies.len() * tuning.len();
+        let per_task = 2 + params.planners.len()
+            * (params.models.len() * params.budgets.len()
+                + simulators * params.simulator_budgets().len());
+        // The feedback loops' episodes, tuning ones too, of the tasks that
+        // take one.
+        let held = match params.feedback_frequencies.is_empty() {
+            true => 0,
+            false => params
+                .task
+                .iter()
+                .filter(|task| Feedback::new(nominal, &controls, task, Law::Pd).is_ok())
+                .count(),
+        };
+        let loop_episodes = Law::ALL.len()
+            * (params.episodes.get() + params.feedback_frequencies.len() * tuning.len());
         progress.start(
             "plan",
-            (params.task.len() * (per_task * params.episodes.get() + tuned)) as u64,
+            (params.task.len() * per_task * params.episodes.get() + held * loop_episodes) as u64,
             "episodes",
         );
         // One thread: decision times are one thread's, whatever the machine.
@@ -576,7 +593,6 @@ pub fn run(
         let context = Context {
             p,
             controls: &controls,
-            starts: &starts,
             params,
             seed,
             progress,
@@ -584,8 +600,13 @@ pub fn run(
         pool.install(|| -> Result<()> {
             for (t, task) in params.task.iter().enumerate() {
                 let cost = task.over(&p.layout.variables, p).map_err(Error::Invalid)?;
+                let at = |logged: &[State]| -> Vec<State> {
+                    logged.iter().map(|s| task.start_state(p, s)).collect()
+                };
+                let task_starts = at(&starts);
                 let task_run = TaskRun {
                     context: &context,
+                    starts: &task_starts,
                     task: task.name(),
                     index: t,
                     variables: cost
@@ -596,10 +617,14 @@ pub fn run(
                 };
                 task_run.reference(PolicyId::Zero, &mut Policy::Zero, &mut out)?;
                 task_run.reference(PolicyId::Random, &mut Policy::Random, &mut out)?;
-                if !params.pd_frequencies.is_empty() {
-                    let pd = GravityPd::new(nominal, &controls, task)
-                        .map_err(|m| Error::Invalid(format!("[plan] pd_frequencies: {m}")))?;
-                    task_run.feedback(pd, &tuning, &mut out)?;
+                // The loops hold the tasks they can (validated: one at least).
+                let loops = Law::ALL
+                    .iter()
+                    .filter(|_| !params.feedback_frequencies.is_empty());
+                for &law in loops {
+                    if let Ok(held) = Feedback::new(nominal, &controls, task, law) {
+                        task_run.feedback(held, &at(&tuning), &mut out)?;
+                    }
                 }
                 for &kind in &params.models {
                     let (name, model): (PolicyId, Box<dyn Model>) = match kind {
@@ -702,7 +727,6 @@ struct Context<'a> {
     /// The scene episodes execute in: with its plant, if any.
     p: &'a Prepared,
     controls: &'a Controls,
-    starts: &'a [State],
     params: &'a Params,
     seed: u64,
     progress: &'a dyn Progress,
@@ -711,6 +735,9 @@ struct Context<'a> {
 /// One task's episodes.
 struct TaskRun<'a> {
     context: &'a Context<'a>,
+    /// Its episodes' start states: the logged ones, as the task starts
+    /// from them ([`Task::start_state`]).
+    starts: &'a [State],
     task: &'a str,
     index: usize,
     /// The names of the task's variables, in the order of [`Cost::variables`].
@@ -721,24 +748,24 @@ struct TaskRun<'a> {
 impl TaskRun<'_> {
     /// Every episode under a reference policy.
     fn reference(&self, name: PolicyId, policy: &mut Policy, out: &mut Outputs) -> Result<()> {
-        for e in 0..self.context.starts.len() {
+        for e in 0..self.starts.len() {
             self.episode(name, "", 0, e, policy, out)?;
         }
         Ok(())
     }
 
-    /// The PD loop's frequency picked by the lowest mean cost over the
+    /// The loop's frequency picked by the lowest mean cost over the
     /// `tuning` episodes (a frequency whose episode blows up is not
-    /// picked), then every episode with it.
-    fn feedback(&self, mut pd: GravityPd, tuning: &[State], out: &mut Outputs) -> Result<()> {
+    /// picked; an error if every one does), then every episode with it.
+    fn feedback(&self, mut held: Feedback, tuning: &[State], out: &mut Outputs) -> Result<()> {
         let c = self.context;
         let mut best: Option<(f64, f64)> = None;
-        for &omega in &c.params.pd_frequencies {
-            pd.tune(omega);
-            let mut policy = Policy::Feedback(pd.clone());
+        for &omega in &c.params.feedback_frequencies {
+            held.tune(omega);
+            let mut policy = Policy::Feedback(held.clone());
             let mut total = 0.0;
             for (e, start) in tuning.iter().enumerate() {
-                let seed = mix_seed(c.seed, TUNING_STARTS ^ e as u64);
+                let seed = mix_seed(c.seed, TUNING_EPISODES ^ e as u64);
                 let frames = c.params.frames.get() as u32;
                 let ran = episode::run(
                     c.p,
@@ -759,15 +786,22 @@ impl TaskRun<'_> {
                 }
             }
             let mean = total / tuning.len() as f64;
-            if best.is_none_or(|(lowest, _)| mean < lowest) {
+            if mean.is_finite() && best.is_none_or(|(lowest, _)| mean < lowest) {
                 best = Some((mean, omega));
             }
         }
-        let (_, omega) = best.expect("validated: at least one frequency");
-        pd.tune(omega);
-        let mut policy = Policy::Feedback(pd);
-        for e in 0..c.starts.len() {
-            self.episode(PolicyId::GravityPd, "", 0, e, &mut policy, out)?;
+        let name = held.law().policy();
+        let Some((_, omega)) = best else {
+            return Err(Error::Diverged(format!(
+                "task `{}`: {name} blew up at every frequency of `feedback_frequencies` on its \
+                 tuning episodes",
+                self.task
+            )));
+        };
+        held.tune(omega);
+        let mut policy = Policy::Feedback(held);
+        for e in 0..self.starts.len() {
+            self.episode(name, "", 0, e, &mut policy, out)?;
         }
         Ok(())
     }
@@ -788,7 +822,7 @@ impl TaskRun<'_> {
         };
         for &kind in &params.planners {
             for budget in budgets {
-                for e in 0..self.context.starts.len() {
+                for e in 0..self.starts.len() {
                     let seed = mix_seed(
                         self.context.seed,
                         (self.index as u64) << 40 ^ (budget.get() as u64) << 20 ^ e as u64,
@@ -836,7 +870,7 @@ impl TaskRun<'_> {
                 ("budget".to_string(), budget.to_string()),
                 ("episode".to_string(), e.to_string()),
             ]);
-            out.view.start_run(c.p, record, &c.starts[e])?;
+            out.view.start_run(c.p, record, &self.starts[e])?;
         }
         // The ALN's planned frames are the next round's training pairs, each
         // frame as the log records it (under the torques applied from it
@@ -852,7 +886,7 @@ impl TaskRun<'_> {
         let outcome = episode::run(
             c.p,
             c.controls,
-            &c.starts[e],
+            &self.starts[e],
             c.params.frames.get() as u32,
             c.params.horizon.get(),
             self.cost,
@@ -909,8 +943,8 @@ impl TaskRun<'_> {
             t => (t[t.len() / 2], t[0], t[t.len() - 1]),
         };
         let frames_run = c.params.frames.get() as f64;
-        let pd_frequency = match policy {
-            Policy::Feedback(pd) => pd.omega(),
+        let feedback_frequency = match policy {
+            Policy::Feedback(held) => held.omega(),
             _ => f64::NAN,
         };
         out.episodes.push(planning::Episode {
@@ -931,7 +965,7 @@ impl TaskRun<'_> {
             final_error: outcome.final_error,
             settle_s: outcome.settle_s,
             within_tolerance: outcome.within,
-            pd_frequency,
+            feedback_frequency,
         });
         c.progress.advance(1);
         Ok(())
@@ -941,18 +975,29 @@ impl TaskRun<'_> {
 /// The stream of random numbers the judged episodes' start states are
 /// drawn from …
 const EPISODE_STARTS: u64 = 0x504C_414E;
-/// … and the PD loop's tuning episodes'.
+/// … the feedback loops' tuning episodes' …
 const TUNING_STARTS: u64 = 0x5455_4E45 << 32;
+/// … and the seeds of those episodes (a plant's actuator noise).
+const TUNING_EPISODES: u64 = (0x5455_4E45 << 32) | 1 << 31;
+
+/// The judged episodes' start states (indices of logged frames) that other
+/// episodes keep away from: none starts within `frames` frames of one of
+/// them in the same run, so no tuning episode retraces a judged one.
+struct Apart<'a> {
+    taken: &'a [usize],
+    frames: u32,
+}
 
 /// `count` episodes' start states, and the indices of the logged frames
 /// they are: frames drawn from the scene's runs with the random numbers of
-/// `(seed, stream)`, none of them one of `excluded`.
+/// `(seed, stream)` — with `apart`, each a frame of its own, away from the
+/// judged ones.
 fn start_states(
     p: &Prepared,
     logged: &[StateFrame],
     count: usize,
     (seed, stream): (u64, u64),
-    excluded: &[usize],
+    apart: Option<Apart>,
     path: &Path,
 ) -> Result<(Vec<State>, Vec<usize>)> {
     if logged.is_empty() {
@@ -961,17 +1006,22 @@ fn start_states(
             format!("scene `{}` has no frames", p.scene.name),
         ));
     }
-    let mut distinct = excluded.to_vec();
-    distinct.sort_unstable();
-    distinct.dedup();
-    if distinct.len() >= logged.len() {
+    let away = |index: usize| {
+        let here = &logged[index];
+        apart.as_ref().is_none_or(|a| {
+            a.taken.iter().all(|&t| {
+                logged[t].run != here.run || logged[t].frame.abs_diff(here.frame) > a.frames
+            })
+        })
+    };
+    let free = (0..logged.len()).filter(|&i| away(i)).count();
+    if apart.is_some() && free < count {
         return Err(Error::bad_file(
             path,
             format!(
-                "scene `{}` has {} frames, and every one starts a judged episode: none is left \
-                 to start another from",
-                p.scene.name,
-                logged.len(),
+                "scene `{}` has {free} frames away from the judged episodes' starts, fewer than \
+                 the {count} tuning episodes to start from them",
+                p.scene.name
             ),
         ));
     }
@@ -979,7 +1029,7 @@ fn start_states(
     let mut taken = Vec::with_capacity(count);
     while taken.len() < count {
         let index = rng.random_range(0..logged.len());
-        if distinct.binary_search(&index).is_err() {
+        if away(index) && !(apart.is_some() && taken.contains(&index)) {
             taken.push(index);
         }
     }

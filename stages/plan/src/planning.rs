@@ -6,7 +6,7 @@
 //! one-step error on the task's variables over the episode, and its error
 //! over the planning horizon fed its own predictions; what the episode came
 //! to in the task's physical unit (steady-state error, time to settle,
-//! fraction of frames within tolerance); the PD loop's frequency.
+//! fraction of frames within tolerance); a feedback loop's frequency.
 
 use std::path::Path;
 use std::sync::Arc;
@@ -20,7 +20,7 @@ use arrow_array::{Array, Float64Array, StringArray, UInt32Array, UInt64Array};
 pub struct Episode {
     pub task: String,
     /// The forward model (`aln`, `linear`, `simulator@k`, `plant@k`) or a
-    /// reference (`zero`, `random`, `gravity-pd`).
+    /// reference (`zero`, `random`, `gravity-pd`, `gravity-pid`).
     pub model: PolicyId,
     /// The round of the planner's own data (`[plan] rounds`) whose table
     /// the episode was read from: 0 for the first plan stage's, r for the
@@ -59,9 +59,9 @@ pub struct Episode {
     pub settle_s: f64,
     /// The fraction of frames within the task's tolerance.
     pub within_tolerance: f64,
-    /// The PD loop's natural frequency (rad/s) as tuned; NaN for every
+    /// A feedback loop's natural frequency (rad/s) as tuned; NaN for every
     /// other policy.
-    pub pd_frequency: f64,
+    pub feedback_frequency: f64,
 }
 
 /// Writes `rows` to `path`.
@@ -102,7 +102,7 @@ pub fn write(path: &Path, rows: &[Episode], provenance: &Provenance) -> Result<(
         ("final_error", real(|r| r.final_error)),
         ("settle_s", real(|r| r.settle_s)),
         ("within_tolerance", real(|r| r.within_tolerance)),
-        ("pd_frequency", real(|r| r.pd_frequency)),
+        ("feedback_frequency", real(|r| r.feedback_frequency)),
     ]);
     table::write_parquet(path, &batch, provenance)
 }
@@ -128,7 +128,7 @@ pub fn read(path: &Path) -> Result<Vec<Episode>> {
     let horizon_rms = optional("horizon_rms")?;
     let (final_error, settle_s) = (optional("final_error")?, optional("settle_s")?);
     let within = optional("within_tolerance")?;
-    let pd_frequency = optional("pd_frequency")?;
+    let feedback_frequency = optional("feedback_frequency")?;
     let or_nan = |c: Option<&[f64]>, i: usize| c.map_or(f64::NAN, |c| c[i]);
     Ok((0..t.num_rows())
         .map(|i| Episode {
@@ -149,7 +149,7 @@ pub fn read(path: &Path) -> Result<Vec<Episode>> {
             final_error: or_nan(final_error, i),
             settle_s: or_nan(settle_s, i),
             within_tolerance: or_nan(within, i),
-            pd_frequency: or_nan(pd_frequency, i),
+            feedback_frequency: or_nan(feedback_frequency, i),
         })
         .collect())
 }
@@ -178,7 +178,7 @@ mod tests {
             final_error: 0.04,
             settle_s: f64::INFINITY,
             within_tolerance: 0.5,
-            pd_frequency: f64::NAN,
+            feedback_frequency: f64::NAN,
         }];
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("planning.parquet");
@@ -189,9 +189,9 @@ mod tests {
         };
         write(&path, &rows, &provenance).unwrap();
         let back = read(&path).unwrap();
-        assert!(back[0].pd_frequency.is_nan());
+        assert!(back[0].feedback_frequency.is_nan());
         let same = |e: &Episode| Episode {
-            pd_frequency: 0.0,
+            feedback_frequency: 0.0,
             ..e.clone()
         };
         assert_eq!(

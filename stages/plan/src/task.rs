@@ -16,6 +16,11 @@
 //!   joints between it and the robot's welded base, so each of those must
 //!   be a variable.
 //!
+//! A hold-angles task of a robot's joints may start at its targets, at rest
+//! (`start = "at-target"`: holding, not reaching — against a plant's
+//! payload, say), and may weigh the joints' velocities too
+//! (`velocity_weight`, s²: reach the angles and stop there).
+//!
 //! Beside the cost, each frame has an error in the task's physical unit
 //! ([`Cost::error`]: the largest angle still to go, rad; the rate's miss,
 //! rad/s; the distance, m), and each task a `tolerance` within which a frame
@@ -26,7 +31,7 @@ use std::collections::BTreeMap;
 use std::f64::consts::{PI, TAU};
 
 use alnlab_physics::Prepared;
-use alnlab_physics::dynamics::ChainPoint;
+use alnlab_physics::dynamics::{ChainPoint, State};
 use alnlab_physics::model::Root;
 use nalgebra::{Matrix3, Vector3};
 use serde::{Deserialize, Serialize};
@@ -46,6 +51,15 @@ pub enum Task {
         /// default where not given).
         #[serde(default, skip_serializing_if = "Option::is_none")]
         tolerance: Option<f64>,
+        /// Where its episodes start ([`HoldStart`]): from the logged state,
+        /// or at the targets, at rest — holding, not reaching.
+        #[serde(default, skip_serializing_if = "HoldStart::is_logged")]
+        start: HoldStart,
+        /// Each frame also costs this (s²) times each target joint's
+        /// squared velocity (q̇², `qd.<joint>`): reach the angles and stop
+        /// there. None: the angles alone.
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        velocity_weight: Option<f64>,
     },
     /// Spin at a rate.
     Spin {
@@ -73,6 +87,25 @@ pub enum Task {
     },
 }
 
+/// Where a hold-angles task's episodes start.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum HoldStart {
+    /// From the logged state the episode is drawn at (reach, then hold).
+    #[default]
+    Logged,
+    /// From that state with each target joint at its target and every
+    /// velocity zero: the arm at rest on target, so that what the episode
+    /// measures is holding it there (under a plant's payload, say).
+    AtTarget,
+}
+
+impl HoldStart {
+    fn is_logged(&self) -> bool {
+        *self == HoldStart::Logged
+    }
+}
+
 impl Task {
     /// The task's name.
     pub fn name(&self) -> &str {
@@ -88,14 +121,29 @@ impl Task {
     /// the squared angles to go (rad², on the circle)".
     pub fn describe(&self) -> String {
         match self {
-            Task::HoldAngles { targets, .. } => {
+            Task::HoldAngles {
+                targets,
+                start,
+                velocity_weight,
+                ..
+            } => {
                 let each: Vec<String> = targets
                     .iter()
                     .map(|(v, t)| format!("`{v}` to {t} rad"))
                     .collect();
+                let asked = match start {
+                    HoldStart::Logged => "reach and hold",
+                    HoldStart::AtTarget => "starting there at rest, hold",
+                };
+                let rates = match velocity_weight {
+                    Some(w) => format!(
+                        ", plus {w} s² times each of those joints' squared velocity (stop there)"
+                    ),
+                    None => String::new(),
+                };
                 format!(
-                    "reach and hold {}; a frame costs the sum of the squared angles still to go \
-                     (rad², on the circle)",
+                    "{asked} {}; a frame costs the sum of the squared angles still to go \
+                     (rad², on the circle){rates}",
                     each.join(" and ")
                 )
             }
@@ -109,6 +157,38 @@ impl Task {
                 target[0], target[1], target[2]
             ),
         }
+    }
+
+    /// An episode's start state in scene `p` from the logged state `logged`:
+    /// as logged, or for a hold-angles task that starts at its targets,
+    /// each target joint there, every velocity zero (a mimic joint's
+    /// followers moved with it).
+    pub fn start_state(&self, p: &Prepared, logged: &State) -> State {
+        let (
+            Task::HoldAngles {
+                targets,
+                start: HoldStart::AtTarget,
+                ..
+            },
+            Some(robot),
+        ) = (self, &p.robot)
+        else {
+            return logged.clone();
+        };
+        let mut state = State {
+            root_v: Vector3::zeros(),
+            rates: vec![Vector3::zeros(); p.model.len()],
+            qd: vec![0.0; p.model.len()],
+            ..logged.clone()
+        };
+        for (variable, &target) in targets {
+            let joint = variable.strip_prefix("q.");
+            if let Some(link) = (1..p.model.len()).find(|&i| joint == Some(&robot.joints[i])) {
+                state.q[link] = target;
+            }
+        }
+        p.model.impose_couplings(&mut state);
+        state
     }
 
     /// The error within which a frame counts as there, in
@@ -158,9 +238,39 @@ impl Task {
             ));
         }
         match self {
-            Task::HoldAngles { targets, .. } => {
+            Task::HoldAngles {
+                targets,
+                start,
+                velocity_weight,
+                ..
+            } => {
                 if targets.is_empty() {
                     return Err(("targets", "expected at least one target angle".into()));
+                }
+                if let Some(w) = velocity_weight.filter(|w| !(w.is_finite() && *w > 0.0)) {
+                    return Err((
+                        "velocity_weight",
+                        format!("expected a positive weight (s²), found {w}"),
+                    ));
+                }
+                let hinge = targets.keys().find(|v| !v.starts_with("q."));
+                if let Some(v) = hinge.filter(|_| velocity_weight.is_some()) {
+                    return Err((
+                        "velocity_weight",
+                        format!(
+                            "weighs joints' velocities `qd.<joint>`, and `{v}` is no robot joint's \
+                             position"
+                        ),
+                    ));
+                }
+                if let Some(v) = hinge.filter(|_| *start == HoldStart::AtTarget) {
+                    return Err((
+                        "start",
+                        format!(
+                            "`at-target` sets robot joints' positions, and `{v}` is no robot \
+                             joint's position (start = \"logged\" reaches it)"
+                        ),
+                    ));
                 }
                 for (variable, target) in targets {
                     let angle = ["roll.", "pitch.", "q."]
@@ -250,6 +360,20 @@ impl Task {
                 )
             })
         };
+        let rates = match self {
+            Task::HoldAngles {
+                targets,
+                velocity_weight: Some(weight),
+                ..
+            } => targets
+                .keys()
+                .map(|v| {
+                    let joint = v.strip_prefix("q.").unwrap_or(v);
+                    Ok((index(&format!("qd.{joint}"))?, *weight))
+                })
+                .collect::<Result<_, String>>()?,
+            _ => Vec::new(),
+        };
         let (terms, reach) = match self {
             Task::HoldAngles { targets, .. } => (
                 targets
@@ -271,6 +395,7 @@ impl Task {
         };
         Ok(Cost {
             terms,
+            rates,
             reach,
             tolerance: self.tolerance(),
         })
@@ -355,6 +480,10 @@ pub struct Cost {
     /// The point to reach and its target (m), placed from the terms'
     /// variables in order.
     reach: Option<(ChainPoint, Vector3<f64>)>,
+    /// (velocity variable index, weight): each costs weight × its square
+    /// on top of the terms (a task's `velocity_weight`); read after the
+    /// terms' variables, never part of the error.
+    rates: Vec<(usize, f64)>,
     /// The task's [`Task::tolerance`].
     tolerance: f64,
 }
@@ -365,6 +494,11 @@ impl Cost {
         if let Some((chain, target)) = &self.reach {
             return (chain.position(|k| values[self.terms[k].0]) - target).norm_squared();
         }
+        let rates: f64 = self
+            .rates
+            .iter()
+            .map(|&(i, w)| w * values[i] * values[i])
+            .sum();
         self.terms
             .iter()
             .map(|&(i, target, angle)| {
@@ -375,7 +509,8 @@ impl Cost {
                 };
                 d * d
             })
-            .sum()
+            .sum::<f64>()
+            + rates
     }
 
     /// A frame's error in the task's physical unit ([`Task::error_unit`]):
@@ -391,7 +526,11 @@ impl Cost {
                 let d = values[i] - target;
                 if angle { on_circle(d) } else { d }.abs()
             })
-            .fold(0.0, f64::max)
+            // A NaN (a lost state) is an error, not the smallest one.
+            .fold(0.0, |a: f64, b| match a.is_nan() || b.is_nan() {
+                true => f64::NAN,
+                false => a.max(b),
+            })
     }
 
     /// The error within which a frame counts as there.
@@ -399,15 +538,19 @@ impl Cost {
         self.tolerance
     }
 
-    /// The variables the cost reads.
+    /// The variables the cost reads: its terms', then its rates'.
     pub fn variables(&self) -> impl Iterator<Item = usize> + '_ {
-        self.terms.iter().map(|t| t.0)
+        self.terms
+            .iter()
+            .map(|t| t.0)
+            .chain(self.rates.iter().map(|r| r.0))
     }
 
     /// The RMS distance of two sets of the task's variables' values (each in
     /// the order of [`Cost::variables`]), angles on the circle — for a point
     /// to reach, the distance between where each places it (m): how far a
-    /// prediction is from what happened, in the task's own terms.
+    /// prediction is from what happened, in the task's own terms (the
+    /// positions': velocities a task weighs are left out).
     pub fn distance(&self, a: &[f64], b: &[f64]) -> f64 {
         if let Some((chain, _)) = &self.reach {
             return (chain.position(|k| a[k]) - chain.position(|k| b[k])).norm();
@@ -438,6 +581,8 @@ mod tests {
     fn a_task_says_what_it_asks_and_in_what_unit_it_costs() {
         let bend = Task::HoldAngles {
             tolerance: None,
+            start: HoldStart::Logged,
+            velocity_weight: None,
             name: "bend".into(),
             targets: BTreeMap::from([("pitch.2".into(), 0.6), ("pitch.3".into(), -0.6)]),
         };
@@ -546,6 +691,8 @@ mod tests {
     fn hold_angles_costs_squared_angles_on_the_circle() {
         let task = Task::HoldAngles {
             tolerance: None,
+            start: HoldStart::Logged,
+            velocity_weight: None,
             name: "hold".into(),
             targets: BTreeMap::from([("roll.2".into(), 0.5), ("pitch.2".into(), 3.0)]),
         };
@@ -569,6 +716,98 @@ mod tests {
         );
     }
 
+    /// Holding from rest on target, and stopping there: the start state
+    /// has the target joints at their targets and nothing moving; each
+    /// frame costs the velocities too, which the error leaves out.
+    #[test]
+    fn a_hold_may_start_on_target_at_rest_and_weigh_the_joints_velocities() {
+        let p = ur5();
+        let names = p.variables.names();
+        let task = Task::HoldAngles {
+            name: "hold".into(),
+            targets: BTreeMap::from([
+                ("q.shoulder_lift_joint".into(), -1.2),
+                ("q.elbow_joint".into(), 1.0),
+            ]),
+            tolerance: None,
+            start: HoldStart::AtTarget,
+            velocity_weight: Some(0.01),
+        };
+        task.validate().unwrap();
+        assert!(
+            task.describe()
+                .starts_with("starting there at rest, hold `q.elbow_joint`")
+        );
+        assert!(
+            task.describe().ends_with("(stop there)"),
+            "{}",
+            task.describe()
+        );
+        let mut logged = State::rest(&p.model, Vector3::zeros());
+        logged.q.iter_mut().for_each(|q| *q = 0.3);
+        logged.qd.iter_mut().for_each(|qd| *qd = 2.0);
+        let start = task.start_state(&p, &logged);
+        let robot = p.robot.as_ref().unwrap();
+        for i in 1..p.model.len() {
+            let expected = match robot.joints[i].as_str() {
+                "shoulder_lift_joint" => -1.2,
+                "elbow_joint" => 1.0,
+                _ => 0.3,
+            };
+            assert_eq!(
+                (start.q[i], start.qd[i]),
+                (expected, 0.0),
+                "{}",
+                robot.joints[i]
+            );
+        }
+        let cost = task.over(&names, &p).unwrap();
+        let read: Vec<&str> = cost.variables().map(|i| names[i].as_str()).collect();
+        assert_eq!(
+            read,
+            [
+                "q.elbow_joint",
+                "q.shoulder_lift_joint",
+                "qd.elbow_joint",
+                "qd.shoulder_lift_joint"
+            ]
+        );
+        let mut values = vec![0.0; names.len()];
+        let at = |name: &str| names.iter().position(|n| n == name).unwrap();
+        values[at("q.elbow_joint")] = 1.1;
+        values[at("q.shoulder_lift_joint")] = -1.2;
+        values[at("qd.elbow_joint")] = 3.0;
+        // 0.1² for the angle, 0.01 × 3² for the velocity.
+        assert!((cost.of(&values) - (0.01 + 0.09)).abs() < 1e-12);
+        assert!((cost.error(&values) - 0.1).abs() < 1e-12);
+        // The distance of two predictions is the angles' alone.
+        let (a, b) = ([1.0, -1.2, 0.0, 0.0], [1.0, -1.2, 5.0, 5.0]);
+        assert_eq!(cost.distance(&a, &b), 0.0);
+
+        // A hinge angle cannot be set, nor its velocity weighed; a weight
+        // must be positive.
+        let hinge = |start, velocity_weight| Task::HoldAngles {
+            name: "bend".into(),
+            targets: BTreeMap::from([("pitch.2".into(), 0.6)]),
+            tolerance: None,
+            start,
+            velocity_weight,
+        };
+        assert_eq!(
+            hinge(HoldStart::AtTarget, None).validate().unwrap_err().0,
+            "start"
+        );
+        let (field, message) = hinge(HoldStart::Logged, Some(1.0)).validate().unwrap_err();
+        assert_eq!(field, "velocity_weight");
+        assert!(message.contains("`pitch.2`"), "{message}");
+        let parsed: Task = toml::from_str(
+            "kind = \"hold-angles\"\nname = \"h\"\ntargets = { \"q.elbow_joint\" = 1.0 }\n\
+             start = \"at-target\"\nvelocity_weight = -1.0",
+        )
+        .unwrap();
+        assert_eq!(parsed.validate().unwrap_err().0, "velocity_weight");
+    }
+
     #[test]
     fn spin_costs_the_squared_rate_error() {
         let task = Task::Spin {
@@ -586,6 +825,8 @@ mod tests {
     fn bad_tasks_are_named() {
         let wrong = Task::HoldAngles {
             tolerance: None,
+            start: HoldStart::Logged,
+            velocity_weight: None,
             name: "h".into(),
             targets: BTreeMap::from([("v.1.x".into(), 0.0)]),
         };

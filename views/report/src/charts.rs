@@ -73,8 +73,10 @@ const LINEAR_NOMINAL: RGBColor = RGBColor(0x88, 0x44, 0x88);
 const BOOSTED_NOMINAL: RGBColor = RGBColor(0x22, 0x33, 0x99);
 /// The planning reference the random controller.
 const RANDOM_TORQUES: RGBColor = RGBColor(0xDD, 0x44, 0x00);
-/// The PD loop on the nominal model's gravity compensation: olive.
-const GRAVITY_PD: RGBColor = RGBColor(0x66, 0x66, 0x00);
+/// The PD and PID loops on the nominal model's gravity compensation: olive,
+/// the PID darker.
+const GRAVITY_PD: RGBColor = RGBColor(0x88, 0x88, 0x00);
+const GRAVITY_PID: RGBColor = RGBColor(0x55, 0x55, 0x00);
 /// A plant's own simulator (`plant@k`), the reference no user has: a dark
 /// green apart from the simulators' browns.
 const PLANT: RGBColor = RGBColor(0x11, 0x55, 0x33);
@@ -147,6 +149,7 @@ pub fn policy_style(policy: PolicyId, round: u32, variant: usize) -> Style {
         PolicyId::Zero => dashed(PERSISTENCE, Marker::Square),
         PolicyId::Random => dashed(RANDOM_TORQUES, Marker::Cross),
         PolicyId::GravityPd => dashed(GRAVITY_PD, Marker::Triangle),
+        PolicyId::GravityPid => dashed(GRAVITY_PID, Marker::Diamond),
     };
     match round {
         0 => style,

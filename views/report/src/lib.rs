@@ -161,9 +161,9 @@ pub struct PlanSetup {
     pub frames: u32,
     /// Episodes per task and replicate.
     pub episodes: u32,
-    /// The PD loop's natural frequencies (rad/s) its tuning chose among
+    /// The feedback loops' natural frequencies (rad/s) their tuning chose among
     /// (none: no loop), and its tuning episodes per task.
-    pub pd_frequencies: Vec<f64>,
+    pub feedback_frequencies: Vec<f64>,
     pub tuning_episodes: u32,
 }
 

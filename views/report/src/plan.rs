@@ -112,17 +112,16 @@ impl Policy<'_> {
         if error.is_nan() {
             return ["—".into(), "—".into(), "—".into()];
         }
-        let mut settled: Vec<f64> = self
-            .episodes
-            .iter()
-            .map(|e| e.settle_s)
-            .filter(|s| s.is_finite())
-            .collect();
-        settled.sort_by(f64::total_cmp);
-        let n = self.episodes.len();
-        let settle = match settled.len() {
-            0 => format!("0 of {n}"),
-            k => format!("{k} of {n}, in {} s", sig3(settled[(k - 1) / 2])),
+        // The median over every episode, one that never settled counting
+        // as never: a policy that rarely settles is not flattered.
+        let mut times: Vec<f64> = self.episodes.iter().map(|e| e.settle_s).collect();
+        times.sort_by(f64::total_cmp);
+        let n = times.len();
+        let k = times.iter().filter(|s| s.is_finite()).count();
+        let median = times[(n - 1) / 2];
+        let settle = match median.is_finite() {
+            true => format!("{k} of {n}, median {} s", sig3(median)),
+            false => format!("{k} of {n}, median never"),
         };
         let within: Vec<f64> = self.episodes.iter().map(|e| e.within_tolerance).collect();
         [
@@ -132,9 +131,17 @@ impl Policy<'_> {
         ]
     }
 
-    /// The PD loop's frequency as tuned (rad/s), where the policy is one.
-    pub(super) fn pd_frequency(&self) -> Option<f64> {
-        let w = self.episodes.first()?.pd_frequency;
+    /// Whether it is a feedback loop on gravity compensation.
+    pub(super) fn is_feedback(&self) -> bool {
+        matches!(
+            self.model.policy,
+            PolicyId::GravityPd | PolicyId::GravityPid
+        )
+    }
+
+    /// A feedback loop's frequency as tuned (rad/s), where the policy is one.
+    pub(super) fn feedback_frequency(&self) -> Option<f64> {
+        let w = self.episodes.first()?.feedback_frequency;
         w.is_finite().then_some(w)
     }
 
@@ -170,7 +177,7 @@ impl Policy<'_> {
     }
 
     fn label(&self) -> String {
-        match (self.planned(), self.pd_frequency()) {
+        match (self.planned(), self.feedback_frequency()) {
             (true, _) => format!("{} {}", self.model, self.planner),
             (false, Some(w)) => format!("{} (ω {} rad/s)", self.model, sig3(w)),
             (false, None) => format!("{} torques", self.model),
@@ -218,9 +225,10 @@ pub(super) fn replicate_figures(replicates: &[Vec<Episode>]) -> Vec<(String, Vec
         for p in &each[0] {
             let same =
                 |q: &&Policy| q.model == p.model && q.planner == p.planner && q.budget == p.budget;
-            let name = match p.planned() {
-                true => format!("{} {} {}", p.model, p.planner, p.budget),
-                false => format!("{} torques", p.model),
+            let name = match (p.planned(), p.is_feedback()) {
+                (true, _) => format!("{} {} {}", p.model, p.planner, p.budget),
+                (false, true) => p.model.to_string(),
+                (false, false) => format!("{} torques", p.model),
             };
             let of = |f: &dyn Fn(&Policy) -> f64| -> Vec<Option<f64>> {
                 each.iter().map(|r| r.iter().find(same).map(f)).collect()
@@ -475,24 +483,29 @@ pub(super) fn section(
                 sig3(real_time)
             );
         }
-        if let (Some(setup), Some(pd)) = (
-            setup.filter(|s| !s.pd_frequencies.is_empty()),
-            policies
+        let loops: Vec<&Policy> = policies.iter().filter(|p| p.is_feedback()).collect();
+        if let Some(setup) =
+            setup.filter(|s| !s.feedback_frequencies.is_empty() && !loops.is_empty())
+        {
+            let grid: Vec<String> = setup
+                .feedback_frequencies
                 .iter()
-                .find(|p| p.model.policy == PolicyId::GravityPd),
-        ) {
-            let grid: Vec<String> = setup.pd_frequencies.iter().map(|w| sig3(*w)).collect();
+                .map(|w| sig3(*w))
+                .collect();
+            let tuned: Vec<String> = loops.iter().map(|p| p.label()).collect();
             let _ = writeln!(
                 md,
-                "gravity-pd, the controls engineer's first try: each driven joint's effort is \
-                 the nominal model's gravity effort plus a PD loop, Kp = M_ii ω², Kd = 2 M_ii ω \
-                 on the nominal mass matrix's diagonal (each joint alone critically damped), to \
-                 the task's targets (the other joints held where the episode started), clamped \
-                 to the planners' box; ω = {} rad/s, the lowest mean cost among {} rad/s over {} \
-                 tuning episodes from other logged states.\n",
-                pd.pd_frequency().map_or("—".into(), sig3),
+                "gravity-pd and gravity-pid, the controls engineer's first tries: each driven \
+                 joint's effort is the nominal model's gravity effort plus a PD loop, M_ii (ω² e \
+                 − 2ω q̇), or a PID loop, M_ii (3ω² e + ω³ ∫e dt − 3ω q̇) with its integral held \
+                 while the effort is clamped, on the nominal mass matrix's diagonal, e the angle \
+                 still to go to the task's targets (the other joints held where the episode \
+                 started), clamped to the planners' box, once a frame; each at the ω of the \
+                 lowest mean cost among {} rad/s over {} tuning episodes from other stretches of \
+                 the log: {}.\n",
                 grid.join(", "),
-                setup.tuning_episodes
+                setup.tuning_episodes,
+                tuned.join(", ")
             );
         }
         let mut table = MdTable::new(&["model", "planner", "budget"])
@@ -563,8 +576,9 @@ pub(super) fn section(
              is the largest of the task's angles still to go (rad; a rate's miss, rad/s; a \
              point's distance, m); steady-state error: its mean over an episode's last quarter \
              (mean over episodes); settled: the episodes whose error came within the task's \
-             tolerance{tolerance} and stayed there to the end, and their median time to get \
-             there; frames within tolerance: mean over episodes.\n"
+             tolerance{tolerance} and stayed there to the end, and the median over every \
+             episode of the time it took (never, for one that did not); frames within \
+             tolerance: mean over episodes.\n"
         );
         at_equal_time(md, &policies, (zero, random), real_time, words);
 
@@ -597,10 +611,8 @@ pub(super) fn section(
                 }),
             }
         }
-        let feedback = policies
-            .iter()
-            .find(|p| p.model.policy == PolicyId::GravityPd);
-        for reference in [Some(random), feedback].into_iter().flatten() {
+        let loops = policies.iter().filter(|p| p.is_feedback());
+        for reference in std::iter::once(random).chain(loops) {
             let Some(d) = Interval::of(&reference.differences(zero)) else {
                 continue;
             };
@@ -633,8 +645,9 @@ pub(super) fn section(
              curve is one forward model with one planner (filled: cross-entropy method; hollow: \
              random shooting), a point per budget: its episodes' costs minus zero torques' on \
              the same episodes, bars the 95% interval of that paired difference over the \
-             episodes; the flat lines are the random controller's and, where it ran, the PD \
-             loop's on the nominal model's gravity compensation, the grey level zero torques'; \
+             episodes; the flat lines are the random controller's and, where they ran, the PD \
+             and PID loops' on the nominal model's gravity compensation, the grey level zero \
+             torques'; \
              left of the dashed grey line (real time) a decision takes less than the frame it \
              plans for.\n"
         );
@@ -991,7 +1004,7 @@ mod tests {
                     0.1 * f64::from(k)
                 },
                 within_tolerance: 0.5,
-                pd_frequency: if model == "gravity-pd" { 8.0 } else { f64::NAN },
+                feedback_frequency: if model == "gravity-pd" { 8.0 } else { f64::NAN },
             })
             .collect()
     }
