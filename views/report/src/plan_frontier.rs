@@ -283,9 +283,13 @@ pub(super) fn section(md: &mut String, variants: &[Planned], dir: &Path) -> Resu
         };
         let truth_name = match truth.model.policy {
             PolicyId::Plant { .. } => {
-                "the plant's own simulator (predicting its mean: its actuators' noise left out)"
+                "the plant's own simulator (predicting its mean: its actuators' noise left out), \
+                 the reference no user has"
             }
-            _ => "the scene's own simulator",
+            _ => {
+                "the scene's own simulator at its own step, the true model (the scene has no \
+                  plant, so a user has it too)"
+            }
         };
         chart(md, &methods, (truth, best), truth_name, task, dir)?;
         if !left_out.is_empty() {
@@ -411,8 +415,8 @@ fn chart(
         md,
         "![task {task}: the planning frontier]({file})\n\n**The planning frontier of `{task}`.** \
          Every forward model at every budget it planned with (a point each, joined by \
-         budget): its task cost minus that of {truth_name} ({}, the reference no user has, at \
-         its lowest-cost budget in replicate 1, here {} sequences), paired on the same \
+         budget): its task cost minus that of {truth_name} ({}, at its lowest-cost budget in \
+         replicate 1, here {} sequences), paired on the same \
          episodes, against the median ms a decision of replicate 1 (bars: 95% interval of the \
          paired difference). Given budget, a wrong model may match the reference: the task \
          tells models apart only as far as their errors change the plans. Lower is better; a \
@@ -532,6 +536,14 @@ fn deadlines(
             let Some((m, b, _)) = found else {
                 continue;
             };
+            // The true model picked as the nominal simulator (a scene with
+            // no plant) is not shown twice.
+            let again = nominal
+                .as_ref()
+                .is_some_and(|(n, nb, _)| n.label == m.label && nb.budget == b.budget);
+            if k == 2 && again {
+                continue;
+            }
             let against = nominal.as_ref().filter(|_| k > 0).map(|(_, nb, _)| nb);
             let against_nominal = against
                 .and_then(|nb| paired(b, nb))
