@@ -89,6 +89,19 @@ def interval(values: np.ndarray) -> tuple[float, float, float]:
     return mean, mean - half, mean + half
 
 
+def shown_as(cell: str, differences: np.ndarray, where: str) -> None:
+    """Asserts that `cell` ("higher: +2.72 [+1.04, +4.41]") shows the mean
+    of `differences`, its 95% t-interval to the digits shown, and the
+    verdict word the interval allows."""
+    m = DIFFERENCE.match(cell)
+    assert m, f"{where}: a difference the check cannot read: {cell!r}"
+    mean, low, high = interval(differences)
+    word = "lower" if high < 0 else "higher" if low > 0 else "indistinguishable"
+    assert m["word"] == word, f"{where}: shown {m['word']}, recomputed {word} ({low}, {high})"
+    for shown, value in [(m["mean"], mean), (m["low"], low), (m["high"], high)]:
+        assert close(shown, value), f"{where}: shown {shown}, recomputed {value}"
+
+
 def picks(table: dict, task: str, deadline: float, variants: list[str]) -> dict[str, tuple]:
     """The deadline table's picks, made again from replicates.csv: for the
     simulators and for the ALNs, the (variant, figure) of the lowest
@@ -168,13 +181,8 @@ def check_feedback(report_dir: Path, report: str, table: dict, first_variant: st
             p = PICK.match(part)
             assert p, f"{report_dir.name}: a pick the check cannot read: {part!r}"
             a = np.array(figure_of(p["label"], task, table, first_variant, variants))[1:]
-            mean, low, high = interval(a - held)
-            d = DIFFERENCE.match(f"{p['word']}: {p['interval']}")
-            word = "lower" if high < 0 else "higher" if low > 0 else "indistinguishable"
             where = f"{report_dir.name}, `{task}`, {p['label']} − {picked}"
-            assert d["word"] == word, f"{where}: shown {d['word']}, recomputed {word}"
-            for shown, value in [(d["mean"], mean), (d["low"], low), (d["high"], high)]:
-                assert close(shown, value), f"{where}: shown {shown}, recomputed {value}"
+            shown_as(f"{p['word']}: {p['interval']}", a - held, where)
             checked += 1
     return checked
 
@@ -220,14 +228,7 @@ def check(report_dir: Path) -> int:
                 if "— the reference" not in row[label_at]:
                     assert table[again["aln"]] == list(a), f"{report_dir.name}, `{task}` at {row[0]}: the ALN shown is not the one the rule picks ({again['aln']})"
                 a, b = a[1:], b[1:]
-            mean, low, high = interval(a - b)
-            m = DIFFERENCE.match(cell)
-            assert m, f"{report_dir.name}: a difference the check cannot read: {cell!r}"
-            word = "lower" if high < 0 else "higher" if low > 0 else "indistinguishable"
-            where = f"{report_dir.name}, `{task}`, {label} − {nominal}"
-            assert m["word"] == word, f"{where}: shown {m['word']}, recomputed {word} ({low}, {high})"
-            for shown, value in [(m["mean"], mean), (m["low"], low), (m["high"], high)]:
-                assert close(shown, value), f"{where}: shown {shown}, recomputed {value}"
+            shown_as(cell, a - b, f"{report_dir.name}, `{task}`, {label} − {nominal}")
             checked += 1
             in_table += 1
         assert in_table > 0, f"{report_dir.name}, `{task}`: a planning table with no difference to check"
