@@ -975,36 +975,58 @@ fn at_real_time_of(md: &mut String, variants: &[Planned]) {
 }
 
 #[cfg(test)]
-mod tests {
+pub(super) mod tests {
     use super::*;
+
+    /// Episode `k` of `task` by `model` with `planner` at `budget` (a
+    /// reference: no planner, budget 0): its cost, `ms` a decision, a frame
+    /// 10 ms, its steady-state error a hundredth of `base`.
+    pub(in super::super) fn row(
+        task: &str,
+        (model, planner, budget): (&str, &str, u32),
+        k: u32,
+        (base, cost): (f64, f64),
+        ms: f64,
+    ) -> Episode {
+        Episode {
+            task: task.into(),
+            model: model.parse().unwrap(),
+            round: 0,
+            planner: planner.into(),
+            budget,
+            episode: k,
+            evaluations: u64::from(budget) * 10,
+            cost,
+            ms_per_decision: ms,
+            ms_min: ms,
+            ms_max: ms,
+            real_time_ms: 10.0,
+            prediction_rms: 0.1,
+            horizon_rms: 0.4,
+            final_error: 0.01 * base,
+            settle_s: if k == 0 {
+                f64::INFINITY
+            } else {
+                0.1 * f64::from(k)
+            },
+            within_tolerance: 0.5,
+            feedback_frequency: if model.starts_with("gravity-") {
+                8.0
+            } else {
+                f64::NAN
+            },
+        }
+    }
 
     /// Four episodes of `model` (with `planner` when it planned), costs
     /// `base` + the episode, each decision `ms` long, a frame 10 ms.
     fn episodes(model: &str, planner: &str, base: f64, ms: f64) -> Vec<Episode> {
         (0..4)
-            .map(|k| Episode {
-                task: "bend".into(),
-                model: model.parse().unwrap(),
-                round: 0,
-                planner: planner.into(),
-                budget: if planner.is_empty() { 0 } else { 64 },
-                episode: k,
-                evaluations: 640,
-                cost: base + f64::from(k) * if planner.is_empty() { 1.0 } else { 1.1 },
-                ms_per_decision: ms,
-                ms_min: ms,
-                ms_max: ms,
-                real_time_ms: 10.0,
-                prediction_rms: 0.1,
-                horizon_rms: 0.4,
-                final_error: 0.01 * base,
-                settle_s: if k == 0 {
-                    f64::INFINITY
-                } else {
-                    0.1 * f64::from(k)
-                },
-                within_tolerance: 0.5,
-                feedback_frequency: if model == "gravity-pd" { 8.0 } else { f64::NAN },
+            .map(|k| {
+                let budget = if planner.is_empty() { 0 } else { 64 };
+                let step = if planner.is_empty() { 1.0 } else { 1.1 };
+                let cost = base + f64::from(k) * step;
+                row("bend", (model, planner, budget), k, (base, cost), ms)
             })
             .collect()
     }

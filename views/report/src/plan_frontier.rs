@@ -633,35 +633,17 @@ fn deadlines(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::plan::tests::row;
     use alnlab_plan::planning::Episode;
 
     /// Four episodes of `model` at `budget` (0: a reference), costs `base`
     /// plus `spread` times the episode, each decision `ms` long.
     fn at(model: &str, budget: u32, base: f64, spread: f64, ms: f64) -> Vec<Episode> {
+        let planner = if budget == 0 { "" } else { "cem" };
         (0..4)
-            .map(|k| Episode {
-                task: "hold".into(),
-                model: model.parse().unwrap(),
-                round: 0,
-                planner: if budget == 0 {
-                    String::new()
-                } else {
-                    "cem".into()
-                },
-                budget,
-                episode: k,
-                evaluations: u64::from(budget) * 10,
-                cost: base + spread * f64::from(k),
-                ms_per_decision: ms,
-                ms_min: ms,
-                ms_max: ms,
-                real_time_ms: 10.0,
-                prediction_rms: 0.1,
-                horizon_rms: 0.4,
-                final_error: 0.01 * base,
-                settle_s: 0.2,
-                within_tolerance: 0.5,
-                feedback_frequency: if model == "gravity-pd" { 8.0 } else { f64::NAN },
+            .map(|k| {
+                let cost = base + spread * f64::from(k);
+                row("hold", (model, planner, budget), k, (base, cost), ms)
             })
             .collect()
     }
