@@ -11,9 +11,9 @@
 //! plant, where it has one — executes the first frame's controls, and the
 //! task's cost ([`task`]) of the frame reached is added up ([`episode`]).
 //! Zero torques and the scene's random controller are the references, and
-//! for a robot, the controls engineer's first try: a PD loop on the nominal
-//! model's gravity compensation, its frequency tuned on episodes of its own
-//! ([`feedback`]).
+//! for a robot, the controls engineer's first tries: PD and PID loops on the
+//! nominal model's gravity compensation, each loop's frequency tuned on
+//! episodes of its own ([`feedback`]).
 //!
 //! For every task, model, planner and budget (sequences per decision), the
 //! same episodes — the same start states, taken from the trajectory log —
@@ -93,7 +93,7 @@ use crate::transitions::Transitions;
 /// implicit drives, batched implicitly, mimic joints; 11: the plant's own
 /// simulator predicts its mean, in SIMD lanes, time going on from frame to
 /// frame; 12: each episode's steady-state error, time to settle and frames
-/// within tolerance, and the PD loop on gravity compensation).
+/// within tolerance, and the PD and PID loops on gravity compensation).
 pub const FORMAT_VERSION: u32 = 12;
 /// File name of the per-frame table.
 pub const PLAN_FILE: &str = "plan.parquet";
