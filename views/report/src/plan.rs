@@ -492,7 +492,30 @@ pub(super) fn section(
                 .iter()
                 .map(|w| sig3(*w))
                 .collect();
-            let tuned: Vec<String> = loops.iter().map(|p| p.label()).collect();
+            // A pick at an end of the grid says the grid may not hold the
+            // loop's best frequency.
+            let (low, high) = setup
+                .feedback_frequencies
+                .iter()
+                .fold((f64::INFINITY, 0.0f64), |(l, h), &w| (l.min(w), h.max(w)));
+            let tuned: Vec<String> = loops
+                .iter()
+                .map(|p| match p.feedback_frequency() {
+                    Some(w) if w == high && low < high => {
+                        format!(
+                            "{} (the grid's highest: a higher one may do better)",
+                            p.label()
+                        )
+                    }
+                    Some(w) if w == low && low < high => {
+                        format!(
+                            "{} (the grid's lowest: a lower one may do better)",
+                            p.label()
+                        )
+                    }
+                    _ => p.label(),
+                })
+                .collect();
             let _ = writeln!(
                 md,
                 "gravity-pd and gravity-pid, the controls engineer's first tries: each driven \
@@ -1049,6 +1072,43 @@ pub(super) mod tests {
         })
         .unwrap();
         md
+    }
+
+    /// The feedback loops are described with the frequency each was tuned
+    /// to, and a pick at an end of the grid is said to be one.
+    #[test]
+    fn a_loop_tuned_to_the_grids_end_is_said_to_be() {
+        let mut rows = aln_only();
+        rows.extend((0..4).map(|k| row("bend", ("gravity-pd", "", 0), k, (30.0, 30.0), 0.0)));
+        let setup = PlanSetup {
+            tasks: vec![super::super::PlanTask {
+                name: "bend".into(),
+                definition: "reach and hold".into(),
+                unit: "rad²".into(),
+                error_unit: "rad".into(),
+                tolerance: 0.05,
+            }],
+            horizon: 10,
+            frames: 40,
+            episodes: 4,
+            feedback_frequencies: vec![2.0, 8.0],
+            tuning_episodes: 4,
+        };
+        let dir = tempfile::tempdir().unwrap();
+        let mut md = String::new();
+        section(&mut md, &rows, 1, Some(&setup), dir.path(), |c| {
+            format!("{c}.svg")
+        })
+        .unwrap();
+        assert!(
+            md.contains(
+                "lowest mean cost among 2, 8 rad/s over 4 tuning episodes from other stretches \
+                 of the log: gravity-pd (ω 8 rad/s) (the grid's highest: a higher one may do \
+                 better)."
+            ),
+            "{md}"
+        );
+        assert!(md.contains("| gravity-pd | — | — |"), "{md}");
     }
 
     #[test]
