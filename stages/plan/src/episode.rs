@@ -80,6 +80,13 @@ pub struct Outcome {
     /// planner visited. +∞ if a prediction blew up; NaN for the references
     /// and episodes shorter than the horizon.
     pub horizon_rms: f64,
+    /// How near the task it held, in the task's unit.
+    pub settling: Settling,
+}
+
+/// What an episode came to against its task's tolerance.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Settling {
     /// The steady-state error: the mean of the frames' errors
     /// ([`Cost::error`]) over the episode's last quarter (at least its last
     /// frame), in the task's unit.
@@ -93,13 +100,12 @@ pub struct Outcome {
     pub within: f64,
 }
 
-impl Outcome {
-    /// The physical outcomes of an episode whose frames, `frame_dt` (s)
-    /// apart, had `errors`, against `tolerance`; cost and horizon error
-    /// left to the caller.
-    fn of_errors(errors: &[f64], tolerance: f64, frame_dt: f64) -> Outcome {
+impl Settling {
+    /// Of an episode whose frames, `frame_dt` (s) apart, had `errors` (at
+    /// least one), against `tolerance`.
+    fn of(errors: &[f64], tolerance: f64, frame_dt: f64) -> Settling {
         let n = errors.len();
-        let last = (n / 4).max(1).min(n);
+        let last = (n / 4).max(1);
         let final_error = errors[n - last..].iter().sum::<f64>() / last as f64;
         let inside = |e: f64| e <= tolerance;
         let settled = errors.iter().rposition(|&e| !inside(e));
@@ -109,9 +115,7 @@ impl Outcome {
             Some(_) => f64::INFINITY,
         };
         let within = errors.iter().filter(|&&e| inside(e)).count() as f64 / n as f64;
-        Outcome {
-            cost: 0.0,
-            horizon_rms: f64::NAN,
+        Settling {
             final_error,
             settle_s,
             within,
@@ -248,7 +252,7 @@ pub fn run(
     Ok(Outcome {
         cost: total,
         horizon_rms,
-        ..Outcome::of_errors(&errors, cost.tolerance(), p.scene.frame_dt.get())
+        settling: Settling::of(&errors, cost.tolerance(), p.scene.frame_dt.get()),
     })
 }
 
@@ -301,21 +305,21 @@ mod tests {
     #[test]
     fn an_episodes_outcomes_are_read_from_its_frames_errors() {
         let errors = [0.9, 0.5, 0.04, 0.2, 0.03, 0.01, 0.02, 0.01];
-        let o = Outcome::of_errors(&errors, 0.05, 0.01);
+        let o = Settling::of(&errors, 0.05, 0.01);
         assert!((o.final_error - 0.015).abs() < 1e-15, "{o:?}");
         // Frame 5 (the fifth frame reached, at 0.05 s) is the first of the
         // run within tolerance to the end.
         assert!((o.settle_s - 0.05).abs() < 1e-15, "{o:?}");
         assert_eq!(o.within, 5.0 / 8.0);
-        let never = Outcome::of_errors(&[0.01, 0.01, 0.3], 0.05, 0.01);
+        let never = Settling::of(&[0.01, 0.01, 0.3], 0.05, 0.01);
         assert_eq!(never.settle_s, f64::INFINITY);
-        let always = Outcome::of_errors(&[0.01], 0.05, 0.01);
+        let always = Settling::of(&[0.01], 0.05, 0.01);
         assert_eq!(
             (always.settle_s, always.within, always.final_error),
             (0.01, 1.0, 0.01)
         );
         // A NaN error is not within tolerance.
-        let lost = Outcome::of_errors(&[0.01, f64::NAN], 0.05, 0.01);
+        let lost = Settling::of(&[0.01, f64::NAN], 0.05, 0.01);
         assert_eq!((lost.settle_s, lost.within), (f64::INFINITY, 0.5));
     }
 

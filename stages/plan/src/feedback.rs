@@ -232,7 +232,7 @@ mod tests {
     use alnlab_physics::plant::{Payload, Plant};
 
     use super::*;
-    use crate::episode::{self, Outcome, Policy};
+    use crate::episode::{self, Policy, Settling};
     use crate::forward::tests::ur5;
     use crate::task::HoldStart;
 
@@ -253,7 +253,7 @@ mod tests {
     /// Two seconds of the loop `law` at `omega` on `plant`, built on
     /// `nominal`, from the UR5 at rest 0.2 rad from the task's targets (the
     /// shoulder lower, the elbow less bent), every other joint at zero.
-    fn hold(nominal: &Prepared, plant: &Prepared, law: Law, omega: f64) -> Outcome {
+    fn hold(nominal: &Prepared, plant: &Prepared, law: Law, omega: f64) -> Settling {
         let controls = Controls::of(plant).unwrap();
         let task = raise();
         let cost = task.over(&plant.layout.variables, plant).unwrap();
@@ -278,6 +278,7 @@ mod tests {
             |_, _, _, _| Ok(()),
         )
         .unwrap()
+        .settling
     }
 
     /// On the model it is built on, the PD loop brings the arm to its

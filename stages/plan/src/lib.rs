@@ -962,9 +962,9 @@ impl TaskRun<'_> {
             real_time_ms: c.p.scene.frame_dt.get() * 1e3,
             prediction_rms: (squared_error / frames_run).sqrt(),
             horizon_rms: outcome.horizon_rms,
-            final_error: outcome.final_error,
-            settle_s: outcome.settle_s,
-            within_tolerance: outcome.within,
+            final_error: outcome.settling.final_error,
+            settle_s: outcome.settling.settle_s,
+            within_tolerance: outcome.settling.within,
             feedback_frequency,
         });
         c.progress.advance(1);

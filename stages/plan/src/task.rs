@@ -164,14 +164,11 @@ impl Task {
     /// each target joint there, every velocity zero (a mimic joint's
     /// followers moved with it).
     pub fn start_state(&self, p: &Prepared, logged: &State) -> State {
-        let (
-            Task::HoldAngles {
-                targets,
-                start: HoldStart::AtTarget,
-                ..
-            },
-            Some(robot),
-        ) = (self, &p.robot)
+        let Task::HoldAngles {
+            targets,
+            start: HoldStart::AtTarget,
+            ..
+        } = self
         else {
             return logged.clone();
         };
@@ -182,8 +179,7 @@ impl Task {
             ..logged.clone()
         };
         for (variable, &target) in targets {
-            let joint = variable.strip_prefix("q.");
-            if let Some(link) = (1..p.model.len()).find(|&i| joint == Some(&robot.joints[i])) {
+            if let Some(link) = joint_link(p, variable) {
                 state.q[link] = target;
             }
         }
@@ -402,21 +398,20 @@ impl Task {
     }
 }
 
+/// The link whose joint a robot's `q.<joint>` variable is the position of;
+/// None for any other variable, or a scene that is no robot.
+fn joint_link(p: &Prepared, variable: &str) -> Option<usize> {
+    let (robot, joint) = (p.robot.as_ref()?, variable.strip_prefix("q.")?);
+    (1..p.model.len()).find(|&i| robot.joints[i] == joint)
+}
+
 /// A joint target's check against the joint's limits.
 fn within_limits(
     targets: &BTreeMap<String, f64>,
     p: &Prepared,
 ) -> Result<(), (&'static str, String)> {
-    let Some(robot) = &p.robot else {
-        return Ok(());
-    };
     for (variable, &target) in targets {
-        let Some(joint) = variable.strip_prefix("q.") else {
-            continue;
-        };
-        let range = (1..p.model.len())
-            .find(|&i| robot.joints[i] == joint)
-            .and_then(|i| p.laws[i].as_ref()?.range);
+        let range = joint_link(p, variable).and_then(|i| p.laws[i].as_ref()?.range);
         if let Some((low, high)) = range.filter(|(l, h)| !(*l..=*h).contains(&target)) {
             return Err((
                 "targets",
