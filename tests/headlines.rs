@@ -249,6 +249,53 @@ fn every_first_screen_table_agrees_with_its_replicates() {
                 "{name}: {label} is not the most accurate"
             );
         }
+        // The abstract's planning sentence repeats the deadline verdicts:
+        // each of its deadlines' intervals is the deadline paragraph's.
+        if let Some(planning) = abstract_.split(" Planning, each model at ").nth(1) {
+            let (_, tasks) = planning.split_once("): `").unwrap();
+            for said in tasks.split("; `") {
+                let (task, said) = said.split_once('`').unwrap();
+                let paragraph = screen
+                    .lines()
+                    .find(|l| l.starts_with(&format!("**`{task}` at each deadline**")))
+                    .unwrap_or_else(|| panic!("{name}: no deadline paragraph of {task}"));
+                for (at, _) in said.match_indices(" ms (") {
+                    let deadline = said[..at].rsplit(' ').next().unwrap();
+                    let rest = &said[at + " ms (".len()..];
+                    let figure = &rest[..=rest.find(']').unwrap()];
+                    let at_deadline = paragraph
+                        .split(&format!("at {deadline} ms, "))
+                        .nth(1)
+                        .and_then(|r| r.split("; at ").next())
+                        .unwrap_or_else(|| panic!("{name}: {task} has no {deadline} ms verdict"));
+                    assert!(
+                        at_deadline.contains(&format!(": {figure}")),
+                        "{name}: the abstract's {task} at {deadline} ms, {figure}, is not the \
+                         paragraph's: {at_deadline}"
+                    );
+                }
+                // The last deadline's pick against the feedback loop, as
+                // the paragraph on the controls engineer's first try says.
+                if let Some((_, against)) = said.split_once(", and at ") {
+                    let (_, rest) = against.split_once(" ms ").unwrap();
+                    let (pick, rest) = rest.split_once(" is ").unwrap();
+                    let word = rest.split(' ').next().unwrap();
+                    let (_, figure) = rest.rsplit_once(" (").unwrap();
+                    let figure = &figure[..=figure.find(']').unwrap()];
+                    let first_try = screen
+                        .lines()
+                        .skip_while(|l| *l != paragraph)
+                        .find(|l| l.starts_with("**Against the controls engineer's first try**"))
+                        .unwrap_or_else(|| panic!("{name}: {task} has no loop paragraph"));
+                    assert!(
+                        first_try.contains(&format!("{pick} {word}: {figure}")),
+                        "{name}: the abstract's {task} loop, {pick} {word}: {figure}, is not \
+                         the paragraph's: {first_try}"
+                    );
+                }
+            }
+            continue;
+        }
         if screen.contains("Planning with it") {
             continue;
         }

@@ -252,8 +252,12 @@ pub(super) fn first_screen(
     let Some(best) = entries.first() else {
         return Ok(());
     };
+    let frontier = super::plan_frontier::abstract_sentence(&super::plan::planned(variants));
+    // Without the frontier's verdicts, each planner at its one budget
+    // within real time, the ALN's and the true model's.
     let planning = entries
         .iter()
+        .filter(|_| frontier.is_none())
         .find(|e| e.model == ModelId::Aln && !e.variant.planning.is_empty())
         .and_then(|e| {
             let setup = e.variant.info.plan_setup.as_ref();
@@ -261,18 +265,25 @@ pub(super) fn first_screen(
             (!phrases.is_empty()).then_some((e.variant.info.name.as_str(), phrases))
         });
     // The true model planning by the same rule, for scale.
-    let true_model = variants.iter().find_map(|v| {
-        let model = super::plan::true_model(v.planning.first()?, v.info.plant)?;
-        let phrases = super::plan::within_real_time(&v.planning, model, v.info.plan_setup.as_ref());
-        (!phrases.is_empty()).then_some((model, phrases))
-    });
+    let true_model = variants
+        .iter()
+        .filter(|_| frontier.is_none())
+        .find_map(|v| {
+            let model = super::plan::true_model(v.planning.first()?, v.info.plant)?;
+            let phrases =
+                super::plan::within_real_time(&v.planning, model, v.info.plan_setup.as_ref());
+            (!phrases.is_empty()).then_some((model, phrases))
+        });
     abstract_(
         md,
         run,
         variants,
         &entries,
-        planning.as_ref(),
-        true_model.as_ref(),
+        Planning {
+            frontier: frontier.as_deref(),
+            within_real_time: planning.as_ref(),
+            true_model: true_model.as_ref(),
+        },
     );
     figure(md, variants.len(), &entries, dir)?;
     let decisions = Decisions::of(variants, &entries);
@@ -414,16 +425,25 @@ pub(super) fn first_screen(
     Ok(())
 }
 
+/// What the abstract says of planning: the frontier's verdicts at the
+/// deadlines where it reads them, else each planner's cost at the one
+/// budget that decides within real time, the ALN's and the true model's.
+struct Planning<'a> {
+    frontier: Option<&'a str>,
+    within_real_time: Option<&'a (&'a str, Vec<String>)>,
+    true_model: Option<&'a (PolicyId, Vec<String>)>,
+}
+
 /// Four sentences: what was measured, the best ALN's standing, the most
 /// accurate of every model one frame and (closed loop) several ahead, and
-/// the ALN's speed — or, where it planned, how it planned within real time.
+/// the ALN's speed — or, where it planned, the frontier's verdicts at the
+/// deadlines (else how it planned within real time).
 fn abstract_(
     md: &mut String,
     run: &RunInfo,
     variants: &[Loaded],
     entries: &[Entry],
-    planning: Option<&(&str, Vec<String>)>,
-    true_model: Option<&(PolicyId, Vec<String>)>,
+    planning: Planning,
 ) {
     let best = &entries[0];
     let replicates = best.variant.replicates.len().max(1);
@@ -530,14 +550,18 @@ fn abstract_(
     }
     md.push('.');
     most_accurate(md, best.variant, entries, variants);
-    if let Some((variant, phrases)) = planning {
+    if let Some(sentence) = planning.frontier {
+        let _ = write!(md, " {sentence}\n\n");
+        return;
+    }
+    if let Some((variant, phrases)) = planning.within_real_time {
         let _ = write!(
             md,
             " Planning with it (`{variant}`), each planner at its largest budget that decides \
              within real time: {}",
             phrases.join("; ")
         );
-        match true_model {
+        match planning.true_model {
             Some((model, phrases)) => {
                 let _ = write!(
                     md,

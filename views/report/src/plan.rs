@@ -266,11 +266,21 @@ fn within<'p, 'a>(
         .max_by_key(|p| p.budget)
 }
 
-/// The tasks of `rows`, in the stage's order.
+/// The tasks of `rows`, in the stage's order: each once, though a round's
+/// rows follow every task's again.
 pub(super) fn tasks(rows: &[Episode]) -> Vec<&str> {
-    let mut tasks: Vec<&str> = rows.iter().map(|e| e.task.as_str()).collect();
-    tasks.dedup();
-    tasks
+    once(rows.iter().map(|e| e.task.as_str()))
+}
+
+/// Each item once, in the order it first appears.
+fn once<T: PartialEq>(items: impl Iterator<Item = T>) -> Vec<T> {
+    let mut seen: Vec<T> = Vec::new();
+    for item in items {
+        if !seen.contains(&item) {
+            seen.push(item);
+        }
+    }
+    seen
 }
 
 /// The frame's duration, real time, of `task` in ms.
@@ -331,12 +341,12 @@ pub(super) fn within_real_time(
             .and_then(|s| s.tasks.iter().find(|t| t.name == task))
             .map_or(String::new(), |t| format!(" {}", t.unit));
         let policies_1 = policies(first, task);
-        let mut planners: Vec<&str> = policies_1
-            .iter()
-            .filter(|p| p.model == model && p.planned())
-            .map(|p| p.planner)
-            .collect();
-        planners.dedup();
+        let planners = once(
+            policies_1
+                .iter()
+                .filter(|p| p.model == model && p.planned())
+                .map(|p| p.planner),
+        );
         let limit = real_time(first, task);
         for planner in planners {
             let Some(chosen) = within(&policies_1, model, planner, limit) else {
@@ -694,12 +704,12 @@ fn at_equal_time(
     if real_time <= 0.0 {
         return;
     }
-    let mut methods: Vec<(PlanModel, &str)> = policies
-        .iter()
-        .filter(|p| p.planned())
-        .map(|p| (p.model, p.planner))
-        .collect();
-    methods.dedup();
+    let methods: Vec<(PlanModel, &str)> = once(
+        policies
+            .iter()
+            .filter(|p| p.planned())
+            .map(|p| (p.model, p.planner)),
+    );
     let mut table = MdTable::new(&["ms / decision at most"])
         .column("lowest cost", Align::Left)
         .numbers(&["cost"])
@@ -811,14 +821,17 @@ pub(super) fn planned<'a>(variants: &'a [super::Loaded]) -> Vec<Planned<'a>> {
         .map(|v| Planned {
             name: &v.info.name,
             planning: &v.planning,
+            setup: v.info.plan_setup.as_ref(),
         })
         .collect()
 }
 
-/// A variant's name and its replicates' planning episodes.
+/// A variant's name, its replicates' planning episodes and what the plan
+/// stage was asked (its tasks' units).
 pub(super) struct Planned<'a> {
     pub name: &'a str,
     pub planning: &'a [Vec<Episode>],
+    pub setup: Option<&'a super::PlanSetup>,
 }
 
 /// [`at_real_time`] of the variants' planning.
@@ -864,7 +877,7 @@ fn at_real_time_of(md: &mut String, variants: &[Planned]) {
         } else {
             "over the episodes of one replicate".to_string()
         };
-        let mut aln_words = Vec::new();
+        let mut aln_planned = false;
         // The ALNs whose plans cost less than the nominal simulator's, the
         // interval below zero: the question's answer.
         let mut aln_lower: Vec<&str> = Vec::new();
@@ -893,7 +906,7 @@ fn at_real_time_of(md: &mut String, variants: &[Planned]) {
                 // The signed-rank test is of the median: say which way.
                 let p = super::plan_frontier::rank_cell(&pooled);
                 if c.model.policy == PolicyId::Aln {
-                    aln_words.push(format!("{}: {difference}, p = {p}", c.label));
+                    aln_planned = true;
                     let lower = Interval::of(&per).is_some_and(|d| d.verdict() == Verdict::Lower);
                     if lower {
                         aln_lower.push(&c.label);
@@ -921,34 +934,19 @@ fn at_real_time_of(md: &mut String, variants: &[Planned]) {
         let _ = writeln!(
             md,
             "**Planning `{task}` within real time** ({} ms a decision): {} {} has the lowest \
-             mean cost of the forward models a user could have{}. {}Every model and planner at its largest budget \
-             whose median decision fits a frame in replicate 1, on the same episodes; µs / state: \
-             the decision's time over the states its model predicted (sequences × horizon), the \
-             planner's own work included; every model predicts a decision's candidates \
-             together (a simulator — the plant's own too, predicting its mean, without its \
-             actuators' noise — and a hybrid's nominal step, in SIMD lanes) except three kinds \
-             of simulator, which step one candidate at a time: one of a scene integrated by \
-             RK4, one of a robot with mimic joints, and one costing a task that reads a link's \
-             acceleration or external force; cost: the \
-             task's summed cost, mean {over}; differences from the nominal simulator of the lowest \
-             mean cost, paired, {over}, with the Wilcoxon signed-rank p-value over every paired \
-             episode (a replicate's episodes share its model, so they are not independent: the \
-             interval across replicates is the verdict) and the median paired difference; \
-             one-step error: the model's prediction of the task's variables one frame \
-             ahead against what the plant then did, RMS over each episode's frames, mean over \
-             episodes — on the states its own planner visited; error at the horizon: the same, \
-             the model fed its own predictions for as many frames as the planner looks ahead \
-             ({} frames, the torques executed), from every frame with that many after it — the \
-             error its plans were scored with.{}{}\n",
+             mean cost of the forward models a user could have{}. Below, every model and planner \
+             at its largest budget whose median decision fits a frame in replicate 1, on the same \
+             episodes; the deadline table further down picks among them on replicate 1 alone \
+             and judges on the other replicates.\n",
             sig3(limit),
-            match (aln_lower.as_slice(), aln_words.is_empty()) {
-                (_, true) => "No ALN planned.".to_string(),
-                ([], false) => format!(
+            match (aln_lower.as_slice(), aln_planned) {
+                (_, false) => "No ALN plans within real time.".to_string(),
+                ([], true) => format!(
                     "no ALN plans to a lower cost than {}, the nominal simulator of the lowest \
                      mean cost ({over}).",
                     nominal.label
                 ),
-                (lower, false) => format!(
+                (lower, true) => format!(
                     "{} {} to a lower cost than {}, the nominal simulator of the lowest mean cost \
                      ({over}).",
                     lower.join(" and "),
@@ -968,11 +966,26 @@ fn at_real_time_of(md: &mut String, variants: &[Planned]) {
             } else {
                 String::new()
             },
-            if aln_words.is_empty() {
-                "No ALN plans within real time. ".to_string()
-            } else {
-                format!("Against the nominal simulator: {}. ", aln_words.join("; "))
-            },
+        );
+        table.write(md);
+        let _ = writeln!(
+            md,
+            "µs / state: the decision's time over the states its model predicted (sequences × \
+             horizon), the planner's own work included. Every model predicts a decision's \
+             candidates together (a simulator, the plant's own too, and a hybrid's nominal step \
+             in SIMD lanes; the plant's own simulator predicts its mean, without its actuators' \
+             noise), except a simulator of a scene integrated by RK4, of a robot with mimic \
+             joints, or costing a task that reads a link's acceleration or external force, which \
+             steps them one at a time. Cost: the task's summed cost, mean {over}. Differences: \
+             from the nominal simulator of the lowest mean cost, paired, {over}; beside them the \
+             Wilcoxon signed-rank p over every paired episode and the median paired difference \
+             (a replicate's episodes share its model, so the interval across replicates is the \
+             verdict). One-step error: the model's prediction of the task's variables one frame \
+             ahead against what the plant then did, RMS over each episode's frames, mean over \
+             episodes, on the states its own planner visited. Error at the horizon: the same, \
+             the model fed its own predictions for as many frames as the planner looks ahead \
+             ({} frames, the torques executed), from every frame with that many after it: the \
+             error its plans were scored with.{}{}\n",
             first.planning[0]
                 .iter()
                 .find(|e| e.budget > 0)
@@ -993,7 +1006,6 @@ fn at_real_time_of(md: &mut String, variants: &[Planned]) {
                 )
             }
         );
-        table.write(md);
     }
 }
 
@@ -1076,6 +1088,16 @@ pub(super) mod tests {
 
     /// The feedback loops are described with the frequency each was tuned
     /// to, and a pick at an end of the grid is said to be one.
+    #[test]
+    fn a_task_is_named_once_though_a_rounds_rows_follow_every_task_again() {
+        let rows: Vec<Episode> = ["raise", "hold", "raise", "hold"]
+            .iter()
+            .enumerate()
+            .map(|(k, task)| row(task, ("aln", "cem", 8), k as u32, (1.0, 1.0), 1.0))
+            .collect();
+        assert_eq!(tasks(&rows), ["raise", "hold"]);
+    }
+
     #[test]
     fn a_loop_tuned_to_the_grids_end_is_said_to_be() {
         let mut rows = aln_only();
@@ -1162,14 +1184,17 @@ pub(super) mod tests {
                 Planned {
                     name: "learned",
                     planning: &learned,
+                    setup: None,
                 },
                 Planned {
                     name: "hybrid",
                     planning: &hybrid,
+                    setup: None,
                 },
                 Planned {
                     name: "other",
                     planning: &other,
+                    setup: None,
                 },
             ],
         );
@@ -1188,8 +1213,13 @@ pub(super) mod tests {
         // The 512-sequence simulator takes 50 ms: beyond a frame.
         assert!(md.contains("− simulator@10, cem (64 sequences)"), "{md}");
         // learned: −10, −8 and −9 across the replicates.
+        let row = |label: &str| -> &str {
+            md.lines()
+                .find(|l| l.starts_with(&format!("| {label} |")))
+                .unwrap_or_else(|| panic!("no row {label}: {md}"))
+        };
         assert!(
-            md.contains("ALN (`learned`), cem (64 sequences): lower: -9.0 ["),
+            row("ALN (`learned`), cem (64 sequences)").contains("| lower: -9.0 ["),
             "{md}"
         );
         // The pooled episode differences, as the table computes them.
@@ -1199,12 +1229,13 @@ pub(super) mod tests {
             .collect();
         let p = alnlab_summarize::signed_rank::test(&pooled).unwrap().p;
         assert!(
-            md.contains(&format!("p = {}, median -9 (12)", sig3(p))),
+            row("ALN (`learned`), cem (64 sequences)")
+                .contains(&format!("| {}, median -9 (12) |", sig3(p))),
             "{md}"
         );
         assert_eq!(md.matches("| simulator@10, cem").count(), 1, "{md}");
         assert!(
-            md.contains("ALN (`hybrid`), cem (64 sequences): higher:"),
+            row("ALN (`hybrid`), cem (64 sequences)").contains("| higher: "),
             "{md}"
         );
         assert!(

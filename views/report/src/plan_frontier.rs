@@ -13,6 +13,7 @@ use std::path::Path;
 use alnlab_common::{PolicyId, Result, atomic};
 use alnlab_summarize::paired::{Interval, Verdict};
 
+use super::PlanTask;
 use super::format::{Align, MdTable, estimate, interval, sig3, signed};
 use super::plan::{PlanModel, Planned, mean, policies, tasks};
 use crate::charts::{self, Axis, Plot, Point, Rule, Series, policy_style};
@@ -300,7 +301,16 @@ pub(super) fn section(md: &mut String, variants: &[Planned], dir: &Path) -> Resu
             );
         }
         let feedback = feedback(first, task);
-        deadlines(md, &methods, truth, feedback.as_ref(), task, replicates);
+        let defined = first
+            .setup
+            .and_then(|s| s.tasks.iter().find(|t| t.name == task));
+        deadlines(
+            md,
+            &methods,
+            (truth, feedback.as_ref()),
+            (task, defined),
+            replicates,
+        );
     }
     Ok(())
 }
@@ -358,11 +368,11 @@ fn chart(
     task: &str,
     dir: &Path,
 ) -> Result<()> {
-    // One curve per model of its own data (rounds are the table's), each
-    // ALN variant in its own colour.
+    // One curve per model and round of the planner's own data, each ALN
+    // variant in its own colour, a round in its marker.
     let mut series = Vec::new();
-    let mut alns = 0;
-    for m in methods.iter().filter(|m| m.model.round == 0) {
+    let mut variants: Vec<String> = Vec::new();
+    for m in methods {
         let points: Vec<Point> = m
             .budgets
             .iter()
@@ -374,16 +384,23 @@ fn chart(
                 })
             })
             .collect();
+        // A variant's rounds share its colour: its label less the round.
         let variant = match m.model.policy {
             PolicyId::Aln => {
-                alns += 1;
-                alns - 1
+                let of = m.label.replace(&m.model.round_suffix(), "");
+                match variants.iter().position(|v| *v == of) {
+                    Some(k) => k,
+                    None => {
+                        variants.push(of);
+                        variants.len() - 1
+                    }
+                }
             }
             _ => 0,
         };
         series.push(Series {
             name: format!("{}, {}", m.label, m.planner),
-            style: policy_style(m.model.policy, 0, variant),
+            style: policy_style(m.model.policy, m.model.round, variant),
             points,
             joined: true,
             hollow: m.planner == "random-shooting",
@@ -415,7 +432,8 @@ fn chart(
         md,
         "![task {task}: the planning frontier]({file})\n\n**The planning frontier of `{task}`.** \
          Every forward model at every budget it planned with (a point each, joined by \
-         budget): its task cost minus that of {truth_name} ({}, at its lowest-cost budget in \
+         budget; a model trained again on its planner's frames in its colour, with a marker \
+         of its round): its task cost minus that of {truth_name} ({}, at its lowest-cost budget in \
          replicate 1, here {} sequences), paired on the same \
          episodes, against the median ms a decision of replicate 1 (bars: 95% interval of the \
          paired difference). Given budget, a wrong model may match the reference: the task \
@@ -429,37 +447,15 @@ fn chart(
     Ok(())
 }
 
-/// The verdict of one task at each deadline: the nominal simulator and the
-/// ALN of the lowest mean cost in replicate 1 among those whose largest
-/// budget that fits, and the true model, judged on the other replicates:
-/// the differences and the regrets.
-fn deadlines(
-    md: &mut String,
-    methods: &[Method],
-    truth: &Method,
-    feedback: Option<&Loop>,
-    task: &str,
-    replicates: usize,
-) {
-    if replicates < 3 {
-        let _ = writeln!(
-            md,
-            "No verdict at fixed deadlines: the models are picked on replicate 1 and judged on \
-             the others, which takes at least 3 replicates ({replicates} here).\n"
-        );
-        return;
-    }
-    let judged = replicates - 1;
-    let mut table = MdTable::new(&["deadline", "forward model, planner (budget)"])
-        .numbers(&["ms / decision", "cost", "steady-state error"])
-        .column("− the nominal simulator", Align::Left)
-        .column("signed-rank p, median difference (episodes)", Align::Left)
-        .column("regret: − the reference, same budget", Align::Left)
-        .column("regret: − the reference at its best", Align::Left);
-    let best_truth = truth.saturated().map(Budgeted::judged);
-    // Among the methods `keep` admits, the one of the lowest mean cost in
-    // replicate 1 at its largest budget within `limit`, and how many fit.
-    let lowest = |keep: &dyn Fn(&Method) -> bool, limit: f64| {
+/// A deadline's pick: a forward model, its largest budget that fits (less
+/// replicate 1: what a verdict reads), and how many of its kind fit.
+type Pick<'m> = (&'m Method, Budgeted, usize);
+
+/// At `limit` ms, the nominal simulator and the ALN of the lowest mean cost
+/// in replicate 1 (so picked on its episodes), each at its largest budget
+/// whose median decision fits.
+fn picks(methods: &[Method], limit: f64) -> (Option<Pick<'_>>, Option<Pick<'_>>) {
+    let lowest = |keep: &dyn Fn(&Method) -> bool| {
         let fitting: Vec<(&Method, &Budgeted)> = methods
             .iter()
             .filter(|m| keep(m))
@@ -471,15 +467,187 @@ fn deadlines(
             .min_by(|a, b| a.1.picked().total_cmp(&b.1.picked()));
         pick.map(|(m, b)| (m, b.judged(), n))
     };
+    (
+        lowest(&|m| matches!(m.model.policy, PolicyId::Simulator { .. })),
+        lowest(&|m| m.model.policy == PolicyId::Aln),
+    )
+}
+
+/// The abstract's sentence on planning, where the frontier reads verdicts
+/// at deadlines: per task, the best ALN minus the best nominal simulator at
+/// each deadline, neighbouring deadlines of one verdict together, and the
+/// last deadline's pick of the lower replicate-1 cost against the controls
+/// engineer's loop where one ran. `None` with fewer than 3 replicates or no
+/// task the ALN planned.
+pub(super) fn abstract_sentence(variants: &[Planned]) -> Option<String> {
+    let planned: Vec<&Planned> = variants
+        .iter()
+        .filter(|v| v.planning.first().is_some_and(|r| !r.is_empty()))
+        .collect();
+    let first = planned.first()?;
+    let replicates = first.planning.len();
+    if replicates < 3 {
+        return None;
+    }
+    let mut said = Vec::new();
+    for task in tasks(&first.planning[0]) {
+        let (methods, _) = methods(&planned, task);
+        if truth(&methods).and_then(Method::saturated).is_none() {
+            continue;
+        }
+        // Runs of neighbouring deadlines of one verdict (`None`: only the
+        // ALN fits), in deadline order.
+        let mut runs: Vec<(Option<Verdict>, Vec<String>)> = Vec::new();
+        let mut last = None;
+        for &limit in &DEADLINES {
+            let (nominal, aln) = picks(&methods, limit);
+            let deadline = format!("{} ms", sig3(limit));
+            let (verdict, figure) = match (&nominal, &aln) {
+                (Some((_, nb, _)), Some((_, ab, _))) => {
+                    let Some(d) = paired(ab, nb) else {
+                        continue;
+                    };
+                    let figure = format!(
+                        "{deadline} ({}{})",
+                        interval(d.mean, d.low, d.high),
+                        p_if_indistinguishable(&d, ab, nb)
+                    );
+                    (Some(d.verdict()), figure)
+                }
+                (None, Some(_)) => (None, deadline),
+                _ => continue,
+            };
+            match runs.last_mut() {
+                Some((v, at)) if *v == verdict => at.push(figure),
+                _ => runs.push((verdict, vec![figure])),
+            }
+            last = Some((limit, [nominal, aln]));
+        }
+        if runs.is_empty() {
+            continue;
+        }
+        let verdicts: Vec<String> = runs
+            .iter()
+            .map(|(verdict, at)| match verdict {
+                None => format!("only the ALN fits at {}", and_list(at)),
+                Some(v) => format!("{} at {}", v.as_str(), and_list(at)),
+            })
+            .collect();
+        let mut phrase = format!("`{task}`: {}", verdicts.join(", "));
+        // The last deadline's pick of the lower cost in replicate 1 against
+        // the loop, judged on the other replicates as the picks are.
+        if let (Some(held), Some((limit, last))) = (feedback(first, task), last) {
+            let lower = last
+                .iter()
+                .flatten()
+                .filter_map(|(m, b, _)| Some((m, b, m.within(limit)?.picked())))
+                .min_by(|a, b| a.2.total_cmp(&b.2));
+            let judged = held.point.judged();
+            if let Some((m, b, _)) = lower
+                && let Some(d) = paired(b, &judged)
+            {
+                let verdict = d.verdict();
+                let _ = write!(
+                    phrase,
+                    ", and at {} ms {} {} the {} loop on the nominal model's gravity \
+                     compensation, which plans nothing ({}{})",
+                    sig3(limit),
+                    m.at(b),
+                    match verdict {
+                        Verdict::Lower => "is lower than",
+                        Verdict::Higher => "is higher than",
+                        Verdict::Indistinguishable => "is indistinguishable from",
+                        Verdict::Tied => "is tied with",
+                    },
+                    law(held.policy),
+                    interval(d.mean, d.low, d.high),
+                    p_if_indistinguishable(&d, b, &judged)
+                );
+            }
+        }
+        said.push(phrase);
+    }
+    (!said.is_empty()).then(|| {
+        format!(
+            "Planning, each model at its largest budget that decides in time, the best ALN minus \
+             the best nominal simulator (picked on replicate 1, judged on the other {}): {}.",
+            replicates - 1,
+            said.join("; ")
+        )
+    })
+}
+
+/// ", p = 0.31" where `d` (`a` minus `b`) holds zero: the signed-rank p over
+/// their paired episodes, which an "indistinguishable" never goes without.
+fn p_if_indistinguishable(d: &Interval, a: &Budgeted, b: &Budgeted) -> String {
+    match d.verdict() {
+        Verdict::Indistinguishable => alnlab_summarize::signed_rank::test(&a.pooled_minus(b))
+            .map(|t| format!(", p = {}", sig3(t.p)))
+            .unwrap_or_default(),
+        _ => String::new(),
+    }
+}
+
+/// "PD" or "PID": a feedback loop's law by name.
+fn law(policy: PolicyId) -> &'static str {
+    match policy {
+        PolicyId::GravityPid => "PID",
+        _ => "PD",
+    }
+}
+
+/// "a", "a and b", "a, b and c".
+fn and_list(items: &[String]) -> String {
+    match items {
+        [] => String::new(),
+        [one] => one.clone(),
+        [init @ .., last] => format!("{} and {last}", init.join(", ")),
+    }
+}
+
+/// The verdict of one task at each deadline: the nominal simulator and the
+/// ALN of the lowest mean cost in replicate 1 among those whose largest
+/// budget that fits, and the true model, judged on the other replicates:
+/// the differences and the regrets.
+fn deadlines(
+    md: &mut String,
+    methods: &[Method],
+    (truth, feedback): (&Method, Option<&Loop>),
+    (task, defined): (&str, Option<&PlanTask>),
+    replicates: usize,
+) {
+    // The units of a cost and of a frame's error, where the run says them.
+    let unit = |of: fn(&PlanTask) -> &str| defined.map_or("", of);
+    let (cost_unit, error_unit) = (unit(|t| &t.unit), unit(|t| &t.error_unit));
+    let titled = |name: &str, unit: &str| match unit {
+        "" => name.to_string(),
+        unit => format!("{name} ({unit})"),
+    };
+    if replicates < 3 {
+        let _ = writeln!(
+            md,
+            "No verdict at fixed deadlines: the models are picked on replicate 1 and judged on \
+             the others, which takes at least 3 replicates ({replicates} here).\n"
+        );
+        return;
+    }
+    let judged = replicates - 1;
+    let mut table = MdTable::new(&["deadline", "forward model, planner (budget)"])
+        .numbers(&[
+            "ms / decision".to_string(),
+            format!("{}, replicates 2–{replicates}", titled("cost", cost_unit)),
+            titled("steady-state error", error_unit),
+        ])
+        .column("− the nominal simulator", Align::Left)
+        .column("signed-rank p, median difference (episodes)", Align::Left)
+        .column("regret: − the reference, same budget", Align::Left)
+        .column("regret: − the reference at its best", Align::Left);
+    let best_truth = truth.saturated().map(Budgeted::judged);
     let mut answers = Vec::new();
     // The deadline picks' standing against the PD loop, judged alike.
     let mut against_feedback = Vec::new();
     for &limit in &DEADLINES {
-        let nominal = lowest(
-            &|m| matches!(m.model.policy, PolicyId::Simulator { .. }),
-            limit,
-        );
-        let aln = lowest(&|m| m.model.policy == PolicyId::Aln, limit);
+        let (nominal, aln) = picks(methods, limit);
         let true_now = truth.within(limit).map(|b| (truth, b.judged(), 1));
         let deadline = format!("{} ms", sig3(limit));
         match (&nominal, &aln) {
@@ -493,14 +661,15 @@ fn deadlines(
                     "at {deadline}, {}{of} {}",
                     a.at(ab),
                     d.map_or("—".into(), |d| format!(
-                        "is {} {} {}: {}",
+                        "is {} {} {}: {}{}",
                         d.verdict().as_str(),
                         match d.verdict() {
                             Verdict::Indistinguishable => "from",
                             _ => "than",
                         },
                         n.at(nb),
-                        interval(d.mean, d.low, d.high)
+                        interval(d.mean, d.low, d.high),
+                        p_if_indistinguishable(&d, ab, nb)
                     ))
                 ));
             }
@@ -608,20 +777,23 @@ fn deadlines(
         let means: Vec<f64> = judged_loop.costs.iter().map(|c| mean(c)).collect();
         let cost = Interval::of(&means).map_or("—".into(), |i| estimate(i.mean, i.low, i.high));
         let tuned: Vec<String> = held.omegas.iter().map(|w| sig3(*w)).collect();
-        let law = match held.policy {
-            PolicyId::GravityPid => "PID",
-            _ => "PD",
-        };
+        let law = law(held.policy);
         let _ = writeln!(
             md,
             "**Against the controls engineer's first try**, the {law} loop on the nominal \
              model's gravity compensation ({}, the lower-cost loop in replicate 1; ω tuned on \
              episodes of its own, per replicate: {} rad/s), which plans nothing and costs {cost} \
-             on the same {judged} replicates (steady-state error {}): the picks above, each \
+             on the same {judged} replicates (steady-state error {}{}): the picks above, each \
              minus it, across those replicates — {}.\n",
             held.policy,
             tuned.join(", "),
             sig3(judged_loop.final_error()),
+            match error_unit {
+                unit if !unit.is_empty() && judged_loop.final_error().is_finite() => {
+                    format!(" {unit}")
+                }
+                _ => String::new(),
+            },
             match against_feedback.is_empty() {
                 true => "none fits a deadline".to_string(),
                 false => against_feedback.join("; "),
@@ -672,6 +844,7 @@ mod tests {
         let planned = [Planned {
             name: "v",
             planning: &planning,
+            setup: None,
         }];
         let refs: Vec<&Planned> = planned.iter().collect();
         let (methods, left_out) = methods(&refs, "hold");
@@ -700,6 +873,7 @@ mod tests {
         let planned = [Planned {
             name: "v",
             planning: &planning,
+            setup: None,
         }];
         let dir = tempfile::tempdir().unwrap();
         let mut md = String::new();
@@ -746,14 +920,28 @@ mod tests {
             md.contains("plant@2, cem (8 sequences) — the reference"),
             "{md}"
         );
+        // The abstract's sentence: the same verdicts, deadlines of one
+        // verdict together, and at 10 ms the lower pick (the simulator's
+        // 21.5) against the PD loop's 36.5.
+        assert_eq!(
+            abstract_sentence(&planned).unwrap(),
+            "Planning, each model at its largest budget that decides in time, the best ALN \
+             minus the best nominal simulator (picked on replicate 1, judged on the other 4): \
+             `hold`: only the ALN fits at 1 ms, lower at 2 ms (-14.7 [-15.0, -14.4]) and 5 ms \
+             (-14.7 [-15.0, -14.4]), higher at 10 ms (+5.30 [+5.01, +5.59]), and at 10 ms \
+             simulator@2, cem (64 sequences) is lower than the PD loop on the nominal model's \
+             gravity compensation, which plans nothing (-15.0 [-15.0, -15.0])."
+        );
         // Too few replicates to pick on one and judge on the others.
         let two = vec![replicate(0.0), replicate(0.5)];
         let mut md = String::new();
         let planned = [Planned {
             name: "v",
             planning: &two,
+            setup: None,
         }];
         section(&mut md, &planned, dir.path()).unwrap();
         assert!(md.contains("No verdict at fixed deadlines"), "{md}");
+        assert!(abstract_sentence(&planned).is_none());
     }
 }

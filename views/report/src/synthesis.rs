@@ -69,9 +69,11 @@ pub fn read_frontier(path: &Path) -> Result<Vec<FrontierRow>> {
 
 /// Draws `<reports>/synthesis.svg` from every `<reports>/<name>/frontier.csv`
 /// (reports in name order): per report, its best ALN, its best hybrid
-/// (`…+nominal`) where it has one, and its simulator settings (joined, fewest steps first; one line for reports on the same
+/// (`…+nominal`, a triangle) where it has one, and its simulator settings
+/// (joined, fewest steps first, hollow; one line for reports on the same
 /// data), each by its mean error over persistence's on the same rows
-/// against its µs per state one at a time. Returns the chart's path and
+/// against its µs per state one at a time. A report's colour is its own
+/// throughout, and its marker on its ALN and its simulator line. Returns the chart's path and
 /// the reports drawn.
 pub fn render_synthesis(reports: &Path) -> Result<(PathBuf, Vec<String>)> {
     let mut found: Vec<(String, PathBuf)> = std::fs::read_dir(reports)
@@ -166,9 +168,11 @@ pub fn render_synthesis(reports: &Path) -> Result<(PathBuf, Vec<String>)> {
         let steps: Vec<String> = simulators.iter().map(|(s, _)| s.to_string()).collect();
         simulator_series.push((
             steps.join(","),
+            // The report's own colour and marker, hollow and dashed: past
+            // the palette, two reports' lines differ by marker.
             Style {
                 colour,
-                marker: Marker::Diamond,
+                marker: aln_marker,
                 dashed: true,
             },
         ));
