@@ -255,10 +255,7 @@ fn cells_listed(placed: &[&alnlab_circuit::fpga::Placed]) -> String {
             format!("`{}` ({}{unit})", p.variable, p.logic_cells)
         })
         .collect();
-    match names.split_last() {
-        Some((last, rest)) if !rest.is_empty() => format!("{} and {last}", rest.join(", ")),
-        _ => names.concat(),
-    }
+    super::format::and_list(&names)
 }
 
 /// How many variables of `state` have no critical path, and why: "3 of

@@ -197,11 +197,10 @@ pub(super) fn difference(i: &Interval) -> String {
 /// The label of the variants whose models read the current accelerations.
 pub(super) fn reads_more(variants: &[&str]) -> String {
     let named: Vec<String> = variants.iter().map(|v| format!("`{v}`")).collect();
-    let (who, learn, their) = match named.as_slice() {
-        [rest @ .., last] if !rest.is_empty() => {
-            (format!("{} and {last}", rest.join(", ")), "learn", "their")
-        }
-        _ => (named.concat(), "learns", "its"),
+    let who = super::format::and_list(&named);
+    let (learn, their) = match named.len() {
+        0 | 1 => ("learns", "its"),
+        _ => ("learn", "their"),
     };
     format!(
         "**Reads more than a controller knows:** {who} {learn} the accelerations (`qdd`), so \

@@ -73,6 +73,15 @@ pub fn estimate(mean: f64, low: f64, high: f64) -> String {
 }
 
 /// A time per state given in ns, in µs: "5.50 µs".
+/// "a", "a and b", "a, b and c".
+pub fn and_list(items: &[String]) -> String {
+    match items {
+        [] => String::new(),
+        [one] => one.clone(),
+        [init @ .., last] => format!("{} and {last}", init.join(", ")),
+    }
+}
+
 pub fn micros(ns: f64) -> String {
     format!("{} µs", sig3(ns / 1000.0))
 }

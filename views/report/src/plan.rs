@@ -834,12 +834,17 @@ pub(super) struct Planned<'a> {
     pub setup: Option<&'a super::PlanSetup>,
 }
 
-/// [`at_real_time`] of the variants' planning.
-fn at_real_time_of(md: &mut String, variants: &[Planned]) {
-    let planned: Vec<&Planned> = variants
+/// The variants whose first replicate planned anything.
+pub(super) fn with_plans<'b, 'a>(variants: &'b [Planned<'a>]) -> Vec<&'b Planned<'a>> {
+    variants
         .iter()
         .filter(|v| v.planning.first().is_some_and(|r| !r.is_empty()))
-        .collect();
+        .collect()
+}
+
+/// [`at_real_time`] of the variants' planning.
+fn at_real_time_of(md: &mut String, variants: &[Planned]) {
+    let planned = with_plans(variants);
     let Some(first) = planned.first() else {
         return;
     };

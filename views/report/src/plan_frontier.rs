@@ -14,8 +14,8 @@ use alnlab_common::{PolicyId, Result, atomic};
 use alnlab_summarize::paired::{Interval, Verdict};
 
 use super::PlanTask;
-use super::format::{Align, MdTable, estimate, interval, sig3, signed};
-use super::plan::{PlanModel, Planned, mean, policies, tasks};
+use super::format::{Align, MdTable, and_list, estimate, interval, sig3, signed};
+use super::plan::{PlanModel, Planned, mean, policies, tasks, with_plans};
 use crate::charts::{self, Axis, Plot, Point, Rule, Series, policy_style};
 
 /// The deadlines a decision is judged at, in ms.
@@ -266,10 +266,7 @@ fn truth(methods: &[Method]) -> Option<&Method> {
 /// paired) against its time a decision, a point per budget; and the
 /// verdict at each of [`DEADLINES`].
 pub(super) fn section(md: &mut String, variants: &[Planned], dir: &Path) -> Result<()> {
-    let planned: Vec<&Planned> = variants
-        .iter()
-        .filter(|v| v.planning.first().is_some_and(|r| !r.is_empty()))
-        .collect();
+    let planned = with_plans(variants);
     let Some(first) = planned.first() else {
         return Ok(());
     };
@@ -480,10 +477,7 @@ fn picks(methods: &[Method], limit: f64) -> (Option<Pick<'_>>, Option<Pick<'_>>)
 /// engineer's loop where one ran. `None` with fewer than 3 replicates or no
 /// task the ALN planned.
 pub(super) fn abstract_sentence(variants: &[Planned]) -> Option<String> {
-    let planned: Vec<&Planned> = variants
-        .iter()
-        .filter(|v| v.planning.first().is_some_and(|r| !r.is_empty()))
-        .collect();
+    let planned = with_plans(variants);
     let first = planned.first()?;
     let replicates = first.planning.len();
     if replicates < 3 {
@@ -593,15 +587,6 @@ fn law(policy: PolicyId) -> &'static str {
     match policy {
         PolicyId::GravityPid => "PID",
         _ => "PD",
-    }
-}
-
-/// "a", "a and b", "a, b and c".
-fn and_list(items: &[String]) -> String {
-    match items {
-        [] => String::new(),
-        [one] => one.clone(),
-        [init @ .., last] => format!("{} and {last}", init.join(", ")),
     }
 }
 
