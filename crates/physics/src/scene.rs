@@ -76,7 +76,7 @@ pub struct Scene {
     /// Integrator.
     #[serde(default)]
     pub integrator: Integrator,
-    /// Number of links (1..=64).
+    /// Number of links (1..=64) of a built-in kind.
     pub links: Option<Count>,
     /// Length of each link (m); for a tumbler, the box's x edge.
     pub link_length: Option<Positive>,
@@ -478,14 +478,10 @@ impl Scene {
         }
         let err = |field: &str, message: String| Err((field.to_string(), message));
         let n = self.links_n();
-        if n > 64 {
-            return match self.kind {
-                SceneKind::Urdf => err(
-                    "file",
-                    format!("the robot has {n} moving bodies; at most 64 are simulated"),
-                ),
-                _ => err("links", format!("expected 1 to 64 links, found {n}")),
-            };
+        // A URDF robot is as large as its description (the parser bounds
+        // it); the built-in kinds are sized by `links`.
+        if n > 64 && self.kind != SceneKind::Urdf {
+            return err("links", format!("expected 1 to 64 links, found {n}"));
         }
         if self.kind == SceneKind::Tumbler && n != 1 {
             return err("links", format!("a tumbler is one body, found links = {n}"));

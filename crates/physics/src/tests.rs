@@ -1126,6 +1126,46 @@ fn robot_of(text: &str, integrator: Integrator, dt: f64, duration: f64) -> Scene
     scene.resolve()
 }
 
+/// A robot is as large as its description: TIAGo dual's 101 joints are
+/// taken (the built-in kinds stay within 64 links), and it simulates.
+#[test]
+fn a_robot_of_more_than_64_moving_bodies_is_simulated() {
+    let inertial = r#"<inertial><mass value="1"/><inertia ixx="0.01" ixy="0" ixz="0" iyy="0.01" iyz="0" izz="0.01"/></inertial>"#;
+    let mut text = String::from(r#"<robot name="long"><link name="base"/>"#);
+    for i in 1..=100 {
+        text += &format!(r#"<link name="l{i}">{inertial}</link>"#);
+        text += &format!(
+            r#"<joint name="j{i}" type="continuous"><parent link="{}"/><child link="l{i}"/><origin xyz="0 0 0.1"/><axis xyz="0 1 0"/><dynamics damping="0.1"/></joint>"#,
+            if i == 1 {
+                "base".to_string()
+            } else {
+                format!("l{}", i - 1)
+            }
+        );
+    }
+    text += "</robot>";
+    let scene = robot_of(&text, Integrator::Implicit, 1e-3, 0.05);
+    scene.validate().unwrap();
+    let p = Prepared::new(&scene);
+    let mut frames = 0;
+    runner::simulate_run(&p, 1, 0, 0, |f, _| {
+        assert!(f.state.iter().all(|x| x.is_finite()));
+        frames += 1;
+        Ok(())
+    })
+    .unwrap();
+    assert!(frames >= 5, "{frames} frames");
+    let worm = Scene {
+        links: Some(Count(65)),
+        ..Scene::default()
+    };
+    let (field, message) = worm.resolve().validate().unwrap_err();
+    assert_eq!(
+        (field.as_str(), message.as_str()),
+        ("links", "expected 1 to 64 links, found 65")
+    );
+}
+
 /// Issue 45: a joint damped 20 times more than an explicit step of dt
 /// resolves. The check refuses it, naming the implicit integrator, which
 /// takes it: each step divides the velocity by 1 + h b / I exactly (the
@@ -1265,8 +1305,10 @@ pub(crate) fn random_robot(rng: &mut rand_chacha::ChaCha8Rng) -> (String, crate:
 /// Issue 45: hundreds of random valid robots driven through their
 /// position limits by random efforts up to their effort limits, their
 /// drives holding the velocity limits as a real robot's do, 2 s at dt =
-/// 1 ms. Under the implicit integrator none blows up and every one runs;
-/// explicitly, how many the damping check refuses or blow up is printed.
+/// 1 ms. Under the implicit integrator none blows up and every one runs,
+/// and each runs at the defaults too (no torque, no velocity limits,
+/// falling through its limits under gravity); explicitly, how many the
+/// damping check refuses or blow up is printed.
 /// (Without the velocity limits, links of grams driven at tens of N m spin
 /// at thousands of rad/s, which neither integrator resolves at 1 ms: its
 /// gyroscopic terms are explicit in both.)
@@ -1278,12 +1320,15 @@ fn random_robots_run_through_their_limits_without_a_blow_up() {
     let (mut explicit_blown, mut explicit_refused, mut limits_met) = (0, 0, 0);
     for robot in 0..robots {
         let (text, base) = random_robot(&mut rng);
-        let run = |integrator| {
+        let run = |integrator, driven: bool| {
             let mut scene = robot_of(&text, integrator, 1e-3, 2.0);
             scene.base = Some(base);
-            scene.velocity_limits = true;
+            scene.velocity_limits = driven;
             scene.controller = Some(ControllerParams {
-                kind: ControllerKind::Random,
+                kind: match driven {
+                    true => ControllerKind::Random,
+                    false => ControllerKind::None,
+                },
                 amplitude: vec![Amplitude::Axis(50.0)],
                 hold: Positive(0.1),
                 ..ControllerParams::default()
@@ -1315,17 +1360,20 @@ fn random_robots_run_through_their_limits_without_a_blow_up() {
             .map_err(|e| e.to_string())?;
             Ok::<bool, String>(past)
         };
-        match run(Integrator::SemiImplicitEuler) {
+        match run(Integrator::SemiImplicitEuler, true) {
             Ok(_) => {}
             Err(e) if e.starts_with("dt:") => explicit_refused += 1,
             Err(_) => explicit_blown += 1,
         }
-        // The default integrator, the implicit one.
-        match run(Integrator::default()) {
+        // The default integrator, the implicit one, driven and at rest.
+        match run(Integrator::default(), true) {
             Ok(past) => limits_met += usize::from(past),
             Err(e) => panic!(
                 "robot {robot} ({base:?}) blew up under the implicit integrator: {e}\n{text}"
             ),
+        }
+        if let Err(e) = run(Integrator::default(), false) {
+            panic!("robot {robot} ({base:?}) blew up at the defaults, with no torque: {e}\n{text}")
         }
     }
     eprintln!(

@@ -612,8 +612,18 @@ fn check_body(head: &LinkTag, link: &Link, leaf: bool) -> Result<()> {
         ));
     }
     if mass <= 0.0 {
+        // Massless links between hinges (a spherical joint written as
+        // three) make a gimbal whose mass matrix is singular where its axes
+        // align: human's hips do, within their ranges, and blow up there.
+        let why = match leaf {
+            true => "",
+            false => {
+                " (a massless one others hang from makes a gimbal, whose accelerations are \
+                 undetermined where its axes align)"
+            }
+        };
         return Err(body(format!(
-            "has mass {mass}; a moving body needs a positive mass in an <inertial>"
+            "has mass {mass}; a moving body needs a positive mass in an <inertial>{why}"
         )));
     }
     // Round-off is judged by the body's own scale — its largest inertia,
