@@ -179,6 +179,15 @@ def test_errors_carry_the_cli_messages(artifacts, alnlab_bin, tmp_path):
         assert isinstance(raised.value, alnlab.AlnlabError)
 
 
+def test_a_codebook_given_as_the_model_is_named_as_one(artifacts):
+    # The two paths swapped (the package, unlike `export`, also takes
+    # Parquet models: the boosted trees).
+    found = artifacts("walk")
+    with pytest.raises(alnlab.InputError, match=r"codebook.parquet: is a codebook \(the quantize stage's table\), "
+                       r"not a model: expected a run's model.aln, linear.aln or boosted.parquet$"):
+        alnlab.Model(found["codebook"], found["model"])
+
+
 def test_bad_arrays_are_refused_with_the_expected_shape(artifacts):
     model = load(artifacts, "piecewise")
     d, u = len(model.state_names), len(model.control_names)

@@ -89,6 +89,9 @@ def test_runs_errors_are_the_cli_messages(runs, alnlab_bin):
     with pytest.raises(alnlab.InputError, match="`trajectory` is not a table"):
         alnlab.table("quickstart", "trajectory", variant="walk", out=runs)
 
+    for replicate in (0, -1):
+        with pytest.raises(alnlab.InputError, match=f"^replicate: expected a whole number of at least 1, got {replicate}"):
+            alnlab.load("quickstart", variant="walk", replicate=replicate, out=runs)
     with pytest.raises(alnlab.InputError, match="model: expected one of aln, linear, boosted, got 'forest'"):
         alnlab.load("quickstart", variant="walk", out=runs, model="forest")
     with pytest.raises(alnlab.InputError, match=r"boosted.parquet: holds no boosted trees: .*\[test\] peer = true"):

@@ -159,6 +159,22 @@ impl Boosted {
     /// names, if it names one.
     pub fn read(path: &Path) -> Result<(Boosted, Option<String>)> {
         let table = Table::read(path)?;
+        // Another of a run's tables given as the model (its codebook, most
+        // likely, the other argument) says what it is.
+        if table.batch.column_by_name("tree").is_none() {
+            let what = match table.metadata.get("alnlab.stage").map(String::as_str) {
+                Some("quantize") => "a codebook (the quantize stage's table)".to_string(),
+                Some(stage) => format!("a table of the {stage} stage"),
+                None => "a Parquet table alnlab did not write".to_string(),
+            };
+            return Err(Error::bad_file(
+                path,
+                format!(
+                    "is {what}, not a model: expected a run's model.aln, linear.aln or \
+                     boosted.parquet"
+                ),
+            ));
+        }
         table.require_no_nulls()?;
         let codebook = Provenance::from_key_values(&table.metadata)
             .and_then(|p| p.inputs.get("codebook").cloned());
@@ -430,6 +446,34 @@ mod tests {
         let (read, codebook) = Boosted::read(&path).unwrap();
         assert_eq!(read, boosted());
         assert_eq!(codebook.as_deref(), Some("c0ffee"));
+    }
+
+    /// A codebook given where the trees belong (the two paths swapped) is
+    /// named as one, not as a table missing a column.
+    #[test]
+    fn another_table_given_as_the_trees_says_what_it_is() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("codebook.parquet");
+        let columns = table::batch(vec![(
+            "variable",
+            Arc::new(StringArray::from(vec!["q.1"])) as Arc<dyn Array>,
+        )]);
+        for (stage, says) in [
+            (
+                "quantize",
+                "is a codebook (the quantize stage's table), not a model",
+            ),
+            ("stride", "is a table of the stride stage, not a model"),
+        ] {
+            let provenance = Provenance {
+                stage: stage.into(),
+                ..Provenance::default()
+            };
+            table::write_parquet(&path, &columns, &provenance).unwrap();
+            let message = Boosted::read(&path).unwrap_err().to_string();
+            assert!(message.contains(says), "{message}");
+            assert!(message.contains("expected a run's model.aln"), "{message}");
+        }
     }
 
     #[test]
