@@ -10,6 +10,7 @@
 use std::ops::Range;
 
 use alnlab_common::{ModelId, PolicyId};
+
 use plotters::coord::ranged1d::{DefaultFormatting, KeyPointHint, Ranged};
 use plotters::element::DashedPathElement;
 use plotters::prelude::*;
@@ -179,6 +180,9 @@ pub struct Axis {
     pub integer: bool,
     /// A linear axis that starts at zero (errors).
     pub from_zero: bool,
+    /// A paired difference: linear, or signed-log where its values span
+    /// decades (see [`Axis::difference`]).
+    pub signed_log: bool,
 }
 
 impl Axis {
@@ -188,6 +192,19 @@ impl Axis {
             log: false,
             integer: false,
             from_zero: false,
+            signed_log: false,
+        }
+    }
+
+    /// A paired difference's axis: linear, or, where its values span more
+    /// than two and a half decades, signed-log — linear within ± a
+    /// thousandth of the largest, logarithmic beyond on either side — so
+    /// that the differences near zero, where verdicts are read, are not
+    /// crushed under the largest.
+    pub fn difference(label: &str) -> Axis {
+        Axis {
+            signed_log: true,
+            ..Axis::linear(label)
         }
     }
 
@@ -317,6 +334,8 @@ struct Ticks {
     /// On a log axis: where values ≤ 0 are drawn, and whether any was.
     floor: f64,
     clamped: bool,
+    /// On a signed-log axis, the half-width of its linear part around zero.
+    linear_within: Option<f64>,
 }
 
 impl Ticks {
@@ -329,6 +348,11 @@ impl Ticks {
                 let clamped = finite.clone().any(|v| v <= 0.0);
                 return Ticks::log(lo.log10(), hi.log10(), clamped);
             }
+        }
+        if axis.signed_log
+            && let Some(ticks) = Ticks::signed_log(&finite.clone().collect::<Vec<_>>())
+        {
+            return ticks;
         }
         let (mut lo, mut hi) =
             finite.fold((f64::MAX, f64::MIN), |(lo, hi), v| (lo.min(v), hi.max(v)));
@@ -361,7 +385,51 @@ impl Ticks {
             log: false,
             floor: lo,
             clamped: false,
+            linear_within: None,
         }
+    }
+
+    /// A signed-log axis over `values`, if they span more than two and a
+    /// half decades (by magnitude, zero aside): ticks at zero and at ± each
+    /// decade from its linear part's half-width, a thousandth of the
+    /// largest magnitude's decade.
+    fn signed_log(values: &[f64]) -> Option<Ticks> {
+        let magnitudes = values.iter().map(|v| v.abs()).filter(|m| *m > 0.0);
+        let big = magnitudes.clone().fold(0f64, f64::max);
+        let small = magnitudes.fold(f64::INFINITY, f64::min);
+        if big == 0.0 || big / small < 10f64.powf(2.5) {
+            return None;
+        }
+        let top = big.log10().floor() as i32;
+        let within = 10f64.powi(top - 3);
+        let at = |v: f64| v.signum() * (1.0 + v.abs() / within).log10();
+        let (lo, hi) = values
+            .iter()
+            .fold((0f64, 0f64), |(lo, hi), &v| (lo.min(at(v)), hi.max(at(v))));
+        let mut ticks = vec![(0.0, "0".to_string())];
+        for e in (top - 3)..=(top + 1) {
+            for sign in [1.0, -1.0] {
+                let t = at(sign * 10f64.powi(e));
+                if (lo - 1e-9..=hi + 1e-9).contains(&t) {
+                    let label = log_label(1.0, e);
+                    let label = match sign < 0.0 {
+                        true => format!("−{label}"),
+                        false => label,
+                    };
+                    ticks.push((t, label));
+                }
+            }
+        }
+        ticks.sort_by(|a, b| a.0.total_cmp(&b.0));
+        let pad = (hi - lo) * 0.04;
+        Some(Ticks {
+            range: (lo - pad, hi + pad),
+            ticks,
+            log: false,
+            floor: lo,
+            clamped: false,
+            linear_within: Some(within),
+        })
     }
 
     /// A log axis over 10^lo … 10^hi.
@@ -400,17 +468,31 @@ impl Ticks {
             log: true,
             floor,
             clamped,
+            linear_within: None,
         }
     }
 
     /// A value in drawing units.
     fn place(&self, v: f64) -> f64 {
-        if !self.log {
+        if let Some(within) = self.linear_within {
+            v.signum() * (1.0 + v.abs() / within).log10()
+        } else if !self.log {
             v
         } else if v > 0.0 {
             v.log10().max(self.floor)
         } else {
             self.floor
+        }
+    }
+
+    /// The axis's label, saying where a signed-log axis turns logarithmic.
+    fn described(&self, label: &str) -> String {
+        match self.linear_within {
+            Some(within) => format!(
+                "{label}, log beyond ±{}",
+                log_label(1.0, within.log10().round() as i32)
+            ),
+            None => label.to_string(),
         }
     }
 
@@ -712,8 +794,8 @@ pub fn plot(plot: &Plot) -> String {
             .build_cartesian_2d(TickedAxis::of(&x), TickedAxis::of(&y))?;
         chart
             .configure_mesh()
-            .x_desc(plot.x.label.as_str())
-            .y_desc(plot.y.label.as_str())
+            .x_desc(x.described(&plot.x.label))
+            .y_desc(y.described(&plot.y.label))
             .label_style(text_style(LABEL_SIZE))
             .axis_desc_style(text_style(LABEL_SIZE))
             .x_label_formatter(&|v| x.label(*v))
@@ -1028,6 +1110,28 @@ mod tests {
         let t = Ticks::new(&Axis::integer("epoch"), &[1.0, 3.0]);
         let labels: Vec<&str> = t.ticks.iter().map(|(_, l)| l.as_str()).collect();
         assert_eq!(labels, ["1", "2", "3"]);
+    }
+
+    /// A paired difference spanning decades (hold's: 20 above the
+    /// reference to 0.2 below) is signed-log, linear within ± a thousandth
+    /// of the largest decade, monotone through zero; one that does not is
+    /// linear.
+    #[test]
+    fn a_difference_spanning_decades_is_signed_log_and_keeps_its_order() {
+        let values = [-0.2, 0.0016, 0.0087, 1.9, 20.0];
+        let t = Ticks::new(&Axis::difference("cost"), &values);
+        assert_eq!(t.linear_within, Some(0.01));
+        let labels: Vec<&str> = t.ticks.iter().map(|(_, l)| l.as_str()).collect();
+        assert_eq!(labels, ["−0.1", "−0.01", "0", "0.01", "0.1", "1", "10"]);
+        let placed: Vec<f64> = values.iter().map(|&v| t.place(v)).collect();
+        assert!(placed.windows(2).all(|w| w[0] < w[1]), "{placed:?}");
+        assert_eq!(t.place(0.0), 0.0);
+        assert!((t.place(0.01) - 2f64.log10()).abs() < 1e-12);
+        assert!((t.place(-0.2) + 21f64.log10()).abs() < 1e-12);
+        assert_eq!(t.described("cost"), "cost, log beyond ±0.01");
+        let narrow = Ticks::new(&Axis::difference("cost"), &[-3.0, 0.5, 12.0]);
+        assert_eq!(narrow.linear_within, None);
+        assert_eq!(narrow.place(12.0), 12.0);
     }
 
     #[test]
