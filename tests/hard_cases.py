@@ -27,6 +27,7 @@ import re
 import statistics
 import subprocess
 import sys
+import xml.etree.ElementTree as ET
 from concurrent.futures import ProcessPoolExecutor, ThreadPoolExecutor
 from pathlib import Path
 
@@ -98,17 +99,23 @@ def condition(model) -> float:
 SINGULAR = 1e12
 
 
-def driven(model, log: Path, torque: float) -> list:
-    """Per driven joint, in the order the log's `tau.` columns give, the
-    random torque's amplitude: `torque`, or none for a joint whose
-    description states no effort limit — no drive (TIAGo's casters, of 50 g,
-    which 0.4 N m spins past any step) — as on the robot."""
+def driven(urdf: Path, model, log: Path, torque: float):
+    """Per hinge, in the order of the log's `q.` columns (every moving
+    joint, a mimic's follower too), the random torque's amplitude: `torque`,
+    or none for a follower (its leader's drive moves it) and for a joint
+    whose description states no effort limit — no drive (TIAGo's casters,
+    of 50 g, which 0.4 N m spins past any step) — as on the robot. Where no
+    joint states one, `torque` on every hinge."""
     with open(log, "rb") as f:
         reader = make_reader(f)
         channel = next(c for c in reader.get_summary().channels.values() if c.topic == "/state")
-    names = [n[len("tau."):] for n in channel.metadata["variables"].split(",") if n.startswith("tau.")]
-    limits = [float(model.effortLimit[model.joints[model.getJointId(n)].idx_v]) for n in names]
-    return [torque if 0.0 < e < 1e10 else 0.0 for e in limits]
+    names = [n[len("q."):] for n in channel.metadata["variables"].split(",") if n.startswith("q.")]
+    followers = {j.get("name") for j in ET.parse(urdf).getroot().iter("joint")
+                 if j.find("mimic") is not None}
+    amplitudes = [0.0 if n in followers else
+                  torque if 0.0 < model.effortLimit[model.joints[model.getJointId(n)].idx_v] < 1e10
+                  else 0.0 for n in names]
+    return amplitudes if any(amplitudes) else torque
 
 
 def manifest(name: str, urdf: Path, integrator: str, torque, seconds: float) -> str:
@@ -188,7 +195,7 @@ def main(alnlab: str, work: str, seconds: float = 10.0, json_out=None, markdown_
         name, _, model, integrator, _ = cases[i]
         still = next((ended[j] for j, c in enumerate(cases) if c[0] == name and c[4] == "zero"
                       and ended[j]["ended"] == "ran"), None)
-        return driven(model, Path(still["log"]), torques[name]) if still else torques[name]
+        return driven(cases[i][1], model, Path(still["log"]), torques[name]) if still else torques[name]
     with ThreadPoolExecutor(workers) as pool:
         randomly = [i for i, c in enumerate(cases) if c[4] == "random"]
         ended.update(zip(randomly, pool.map(
@@ -218,9 +225,15 @@ def main(alnlab: str, work: str, seconds: float = 10.0, json_out=None, markdown_
                                   f"{report['worst_acceleration']:.2e}")
                 if report["worst_pose"] > robots.KINEMATICS_TOLERANCE:
                     failed.append(f"{name} ({kind} torques): poses off by {report['worst_pose']:.2e}")
+                if kind == "random" and report["largest_command"] == 0.0:
+                    failed.append(f"{name}: the random torques drove no joint")
             if integrator == "implicit" and result["ended"] not in ("ran", "refused"):
                 failed.append(f"{name} ({kind} torques) {result['ended']} under the implicit "
                               f"integrator: {result['why']}")
+            still = row.get(f"{integrator}/zero", {}).get("ended")
+            if kind == "random" and result["ended"] == "refused" and still == "ran":
+                failed.append(f"{name}: its random torques were refused where it ran without: "
+                              f"{result['why']}")
             result.pop("log", None)
             row[f"{integrator}/{kind}"] = result
         rows.append(row)

@@ -241,7 +241,7 @@ def check(name: str, log: Path, need_velocities: bool = True) -> dict:
     else:
         assert total.endswith("tau + passive"), (name, total)
     compared = {"velocity": 0, "pose": 0}
-    largest_acceleration = 0.0
+    largest_acceleration = largest_command = 0.0
     for index, (log_time, x) in enumerate(frames):
         q = pin.neutral(model)
         v = np.zeros(model.nv)
@@ -271,6 +271,7 @@ def check(name: str, log: Path, need_velocities: bool = True) -> dict:
             # The actuator's effort where the plant logs it (a gain), else
             # the command.
             effort = x.get(f"joint.{j}.applied", x.get(f"tau.{j}", 0.0))
+            largest_command = max(largest_command, abs(x.get(f"tau.{j}", 0.0)))
             if any(k in plant for k in actuators):
                 assert f"joint.{j}.applied" in x, (name, j)
             if recomputed is not None:
@@ -335,7 +336,7 @@ def check(name: str, log: Path, need_velocities: bool = True) -> dict:
     assert compared["pose"] > 0 and (compared["velocity"] > 0 or not need_velocities), (name, compared)
     return {"robot": name, "frames": len(frames), "velocities": compared["velocity"],
             "poses": compared["pose"], "nv": model.nv,
-            "largest_acceleration": largest_acceleration, **{f"worst_{k}": v for k, v in worst.items()}}
+            "largest_acceleration": largest_acceleration, "largest_command": largest_command, **{f"worst_{k}": v for k, v in worst.items()}}
 
 
 def main(alnlab: str, work: str, json_out=None) -> int:

@@ -3,6 +3,7 @@ behind them imports, and a build without Rust stops and says so instead of
 downloading a toolchain. The docs' MPC examples check their arguments."""
 
 import ast
+import importlib.metadata
 import os
 import subprocess
 import sys
@@ -10,17 +11,18 @@ import tomllib
 from pathlib import Path
 
 import pytest
+from packaging.requirements import Requirement
+from packaging.utils import canonicalize_name
 
 PACKAGE = Path(__file__).resolve().parents[1]
 ROOT = PACKAGE.parent
 
-# Import names that differ from the distribution that provides them.
-DISTRIBUTION = {"mcap_ros2": "mcap-ros2-support"}
-
 
 def imported(*files: Path) -> set[str]:
-    """The third-party distributions the files import (standard library
-    and alnlab itself left out)."""
+    """The third-party distributions the files import, by their
+    canonical names (standard library and alnlab itself left out), as the
+    installed packages map import names to distributions."""
+    distributions = importlib.metadata.packages_distributions()
     found = set()
     for file in files:
         for node in ast.walk(ast.parse(file.read_text())):
@@ -33,12 +35,12 @@ def imported(*files: Path) -> set[str]:
             for name in names:
                 top = name.split(".")[0]
                 if top not in sys.stdlib_module_names and top not in ("alnlab", "conftest"):
-                    found.add(DISTRIBUTION.get(top, top))
+                    found.update(canonicalize_name(d) for d in distributions.get(top, [top]))
     return found
 
 
 def requirements(specs: list[str]) -> set[str]:
-    return {spec.split(">")[0].split("<")[0].split("=")[0].strip() for spec in specs}
+    return {canonicalize_name(Requirement(spec).name) for spec in specs}
 
 
 def test_each_extra_installs_what_the_code_behind_it_imports():
@@ -49,10 +51,14 @@ def test_each_extra_installs_what_the_code_behind_it_imports():
     # gymnasium environments; everything the package's tests import.
     assert {"pyarrow"} <= extras["tables"]
     assert {"pyarrow", "pandas"} <= extras["pandas"]
+    # Each module within the extra that serves it: the environments with
+    # gymnasium, the rest with the tables (pandas only where asked for).
     assert imported(PACKAGE / "alnlab/envs.py") <= extras["gym"]
-    package = imported(*(PACKAGE / "alnlab").glob("*.py"))
-    assert package <= core | extras["pandas"] | extras["gym"], package
-    tests = imported(*(PACKAGE / "tests").glob("*.py"), ROOT / "tests/record_joint_states.py")
+    rest = [f for f in (PACKAGE / "alnlab").glob("*.py") if f.name != "envs.py"]
+    assert imported(*rest) <= extras["pandas"], imported(*rest)
+    # The tests, the ROS 2 writer they run and the build backend they import.
+    tests = imported(*(PACKAGE / "tests").glob("*.py"), ROOT / "tests/record_joint_states.py",
+                     PACKAGE / "build_backend/alnlab_build.py")
     assert tests <= extras["test"], tests - extras["test"]
 
 

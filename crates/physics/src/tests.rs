@@ -1126,8 +1126,9 @@ fn robot_of(text: &str, integrator: Integrator, dt: f64, duration: f64) -> Scene
     scene.resolve()
 }
 
-/// A robot is as large as its description: TIAGo dual's 101 joints are
-/// taken (the built-in kinds stay within 64 links), and it simulates.
+/// A robot is as large as its description: past 64 moving bodies (TIAGo
+/// dual has 101) it is taken and simulates; the built-in kinds stay within
+/// 64 links.
 #[test]
 fn a_robot_of_more_than_64_moving_bodies_is_simulated() {
     let inertial = r#"<inertial><mass value="1"/><inertia ixx="0.01" ixy="0" ixz="0" iyy="0.01" iyz="0" izz="0.01"/></inertial>"#;
@@ -1306,9 +1307,10 @@ pub(crate) fn random_robot(rng: &mut rand_chacha::ChaCha8Rng) -> (String, crate:
 /// position limits by random efforts up to their effort limits, their
 /// drives holding the velocity limits as a real robot's do, 2 s at dt =
 /// 1 ms. Under the implicit integrator none blows up and every one runs,
-/// and each runs at the defaults too (no torque, no velocity limits,
-/// falling through its limits under gravity); explicitly, how many the
-/// damping check refuses or blow up is printed.
+/// and with no torque too (no velocity limits, falling through its limits
+/// under gravity); explicitly, how many the damping check refuses or blow
+/// up is printed, and how many blow up at every default (random efforts of
+/// up to 5, no velocity limits).
 /// (Without the velocity limits, links of grams driven at tens of N m spin
 /// at thousands of rad/s, which neither integrator resolves at 1 ms: its
 /// gyroscopic terms are explicit in both.)
@@ -1318,21 +1320,32 @@ fn random_robots_run_through_their_limits_without_a_blow_up() {
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(45);
     let robots: u64 = 240;
     let (mut explicit_blown, mut explicit_refused, mut limits_met) = (0, 0, 0);
+    let mut blown_at_defaults = Vec::new();
+    #[derive(Clone, Copy, PartialEq)]
+    enum Drive {
+        /// Random efforts of up to 50, the drives holding velocity limits.
+        Held,
+        /// No torque.
+        Still,
+        /// The robot's defaults: random efforts of up to 5, no limits held.
+        Defaults,
+    }
     for robot in 0..robots {
         let (text, base) = random_robot(&mut rng);
-        let run = |integrator, driven: bool| {
+        let run = |integrator, drive: Drive| {
             let mut scene = robot_of(&text, integrator, 1e-3, 2.0);
             scene.base = Some(base);
-            scene.velocity_limits = driven;
-            scene.controller = Some(ControllerParams {
-                kind: match driven {
-                    true => ControllerKind::Random,
-                    false => ControllerKind::None,
-                },
-                amplitude: vec![Amplitude::Axis(50.0)],
-                hold: Positive(0.1),
-                ..ControllerParams::default()
-            });
+            scene.velocity_limits = drive == Drive::Held;
+            scene.controller = match drive {
+                Drive::Held => Some(ControllerParams {
+                    kind: ControllerKind::Random,
+                    amplitude: vec![Amplitude::Axis(50.0)],
+                    hold: Positive(0.1),
+                    ..ControllerParams::default()
+                }),
+                Drive::Still => Some(ControllerParams::default()),
+                Drive::Defaults => None,
+            };
             let scene = scene.resolve();
             scene
                 .validate()
@@ -1360,30 +1373,43 @@ fn random_robots_run_through_their_limits_without_a_blow_up() {
             .map_err(|e| e.to_string())?;
             Ok::<bool, String>(past)
         };
-        match run(Integrator::SemiImplicitEuler, true) {
+        match run(Integrator::SemiImplicitEuler, Drive::Held) {
             Ok(_) => {}
             Err(e) if e.starts_with("dt:") => explicit_refused += 1,
             Err(_) => explicit_blown += 1,
         }
-        // The default integrator, the implicit one, driven and at rest.
-        match run(Integrator::default(), true) {
+        // The default integrator, the implicit one: driven, at rest, and
+        // at every default (random efforts of up to 5, no velocity limits).
+        match run(Integrator::default(), Drive::Held) {
             Ok(past) => limits_met += usize::from(past),
             Err(e) => panic!(
                 "robot {robot} ({base:?}) blew up under the implicit integrator: {e}\n{text}"
             ),
         }
-        if let Err(e) = run(Integrator::default(), false) {
-            panic!("robot {robot} ({base:?}) blew up at the defaults, with no torque: {e}\n{text}")
+        if let Err(e) = run(Integrator::default(), Drive::Still) {
+            panic!("robot {robot} ({base:?}) blew up with no torque: {e}\n{text}")
+        }
+        if let Err(e) = run(Integrator::default(), Drive::Defaults) {
+            eprintln!("robot {robot} ({base:?}) at the defaults: {e}");
+            blown_at_defaults.push(robot);
         }
     }
     eprintln!(
         "{robots} random robots, 2 s at 1 ms: explicitly {explicit_blown} blew up and \
-         {explicit_refused} were refused by the damping check; implicitly none blew up, and \
-         {limits_met} passed a limit"
+         {explicit_refused} were refused by the damping check; implicitly none blew up driven \
+         or still, and {limits_met} passed a limit; at every default, robots \
+         {blown_at_defaults:?} blew up"
     );
     assert!(
         limits_met >= robots as usize / 2,
         "only {limits_met} of {robots} reached a limit: the test would not test limits"
+    );
+    // One does not at every default, unsolved: robot 63, a free-floating
+    // pair whose base link weighs 65 g, blows up at every dt down to 0.1 ms
+    // (issue 60's note). No more may.
+    assert!(
+        blown_at_defaults.len() <= 1,
+        "{blown_at_defaults:?} blew up at the defaults"
     );
 }
 

@@ -182,7 +182,7 @@ pub struct Axis {
     pub from_zero: bool,
     /// A paired difference: linear, or signed-log where its values span
     /// decades (see [`Axis::difference`]).
-    pub signed_log: bool,
+    pub difference: bool,
 }
 
 impl Axis {
@@ -192,18 +192,19 @@ impl Axis {
             log: false,
             integer: false,
             from_zero: false,
-            signed_log: false,
+            difference: false,
         }
     }
 
     /// A paired difference's axis: linear, or, where its values span more
     /// than two and a half decades, signed-log — linear within ± a
-    /// thousandth of the largest, logarithmic beyond on either side — so
-    /// that the differences near zero, where verdicts are read, are not
-    /// crushed under the largest.
+    /// thousandth of the largest value's decade, logarithmic beyond on
+    /// either side, each decade as wide as that band — so that the
+    /// differences near zero, where verdicts are read, are not crushed
+    /// under the largest.
     pub fn difference(label: &str) -> Axis {
         Axis {
-            signed_log: true,
+            difference: true,
             ..Axis::linear(label)
         }
     }
@@ -349,7 +350,7 @@ impl Ticks {
                 return Ticks::log(lo.log10(), hi.log10(), clamped);
             }
         }
-        if axis.signed_log
+        if axis.difference
             && let Some(ticks) = Ticks::signed_log(&finite.clone().collect::<Vec<_>>())
         {
             return ticks;
@@ -390,24 +391,27 @@ impl Ticks {
     }
 
     /// A signed-log axis over `values`, if they span more than two and a
-    /// half decades (by magnitude, zero aside): ticks at zero and at ± each
-    /// decade from its linear part's half-width, a thousandth of the
-    /// largest magnitude's decade.
+    /// half decades by magnitude (zero, and round-off below a millionth of
+    /// the largest, aside): linear within ± a thousandth of the largest
+    /// magnitude's decade, ticked at zero and at ± each decade from there.
     fn signed_log(values: &[f64]) -> Option<Ticks> {
-        let magnitudes = values.iter().map(|v| v.abs()).filter(|m| *m > 0.0);
-        let big = magnitudes.clone().fold(0f64, f64::max);
-        let small = magnitudes.fold(f64::INFINITY, f64::min);
+        let big = values.iter().fold(0f64, |m, v| m.max(v.abs()));
+        let small = values
+            .iter()
+            .map(|v| v.abs())
+            .filter(|m| *m > 1e-6 * big)
+            .fold(f64::INFINITY, f64::min);
         if big == 0.0 || big / small < 10f64.powf(2.5) {
             return None;
         }
         let top = big.log10().floor() as i32;
         let within = 10f64.powi(top - 3);
-        let at = |v: f64| v.signum() * (1.0 + v.abs() / within).log10();
+        let at = |v: f64| signed_log_place(v, within);
         let (lo, hi) = values
             .iter()
             .fold((0f64, 0f64), |(lo, hi), &v| (lo.min(at(v)), hi.max(at(v))));
         let mut ticks = vec![(0.0, "0".to_string())];
-        for e in (top - 3)..=(top + 1) {
+        for e in (top - 3)..=top {
             for sign in [1.0, -1.0] {
                 let t = at(sign * 10f64.powi(e));
                 if (lo - 1e-9..=hi + 1e-9).contains(&t) {
@@ -475,7 +479,7 @@ impl Ticks {
     /// A value in drawing units.
     fn place(&self, v: f64) -> f64 {
         if let Some(within) = self.linear_within {
-            v.signum() * (1.0 + v.abs() / within).log10()
+            signed_log_place(v, within)
         } else if !self.log {
             v
         } else if v > 0.0 {
@@ -489,7 +493,7 @@ impl Ticks {
     fn described(&self, label: &str) -> String {
         match self.linear_within {
             Some(within) => format!(
-                "{label}, log beyond ±{}",
+                "{label}, linear within ±{} and log beyond",
                 log_label(1.0, within.log10().round() as i32)
             ),
             None => label.to_string(),
@@ -501,6 +505,15 @@ impl Ticks {
             .iter()
             .find(|(t, _)| (t - v).abs() < 1e-9)
             .map_or_else(String::new, |(_, l)| l.clone())
+    }
+}
+
+/// Where a signed-log axis linear within ±`within` draws `v`: `v / within`
+/// there, one unit a decade beyond.
+fn signed_log_place(v: f64, within: f64) -> f64 {
+    match v.abs() <= within {
+        true => v / within,
+        false => v.signum() * (1.0 + (v.abs() / within).log10()),
     }
 }
 
@@ -1125,13 +1138,33 @@ mod tests {
         assert_eq!(labels, ["−0.1", "−0.01", "0", "0.01", "0.1", "1", "10"]);
         let placed: Vec<f64> = values.iter().map(|&v| t.place(v)).collect();
         assert!(placed.windows(2).all(|w| w[0] < w[1]), "{placed:?}");
+        // Linear within the band, a unit a decade beyond, either side.
         assert_eq!(t.place(0.0), 0.0);
-        assert!((t.place(0.01) - 2f64.log10()).abs() < 1e-12);
-        assert!((t.place(-0.2) + 21f64.log10()).abs() < 1e-12);
-        assert_eq!(t.described("cost"), "cost, log beyond ±0.01");
-        let narrow = Ticks::new(&Axis::difference("cost"), &[-3.0, 0.5, 12.0]);
-        assert_eq!(narrow.linear_within, None);
-        assert_eq!(narrow.place(12.0), 12.0);
+        assert!((t.place(0.005) - 0.5).abs() < 1e-12);
+        assert!((t.place(0.01) - 1.0).abs() < 1e-12);
+        assert!((t.place(10.0) - 4.0).abs() < 1e-12);
+        assert!((t.place(-0.2) + 1.0 + 20f64.log10()).abs() < 1e-12);
+        assert_eq!(
+            t.described("cost"),
+            "cost, linear within ±0.01 and log beyond"
+        );
+        // Too narrow a span, or one that only round-off widens, stays
+        // linear; so do no values, one, and all zero.
+        for values in [
+            &[-3.0, 0.5, 12.0][..],
+            &[1e-15, 2.0, 30.0],
+            &[],
+            &[5.0],
+            &[0.0, 0.0],
+        ] {
+            let t = Ticks::new(&Axis::difference("cost"), values);
+            assert_eq!(t.linear_within, None, "{values:?}");
+            assert_eq!(t.place(12.0), 12.0);
+        }
+        // All below zero: the same, mirrored.
+        let t = Ticks::new(&Axis::difference("cost"), &[-20.0, -0.01]);
+        let labels: Vec<&str> = t.ticks.iter().map(|(_, l)| l.as_str()).collect();
+        assert_eq!(labels, ["−10", "−1", "−0.1", "−0.01", "0"]);
     }
 
     #[test]

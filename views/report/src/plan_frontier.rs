@@ -433,8 +433,8 @@ fn chart(
          of its round): its task cost minus that of {truth_name} ({}, at its lowest-cost budget in \
          replicate 1, here {} sequences), paired on the same \
          episodes, against the median ms a decision of replicate 1 (bars: 95% interval of the \
-         paired difference; where the differences span decades the vertical axis is \
-         logarithmic beyond a band around zero, so that those near zero, where the deadlines' \
+         paired difference; where the differences span decades the vertical axis is linear \
+         in a band around zero and logarithmic beyond, so that those near zero, where the deadlines' \
          verdicts are read, stay apart). Given budget, a wrong model may match the reference: the task \
          tells models apart only as far as their errors change the plans. Lower is better; a \
          model moves the frontier where its curve passes below every other's at the same \
