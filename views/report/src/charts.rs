@@ -489,15 +489,12 @@ impl Ticks {
         }
     }
 
-    /// The axis's label, saying where a signed-log axis turns logarithmic.
-    fn described(&self, label: &str) -> String {
-        match self.linear_within {
-            Some(within) => format!(
-                "{label}, linear within ±{} and log beyond",
-                log_label(1.0, within.log10().round() as i32)
-            ),
-            None => label.to_string(),
-        }
+    /// For the legend, where a signed-log axis turns logarithmic.
+    fn scale_note(&self, axis: &str) -> Option<String> {
+        self.linear_within.map(|within| {
+            let band = log_label(1.0, within.log10().round() as i32);
+            format!("{axis} axis: linear within ±{band}, log beyond")
+        })
     }
 
     fn label(&self, v: f64) -> String {
@@ -785,6 +782,10 @@ pub fn plot(plot: &Plot) -> String {
     if !zero_note.is_empty() {
         entries.push(Entry::Note(zero_note));
     }
+    let scale_note = y.scale_note("vertical");
+    if let Some(note) = &scale_note {
+        entries.push(Entry::Note(note));
+    }
     let longest = entries
         .iter()
         .map(|e| match e {
@@ -807,8 +808,8 @@ pub fn plot(plot: &Plot) -> String {
             .build_cartesian_2d(TickedAxis::of(&x), TickedAxis::of(&y))?;
         chart
             .configure_mesh()
-            .x_desc(x.described(&plot.x.label))
-            .y_desc(y.described(&plot.y.label))
+            .x_desc(plot.x.label.as_str())
+            .y_desc(plot.y.label.as_str())
             .label_style(text_style(LABEL_SIZE))
             .axis_desc_style(text_style(LABEL_SIZE))
             .x_label_formatter(&|v| x.label(*v))
@@ -1145,8 +1146,8 @@ mod tests {
         assert!((t.place(10.0) - 4.0).abs() < 1e-12);
         assert!((t.place(-0.2) + 1.0 + 20f64.log10()).abs() < 1e-12);
         assert_eq!(
-            t.described("cost"),
-            "cost, linear within ±0.01 and log beyond"
+            t.scale_note("vertical").as_deref(),
+            Some("vertical axis: linear within ±0.01, log beyond")
         );
         // Too narrow a span, or one that only round-off widens, stays
         // linear; so do no values, one, and all zero.
@@ -1161,6 +1162,26 @@ mod tests {
             assert_eq!(t.linear_within, None, "{values:?}");
             assert_eq!(t.place(12.0), 12.0);
         }
+        // The legend says so.
+        let svg = plot(&Plot {
+            title: "t".into(),
+            x: Axis::log("ms"),
+            y: Axis::difference("cost"),
+            series: vec![Series {
+                name: "aln".into(),
+                style: style_of(ModelId::Aln, 0),
+                points: values
+                    .iter()
+                    .map(|&v| Point::at(1.0 + v.abs(), v))
+                    .collect(),
+                joined: true,
+                hollow: false,
+            }],
+            pareto: false,
+            rules: Vec::new(),
+        });
+        well_formed(&svg);
+        assert!(svg.contains("vertical axis: linear within ±0.01, log beyond"));
         // All below zero: the same, mirrored.
         let t = Ticks::new(&Axis::difference("cost"), &[-20.0, -0.01]);
         let labels: Vec<&str> = t.ticks.iter().map(|(_, l)| l.as_str()).collect();
