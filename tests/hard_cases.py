@@ -7,8 +7,8 @@ For every URDF of PyPI's example-robot-data that Pinocchio (PyPI `pin`)
 loads, on a welded base, at dt = 1 ms for S seconds (10 unless given):
 `ALNLAB simulate` with no torque and with random torques (of the order of
 gravity's, see `amplitude`, held 0.2 s, on every joint that states an
-effort limit, each clamped to it, the drives holding the URDF's velocity limits as a real robot's
-do), by semi-implicit Euler and by the implicit integrator. Each run ends
+effort limit, each clamped to it, the drives holding the URDF's velocity
+limits as a real robot's do), by semi-implicit Euler and by the implicit integrator. Each run ends
 one of three ways: it ran, `alnlab` refused it naming why, or it blew up. Every run the implicit integrator completes is
 checked frame by frame against Pinocchio as `robots.py` checks its robots
 (accelerations within 1e-10 — unless the mass matrix is singular to
@@ -192,10 +192,10 @@ def main(alnlab: str, work: str, seconds: float = 10.0, json_out=None, markdown_
             (c for c in cases if c[4] == "zero"))))
 
     def torque(i: int):
-        name, _, model, integrator, _ = cases[i]
+        name, urdf, model, _, _ = cases[i]
         still = next((ended[j] for j, c in enumerate(cases) if c[0] == name and c[4] == "zero"
                       and ended[j]["ended"] == "ran"), None)
-        return driven(cases[i][1], model, Path(still["log"]), torques[name]) if still else torques[name]
+        return driven(urdf, model, Path(still["log"]), torques[name]) if still else torques[name]
     with ThreadPoolExecutor(workers) as pool:
         randomly = [i for i, c in enumerate(cases) if c[4] == "random"]
         ended.update(zip(randomly, pool.map(

@@ -10,7 +10,6 @@
 use std::ops::Range;
 
 use alnlab_common::{ModelId, PolicyId};
-
 use plotters::coord::ranged1d::{DefaultFormatting, KeyPointHint, Ranged};
 use plotters::element::DashedPathElement;
 use plotters::prelude::*;
