@@ -87,6 +87,9 @@ const ROUND_MARKERS: [Marker; 4] = [Marker::Plus, Marker::Diamond, Marker::Cross
 /// series.
 const RULE: RGBColor = RGBColor(0xAA, 0xAA, 0xAA);
 
+/// The fill of a signed-log axis's linear band.
+const BAND: RGBColor = RGBColor(0xF0, 0xF0, 0xF0);
+
 /// A marker's shape.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Marker {
@@ -492,7 +495,7 @@ impl Ticks {
     fn scale_note(&self, axis: &str) -> Option<String> {
         self.linear_within.map(|within| {
             let band = log_label(1.0, within.log10().round() as i32);
-            format!("{axis} axis: linear within ±{band}, log beyond")
+            format!("{axis} axis: linear within ±{band} (shaded), log beyond")
         })
     }
 
@@ -818,6 +821,15 @@ pub fn plot(plot: &Plot) -> String {
             .draw()?;
         let px = |p: (f64, f64)| chart.backend_coord(&(x.place(p.0), y.place(p.1)));
 
+        // A signed-log axis's linear band, shaded: as tall as a decade, it
+        // would otherwise read as one.
+        if let Some(within) = y.linear_within {
+            let corners = [
+                chart.backend_coord(&(x.range.0, y.place(-within))),
+                chart.backend_coord(&(x.range.1, y.place(within))),
+            ];
+            root.draw(&Rectangle::new(corners, BAND.filled()))?;
+        }
         for rule in &plot.rules {
             let ends = if rule.vertical {
                 let x_at = x.place(rule.at);
@@ -1146,7 +1158,7 @@ mod tests {
         assert!((t.place(-0.2) + 1.0 + 20f64.log10()).abs() < 1e-12);
         assert_eq!(
             t.scale_note("vertical").as_deref(),
-            Some("vertical axis: linear within ±0.01, log beyond")
+            Some("vertical axis: linear within ±0.01 (shaded), log beyond")
         );
         // Too narrow a span, or one that only round-off widens, stays
         // linear; so do no values, one, and all zero.
@@ -1180,7 +1192,7 @@ mod tests {
             rules: Vec::new(),
         });
         well_formed(&svg);
-        assert!(svg.contains("vertical axis: linear within ±0.01, log beyond"));
+        assert!(svg.contains("vertical axis: linear within ±0.01 (shaded), log beyond"));
         // All below zero: the same, mirrored.
         let t = Ticks::new(&Axis::difference("cost"), &[-20.0, -0.01]);
         let labels: Vec<&str> = t.ticks.iter().map(|(_, l)| l.as_str()).collect();

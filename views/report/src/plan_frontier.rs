@@ -396,7 +396,8 @@ fn chart(
             _ => 0,
         };
         series.push(Series {
-            name: format!("{}, {}", m.label, m.planner),
+            // Markdown's code quotes mean nothing in a chart.
+            name: format!("{}, {}", m.label.replace('`', ""), m.planner),
             style: policy_style(m.model.policy, m.model.round, variant),
             points,
             joined: true,
@@ -432,10 +433,12 @@ fn chart(
          budget; a model trained again on its planner's frames in its colour, with a marker \
          of its round): its task cost minus that of {truth_name} ({}, at its lowest-cost budget in \
          replicate 1, here {} sequences), paired on the same \
-         episodes, against the median ms a decision of replicate 1 (bars: 95% interval of the \
-         paired difference; where the differences span decades the vertical axis is linear \
-         in a band around zero and logarithmic beyond, so that those near zero, where the deadlines' \
-         verdicts are read, stay apart). Given budget, a wrong model may match the reference: the task \
+         episodes and averaged over every replicate, against the median ms a decision of \
+         replicate 1 (bars: 95% interval of the paired difference across replicates; the table \
+         below judges on the replicates after the first, which its picks were not made on). \
+         Where the differences span decades the vertical axis is linear in a shaded band around \
+         zero and logarithmic beyond, so that those near zero, where the deadlines' verdicts are \
+         read, stay apart; a symmetric interval that crosses the band looks lopsided. Given budget, a wrong model may match the reference: the task \
          tells models apart only as far as their errors change the plans. Lower is better; a \
          model moves the frontier where its curve passes below every other's at the same \
          time. The grey verticals are the deadlines the table below reads. Where an ALN is \
