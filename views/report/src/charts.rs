@@ -824,9 +824,14 @@ pub fn plot(plot: &Plot) -> String {
         // A signed-log axis's linear band, shaded: as tall as a decade, it
         // would otherwise read as one.
         if let Some(within) = y.linear_within {
+            // Within the plot: the band may reach past the values drawn.
+            let (low, high) = (
+                y.place(-within).max(y.range.0),
+                y.place(within).min(y.range.1),
+            );
             let corners = [
-                chart.backend_coord(&(x.range.0, y.place(-within))),
-                chart.backend_coord(&(x.range.1, y.place(within))),
+                chart.backend_coord(&(x.range.0, low)),
+                chart.backend_coord(&(x.range.1, high)),
             ];
             root.draw(&Rectangle::new(corners, BAND.filled()))?;
         }
